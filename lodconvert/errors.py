@@ -1,0 +1,19 @@
+"""Exception types that the command line maps to exit codes and one-line messages."""
+
+from __future__ import annotations
+
+
+class LodConvertError(Exception):
+    """Input or processing error: bad file, unreadable geometry, failed write (exit code 1)."""
+
+    def __init__(self, message: str, path: str | None = None) -> None:
+        self.path = path
+        super().__init__(f"{path}: {message}" if path else message)
+
+
+class InputError(LodConvertError):
+    """The input file is missing, of an unknown kind, empty, truncated or holds bad geometry."""
+
+
+class UsageError(Exception):
+    """An option value is out of range or inconsistent with the others (exit code 2)."""
