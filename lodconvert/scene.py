@@ -16,6 +16,7 @@ from typing import Any, Literal
 import numpy as np
 
 GREY = np.array([204, 204, 204, 255], dtype=np.uint8)
+WHITE = np.array([255, 255, 255, 255], dtype=np.uint8)
 
 
 @dataclass
@@ -23,7 +24,8 @@ class Surface:
     """A triangle mesh with optional per-vertex colours, UVs + texture, and a base colour.
 
     ``vertices`` (n, 3) float64, ``faces`` (m, 3) int64. ``vertex_colors`` (n, 4) uint8 RGBA,
-    ``uv`` (n, 2) float64 with ``texture`` (h, w, 4) uint8 RGBA, ``base_color`` (4,) uint8.
+    ``uv`` (n, 2) float64 with ``texture`` (h, w, 4) uint8 RGBA, ``base_color`` (4,) uint8 or
+    None when the source names none (then :attr:`material_color` picks a neutral one).
     """
 
     vertices: np.ndarray
@@ -31,7 +33,7 @@ class Surface:
     vertex_colors: np.ndarray | None = None
     uv: np.ndarray | None = None
     texture: np.ndarray | None = None
-    base_color: np.ndarray = field(default_factory=lambda: GREY.copy())
+    base_color: np.ndarray | None = None
 
     @property
     def bounds(self) -> np.ndarray:
@@ -40,13 +42,12 @@ class Surface:
         return np.stack([used.min(axis=0), used.max(axis=0)])
 
     @property
-    def has_color(self) -> bool:
-        """True when the source carries colour beyond the default grey."""
-        return (
-            self.vertex_colors is not None
-            or self.texture is not None
-            or not np.array_equal(self.base_color, GREY)
-        )
+    def material_color(self) -> np.ndarray:
+        """The base colour in effect: the source's, else white under vertex colours or a
+        texture (which then carry the colour), else light grey."""
+        if self.base_color is not None:
+            return self.base_color
+        return WHITE if self.vertex_colors is not None or self.texture is not None else GREY
 
     def face_normals(self, face_ids: np.ndarray) -> np.ndarray:
         """Unit normals (k, 3) float32 of the given faces; degenerate faces get +z."""
@@ -87,8 +88,9 @@ class Surface:
         k = len(face_ids)
         if k == 0:
             return np.zeros((0, 4), dtype=np.uint8)
+        base = self.material_color
         if self.texture is None and self.vertex_colors is None:
-            return np.repeat(self.base_color[None, :], k, axis=0)
+            return np.repeat(base[None, :], k, axis=0)
         bary = self.barycentric(face_ids, points)
         corners = self.faces[face_ids]
         if self.texture is not None and self.uv is not None:
@@ -99,7 +101,7 @@ class Surface:
             rgba = self.texture[y, x].astype(np.float64)
         else:
             rgba = np.einsum("ij,ijk->ik", bary, self.vertex_colors[corners].astype(np.float64))
-        rgba = rgba * (self.base_color.astype(np.float64) / 255.0)
+        rgba = rgba * (base.astype(np.float64) / 255.0)
         return np.clip(np.rint(rgba), 0, 255).astype(np.uint8)
 
 

@@ -30,7 +30,10 @@ def _filled(mask: np.ndarray, kind: FilterName) -> np.ndarray:
         grown = cv2.medianBlur(mask, 3) > 0
     else:
         grown = cv2.GaussianBlur(mask.astype(np.float32) / 255.0, (3, 3), 0) >= 0.5
-    return grown & (mask == 0)
+    grown &= mask == 0
+    grown[[0, -1], :] = False  # the one-pixel padding ring is outside the image
+    grown[:, [0, -1]] = False
+    return grown
 
 
 def fill_holes(hits: SlabHits, grid: Grid, kind: FilterName) -> SlabHits:

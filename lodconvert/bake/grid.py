@@ -63,14 +63,22 @@ class Grid:
         idx = np.clip(idx, 0, n - 1)
         return (idx[:, 0] * n[1] + idx[:, 1]) * n[2] + idx[:, 2]
 
+    def cell_index(self, keys: np.ndarray) -> np.ndarray:
+        """Integer cell coordinates (k, 3) of the given keys."""
+        n = self.cells
+        return np.stack([keys // (n[1] * n[2]), (keys // n[2]) % n[1], keys % n[2]], axis=1)
+
     def cell_centers(self, keys: np.ndarray) -> np.ndarray:
         """World centres (k, 3) of the cells with the given keys."""
-        n = self.cells
-        i2 = keys % n[2]
-        i1 = (keys // n[2]) % n[1]
-        i0 = keys // (n[1] * n[2])
-        idx = np.stack([i0, i1, i2], axis=1).astype(np.float64)
-        return self.lo + (idx + 0.5) * self.pitch
+        return self.lo + (self.cell_index(keys).astype(np.float64) + 0.5) * self.pitch
+
+    def neighbourhood_keys(self, keys: np.ndarray) -> np.ndarray:
+        """Sorted keys of the given cells and their 26 neighbours (clamped into the grid)."""
+        idx = self.cell_index(keys)
+        n = np.asarray(self.cells, dtype=np.int64)
+        offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
+        around = np.clip(idx[:, None, :] + offsets[None], 0, n - 1).reshape(-1, 3)
+        return np.sort((around[:, 0] * n[1] + around[:, 1]) * n[2] + around[:, 2])
 
 
 @dataclass

@@ -5,8 +5,9 @@ point cloud on the level's grid:
 
 1. hole filling per slab image (:mod:`.filters`);
 2. all directions merged; each hit becomes a point at its pixel centre and hit depth;
-3. thin-feature rescue: a cell that holds the centroid of a face but no ray hit (a part thinner
-   than the pitch, missed by every pixel centre) gets that centroid, which lies on the surface;
+3. thin-feature rescue: surface samples (face centroids, and points along each face's longest
+   edge at most a pitch apart) whose cell has no ray hit in it or next to it — a part thinner
+   than the pitch, missed by every pixel centre — are added; they lie on the surface;
 4. one point per occupied cell: the hit nearest the cell centre (so points stay on the surface);
 5. colour from the source surface at the point, normal of the face it lies on.
 """
@@ -51,20 +52,41 @@ def occupied_hits(
     return grid, positions, faces
 
 
+def surface_samples(surface: Surface, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points on every non-degenerate face: its centroid, and samples at most ``pitch`` apart
+    along its longest edge (a sliver thinner than the pitch lies within a pitch of them)."""
+    tri = surface.vertices[surface.faces]
+    edges = tri[:, [1, 2, 0]] - tri
+    area2 = np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
+    face_ids = np.flatnonzero(area2 > 0)
+    tri, edges = tri[face_ids], edges[face_ids]
+    lengths = np.linalg.norm(edges, axis=2)
+    longest = np.argmax(lengths, axis=1)
+    rows = np.arange(len(face_ids))
+    count = np.maximum(1, np.ceil(lengths[rows, longest] / pitch).astype(np.int64))
+    owner = np.repeat(rows, count)
+    k = np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)
+    t = (k + 0.5) / count[owner]
+    along = tri[owner, longest[owner]] + edges[owner, longest[owner]] * t[:, None]
+    points = np.concatenate([tri.mean(axis=1), along])
+    return points, np.concatenate([face_ids, face_ids[owner]])
+
+
 def rescue_thin_features(
     surface: Surface, grid: Grid, positions: np.ndarray, faces: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Add face centroids that fall in cells no hit occupies (see module docstring)."""
-    tri = surface.vertices[surface.faces]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    face_ids = np.flatnonzero(area2 > 0)
-    centroids = tri[face_ids].mean(axis=1)
-    hit_keys = np.unique(grid.cell_keys(positions)) if len(positions) else np.zeros(0, np.int64)
-    keys = grid.cell_keys(centroids)
-    new = ~np.isin(keys, hit_keys)
+    """Add the surface samples that no hit is near (see module docstring)."""
+    samples, sample_faces = surface_samples(surface, grid.pitch)
+    if len(positions):
+        near = grid.neighbourhood_keys(grid.cell_keys(positions))
+        keys = grid.cell_keys(samples)
+        at = np.minimum(np.searchsorted(near, keys), len(near) - 1)
+        new = near[at] != keys
+    else:
+        new = np.ones(len(samples), dtype=bool)
     return (
-        np.concatenate([positions, centroids[new]]),
-        np.concatenate([faces, face_ids[new]]),
+        np.concatenate([positions, samples[new]]),
+        np.concatenate([faces, sample_faces[new]]),
     )
 
 

@@ -1,0 +1,70 @@
+"""Shared fixtures: paths to ../shared test data, small real meshes, helpers."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from lodconvert.scene import SceneObject, Surface
+
+ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared"
+STANFORD = SHARED / "data" / "stanford"
+X3D_SCHEMAS = SHARED / "schemas" / "x3d"
+SAMPLE = ROOT / "samples" / "torus_knot.ply"
+
+
+def require(condition: bool, reason: str, env: str = "LODCONVERT_REQUIRE_VALIDATORS") -> None:
+    """Skip when ``condition`` is false, or fail when ``env`` is set to 1 (as CI sets it)."""
+    if condition:
+        return
+    if os.environ.get(env) == "1":
+        pytest.fail(f"{reason} (and {env}=1)")
+    pytest.skip(reason)
+
+
+def stanford(name: str) -> Path:
+    """Path of a Stanford scan in ../shared/data/stanford, or skip the test."""
+    path = STANFORD / name
+    if not path.exists():
+        pytest.skip(f"{path} is absent (shared test data not checked out)")
+    return path
+
+
+def surface_of(mesh: trimesh.Trimesh) -> Surface:
+    """A Surface from a trimesh, keeping vertex colours when present."""
+    colors = None
+    if mesh.visual.kind == "vertex":
+        colors = np.asarray(mesh.visual.vertex_colors, dtype=np.uint8)
+    return Surface(
+        vertices=np.asarray(mesh.vertices, dtype=np.float64),
+        faces=np.asarray(mesh.faces, dtype=np.int64),
+        vertex_colors=colors,
+    )
+
+
+@pytest.fixture(scope="session")
+def bunny_mesh() -> trimesh.Trimesh:
+    """The full-resolution Stanford bunny (35,947 vertices, 69,451 faces)."""
+    return trimesh.load(stanford("bunny_bun_zipper.ply"), process=False, force="mesh")
+
+
+@pytest.fixture(scope="session")
+def bunny(bunny_mesh: trimesh.Trimesh) -> SceneObject:
+    """The bunny as a SceneObject."""
+    return SceneObject("bunny", surface_of(bunny_mesh))
+
+
+@pytest.fixture
+def torus() -> SceneObject:
+    """A torus (major radius 1, minor 0.3) with a colour gradient over its vertices."""
+    mesh = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=64, minor_sections=24)
+    v = np.asarray(mesh.vertices)
+    t = (v[:, 0] - v[:, 0].min()) / np.ptp(v[:, 0])
+    colors = np.stack([255 * t, 128 + 0 * t, 255 * (1 - t), 255 + 0 * t], axis=1)
+    mesh.visual.vertex_colors = np.rint(colors).astype(np.uint8)
+    return SceneObject("torus", surface_of(mesh))

@@ -1,0 +1,114 @@
+"""Properties of baked point levels that a user would notice (numpy backend)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from lodconvert.bake import NumpyBackend, bake_points
+from lodconvert.bake.pcd import occupied_hits
+from lodconvert.scene import BakeParams, SceneObject, Surface
+
+from .conftest import surface_of
+
+
+def params(resolution: int, kind: str = "median", slices: int | None = None) -> BakeParams:
+    return BakeParams(resolution=resolution, slices=slices or resolution, point_size=2.0, filter=kind)
+
+
+def distances_to(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
+    return trimesh.proximity.closest_point(mesh, points)[1]
+
+
+@pytest.mark.parametrize("resolution", [24, 64])
+def test_points_lie_within_one_pitch_of_the_torus(torus: SceneObject, resolution: int) -> None:
+    mesh = trimesh.Trimesh(torus.surface.vertices, torus.surface.faces, process=False)
+    cloud, grid = bake_points(torus.surface, params(resolution), NumpyBackend())
+    assert len(cloud) > 100
+    assert distances_to(mesh, cloud.positions).max() <= grid.pitch
+
+
+def test_points_cover_the_whole_extent(torus: SceneObject) -> None:
+    cloud, grid = bake_points(torus.surface, params(32), NumpyBackend())
+    bounds = torus.surface.bounds
+    assert np.all(cloud.positions.min(axis=0) <= bounds[0] + grid.pitch)
+    assert np.all(cloud.positions.max(axis=0) >= bounds[1] - grid.pitch)
+
+
+def test_one_point_per_cell_and_counts_fall_with_resolution(torus: SceneObject) -> None:
+    counts = []
+    for resolution in (96, 48, 24, 12):
+        cloud, grid = bake_points(torus.surface, params(resolution), NumpyBackend())
+        keys = grid.cell_keys(cloud.positions)
+        assert len(np.unique(keys)) == len(keys)
+        counts.append(len(cloud))
+    assert counts == sorted(counts, reverse=True) and len(set(counts)) == 4
+
+
+def test_hole_filters_only_add_points(bunny: SceneObject) -> None:
+    backend = NumpyBackend()
+    grid, plain, _ = occupied_hits(bunny.surface, params(64, "none"), backend)
+    plain_cells = set(grid.cell_keys(plain).tolist())
+    for kind in ("median", "gaussian"):
+        _, filled, _ = occupied_hits(bunny.surface, params(64, kind), backend)
+        cells = set(grid.cell_keys(filled).tolist())
+        assert plain_cells <= cells
+        assert len(cells) > len(plain_cells)  # the bunny's holes and slab edges get filled
+
+
+def test_colours_come_from_the_surface(torus: SceneObject) -> None:
+    cloud, _ = bake_points(torus.surface, params(48), NumpyBackend())
+    x = cloud.positions[:, 0]
+    red, blue = cloud.colors[:, 0].astype(float), cloud.colors[:, 2].astype(float)
+    # the torus fixture runs from blue (low x) to red (high x)
+    assert np.corrcoef(x, red)[0, 1] > 0.95
+    assert np.corrcoef(x, blue)[0, 1] < -0.95
+    assert np.all(cloud.colors[:, 1] == 128)
+
+
+def test_normals_are_unit_and_point_away_from_the_torus_core(torus: SceneObject) -> None:
+    cloud, _ = bake_points(torus.surface, params(48), NumpyBackend())
+    assert np.allclose(np.linalg.norm(cloud.normals, axis=1), 1.0, atol=1e-5)
+    p = cloud.positions
+    ring = p.copy()
+    ring[:, 2] = 0
+    ring *= (1.0 / np.linalg.norm(ring, axis=1))[:, None]
+    outward = p - ring
+    outward /= np.linalg.norm(outward, axis=1, keepdims=True)
+    # trimesh's torus is wound outward; face normals must agree almost everywhere
+    assert np.mean(np.einsum("ij,ij->i", outward, cloud.normals) > 0.5) > 0.98
+
+
+def test_baking_is_deterministic(bunny: SceneObject) -> None:
+    a, _ = bake_points(bunny.surface, params(48), NumpyBackend())
+    b, _ = bake_points(bunny.surface, params(48), NumpyBackend())
+    assert np.array_equal(a.positions, b.positions)
+    assert np.array_equal(a.colors, b.colors)
+
+
+def test_flat_square_bakes_onto_its_plane() -> None:
+    square = Surface(
+        vertices=np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64),
+        faces=np.array([[0, 1, 2], [0, 2, 3]]),
+    )
+    cloud, grid = bake_points(square, params(16), NumpyBackend())
+    assert len(cloud) == 16 * 16
+    assert np.all(cloud.positions[:, 2] == 0)
+
+
+def test_thin_rod_is_not_lost() -> None:
+    """A rod far thinner than the pitch: no pixel centre may hit it, the rescue keeps it."""
+    rod = trimesh.creation.cylinder(radius=0.002, height=1.0, sections=8)
+    cloud, grid = bake_points(surface_of(rod), params(40), NumpyBackend())
+    z = np.sort(cloud.positions[:, 2])
+    assert len(cloud) >= 35
+    assert z[0] < -0.45 and z[-1] > 0.45
+    assert np.diff(z).max() <= 2 * grid.pitch  # no gap along the rod
+
+
+@pytest.mark.slow
+def test_bunny_points_lie_on_the_scan(bunny_mesh: trimesh.Trimesh, bunny: SceneObject) -> None:
+    for resolution in (128, 64, 32):
+        cloud, grid = bake_points(bunny.surface, params(resolution), NumpyBackend())
+        assert distances_to(bunny_mesh, cloud.positions).max() <= grid.pitch
