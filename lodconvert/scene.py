@@ -9,7 +9,7 @@ back as a parent transform / node translation.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
@@ -34,12 +34,33 @@ class Surface:
     uv: np.ndarray | None = None
     texture: np.ndarray | None = None
     base_color: np.ndarray | None = None
+    # Arrays derived from the geometry (bounds, per-face tables), computed once per Surface.
+    # Not an init field, so ``dataclasses.replace`` starts a fresh cache for new geometry.
+    _derived: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def derived(self, key: str, compute: Callable[[], Any]) -> Any:
+        """``compute()`` once per surface and key; later calls return the stored value.
+        The geometry arrays must not be modified in place after the first call."""
+        if key not in self._derived:
+            self._derived[key] = compute()
+        return self._derived[key]
 
     @property
     def bounds(self) -> np.ndarray:
         """(2, 3) array: min and max corner of the vertices used by faces."""
-        used = self.vertices[np.unique(self.faces)] if len(self.faces) else self.vertices
-        return np.stack([used.min(axis=0), used.max(axis=0)])
+
+        def compute() -> np.ndarray:
+            used = np.zeros(len(self.vertices), dtype=bool)
+            used[self.faces.ravel()] = True
+            v = self.vertices[used] if used.any() else self.vertices
+            return np.stack([v.min(axis=0), v.max(axis=0)])
+
+        return self.derived("bounds", compute)
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """Corner positions (m, 3, 3) of every face."""
+        return self.derived("triangles", lambda: self.vertices[self.faces])
 
     @property
     def material_color(self) -> np.ndarray:

@@ -4,12 +4,16 @@ Every pixel centre of an image plane is a ray parallel to the view axis. A trian
 pixel centres inside its projection (edges inclusive, as GL's fill rule does up to ties); the
 hit depth is the triangle's plane at that centre. Per slab, the nearest hit seen from each side
 is what the GL backend's depth test keeps, so both backends yield the same cells.
+
+The per-face tables (projected bounds, barycentric and depth planes in world coordinates) do
+not depend on the level, so they are computed once per surface and shared by all its levels.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..scene import Surface
 from .grid import Grid, SlabHits
 
 # Candidate (face, pixel) pairs tested at once; bounds peak memory (~150 bytes per candidate).
@@ -23,101 +27,100 @@ class NumpyBackend:
     name = "numpy"
     renderer = "numpy axis-ray rasteriser (CPU)"
 
-    def rasterize(self, vertices: np.ndarray, faces: np.ndarray, grid: Grid) -> list[SlabHits]:
+    def rasterize(self, surface: Surface, grid: Grid) -> list[SlabHits]:
         """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z)."""
-        tri = vertices[faces]
         hits: list[SlabHits] = []
         for axis in range(3):
-            hits.extend(rasterize_axis(tri, grid, axis))
+            table = surface.derived(f"numpy-axis-{axis}", lambda a=axis: face_table(surface, a))
+            hits.extend(rasterize_axis(table, grid, axis))
         return hits
 
 
-def _face_setup(tri: np.ndarray, grid: Grid, axis: int) -> dict[str, np.ndarray]:
-    """Per face: pixel bounding range and barycentric/depth plane coefficients, for the faces
-    whose projection contains at least one pixel centre candidate."""
-    u, v = grid.plane_axes(axis)
-    rows, cols = grid.image_shape(axis)
-    # Pixel coordinates in which pixel (iu, iv) has its centre at (iu, iv).
-    pu = (tri[:, :, u] - grid.lo[u]) / grid.pitch - 0.5
-    pv = (tri[:, :, v] - grid.lo[v]) / grid.pitch - 0.5
-    iu0 = np.maximum(np.ceil(pu.min(axis=1) - EPS), 0).astype(np.int64)
-    iu1 = np.minimum(np.floor(pu.max(axis=1) + EPS), cols - 1).astype(np.int64)
-    iv0 = np.maximum(np.ceil(pv.min(axis=1) - EPS), 0).astype(np.int64)
-    iv1 = np.minimum(np.floor(pv.max(axis=1) + EPS), rows - 1).astype(np.int64)
-    nu = iu1 - iu0 + 1
-    nv = iv1 - iv0 + 1
-    ax, ay = pu[:, 0], pv[:, 0]
-    bx, by = pu[:, 1], pv[:, 1]
-    cx, cy = pu[:, 2], pv[:, 2]
+def face_table(surface: Surface, axis: int) -> dict[str, np.ndarray]:
+    """Per face not degenerate in projection along ``axis``: projected bounds and the planes of
+    two barycentric coordinates and of the depth, as ``(a, b, c)`` of ``a·u + b·v + c``."""
+    tri = surface.triangles
+    u, v = Grid.plane_axes(axis)
+    pu, pv, w = tri[:, :, u], tri[:, :, v], tri[:, :, axis]
+    ax, bx, cx = pu[:, 0], pu[:, 1], pu[:, 2]
+    ay, by, cy = pv[:, 0], pv[:, 1], pv[:, 2]
     area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-    keep = (nu > 0) & (nv > 0) & (np.abs(area) > 1e-12)
-    idx = np.flatnonzero(keep)
+    extent = float(np.ptp(surface.bounds, axis=0).max())
+    idx = np.flatnonzero(np.abs(area) > 1e-15 * extent * extent)
     ax, ay, bx, by, cx, cy, area = (a[idx] for a in (ax, ay, bx, by, cx, cy, area))
-    # b0(x, y) = ((bx-x)(cy-y) - (by-y)(cx-x)) / area, b1 likewise with (c, a); b2 = 1 - b0 - b1.
-    b0 = np.stack([(by - cy), (cx - bx), bx * cy - by * cx], axis=1) / area[:, None]
-    b1 = np.stack([(cy - ay), (ax - cx), cx * ay - cy * ax], axis=1) / area[:, None]
-    w = tri[idx][:, :, axis]
-    # Depth plane: w(x, y) = w0·b0 + w1·b1 + w2·(1 - b0 - b1).
-    dw0 = (w[:, 0] - w[:, 2])[:, None]
-    dw1 = (w[:, 1] - w[:, 2])[:, None]
-    plane = dw0 * b0 + dw1 * b1
+    inv = (1.0 / area)[:, None]
+    b0 = np.stack([by - cy, cx - bx, bx * cy - by * cx], axis=1) * inv
+    b1 = np.stack([cy - ay, ax - cx, cx * ay - cy * ax], axis=1) * inv
+    w = w[idx]
+    plane = (w[:, 0] - w[:, 2])[:, None] * b0 + (w[:, 1] - w[:, 2])[:, None] * b1
     plane[:, 2] += w[:, 2]
     return {
         "face": idx,
-        "iu0": iu0[idx],
-        "iv0": iv0[idx],
-        "nu": nu[idx],
-        "count": (nu * nv)[idx],
+        "umin": pu[idx].min(axis=1),
+        "umax": pu[idx].max(axis=1),
+        "vmin": pv[idx].min(axis=1),
+        "vmax": pv[idx].max(axis=1),
         "b0": b0,
         "b1": b1,
         "plane": plane,
     }
 
 
-def _candidates(setup: dict[str, np.ndarray], start: int, stop: int) -> tuple[np.ndarray, ...]:
-    """Test the (face, pixel) candidates of faces ``start:stop``; return the inside ones as
-    (face row, iu, iv, depth)."""
-    count = setup["count"][start:stop]
-    rows = np.repeat(np.arange(start, stop), count)
-    first = np.cumsum(count) - count
-    offset = np.arange(len(rows)) - np.repeat(first, count)
-    nu = setup["nu"][rows]
-    iu = setup["iu0"][rows] + offset % nu
-    iv = setup["iv0"][rows] + offset // nu
-    x = iu.astype(np.float64)
-    y = iv.astype(np.float64)
-    b0c = setup["b0"][rows]
-    b1c = setup["b1"][rows]
+def _pixel_range(lo: np.ndarray, hi: np.ndarray, origin: float, pitch: float, n: int):
+    """First pixel and pixel count whose centres fall in [lo, hi] (world), clipped to 0..n-1."""
+    first = np.maximum(np.ceil((lo - origin) / pitch - 0.5 - EPS), 0).astype(np.int64)
+    last = np.minimum(np.floor((hi - origin) / pitch - 0.5 + EPS), n - 1).astype(np.int64)
+    return first, np.maximum(last - first + 1, 0)
+
+
+def _candidates(
+    table: dict[str, np.ndarray], rows: np.ndarray, iu: np.ndarray, iv: np.ndarray, grid: Grid, axis: int
+) -> tuple[np.ndarray, ...]:
+    """Keep the (face row, pixel) candidates whose pixel centre is inside the face; return
+    them with their depth."""
+    u, v = grid.plane_axes(axis)
+    x = grid.lo[u] + (iu + 0.5) * grid.pitch
+    y = grid.lo[v] + (iv + 0.5) * grid.pitch
+    b0c = table["b0"][rows]
+    b1c = table["b1"][rows]
     b0 = b0c[:, 0] * x + b0c[:, 1] * y + b0c[:, 2]
     b1 = b1c[:, 0] * x + b1c[:, 1] * y + b1c[:, 2]
     inside = (b0 >= -EPS) & (b1 >= -EPS) & (b0 + b1 <= 1.0 + EPS)
     rows, iu, iv, x, y = rows[inside], iu[inside], iv[inside], x[inside], y[inside]
-    pl = setup["plane"][rows]
-    depth = pl[:, 0] * x + pl[:, 1] * y + pl[:, 2]
-    return rows, iu, iv, depth
+    pl = table["plane"][rows]
+    return rows, iu, iv, pl[:, 0] * x + pl[:, 1] * y + pl[:, 2]
 
 
-def rasterize_axis(tri: np.ndarray, grid: Grid, axis: int) -> list[SlabHits]:
+def rasterize_axis(table: dict[str, np.ndarray], grid: Grid, axis: int) -> list[SlabHits]:
     """Nearest hit per (slab, pixel) seen from both sides of ``axis``: two :class:`SlabHits`."""
-    setup = _face_setup(tri, grid, axis)
+    u, v = grid.plane_axes(axis)
+    rows_n, cols_n = grid.image_shape(axis)
+    iu0, nu = _pixel_range(table["umin"], table["umax"], grid.lo[u], grid.pitch, cols_n)
+    iv0, nv = _pixel_range(table["vmin"], table["vmax"], grid.lo[v], grid.pitch, rows_n)
+    count = nu * nv
+    live = np.flatnonzero(count)
+    count = count[live]
+    cum = np.cumsum(count)
     parts: list[tuple[np.ndarray, ...]] = []
-    cum = np.cumsum(setup["count"])
     start = 0
-    total_faces = len(cum)
-    while start < total_faces:
+    while start < len(live):
         base = cum[start - 1] if start else 0
-        stop = int(np.searchsorted(cum, base + CHUNK, side="right"))
-        stop = max(stop, start + 1)
-        parts.append(_candidates(setup, start, stop))
+        stop = max(start + 1, int(np.searchsorted(cum, base + CHUNK, side="right")))
+        c = count[start:stop]
+        rows = np.repeat(live[start:stop], c)
+        offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
+        width = nu[rows]
+        parts.append(
+            _candidates(table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis)
+        )
         start = stop
     if parts:
         rows, iu, iv, depth = (np.concatenate(p) for p in zip(*parts, strict=True))
     else:
         rows = iu = iv = np.zeros(0, dtype=np.int64)
         depth = np.zeros(0, dtype=np.float64)
-    face = setup["face"][rows]
+    face = table["face"][rows]
     slab = grid.slab_of(axis, depth)
-    rows_n, cols_n = grid.image_shape(axis)
     key = (slab * rows_n + iv) * cols_n + iu
     # Sort by key, then depth, then face (deterministic ties): the first of a key group is the
     # nearest hit from the low side, the last the nearest from the high side.
@@ -125,17 +128,15 @@ def rasterize_axis(tri: np.ndarray, grid: Grid, axis: int) -> list[SlabHits]:
     key = key[order]
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if len(key) else key
     ends = np.r_[starts[1:], len(key)] - 1 if len(key) else key
-    out = []
-    for sign, pick in ((1, order[starts]), (-1, order[ends])):
-        out.append(
-            SlabHits(
-                axis=axis,
-                sign=sign,
-                slab=slab[pick],
-                iu=iu[pick],
-                iv=iv[pick],
-                depth=depth[pick],
-                face=face[pick],
-            )
+    return [
+        SlabHits(
+            axis=axis,
+            sign=sign,
+            slab=slab[pick],
+            iu=iu[pick],
+            iv=iv[pick],
+            depth=depth[pick],
+            face=face[pick],
         )
-    return out
+        for sign, pick in ((1, order[starts]), (-1, order[ends]))
+    ]

@@ -29,7 +29,7 @@ class Backend(Protocol):
     name: str
     renderer: str
 
-    def rasterize(self, vertices: np.ndarray, faces: np.ndarray, grid: Grid) -> list[SlabHits]:
+    def rasterize(self, surface: Surface, grid: Grid) -> list[SlabHits]:
         """Nearest hit per (slab, pixel) for +x, -x, +y, -y, +z, -z (in any order)."""
         ...
 
@@ -41,7 +41,7 @@ def occupied_hits(
     grid = Grid.for_bounds(
         surface.bounds if bounds is None else bounds, params.resolution, params.slices
     )
-    raw = backend.rasterize(surface.vertices, surface.faces, grid)
+    raw = backend.rasterize(surface, grid)
     filled = [fill_holes(h, grid, params.filter) for h in raw]
     if filled:
         positions = np.concatenate([h.positions(grid) for h in filled])
@@ -52,10 +52,9 @@ def occupied_hits(
     return grid, positions, faces
 
 
-def surface_samples(surface: Surface, pitch: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points on every non-degenerate face: its centroid, and samples at most ``pitch`` apart
-    along its longest edge (a sliver thinner than the pitch lies within a pitch of them)."""
-    tri = surface.vertices[surface.faces]
+def _edge_table(surface: Surface) -> dict[str, np.ndarray]:
+    """Per non-degenerate face: centroid, and start, vector and length of its longest edge."""
+    tri = surface.triangles
     edges = tri[:, [1, 2, 0]] - tri
     area2 = np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
     face_ids = np.flatnonzero(area2 > 0)
@@ -63,13 +62,30 @@ def surface_samples(surface: Surface, pitch: float) -> tuple[np.ndarray, np.ndar
     lengths = np.linalg.norm(edges, axis=2)
     longest = np.argmax(lengths, axis=1)
     rows = np.arange(len(face_ids))
-    count = np.maximum(1, np.ceil(lengths[rows, longest] / pitch).astype(np.int64))
-    owner = np.repeat(rows, count)
-    k = np.arange(len(owner)) - np.repeat(np.cumsum(count) - count, count)
-    t = (k + 0.5) / count[owner]
-    along = tri[owner, longest[owner]] + edges[owner, longest[owner]] * t[:, None]
-    points = np.concatenate([tri.mean(axis=1), along])
-    return points, np.concatenate([face_ids, face_ids[owner]])
+    return {
+        "face": face_ids,
+        "centroid": tri.mean(axis=1),
+        "start": tri[rows, longest],
+        "edge": edges[rows, longest],
+        "length": lengths[rows, longest],
+    }
+
+
+def surface_samples(surface: Surface, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points on every non-degenerate face: its centroid, and samples at most ``pitch`` apart
+    along its longest edge (a sliver thinner than the pitch lies within a pitch of them)."""
+    table = surface.derived("edge-table", lambda: _edge_table(surface))
+    count = np.maximum(1, np.ceil(table["length"] / pitch).astype(np.int64))
+    if int(count.max(initial=1)) == 1:
+        along_rows = np.arange(len(count))
+        t = np.full(len(count), 0.5)
+    else:
+        along_rows = np.repeat(np.arange(len(count)), count)
+        k = np.arange(len(along_rows)) - np.repeat(np.cumsum(count) - count, count)
+        t = (k + 0.5) / count[along_rows]
+    along = table["start"][along_rows] + table["edge"][along_rows] * t[:, None]
+    points = np.concatenate([table["centroid"], along])
+    return points, np.concatenate([table["face"], table["face"][along_rows]])
 
 
 def rescue_thin_features(
