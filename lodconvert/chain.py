@@ -179,6 +179,12 @@ def bake_chain(
             smaller = max(1, min(params.resolution - 1, math.floor(params.resolution * shrink)))
             params = _params_for(i, longest, distance, opts, resolution=smaller)
             cloud, grid = bake_points(surface, params, backend, bounds)
+        if warn and opts.resolutions and params.resolution != opts.resolutions[i]:
+            warn(
+                f"{obj.id}: {name} baked at resolution {params.resolution} instead of "
+                f"{opts.resolutions[i]}: it must have fewer points than {LEVEL_NAMES[n - 1]} "
+                f"({previous:,})"
+            )
         if len(cloud) >= previous:
             if warn:
                 warn(

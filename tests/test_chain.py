@@ -1,0 +1,135 @@
+"""LOD chains: levels, default parameters, switching distances, degenerate objects."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from lodconvert.bake import NumpyBackend
+from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.errors import InputError, UsageError
+from lodconvert.ranges import projected_px
+from lodconvert.scene import SceneObject, Surface
+
+from .conftest import surface_of
+
+
+def chain_of(obj: SceneObject, **options):
+    return bake_chain(obj, ChainOptions(**options), NumpyBackend())
+
+
+def test_default_chain_is_mesh_then_three_point_levels(bunny: SceneObject) -> None:
+    chain = chain_of(bunny)
+    assert [lv.name for lv in chain.levels] == ["LOD4", "LOD3", "LOD2", "LOD1"]
+    assert [lv.kind for lv in chain.levels] == ["mesh", "pcd", "pcd", "pcd"]
+    counts = [lv.count for lv in chain.levels]
+    assert counts[0] == len(bunny.surface.vertices)
+    assert all(b < a for a, b in zip(counts, counts[1:], strict=False)), counts
+
+
+def test_cutoffs_follow_alpha_beta_gamma(bunny: SceneObject) -> None:
+    chain = chain_of(bunny, gamma=20.0)
+    lo, hi = bunny.surface.bounds
+    alpha = float(np.linalg.norm(hi - lo))
+    assert chain.alpha == pytest.approx(alpha)
+    expected = [alpha * 3.0 * 20.0**x for x in (0.33, 0.66, 1.0)]
+    assert chain.cutoffs == pytest.approx(expected)
+    assert np.allclose(chain.origin, (lo + hi) / 2)
+
+
+def test_default_resolution_keeps_spacing_within_budget(bunny: SceneObject) -> None:
+    opts = ChainOptions()
+    chain = chain_of(bunny)
+    for level in chain.levels[1:]:
+        # the pitch seen from where the level first shows stays within the pixel budget ...
+        spacing_px = projected_px(level.spacing, level.design_distance, opts.view)
+        assert spacing_px <= opts.spacing_px + 1e-9
+        # ... and the point size covers the cell diagonal there
+        assert level.params.point_size >= np.sqrt(2) * spacing_px - 0.01
+    # coarser levels are designed for farther distances
+    assert [lv.design_distance for lv in chain.levels[1:]] == pytest.approx(chain.cutoffs)
+
+
+def test_explicit_parameters_are_used(bunny: SceneObject) -> None:
+    chain = chain_of(bunny, resolutions=(40, 20, 10), slices=(20, 10, 5), point_sizes=(3, 4, 5))
+    params = [lv.params for lv in chain.levels[1:]]
+    assert [p.resolution for p in params] == [40, 20, 10]
+    assert [p.slices for p in params] == [20, 10, 5]
+    assert [p.point_size for p in params] == [3, 4, 5]
+
+
+def test_a_level_heavier_than_the_one_before_is_lowered(torus: SceneObject) -> None:
+    warnings: list[str] = []
+    chain = bake_chain(
+        torus, ChainOptions(resolutions=(64, 20, 10)), NumpyBackend(), warn=warnings.append
+    )
+    assert chain.levels[1].count < chain.levels[0].count  # 1,536 torus vertices
+    assert chain.levels[1].params.resolution < 64
+    assert any("LOD3" in w and "64" in w for w in warnings)
+
+
+def test_no_mesh_bakes_every_level(torus: SceneObject) -> None:
+    chain = chain_of(torus, keep_mesh=False)
+    assert [lv.kind for lv in chain.levels] == ["pcd"] * 4
+    counts = [lv.count for lv in chain.levels]
+    assert all(b < a for a, b in zip(counts, counts[1:], strict=False))
+
+
+def test_levels_and_exponents(torus: SceneObject) -> None:
+    chain = chain_of(torus, levels=3)
+    assert [lv.name for lv in chain.levels] == ["LOD4", "LOD3", "LOD2"]
+    assert chain.xs == [0.5, 1.0]
+    with pytest.raises(UsageError, match="exponents"):
+        chain_of(torus, levels=3, xs=(0.3, 0.6, 1.0))
+
+
+def test_cull_adds_a_last_cutoff(torus: SceneObject) -> None:
+    chain = chain_of(torus, cull=1.5)
+    assert chain.culled
+    assert len(chain.cutoffs) == len(chain.levels)
+    assert chain.cutoffs[-1] == pytest.approx(chain.alpha * 3 * 10**1.5)
+    with pytest.raises(UsageError, match="--cull"):
+        chain_of(torus, cull=0.9)
+
+
+def test_far_from_origin_levels_stay_small(torus: SceneObject) -> None:
+    offset = np.array([500000.0, 5400000.0, 100.0])
+    moved = SceneObject("far", Surface(torus.surface.vertices + offset, torus.surface.faces))
+    chain = chain_of(moved)
+    assert np.allclose(chain.origin, offset, atol=1e-6)
+    near = chain_of(torus)
+    for a, b in zip(chain.levels[1:], near.levels[1:], strict=True):
+        assert np.abs(a.points.positions).max() < 2.0
+        assert a.count == b.count
+
+
+@pytest.mark.parametrize(
+    "mesh",
+    [
+        trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]]),
+        trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]),
+        trimesh.creation.cylinder(radius=0.01, height=10.0, sections=12),
+    ],
+    ids=["flat-square", "single-triangle", "thin-rod"],
+)
+def test_degenerate_but_valid_objects_convert(mesh: trimesh.Trimesh) -> None:
+    warnings: list[str] = []
+    chain = bake_chain(
+        SceneObject("thing", surface_of(mesh)), ChainOptions(), NumpyBackend(), warn=warnings.append
+    )
+    counts = [lv.count for lv in chain.levels]
+    assert len(chain.levels) >= 2 and counts[1] >= 1
+    assert all(b < a for a, b in zip(counts, counts[1:], strict=False))
+    assert len(chain.cutoffs) == len(chain.levels) - 1
+    if len(chain.levels) < 4:
+        assert warnings and "dropped" in warnings[0]
+
+
+def test_bad_geometry_is_an_input_error() -> None:
+    nan = Surface(np.array([[0, 0, 0], [1, np.nan, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
+    with pytest.raises(InputError, match="NaN"):
+        chain_of(SceneObject("bad", nan))
+    empty = Surface(np.zeros((3, 3)), np.zeros((0, 3), dtype=np.int64))
+    with pytest.raises(InputError, match="no faces"):
+        chain_of(SceneObject("empty", empty))
