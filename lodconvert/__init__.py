@@ -54,7 +54,7 @@ def write(
 
 
 def convert(input_path: str | Path, output_path: str | Path, **kwargs: object) -> dict:
-    """Read, bake and write in one call; returns the report. See :func:`lodconvert.convert.convert`."""
+    """Read, bake and write in one call; return the report (see :mod:`lodconvert.convert`)."""
     from .convert import convert as _convert
 
     return _convert(input_path, output_path, **kwargs)  # type: ignore[arg-type]

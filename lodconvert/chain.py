@@ -30,7 +30,7 @@ from .ranges import (
     default_xs,
     projected_px,
 )
-from .scene import BakeParams, Level, LodChain, SceneObject, Surface
+from .scene import BakeParams, Level, LodChain, SceneObject
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
@@ -89,7 +89,9 @@ class ChainOptions:
             if values is None:
                 continue
             if len(values) != n:
-                raise UsageError(f"{flag} needs {n} values (one per point level), got {len(values)}")
+                raise UsageError(
+                    f"{flag} needs {n} values (one per point level), got {len(values)}"
+                )
             if any(not (math.isfinite(v) and v > 0) for v in values):
                 raise UsageError(f"{flag} values must be positive")
         for flag, values in (("--resolution", self.resolutions), ("--slices", self.slices)):
@@ -107,7 +109,9 @@ def default_resolution(longest: float, distance: float, opts: ChainOptions) -> i
 
 def default_point_size(pitch: float, distance: float, opts: ChainOptions) -> float:
     """Projected cell diagonal (≥ 1 px) at ``distance``, rounded up to 0.01 px."""
-    return max(1.0, math.ceil(100 * math.sqrt(2.0) * projected_px(pitch, distance, opts.view)) / 100)
+    return max(
+        1.0, math.ceil(100 * math.sqrt(2.0) * projected_px(pitch, distance, opts.view)) / 100
+    )
 
 
 def _check_geometry(obj: SceneObject) -> None:
@@ -137,7 +141,9 @@ def _params_for(
         if opts.point_sizes
         else default_point_size(longest / t3, distance, opts)
     )
-    return BakeParams(resolution=int(t3), slices=int(t1), point_size=float(size), filter=opts.filter)
+    return BakeParams(
+        resolution=int(t3), slices=int(t1), point_size=float(size), filter=opts.filter
+    )
 
 
 def bake_chain(
@@ -233,4 +239,3 @@ def parse_list(text: str, kind: type, flag: str) -> tuple:
     if not values:
         raise UsageError(f"{flag} expects at least one value")
     return values
-

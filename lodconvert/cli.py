@@ -80,14 +80,20 @@ def build_convert_parser() -> Parser:
     parser.add_argument("--version", action="version", version=f"lodconvert {__version__}")
     bake = parser.add_argument_group("baking (one value per point level, finest first)")
     bake.add_argument("--resolution", metavar="T3,..", help="grid cells along the longest side")
-    bake.add_argument("--slices", metavar="T1,..", help="slabs along the longest side (default = T3)")
+    bake.add_argument(
+        "--slices", metavar="T1,..", help="slabs along the longest side (default = T3)"
+    )
     bake.add_argument("--point-size", metavar="T2,..", help="point size in pixels at switch-in")
-    bake.add_argument("--filter", choices=FILTERS, default="median", help="hole filter (default median)")
+    bake.add_argument(
+        "--filter", choices=FILTERS, default="median", help="hole filter (default median)"
+    )
     bake.add_argument("--backend", choices=BACKENDS, default="auto", help="baker (default auto)")
     bake.add_argument("--no-mesh", action="store_true", help="bake the finest level too")
     _add_range_options(parser)
     out = parser.add_argument_group("output and messages")
-    out.add_argument("--report", metavar="FILE", help="write a JSON report (schemas/report.schema.json)")
+    out.add_argument(
+        "--report", metavar="FILE", help="write a JSON report (schemas/report.schema.json)"
+    )
     out.add_argument("-q", "--quiet", action="store_true", help="print errors only")
     out.add_argument("-v", "--verbose", action="store_true", help="print every step")
     out.add_argument("--debug", action="store_true", help="show tracebacks")

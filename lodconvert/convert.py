@@ -91,7 +91,11 @@ def iter_chains(
     for i, obj in enumerate(scene.objects, start=1):
         try:
             chain = bake_chain(
-                obj, options, backend, progress=lambda m, i=i: progress(f"[{i}/{total}] {m}"), warn=warn
+                obj,
+                options,
+                backend,
+                progress=lambda m, i=i: progress(f"[{i}/{total}] {m}"),
+                warn=warn,
             )
         except InputError as exc:
             if total > 1:

@@ -9,6 +9,7 @@ glTF ``MSFT_screencoverage`` values.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -56,7 +57,7 @@ def check_range_parameters(beta: float, gamma: float, xs: Sequence[float]) -> No
         raise UsageError("--x needs at least one exponent")
     if any(not math.isfinite(x) or x <= 0 for x in xs):
         raise UsageError(f"--x exponents must be positive, got {', '.join(f'{x:g}' for x in xs)}")
-    if any(b <= a for a, b in zip(xs, xs[1:], strict=False)):
+    if any(b <= a for a, b in itertools.pairwise(xs)):
         raise UsageError(
             f"--x exponents must be strictly increasing, got {', '.join(f'{x:g}' for x in xs)}"
         )

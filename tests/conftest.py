@@ -62,7 +62,9 @@ def bunny(bunny_mesh: trimesh.Trimesh) -> SceneObject:
 @pytest.fixture
 def torus() -> SceneObject:
     """A torus (major radius 1, minor 0.3) with a colour gradient over its vertices."""
-    mesh = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=64, minor_sections=24)
+    mesh = trimesh.creation.torus(
+        major_radius=1.0, minor_radius=0.3, major_sections=64, minor_sections=24
+    )
     v = np.asarray(mesh.vertices)
     t = (v[:, 0] - v[:, 0].min()) / np.ptp(v[:, 0])
     colors = np.stack([255 * t, 128 + 0 * t, 255 * (1 - t), 255 + 0 * t], axis=1)

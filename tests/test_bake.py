@@ -14,7 +14,9 @@ from .conftest import surface_of
 
 
 def params(resolution: int, kind: str = "median", slices: int | None = None) -> BakeParams:
-    return BakeParams(resolution=resolution, slices=slices or resolution, point_size=2.0, filter=kind)
+    return BakeParams(
+        resolution=resolution, slices=slices or resolution, point_size=2.0, filter=kind
+    )
 
 
 def distances_to(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
@@ -92,7 +94,7 @@ def test_flat_square_bakes_onto_its_plane() -> None:
         vertices=np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64),
         faces=np.array([[0, 1, 2], [0, 2, 3]]),
     )
-    cloud, grid = bake_points(square, params(16), NumpyBackend())
+    cloud, _grid = bake_points(square, params(16), NumpyBackend())
     assert len(cloud) == 16 * 16
     assert np.all(cloud.positions[:, 2] == 0)
 

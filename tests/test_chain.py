@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 import trimesh
@@ -25,7 +27,7 @@ def test_default_chain_is_mesh_then_three_point_levels(bunny: SceneObject) -> No
     assert [lv.kind for lv in chain.levels] == ["mesh", "pcd", "pcd", "pcd"]
     counts = [lv.count for lv in chain.levels]
     assert counts[0] == len(bunny.surface.vertices)
-    assert all(b < a for a, b in zip(counts, counts[1:], strict=False)), counts
+    assert all(b < a for a, b in itertools.pairwise(counts)), counts
 
 
 def test_cutoffs_follow_alpha_beta_gamma(bunny: SceneObject) -> None:
@@ -73,7 +75,7 @@ def test_no_mesh_bakes_every_level(torus: SceneObject) -> None:
     chain = chain_of(torus, keep_mesh=False)
     assert [lv.kind for lv in chain.levels] == ["pcd"] * 4
     counts = [lv.count for lv in chain.levels]
-    assert all(b < a for a, b in zip(counts, counts[1:], strict=False))
+    assert all(b < a for a, b in itertools.pairwise(counts))
 
 
 def test_levels_and_exponents(torus: SceneObject) -> None:
@@ -120,7 +122,7 @@ def test_degenerate_but_valid_objects_convert(mesh: trimesh.Trimesh) -> None:
     )
     counts = [lv.count for lv in chain.levels]
     assert len(chain.levels) >= 2 and counts[1] >= 1
-    assert all(b < a for a, b in zip(counts, counts[1:], strict=False))
+    assert all(b < a for a, b in itertools.pairwise(counts))
     assert len(chain.cutoffs) == len(chain.levels) - 1
     if len(chain.levels) < 4:
         assert warnings and "dropped" in warnings[0]

@@ -196,7 +196,9 @@ def test_several_objects_stay_several_and_a_broken_one_is_skipped(work: Path) ->
     scene.add_geometry(box, node_name="near", geom_name="box")
     far = np.eye(4)
     far[:3, 3] = (300000.0, 5000000.0, 50.0)
-    scene.add_geometry(trimesh.creation.icosphere(3), node_name="far", geom_name="ball", transform=far)
+    scene.add_geometry(
+        trimesh.creation.icosphere(3), node_name="far", geom_name="ball", transform=far
+    )
     flat = trimesh.Trimesh([[1, 1, 1]] * 3, [[0, 1, 2]], process=False)
     scene.add_geometry(flat, node_name="broken", geom_name="flat")
     src = work / "city.glb"

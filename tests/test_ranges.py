@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import pytest
@@ -21,7 +22,7 @@ def test_cutoffs_follow_the_formula() -> None:
     ys = cutoffs(alpha, beta, gamma, [0.33, 0.66, 1.0])
     assert ys == pytest.approx([alpha * beta * gamma**x for x in (0.33, 0.66, 1.0)])
     assert ys[-1] == pytest.approx(150.0)
-    assert all(b > a for a, b in zip(ys, ys[1:], strict=False))
+    assert all(b > a for a, b in itertools.pairwise(ys))
 
 
 def test_default_exponents_are_the_papers() -> None:

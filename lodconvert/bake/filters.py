@@ -10,6 +10,7 @@ surface and takes that surface's colour.
 
 from __future__ import annotations
 
+import itertools
 from typing import Literal
 
 import cv2
@@ -48,7 +49,7 @@ def fill_holes(hits: SlabHits, grid: Grid, kind: FilterName) -> SlabHits:
     mask = np.zeros((rows + 2, cols + 2), dtype=np.uint8)
     depth = np.zeros((rows + 2, cols + 2), dtype=np.float64)
     face = np.full((rows + 2, cols + 2), -1, dtype=np.int64)
-    for a, b in zip(bounds[:-1], bounds[1:], strict=True):
+    for a, b in itertools.pairwise(bounds):
         sel = order[a:b]
         y = hits.iv[sel] + 1
         x = hits.iu[sel] + 1

@@ -74,7 +74,12 @@ def _pixel_range(lo: np.ndarray, hi: np.ndarray, origin: float, pitch: float, n:
 
 
 def _candidates(
-    table: dict[str, np.ndarray], rows: np.ndarray, iu: np.ndarray, iv: np.ndarray, grid: Grid, axis: int
+    table: dict[str, np.ndarray],
+    rows: np.ndarray,
+    iu: np.ndarray,
+    iv: np.ndarray,
+    grid: Grid,
+    axis: int,
 ) -> tuple[np.ndarray, ...]:
     """Keep the (face row, pixel) candidates whose pixel centre is inside the face; return
     them with their depth."""
@@ -111,7 +116,9 @@ def rasterize_axis(table: dict[str, np.ndarray], grid: Grid, axis: int) -> list[
         offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
         width = nu[rows]
         parts.append(
-            _candidates(table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis)
+            _candidates(
+                table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis
+            )
         )
         start = stop
     if parts:

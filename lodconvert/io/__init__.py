@@ -50,7 +50,9 @@ def reader_for(path: str | Path) -> Reader:
     suffix = suffix_of(path)
     if suffix not in READERS:
         known = ", ".join(sorted(READERS))
-        raise InputError(f"unknown input format {suffix or '(no suffix)'!r}; known: {known}", str(path))
+        raise InputError(
+            f"unknown input format {suffix or '(no suffix)'!r}; known: {known}", str(path)
+        )
     return READERS[suffix]
 
 
@@ -60,7 +62,9 @@ def writer_for(path: str | Path) -> Writer:
     suffix = Path(path).suffix.lower()
     if suffix not in WRITERS:
         known = ", ".join(sorted(WRITERS))
-        raise InputError(f"unknown output format {suffix or '(no suffix)'!r}; known: {known}", str(path))
+        raise InputError(
+            f"unknown output format {suffix or '(no suffix)'!r}; known: {known}", str(path)
+        )
     return WRITERS[suffix]
 
 

@@ -111,7 +111,9 @@ def read_mesh(path: Path) -> Scene:
     try:
         loaded = _load_trimesh_scene(path, suffix)
     except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
-        raise InputError(f"is truncated or not a valid {suffix[1:].upper()} file ({exc})", str(path)) from None
+        raise InputError(
+            f"is truncated or not a valid {suffix[1:].upper()} file ({exc})", str(path)
+        ) from None
     except Exception as exc:  # trimesh raises many types for malformed files
         reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise InputError(f"cannot be read as {suffix[1:].upper()}: {reason}", str(path)) from None
