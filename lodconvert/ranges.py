@@ -87,10 +87,11 @@ def cutoffs(
 
 def screen_coverage(alpha: float, distance: float, view: ReferenceView = REFERENCE_VIEW) -> float:
     """Fraction of the viewport height covered by the object's diagonal α seen from
-    ``distance`` (capped at 1): the quantity glTF ``MSFT_screencoverage`` thresholds compare."""
+    ``distance``: the quantity glTF ``MSFT_screencoverage`` thresholds compare. Not capped at
+    1 (an object can overfill the view), so thresholds of increasing cutoffs strictly fall."""
     if distance <= 0:
-        return 1.0
-    return min(1.0, alpha * view.focal_px / (distance * view.height_px))
+        raise ValueError("distance must be positive")
+    return alpha * view.focal_px / (distance * view.height_px)
 
 
 def projected_px(length: float, distance: float, view: ReferenceView = REFERENCE_VIEW) -> float:
