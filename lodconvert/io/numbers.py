@@ -1,0 +1,123 @@
+"""Fast, deterministic number formatting for text formats (X3D attributes, reports).
+
+Large arrays (hundreds of thousands of vertices) are written without a per-number Python call:
+the digits are computed with numpy straight into a byte buffer. Geometry is printed in fixed
+point with trailing zeros trimmed (``0.125``, ``-3``, ``12.5``), at a number of decimals that
+keeps a given count of significant digits on the array's largest magnitude, so the rounding
+error is at most half a unit in that last digit for every value. Scalars that must survive
+exactly (a georeferenced origin in the millions, metadata) use Python's shortest round-trip
+``repr``. The same input always gives the same text.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable
+
+import numpy as np
+
+GEOMETRY_DIGITS = 7
+"""Significant digits kept on an array's largest magnitude: float32-level precision."""
+
+_POW10 = 10 ** np.arange(19, dtype=np.int64)
+_SPACE, _MINUS, _DOT, _ZERO = (ord(c) for c in " -.0")
+_UNIT_BYTES = np.array([f"{i / 255:.4f}".rstrip("0").rstrip(".") for i in range(256)], dtype=object)
+
+
+def decimals_for(max_abs: float, significant: int = GEOMETRY_DIGITS) -> int:
+    """Decimals that give ``max_abs`` ``significant`` significant digits (never negative).
+
+    >>> decimals_for(0.0781), decimals_for(123.4), decimals_for(5e9)
+    (8, 4, 0)
+    """
+    if not (math.isfinite(max_abs) and max_abs > 0):
+        return 0
+    return max(0, significant - 1 - math.floor(math.log10(max_abs)))
+
+
+def _digit_counts(values: np.ndarray) -> np.ndarray:
+    """Decimal digits of non-negative int64 ``values`` (0 has one digit)."""
+    return np.maximum(np.searchsorted(_POW10, values, side="right"), 1)
+
+
+def _put_digits(buf: np.ndarray, ends: np.ndarray, values: np.ndarray, widths: np.ndarray) -> None:
+    """Write each of ``values`` as ``widths`` digits (zero-padded) ending before ``ends``."""
+    rest = values.copy()
+    for place in range(int(widths.max(initial=0))):
+        live = widths > place
+        buf[ends[live] - 1 - place] = _ZERO + rest[live] % 10
+        rest //= 10
+
+
+def _join(
+    negative: np.ndarray, whole: np.ndarray, fraction: np.ndarray, fraction_digits: np.ndarray
+) -> str:
+    """Space-separated ``[-]whole[.fraction]`` tokens; ``fraction`` has ``fraction_digits``
+    digits (zero-padded on the left), and no fraction part is written where that count is 0."""
+    if len(whole) == 0:
+        return ""
+    whole_digits = _digit_counts(whole)
+    has_fraction = fraction_digits > 0
+    lengths = negative + whole_digits + has_fraction * (1 + fraction_digits)
+    starts = np.zeros(len(lengths), dtype=np.int64)
+    np.cumsum(lengths[:-1] + 1, out=starts[1:])
+    buf = np.full(int(starts[-1] + lengths[-1]), _SPACE, dtype=np.uint8)
+    buf[starts[negative]] = _MINUS
+    point = starts + negative + whole_digits
+    _put_digits(buf, point, whole, whole_digits)
+    buf[point[has_fraction]] = _DOT
+    _put_digits(buf, starts + lengths, fraction, fraction_digits)
+    return buf.tobytes().decode("ascii")
+
+
+def format_ints(values: np.ndarray | Iterable[int]) -> str:
+    """Integers separated by single spaces (any shape, flattened in C order)."""
+    flat = np.asarray(values, dtype=np.int64).ravel()
+    zeros = np.zeros(len(flat), dtype=np.int64)
+    return _join(flat < 0, np.abs(flat), zeros, zeros)
+
+
+def format_fixed(values: np.ndarray | Iterable[float], decimals: int) -> str:
+    """Finite floats rounded to ``decimals`` places, trailing zeros and ``-0`` dropped,
+    separated by single spaces (any shape, flattened in C order).
+
+    >>> format_fixed([0.5, -2.0, 1e-9, -0.000049, 1234.56789], 4)
+    '0.5 -2 0 0 1234.5679'
+    """
+    if not 0 <= decimals <= 15:
+        raise ValueError(f"decimals must be between 0 and 15, got {decimals}")
+    flat = np.asarray(values, dtype=np.float64).ravel()
+    if not np.isfinite(flat).all():
+        raise ValueError("cannot format NaN or infinite values")
+    scaled = np.rint(flat * float(_POW10[decimals])).astype(np.int64)
+    magnitude = np.abs(scaled)
+    whole, fraction = np.divmod(magnitude, _POW10[decimals])
+    trailing = np.zeros(len(flat), dtype=np.int64)
+    for place in range(1, decimals + 1):
+        trailing += (fraction % _POW10[place]) == 0
+    fraction_digits = np.where(fraction == 0, 0, decimals - trailing)
+    return _join(scaled < 0, whole, fraction // _POW10[trailing], fraction_digits)
+
+
+def format_floats(values: np.ndarray | Iterable[float], significant: int = GEOMETRY_DIGITS) -> str:
+    """Floats in fixed point with ``significant`` digits on the largest magnitude
+    (see :func:`decimals_for`); every value is within half a unit of that last digit.
+
+    >>> format_floats([0.1234567891, -0.001, 12.0], significant=4)
+    '0.12 0 12'
+    """
+    flat = np.asarray(values, dtype=np.float64).ravel()
+    max_abs = float(np.abs(flat).max()) if len(flat) else 0.0
+    return format_fixed(flat, decimals_for(max_abs, significant))
+
+
+def format_unit_bytes(values: np.ndarray) -> str:
+    """uint8 values as fractions of 255 with at most 4 decimals (``0``, ``0.502``, ``1``):
+    colour channels that read back to the same byte with ``rint(x * 255)``."""
+    return " ".join(_UNIT_BYTES[np.asarray(values, dtype=np.uint8).ravel()].tolist())
+
+
+def format_exact(values: Iterable[float]) -> str:
+    """Floats with Python's shortest round-trip ``repr`` (full float64 precision), for the few
+    numbers that must survive exactly, such as a georeferenced origin."""
+    return " ".join(repr(float(v)) for v in values)

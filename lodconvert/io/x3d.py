@@ -1,0 +1,431 @@
+"""X3D 4.0 XML output: one ``Transform`` + ``LOD`` per chain, and a reader for our own files.
+
+Layout of a written file (validates against the official x3d-4.0.xsd)::
+
+    <X3D profile='Interchange' version='4.0' ...>
+      <head> components Navigation 2, Rendering 4, Shape 5; meta generator, source, crs, ...
+      <Scene>
+        <Transform DEF='id' translation='origin (full float64 precision)'>
+          <LOD DEF='id_LOD' center=... range='cutoffs' forceTransitions='true'>
+            <MetadataSet name='lodconvert' containerField='metadata'> alpha, β, γ, xs, ...
+            <Shape DEF='id_LOD4'> Material + IndexedTriangleSet (the source mesh)
+            <Shape DEF='id_LOD3'> PointProperties + PointSet (baked points) ...
+            <Group/>   (only for a culled chain: nothing is drawn beyond the last range)
+
+Geometry inside the ``Transform`` is relative to the chain origin and printed with float32-level
+precision (:data:`~lodconvert.io.numbers.GEOMETRY_DIGITS` significant digits on the largest
+coordinate); the origin itself keeps every digit, so georeferenced data in the millions keeps
+its position. X3D LOD needs ``n + 1`` children for ``n`` ranges: without culling the chain has
+one cutoff fewer than levels; with culling the last cutoff is where the empty ``Group`` takes
+over.
+
+Point sizes follow the X3D 4.0 ``PointProperties`` node, whose attenuation factor is
+``1 / (a + b·r + c·r²)`` with ``r`` the distance from the viewer to each point; the nominal size
+(``pointSizeScaleFactor`` × the browser's minimum point size, 1 px) is multiplied by it and
+clipped to ``[pointSizeMinValue, pointSizeMaxValue]`` × the minimum point size. With
+``a = c = 0`` and ``b = s / (p·d)`` a point is ``p·d / r`` pixels wide: ``p`` (the level's
+``params.point_size``) at its design distance ``d``, shrinking with 1/r like a surface splat.
+The scale factor ``s = max(1, p)`` keeps the XSD's ``pointSizeScaleFactor >= 1``.
+
+Files can hold attribute values longer than libxml2's default 10 MB limit (the index list of a
+large scan), so readers of these files need lxml's ``huge_tree=True``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import re
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+from lxml import etree
+
+from ..errors import InputError
+from ..scene import Level, LodChain, Surface
+from . import WRITERS, OutputInfo
+from .numbers import format_exact, format_fixed, format_floats, format_ints, format_unit_bytes
+
+XSI = "http://www.w3.org/2001/XMLSchema-instance"
+SCHEMA_URL = "https://www.web3d.org/specifications/x3d-4.0.xsd"
+COMPONENTS = (("Navigation", 2), ("Rendering", 4), ("Shape", 5))
+"""Beyond the Interchange profile: LOD needs Navigation 2, ColorRGBA alpha is guaranteed from
+Rendering 4, PointProperties needs Shape 5."""
+
+MAX_POINT_GROWTH = 4.0
+"""Cap on how much larger than ``params.point_size`` a point may grow when the viewer comes
+closer than the design distance (a baked finest level shows from distance 0)."""
+
+METADATA_SET = "lodconvert"
+_NOT_NCNAME = re.compile(r"[^A-Za-z0-9_.\-]")
+
+Metadata = tuple[str, str, str]
+"""One metadata entry: node type (``MetadataDouble`` …), name, value as X3D field text."""
+
+
+class _Out:
+    """An ``lxml.etree.xmlfile`` with two-space indentation."""
+
+    def __init__(self, xf: Any) -> None:
+        self.xf = xf
+        self.depth = 0
+
+    def _newline(self) -> None:
+        self.xf.write("\n" + "  " * self.depth)
+
+    @contextlib.contextmanager
+    def node(
+        self, tag: str, attrib: dict[str, str] | None = None, nsmap: dict[str, str] | None = None
+    ) -> Iterator[None]:
+        """Open an element whose children are written inside the ``with`` block."""
+        if self.depth:  # no text may precede the root element
+            self._newline()
+        with self.xf.element(tag, attrib or {}, nsmap=nsmap):
+            self.depth += 1
+            yield
+            self.depth -= 1
+            self._newline()
+
+    def leaf(self, tag: str, attrib: dict[str, str] | None = None) -> None:
+        """Write an element without children."""
+        self._newline()
+        self.xf.write(etree.Element(tag, attrib or {}))
+
+
+def _mfstring(values: Iterable[str]) -> str:
+    """X3D MFString text: each value double-quoted, with ``\\`` and ``"`` escaped."""
+    return " ".join('"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"' for v in values)
+
+
+def _head(out: _Out, info: OutputInfo) -> None:
+    view = info.view
+    meta = [
+        ("generator", info.generator),
+        ("source", info.source),
+        *([("crs", info.crs)] if info.crs else []),
+        (
+            "reference-view",
+            f"{view.height_px} px high viewport, {view.fov_y_deg:g} degree vertical field of "
+            f"view (focal length {view.focal_px:.2f} px)",
+        ),
+        (
+            "lod-ranges",
+            "LOD range values are distances in scene units from the LOD center at which the next "
+            "coarser child takes over: Y = alpha * beta * gamma^x (alpha = bounding-box "
+            "diagonal); after the last range of a culled object an empty Group shows nothing",
+        ),
+        (
+            "point-size",
+            "PointSet points are point_size_px pixels wide at design_distance in the reference "
+            "view and scale with 1/distance (PointProperties attenuation 0 b 0)",
+        ),
+        *(
+            [("options", json.dumps(info.options, sort_keys=True, default=str))]
+            if info.options
+            else []
+        ),
+    ]
+    with out.node("head"):
+        for name, level in COMPONENTS:
+            out.leaf("component", {"name": name, "level": str(level)})
+        for name, content in meta:
+            out.leaf("meta", {"name": name, "content": content})
+
+
+def _metadata_set(out: _Out, entries: list[Metadata]) -> None:
+    with out.node("MetadataSet", {"name": METADATA_SET, "containerField": "metadata"}):
+        for tag, name, value in entries:
+            out.leaf(tag, {"name": name, "value": value})
+
+
+def _unique_names(object_id: str, used: set[str], levels: list[Level]) -> tuple[str, list[str]]:
+    """A DEF base (an XML NCName) for ``object_id`` whose derived names are not yet in
+    ``used``, and the level DEFs; all are added to ``used``."""
+    base = _NOT_NCNAME.sub("_", object_id) or "_"
+    if not (base[0].isalpha() or base[0] == "_"):
+        base = "_" + base
+    candidate, n = base, 1
+    while True:
+        names = [candidate, f"{candidate}_LOD", *(f"{candidate}_{lv.name}" for lv in levels)]
+        if not used.intersection(names):
+            used.update(names)
+            return candidate, names[2:]
+        n += 1
+        candidate = f"{base}_{n}"
+
+
+def _check_chain(chain: LodChain) -> None:
+    names = [level.name for level in chain.levels]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{chain.object_id}: level names must be unique: {names}")
+    expected = len(chain.levels) - 1 + int(chain.culled)
+    if len(chain.cutoffs) != expected:
+        raise ValueError(
+            f"{chain.object_id}: {len(chain.levels)} levels (culled={chain.culled}) need "
+            f"{expected} cutoffs, got {len(chain.cutoffs)}"
+        )
+    if any(b <= a for a, b in zip(chain.cutoffs, chain.cutoffs[1:], strict=False)):
+        raise ValueError(f"{chain.object_id}: cutoffs must increase strictly: {chain.cutoffs}")
+
+
+def _chain_metadata(chain: LodChain) -> list[Metadata]:
+    entries = [
+        ("MetadataString", "object_id", _mfstring([chain.object_id])),
+        ("MetadataDouble", "alpha", format_exact([chain.alpha])),
+        ("MetadataDouble", "beta", format_exact([chain.beta])),
+        ("MetadataDouble", "gamma", format_exact([chain.gamma])),
+        ("MetadataDouble", "xs", format_exact(chain.xs)),
+        ("MetadataDouble", "cutoffs", format_exact(chain.cutoffs)),
+        ("MetadataBoolean", "culled", "true" if chain.culled else "false"),
+    ]
+    if chain.metadata:
+        attributes = json.dumps(chain.metadata, sort_keys=True, default=str, ensure_ascii=False)
+        entries.append(("MetadataString", "attributes", _mfstring([attributes])))
+    return entries
+
+
+def _level_metadata(level: Level, switch_in: float, switch_out: float | None) -> list[Metadata]:
+    entries = [
+        ("MetadataString", "level", _mfstring([level.name])),
+        ("MetadataString", "kind", _mfstring([level.kind])),
+        ("MetadataInteger", "count", str(level.count)),
+        ("MetadataDouble", "switch_in", format_exact([switch_in])),
+    ]
+    if switch_out is not None:
+        entries.append(("MetadataDouble", "switch_out", format_exact([switch_out])))
+    if level.mesh is not None:
+        entries.append(("MetadataInteger", "triangles", str(len(level.mesh.faces))))
+    if level.params is not None:
+        entries += [
+            ("MetadataInteger", "resolution", str(level.params.resolution)),
+            ("MetadataInteger", "slices", str(level.params.slices)),
+            ("MetadataDouble", "point_size_px", format_exact([level.params.point_size])),
+            ("MetadataString", "filter", _mfstring([level.params.filter])),
+        ]
+    if level.spacing is not None:
+        entries.append(("MetadataDouble", "spacing", format_exact([level.spacing])))
+    if level.design_distance is not None:
+        entries.append(("MetadataDouble", "design_distance", format_exact([level.design_distance])))
+    return entries
+
+
+def point_properties(level: Level, switch_in: float, alpha: float) -> dict[str, str]:
+    """``PointProperties`` fields that draw ``level``'s points ``point_size · d / r`` pixels
+    wide (``d`` its design distance, ``r`` the viewer distance; see the module docstring).
+
+    The maximum is the size at the nearest distance the level can be seen from: its switch-in
+    distance less half the object diagonal ``alpha`` (points lie up to that far from the
+    centre), but never closer than ``d / MAX_POINT_GROWTH``. Without a design distance the
+    points keep a constant ``point_size``.
+    """
+    size = level.params.point_size if level.params is not None else 1.0
+    scale = max(1.0, size)
+    design = level.design_distance
+    if design is None or design <= 0:
+        fixed = format_exact([scale])
+        return {"pointSizeScaleFactor": fixed, "pointSizeMinValue": "1", "pointSizeMaxValue": fixed}
+    nearest = max(switch_in - alpha / 2.0, design / MAX_POINT_GROWTH)
+    return {
+        "pointSizeScaleFactor": format_exact([scale]),
+        "pointSizeMinValue": "1",
+        "pointSizeMaxValue": format_fixed([max(1.0, size * design / nearest)], 2),
+        "attenuation": "0 " + format_exact([scale / (size * design)]) + " 0",
+    }
+
+
+def _color_node(out: _Out, rgba: np.ndarray) -> None:
+    """``Color`` (RGB) when every alpha is 255, else ``ColorRGBA``."""
+    if (rgba[:, 3] == 255).all():
+        out.leaf("Color", {"color": format_unit_bytes(rgba[:, :3])})
+    else:
+        out.leaf("ColorRGBA", {"color": format_unit_bytes(rgba)})
+
+
+def vertex_colors(surface: Surface) -> np.ndarray | None:
+    """Per-vertex RGBA (n, 4) uint8 for a mesh written without its texture, or ``None`` when the
+    surface has neither vertex colours nor a texture with UVs (its
+    :attr:`~Surface.material_color` then goes to the Material).
+
+    Each vertex takes :meth:`Surface.colors_at` at its own position on the first face that
+    uses it: the texture sampled at the vertex UV (nearest texel) or the vertex colour, both
+    modulated by the base colour. Texture detail between vertices is lost; vertices used by
+    no face get the material colour.
+    """
+    textured = surface.texture is not None and surface.uv is not None
+    if not textured and surface.vertex_colors is None:
+        return None
+    colors = np.repeat(surface.material_color[None, :], len(surface.vertices), axis=0)
+    corners = surface.faces.ravel()
+    order = np.argsort(corners, kind="stable")
+    ordered = corners[order]
+    first = np.ones(len(ordered), dtype=bool)
+    first[1:] = ordered[1:] != ordered[:-1]
+    used = ordered[first]
+    colors[used] = surface.colors_at(order[first] // 3, surface.vertices[used])
+    return colors
+
+
+def _mesh_shape(out: _Out, surface: Surface) -> None:
+    base = surface.material_color
+    material = {"diffuseColor": format_unit_bytes(base[:3])}
+    if base[3] < 255:
+        material["transparency"] = format_fixed([1.0 - base[3] / 255.0], 4)
+    with out.node("Appearance"):
+        out.leaf("Material", material)
+    index = format_ints(surface.faces)
+    with out.node("IndexedTriangleSet", {"solid": "false", "index": index}):
+        out.leaf("Coordinate", {"point": format_floats(surface.vertices)})
+        colors = vertex_colors(surface)
+        if colors is not None:
+            _color_node(out, colors)
+
+
+def _points_shape(out: _Out, level: Level, switch_in: float, alpha: float) -> None:
+    assert level.points is not None
+    with out.node("Appearance"):
+        out.leaf("PointProperties", point_properties(level, switch_in, alpha))
+    with out.node("PointSet"):
+        _color_node(out, level.points.colors)
+        out.leaf("Coordinate", {"point": format_floats(level.points.positions)})
+
+
+def _write_chain(out: _Out, chain: LodChain, used: set[str]) -> None:
+    _check_chain(chain)
+    base, level_defs = _unique_names(chain.object_id, used, chain.levels)
+    lod = {
+        "DEF": f"{base}_LOD",
+        "center": format_exact(chain.center),
+        "range": format_exact(chain.cutoffs),
+        "forceTransitions": "true",
+    }
+    transform = {"DEF": base, "translation": format_exact(chain.origin)}
+    with out.node("Transform", transform), out.node("LOD", lod):
+        _metadata_set(out, _chain_metadata(chain))
+        bounds = [0.0, *chain.cutoffs]
+        for i, (level, name) in enumerate(zip(chain.levels, level_defs, strict=True)):
+            switch_out = bounds[i + 1] if i + 1 < len(bounds) else None
+            with out.node("Shape", {"DEF": name}):
+                _metadata_set(out, _level_metadata(level, bounds[i], switch_out))
+                if level.kind == "mesh":
+                    assert level.mesh is not None
+                    _mesh_shape(out, level.mesh)
+                else:
+                    _points_shape(out, level, bounds[i], chain.alpha)
+        if chain.culled:
+            out.leaf("Group")
+
+
+def write_x3d(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) -> None:
+    """Write ``chains`` as an X3D 4.0 XML document to the binary ``handle``.
+
+    The document is streamed: each chain is written (and flushed) as the iterable yields it, so
+    only one chain's text is held in memory. Same input, same bytes.
+    """
+    used: set[str] = set()
+    with etree.xmlfile(handle, encoding="UTF-8") as xf:
+        xf.write_declaration()
+        out = _Out(xf)
+        root = {
+            "profile": "Interchange",
+            "version": "4.0",
+            f"{{{XSI}}}noNamespaceSchemaLocation": SCHEMA_URL,
+        }
+        with out.node("X3D", root, nsmap={"xsd": XSI}):
+            _head(out, info)
+            with out.node("Scene"):
+                for chain in chains:
+                    _write_chain(out, chain, used)
+                    xf.flush()
+    handle.write(b"\n")
+
+
+WRITERS[".x3d"] = write_x3d
+
+
+@dataclass
+class X3DShape:
+    """One DEF'd ``Shape`` read back from an X3D file.
+
+    ``coordinates`` (k, 3) float64 are as written, relative to ``translation`` (the sum of the
+    enclosing ``Transform`` translations); ``colors`` (k, 4) uint8 or ``None``; ``index``
+    (m, 3) int64 triangles of an ``IndexedTriangleSet``, ``None`` for a ``PointSet``.
+    """
+
+    geometry: str
+    coordinates: np.ndarray
+    translation: np.ndarray
+    colors: np.ndarray | None = None
+    index: np.ndarray | None = None
+
+    @property
+    def world(self) -> np.ndarray:
+        """Coordinates in world units (float64)."""
+        return self.coordinates + self.translation
+
+
+def _numbers(text: str | None, width: int, dtype: type, what: str) -> np.ndarray:
+    values = np.array((text or "").replace(",", " ").split(), dtype=dtype)
+    if len(values) % width:
+        raise ValueError(f"{what} has {len(values)} values, not a multiple of {width}")
+    return values.reshape(-1, width)
+
+
+def _read_shape(shape: etree._Element, translation: np.ndarray) -> X3DShape | None:
+    for geometry in ("PointSet", "IndexedTriangleSet"):
+        node = shape.find(geometry)
+        if node is not None:
+            break
+    else:
+        return None
+    coordinate = node.find("Coordinate")
+    points = coordinate.get("point") if coordinate is not None else None
+    coords = _numbers(points, 3, np.float64, "point")
+    colors = None
+    for tag, width in (("Color", 3), ("ColorRGBA", 4)):
+        color = node.find(tag)
+        if color is not None:
+            values = _numbers(color.get("color"), width, np.float64, "color")
+            rgba = np.full((len(values), 4), 255, dtype=np.uint8)
+            rgba[:, :width] = np.clip(np.rint(values * 255.0), 0, 255).astype(np.uint8)
+            colors = rgba
+    index = _numbers(node.get("index"), 3, np.int64, "index") if geometry != "PointSet" else None
+    return X3DShape(geometry, coords, translation.copy(), colors, index)
+
+
+def read_x3d_points(path: str | Path) -> dict[str, X3DShape]:
+    """Read the DEF'd geometry ``Shape`` s (``PointSet`` / ``IndexedTriangleSet``) of an X3D
+    file written by :func:`write_x3d`, keyed by DEF, in document order.
+
+    Raises :class:`~lodconvert.errors.InputError` naming the file when it is missing, not
+    well-formed (truncated, say), not X3D, or holds malformed numbers.
+    """
+    shapes: dict[str, X3DShape] = {}
+    offsets: list[np.ndarray] = []
+    try:
+        events = etree.iterparse(str(path), events=("start", "end"), huge_tree=True)
+        for event, element in events:
+            if event == "start":
+                if element.tag == "Transform":
+                    shift = _numbers(element.get("translation"), 3, np.float64, "translation")
+                    offsets.append(shift[0] if len(shift) else np.zeros(3))
+                continue
+            if element.tag == "Transform":
+                offsets.pop()
+            elif element.tag == "Shape" and element.get("DEF"):
+                translation = np.sum(offsets, axis=0) if offsets else np.zeros(3)
+                shape = _read_shape(element, translation)
+                if shape is not None:
+                    shapes[element.get("DEF")] = shape
+                element.clear()
+        if events.root is None or events.root.tag != "X3D":
+            raise InputError("is not an X3D document", str(path))
+    except etree.XMLSyntaxError as err:
+        raise InputError(f"is not well-formed X3D: {err}", str(path)) from None
+    except OSError as err:
+        raise InputError(f"cannot be read: {err.strerror or err}", str(path)) from None
+    except ValueError as err:
+        raise InputError(f"holds malformed numbers: {err}", str(path)) from None
+    return shapes

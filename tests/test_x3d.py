@@ -1,0 +1,445 @@
+"""X3D output: validation against the official X3D 4.0 XSD, LOD structure, point sizes, round
+trip through read_x3d_points, georeferenced origins, streaming, determinism, number formatting
+and errors on bad files."""
+
+from __future__ import annotations
+
+import io
+import math
+import re
+from collections.abc import Iterator
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from lxml import etree
+
+from lodconvert.bake import NumpyBackend
+from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.errors import InputError
+from lodconvert.io import WRITERS, OutputInfo
+from lodconvert.io.numbers import (
+    decimals_for,
+    format_exact,
+    format_fixed,
+    format_floats,
+    format_ints,
+    format_unit_bytes,
+)
+from lodconvert.io.x3d import point_properties, read_x3d_points, vertex_colors, write_x3d
+from lodconvert.scene import LodChain, SceneObject, Surface
+
+from .conftest import X3D_SCHEMAS, require
+
+FAR = np.array([500000.0, 5400000.0, 100.0])
+INFO = OutputInfo(
+    generator="lodconvert tests", source="fixture.ply", crs="EPSG:25832", options={"levels": 4}
+)
+OPTIONS = ChainOptions(resolutions=(48, 24, 12))
+
+
+# --- helpers and fixtures -----------------------------------------------------------------------
+
+
+class _Catalog(etree.Resolver):
+    """Resolve the XSD's remote imports (xmldsig) to the local copies listed in catalog.xml."""
+
+    def __init__(self, catalog: Path) -> None:
+        super().__init__()
+        entries = etree.parse(str(catalog)).getroot()
+        self.local = {
+            e.get("name") or e.get("systemId"): str(catalog.parent / e.get("uri")) for e in entries
+        }
+
+    def resolve(self, url: str, pubid: str | None, context: object) -> object:
+        path = self.local.get(url)
+        return self.resolve_filename(path, context) if path else None
+
+
+@pytest.fixture(scope="module")
+def schema() -> etree.XMLSchema:
+    """The official X3D 4.0 schema, loaded offline; skipped (or failed in CI) when absent."""
+    xsd = X3D_SCHEMAS / "x3d-4.0.xsd"
+    require(xsd.exists(), f"{xsd} is absent (shared schemas not checked out)")
+    parser = etree.XMLParser()
+    parser.resolvers.add(_Catalog(X3D_SCHEMAS / "catalog.xml"))
+    return etree.XMLSchema(etree.parse(str(xsd), parser))
+
+
+def _bake(obj: SceneObject, opts: ChainOptions = OPTIONS) -> LodChain:
+    return bake_chain(obj, opts, NumpyBackend())
+
+
+def _write(chains: list[LodChain]) -> bytes:
+    out = io.BytesIO()
+    write_x3d(chains, out, INFO)
+    return out.getvalue()
+
+
+def _assert_valid(schema: etree.XMLSchema, data: bytes) -> None:
+    doc = etree.parse(io.BytesIO(data), etree.XMLParser(huge_tree=True))
+    assert schema.validate(doc), "\n".join(str(e) for e in schema.error_log)
+
+
+@pytest.fixture
+def chain(torus: SceneObject) -> LodChain:
+    return _bake(torus)
+
+
+@pytest.fixture
+def culled(torus: SceneObject) -> LodChain:
+    return _bake(torus, replace(OPTIONS, cull=1.5))
+
+
+def _lod(data: bytes) -> etree._Element:
+    return etree.fromstring(data).find("Scene/Transform/LOD")
+
+
+def _floats(text: str) -> np.ndarray:
+    return np.array(text.split(), dtype=np.float64)
+
+
+# --- validation ---------------------------------------------------------------------------------
+
+
+def test_output_validates_against_official_xsd(
+    schema: etree.XMLSchema, chain: LodChain, culled: LodChain
+) -> None:
+    translucent = replace(chain, object_id="translucent")
+    points = translucent.levels[1].points
+    faded = points.colors.copy()
+    faded[::2, 3] = 100  # ColorRGBA instead of Color
+    translucent.levels = [
+        translucent.levels[0],
+        replace(translucent.levels[1], points=replace(points, colors=faded)),
+        *translucent.levels[2:],
+    ]
+    data = _write([chain, replace(culled, object_id="culled"), translucent])
+    assert data.startswith(b"<?xml version='1.0' encoding='UTF-8'?>\n<X3D ")
+    assert b"<!DOCTYPE" not in data
+    assert b"<ColorRGBA " in data
+    _assert_valid(schema, data)
+
+
+@pytest.mark.parametrize(
+    ("pattern", "replacement"),
+    [
+        (rb"(<PointSet>)", rb'\1<Normal vector="0 0 1"/>'),  # the XSD has no PointSet normal
+        (rb'pointSizeScaleFactor="[^"]*"', b'pointSizeScaleFactor="0.5"'),  # must be >= 1
+        (rb'range="[^"]*"', b'range="near far"'),
+        (rb'(<Transform DEF=")[^"]*(")', rb"\g<1>9 lives\2"),  # DEF must be an NCName
+    ],
+)
+def test_validator_rejects_broken_documents(
+    schema: etree.XMLSchema, chain: LodChain, pattern: bytes, replacement: bytes
+) -> None:
+    data = _write([chain])
+    broken, n = re.subn(pattern, replacement, data, count=1)
+    assert n == 1
+    doc = etree.parse(io.BytesIO(broken))
+    assert not schema.validate(doc)
+
+
+def test_awkward_and_repeated_ids_make_unique_valid_defs(
+    schema: etree.XMLSchema, chain: LodChain
+) -> None:
+    chains = [replace(chain, object_id=i) for i in ("1 a:b", "_1_a_b", "_1_a_b", "é")]
+    data = _write(chains)
+    _assert_valid(schema, data)  # xs:ID: NCName and unique
+    defs = [t.get("DEF") for t in etree.fromstring(data).iter("Transform")]
+    assert len(set(defs)) == 4
+    ids = [
+        m.get("value")
+        for m in etree.fromstring(data).iter("MetadataString")
+        if m.get("name") == "object_id"
+    ]
+    assert ids == ['"1 a:b"', '"_1_a_b"', '"_1_a_b"', '"é"']
+
+
+# --- structure ----------------------------------------------------------------------------------
+
+
+def _lod_children(lod: etree._Element) -> list[etree._Element]:
+    return [c for c in lod if c.get("containerField") != "metadata"]
+
+
+def test_head_declares_components_and_meta(chain: LodChain) -> None:
+    root = etree.fromstring(_write([chain]))
+    assert root.get("profile") == "Interchange" and root.get("version") == "4.0"
+    assert root.nsmap["xsd"] == "http://www.w3.org/2001/XMLSchema-instance"
+    components = {c.get("name"): int(c.get("level")) for c in root.iter("component")}
+    assert components["Navigation"] >= 2 and components["Shape"] >= 5
+    meta = {m.get("name"): m.get("content") for m in root.iter("meta")}
+    assert meta["generator"] == INFO.generator and meta["source"] == INFO.source
+    assert meta["crs"] == "EPSG:25832"
+    assert "1080" in meta["reference-view"] and "range" in meta["lod-ranges"]
+
+
+def test_lod_has_one_child_more_than_ranges(chain: LodChain) -> None:
+    lod = _lod(_write([chain]))
+    ranges = _floats(lod.get("range"))
+    children = _lod_children(lod)
+    assert len(ranges) == len(children) - 1 == len(chain.levels) - 1
+    assert np.all(np.diff(ranges) > 0)
+    np.testing.assert_allclose(ranges, chain.cutoffs, rtol=1e-12)
+    assert [c.tag for c in children] == ["Shape"] * len(chain.levels)
+    assert [c.get("DEF") for c in children] == [
+        "torus_LOD4",
+        "torus_LOD3",
+        "torus_LOD2",
+        "torus_LOD1",
+    ]
+    assert children[0].find("IndexedTriangleSet") is not None
+    assert all(c.find("PointSet") is not None for c in children[1:])
+
+
+def test_culled_chain_ends_with_an_empty_child(culled: LodChain) -> None:
+    assert culled.culled and len(culled.cutoffs) == len(culled.levels)
+    lod = _lod(_write([culled]))
+    children = _lod_children(lod)
+    assert len(_floats(lod.get("range"))) == len(children) - 1 == len(culled.levels)
+    assert children[-1].tag == "Group" and len(children[-1]) == 0
+    assert all(c.tag == "Shape" for c in children[:-1])
+
+
+def test_inconsistent_chain_is_refused(chain: LodChain) -> None:
+    with pytest.raises(ValueError, match="cutoffs"):
+        _write([replace(chain, cutoffs=chain.cutoffs[:-1])])
+    with pytest.raises(ValueError, match="increase"):
+        _write([replace(chain, cutoffs=chain.cutoffs[::-1])])
+    twin = replace(chain.levels[2], name=chain.levels[1].name)
+    with pytest.raises(ValueError, match="unique"):
+        _write([replace(chain, levels=[*chain.levels[:2], twin, *chain.levels[3:]])])
+
+
+def test_pointsets_have_one_colour_per_point_and_no_normals(chain: LodChain) -> None:
+    root = etree.fromstring(_write([chain]))
+    pointsets = list(root.iter("PointSet"))
+    assert len(pointsets) == 3
+    for ps, level in zip(pointsets, chain.levels[1:], strict=True):
+        assert ps.find("Normal") is None
+        points = _floats(ps.find("Coordinate").get("point"))
+        colours = _floats(ps.find("Color").get("color"))
+        assert len(points) == len(colours) == 3 * level.count
+
+
+def test_level_and_chain_metadata(chain: LodChain) -> None:
+    lod = _lod(_write([chain]))
+
+    def values(node: etree._Element) -> dict[str, str]:
+        meta = node.find("MetadataSet")
+        assert meta.get("containerField") == "metadata" and node.index(meta) == 0
+        return {m.get("name"): m.get("value") for m in meta}
+
+    top = values(lod)
+    assert top["object_id"] == '"torus"'
+    np.testing.assert_allclose(_floats(top["cutoffs"]), chain.cutoffs)
+    assert float(top["beta"]) == chain.beta and float(top["alpha"]) == chain.alpha
+    level = chain.levels[2]
+    shape = _lod_children(lod)[2]
+    meta = values(shape)
+    assert meta["level"] == '"LOD2"' and meta["kind"] == '"pcd"'
+    assert int(meta["count"]) == level.count
+    assert int(meta["resolution"]) == level.params.resolution
+    assert float(meta["point_size_px"]) == level.params.point_size
+    assert float(meta["design_distance"]) == level.design_distance
+    assert float(meta["switch_in"]) == chain.cutoffs[1]
+    assert float(meta["spacing"]) == level.spacing
+
+
+# --- point sizes --------------------------------------------------------------------------------
+
+
+def _size_px(fields: dict[str, str], r: float) -> float:
+    """Pixel size by the X3D 4.0 PointProperties rule (minimum renderable size 1 px)."""
+    a, b, c = _floats(fields.get("attenuation", "1 0 0"))
+    size = float(fields["pointSizeScaleFactor"]) / (a + b * r + c * r * r)
+    return min(max(size, float(fields["pointSizeMinValue"])), float(fields["pointSizeMaxValue"]))
+
+
+def test_point_size_is_design_size_at_design_distance_and_falls_with_distance(
+    chain: LodChain,
+) -> None:
+    for i, level in enumerate(chain.levels[1:], start=1):
+        fields = point_properties(level, chain.cutoffs[i - 1], chain.alpha)
+        d, p = level.design_distance, level.params.point_size
+        assert _size_px(fields, d) == pytest.approx(p)
+        assert _size_px(fields, 2 * d) == pytest.approx(max(1.0, p / 2))
+        assert _size_px(fields, 1000 * d) == 1.0  # clamped to pointSizeMinValue
+        # points up to alpha/2 nearer than the centre still get their full size
+        near = chain.cutoffs[i - 1] - chain.alpha / 2
+        assert _size_px(fields, near) == pytest.approx(p * d / near, rel=1e-3)
+        assert float(fields["pointSizeMaxValue"]) <= 4 * p
+
+
+def test_small_and_finest_point_sizes_stay_valid(chain: LodChain) -> None:
+    level = chain.levels[1]
+    tiny = replace(level, params=replace(level.params, point_size=0.5))
+    fields = point_properties(tiny, chain.cutoffs[0], chain.alpha)
+    assert float(fields["pointSizeScaleFactor"]) >= 1  # XSD minimum
+    assert _size_px(fields, level.design_distance / 2) == pytest.approx(1.0)
+    finest = point_properties(level, 0.0, chain.alpha)  # shows from distance 0
+    assert float(finest["pointSizeMaxValue"]) == pytest.approx(4 * level.params.point_size)
+
+
+# --- round trip and georeferencing --------------------------------------------------------------
+
+
+def _check_round_trip(chain: LodChain, path: Path) -> None:
+    with path.open("wb") as f:
+        write_x3d([chain], f, INFO)
+    shapes = read_x3d_points(path)
+    assert list(shapes) == [f"{chain.object_id}_{lv.name}" for lv in chain.levels]
+    for level, shape in zip(chain.levels, shapes.values(), strict=True):
+        np.testing.assert_array_equal(shape.translation, chain.origin)
+        if level.kind == "mesh":
+            expected, colours = level.mesh.vertices, vertex_colors(level.mesh)
+            np.testing.assert_array_equal(shape.index, level.mesh.faces)
+        else:
+            expected, colours = level.points.positions, level.points.colors
+            assert shape.index is None
+        # 7 significant digits on the largest coordinate: float32-level precision
+        scale = np.abs(expected).max()
+        np.testing.assert_allclose(shape.coordinates, expected, rtol=0, atol=5e-7 * scale)
+        np.testing.assert_allclose(shape.world, expected + chain.origin, rtol=0, atol=1e-6 * scale)
+        if colours is None:
+            assert shape.colors is None
+        else:
+            np.testing.assert_array_equal(shape.colors, colours)
+
+
+def test_round_trip_gives_back_baked_points(chain: LodChain, tmp_path: Path) -> None:
+    _check_round_trip(chain, tmp_path / "torus.x3d")
+
+
+def test_far_object_keeps_exact_origin_and_small_coordinates(
+    torus: SceneObject, tmp_path: Path
+) -> None:
+    surface = replace(torus.surface, vertices=torus.surface.vertices + FAR)
+    chain = _bake(SceneObject("far", surface))
+    path = tmp_path / "far.x3d"
+    _check_round_trip(chain, path)
+    transform = etree.parse(str(path)).find("Scene/Transform")
+    origin = _floats(transform.get("translation"))
+    np.testing.assert_array_equal(origin, chain.origin)  # every float64 digit kept
+    assert np.abs(origin - FAR).max() < 1.0
+    for shape in read_x3d_points(path).values():
+        assert np.abs(shape.coordinates).max() < 2.0  # relative to the origin, not millions
+
+
+def test_textured_mesh_gets_texture_colours_per_vertex(chain: LodChain) -> None:
+    mesh = trimesh.creation.box()
+    texture = np.zeros((2, 2, 4), dtype=np.uint8)
+    texture[:, 0] = (255, 0, 0, 255)  # left half red
+    texture[:, 1] = (0, 0, 255, 255)  # right half blue
+    uv = np.column_stack([np.where(mesh.vertices[:, 0] < 0, 0.25, 0.75), np.full(8, 0.5)])
+    surface = Surface(mesh.vertices, mesh.faces.astype(np.int64), uv=uv, texture=texture)
+    textured = replace(chain, levels=[replace(chain.levels[0], mesh=surface), *chain.levels[1:]])
+    shape = etree.fromstring(_write([textured])).find(".//IndexedTriangleSet")
+    colours = _floats(shape.find("Color").get("color")).reshape(-1, 3)
+    left = mesh.vertices[:, 0] < 0
+    np.testing.assert_array_equal(colours[left], [[1, 0, 0]] * left.sum())
+    np.testing.assert_array_equal(colours[~left], [[0, 0, 1]] * (~left).sum())
+
+
+def test_uncoloured_mesh_uses_material_colour(chain: LodChain) -> None:
+    mesh = chain.levels[0].mesh
+    plain = Surface(mesh.vertices, mesh.faces, base_color=np.array([255, 0, 0, 128], np.uint8))
+    level = replace(chain.levels[0], mesh=plain)
+    shape = etree.fromstring(_write([replace(chain, levels=[level, *chain.levels[1:]])]))
+    material = shape.find(".//Material")
+    assert material.get("diffuseColor") == "1 0 0"
+    assert float(material.get("transparency")) == pytest.approx(1 - 128 / 255, abs=1e-4)
+    assert shape.find(".//IndexedTriangleSet/Color") is None
+
+
+def test_bunny_round_trip_and_validation(
+    schema: etree.XMLSchema, bunny: SceneObject, tmp_path: Path
+) -> None:
+    chain = _bake(bunny)
+    _check_round_trip(chain, tmp_path / "bunny.x3d")
+    _assert_valid(schema, (tmp_path / "bunny.x3d").read_bytes())
+
+
+# --- streaming and determinism ------------------------------------------------------------------
+
+
+def test_writing_twice_gives_identical_bytes(chain: LodChain, culled: LodChain) -> None:
+    chains = [chain, replace(culled, object_id="culled")]
+    assert _write(chains) == _write(chains)
+
+
+def test_chains_are_streamed_as_they_come(chain: LodChain) -> None:
+    out = io.BytesIO()
+    seen: list[int] = []
+
+    def chains() -> Iterator[LodChain]:
+        for name in ("first", "second"):
+            seen.append(len(out.getvalue()))
+            if name == "second":  # the first chain is already on the handle, to its end
+                assert out.getvalue().rstrip().endswith(b"</Transform>")
+            yield replace(chain, object_id=name)
+
+    write_x3d(chains(), out, INFO)
+    assert len(seen) == 2 and out.getvalue().endswith(b"</X3D>\n")
+
+
+def test_writer_is_registered() -> None:
+    assert WRITERS[".x3d"] is write_x3d
+
+
+# --- reader errors ------------------------------------------------------------------------------
+
+
+def test_truncated_or_foreign_files_raise_input_error(chain: LodChain, tmp_path: Path) -> None:
+    data = _write([chain])
+    truncated = tmp_path / "cut.x3d"
+    truncated.write_bytes(data[: len(data) // 2])
+    with pytest.raises(InputError, match=re.escape(str(truncated))):
+        read_x3d_points(truncated)
+    foreign = tmp_path / "foreign.x3d"
+    foreign.write_bytes(b"<?xml version='1.0'?><html><body/></html>")
+    with pytest.raises(InputError, match=re.escape(f"{foreign}: is not an X3D")):
+        read_x3d_points(foreign)
+    garbled = tmp_path / "garbled.x3d"
+    garbled.write_bytes(data.replace(b'point="', b'point="x ', 1))
+    with pytest.raises(InputError, match=re.escape(str(garbled))):
+        read_x3d_points(garbled)
+    missing = tmp_path / "missing.x3d"
+    with pytest.raises(InputError, match=re.escape(str(missing))):
+        read_x3d_points(missing)
+
+
+# --- number formatting --------------------------------------------------------------------------
+
+
+def test_fixed_formatting_matches_python_and_trims_zeros() -> None:
+    rng = np.random.default_rng(7)
+    values = rng.normal(size=5000) * 10.0 ** rng.integers(-9, 6, size=5000)
+    values[:4] = (0.0, -0.0, -1e-12, 100.0)
+    for decimals in (0, 3, 8):
+        text = format_fixed(values, decimals).split()
+        expected = [f"{v:.{decimals}f}" for v in values]
+        expected = [e.rstrip("0").rstrip(".") if "." in e else e for e in expected]
+        expected = ["0" if e == "-0" else e for e in expected]
+        assert text == expected
+    assert format_fixed([0.5, -2.0, 1e-9, 1234.56789], 4) == "0.5 -2 0 1234.5679"
+    with pytest.raises(ValueError):
+        format_fixed([math.nan], 3)
+
+
+def test_float_ints_colour_and_exact_formatting() -> None:
+    assert decimals_for(0.0781) == 8 and decimals_for(5e9) == 0 and decimals_for(0.0) == 0
+    v = np.array([[0.1234567891, -0.001, 12.0]])
+    assert format_floats(v, significant=4) == "0.12 0 12"
+    assert format_floats(np.zeros((0, 3))) == ""
+    ints = np.array([0, 7, -12, 10, 999999, -(2**40)])
+    assert format_ints(ints) == " ".join(map(str, ints.tolist()))
+    bytes_ = np.arange(256, dtype=np.uint8)
+    back = np.rint(_floats(format_unit_bytes(bytes_)) * 255).astype(int)
+    np.testing.assert_array_equal(back, bytes_)
+    assert format_unit_bytes(np.array([0, 128, 255], np.uint8)) == "0 0.502 1"
+    origin = [500000.123456789, 5400000.987654321, -0.1]
+    assert [float(t) for t in format_exact(origin).split()] == origin
