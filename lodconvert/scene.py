@@ -110,11 +110,12 @@ class Surface:
         if k == 0:
             return np.zeros((0, 4), dtype=np.uint8)
         base = self.material_color
-        if self.texture is None and self.vertex_colors is None:
+        textured = self.texture is not None and self.uv is not None
+        if not textured and self.vertex_colors is None:
             return np.repeat(base[None, :], k, axis=0)
         bary = self.barycentric(face_ids, points)
         corners = self.faces[face_ids]
-        if self.texture is not None and self.uv is not None:
+        if textured:
             uv = np.einsum("ij,ijk->ik", bary, self.uv[corners])
             h, w = self.texture.shape[:2]
             x = np.floor((uv[:, 0] % 1.0) * w).astype(np.int64).clip(0, w - 1)

@@ -114,3 +114,14 @@ def test_bunny_points_lie_on_the_scan(bunny_mesh: trimesh.Trimesh, bunny: SceneO
     for resolution in (128, 64, 32):
         cloud, grid = bake_points(bunny.surface, params(resolution), NumpyBackend())
         assert distances_to(bunny_mesh, cloud.positions).max() <= grid.pitch
+
+
+def test_a_texture_without_uvs_falls_back_to_the_material_colour() -> None:
+    square = Surface(
+        vertices=np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=np.float64),
+        faces=np.array([[0, 1, 2], [0, 2, 3]]),
+        texture=np.zeros((4, 4, 4), dtype=np.uint8),
+        base_color=np.array([10, 20, 30, 255], dtype=np.uint8),
+    )
+    cloud, _ = bake_points(square, params(8), NumpyBackend())
+    assert np.all(cloud.colors == [10, 20, 30, 255])
