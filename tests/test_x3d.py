@@ -1,6 +1,6 @@
-"""X3D output: validation against the official X3D 4.0 XSD, LOD structure, point sizes, round
-trip through read_x3d_points, georeferenced origins, streaming, determinism, number formatting
-and errors on bad files."""
+"""X3D output: validation against the official X3D 4.0 XSD, LOD structure, levels split over
+several Shapes, point sizes, round trip through read_x3d_points, georeferenced origins,
+streaming, determinism, number formatting and errors on bad files."""
 
 from __future__ import annotations
 
@@ -18,8 +18,9 @@ from lxml import etree
 
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.convert import read_scene
 from lodconvert.errors import InputError
-from lodconvert.io import WRITERS, OutputInfo
+from lodconvert.io import WRITERS, OutputInfo, x3d
 from lodconvert.io.numbers import (
     decimals_for,
     format_exact,
@@ -27,11 +28,12 @@ from lodconvert.io.numbers import (
     format_floats,
     format_ints,
     format_unit_bytes,
+    geometry_decimals,
 )
 from lodconvert.io.x3d import point_properties, read_x3d_points, vertex_colors, write_x3d
 from lodconvert.scene import LodChain, SceneObject, Surface
 
-from .conftest import X3D_SCHEMAS, require
+from .conftest import X3D_SCHEMAS, require, stanford
 
 FAR = np.array([500000.0, 5400000.0, 100.0])
 INFO = OutputInfo(
@@ -79,7 +81,8 @@ def _write(chains: list[LodChain]) -> bytes:
 
 
 def _assert_valid(schema: etree.XMLSchema, data: bytes) -> None:
-    doc = etree.parse(io.BytesIO(data), etree.XMLParser(huge_tree=True))
+    """Valid against the XSD, parsed with libxml2's default limits (no ``huge_tree``)."""
+    doc = etree.parse(io.BytesIO(data))
     assert schema.validate(doc), "\n".join(str(e) for e in schema.error_log)
 
 
@@ -184,15 +187,19 @@ def test_lod_has_one_child_more_than_ranges(chain: LodChain) -> None:
     assert len(ranges) == len(children) - 1 == len(chain.levels) - 1
     assert np.all(np.diff(ranges) > 0)
     np.testing.assert_allclose(ranges, chain.cutoffs, rtol=1e-12)
-    assert [c.tag for c in children] == ["Shape"] * len(chain.levels)
+    assert [c.tag for c in children] == ["Group"] * len(chain.levels)
     assert [c.get("DEF") for c in children] == [
         "torus_LOD4",
         "torus_LOD3",
         "torus_LOD2",
         "torus_LOD1",
     ]
-    assert children[0].find("IndexedTriangleSet") is not None
-    assert all(c.find("PointSet") is not None for c in children[1:])
+    shapes = [c.findall("Shape") for c in children]  # the torus's levels fit one Shape each
+    assert [len(s) for s in shapes] == [1] * len(chain.levels)
+    assert shapes[0][0].find("IndexedTriangleSet") is not None
+    assert all(s[0].find("PointSet") is not None for s in shapes[1:])
+    appearances = [s[0].find("Appearance") for s in shapes]
+    assert [a.get("DEF") for a in appearances] == [f"{c.get('DEF')}_Appearance" for c in children]
 
 
 def test_culled_chain_ends_with_an_empty_child(culled: LodChain) -> None:
@@ -201,7 +208,8 @@ def test_culled_chain_ends_with_an_empty_child(culled: LodChain) -> None:
     children = _lod_children(lod)
     assert len(_floats(lod.get("range"))) == len(children) - 1 == len(culled.levels)
     assert children[-1].tag == "Group" and len(children[-1]) == 0
-    assert all(c.tag == "Shape" for c in children[:-1])
+    assert children[-1].get("DEF") is None
+    assert all(c.tag == "Group" and c.find("Shape") is not None for c in children[:-1])
 
 
 def test_inconsistent_chain_is_refused(chain: LodChain) -> None:
@@ -214,15 +222,24 @@ def test_inconsistent_chain_is_refused(chain: LodChain) -> None:
         _write([replace(chain, levels=[*chain.levels[:2], twin, *chain.levels[3:]])])
 
 
+def _shape_geometry(group: etree._Element) -> list[etree._Element]:
+    """The geometry node of each Shape of a level Group (the one after its Appearance)."""
+    return [shape[1] for shape in group.iter("Shape")]
+
+
+def _point_count(geometry: etree._Element) -> int:
+    return len(_floats(geometry.find("Coordinate").get("point"))) // 3
+
+
 def test_pointsets_have_one_colour_per_point_and_no_normals(chain: LodChain) -> None:
     root = etree.fromstring(_write([chain]))
-    pointsets = list(root.iter("PointSet"))
-    assert len(pointsets) == 3
-    for ps, level in zip(pointsets, chain.levels[1:], strict=True):
-        assert ps.find("Normal") is None
-        points = _floats(ps.find("Coordinate").get("point"))
-        colours = _floats(ps.find("Color").get("color"))
-        assert len(points) == len(colours) == 3 * level.count
+    assert len(list(root.iter("PointSet"))) == 3
+    groups = _lod_children(root.find("Scene/Transform/LOD"))[1:]
+    for group, level in zip(groups, chain.levels[1:], strict=True):
+        for ps in _shape_geometry(group):
+            assert ps.tag == "PointSet" and ps.find("Normal") is None
+            assert len(_floats(ps.find("Color").get("color"))) == 3 * _point_count(ps)
+        assert sum(map(_point_count, _shape_geometry(group))) == level.count
 
 
 def test_level_and_chain_metadata(chain: LodChain) -> None:
@@ -238,8 +255,8 @@ def test_level_and_chain_metadata(chain: LodChain) -> None:
     np.testing.assert_allclose(_floats(top["cutoffs"]), chain.cutoffs)
     assert float(top["beta"]) == chain.beta and float(top["alpha"]) == chain.alpha
     level = chain.levels[2]
-    shape = _lod_children(lod)[2]
-    meta = values(shape)
+    group = _lod_children(lod)[2]
+    meta = values(group)
     assert meta["level"] == '"LOD2"' and meta["kind"] == '"pcd"'
     assert int(meta["count"]) == level.count
     assert int(meta["resolution"]) == level.params.resolution
@@ -287,31 +304,51 @@ def test_small_and_finest_point_sizes_stay_valid(chain: LodChain) -> None:
 # --- round trip and georeferencing --------------------------------------------------------------
 
 
+def _per_corner(
+    coordinates: np.ndarray, colours: np.ndarray | None, index: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Coordinates and colours per point, or per triangle corner when ``index`` is given."""
+    if index is None:
+        return coordinates, colours
+    return coordinates[index], None if colours is None else colours[index]
+
+
 def _check_round_trip(chain: LodChain, path: Path) -> None:
+    """Write ``chain`` to ``path`` and read it back: points in order, and mesh triangles in
+    order compared corner by corner (a mesh split over several Shapes comes back with shared
+    vertices repeated and unused ones dropped)."""
     with path.open("wb") as f:
         write_x3d([chain], f, INFO)
-    shapes = read_x3d_points(path)
-    assert list(shapes) == [f"{chain.object_id}_{lv.name}" for lv in chain.levels]
-    for level, shape in zip(chain.levels, shapes.values(), strict=True):
-        np.testing.assert_array_equal(shape.translation, chain.origin)
+    levels = read_x3d_points(path)
+    assert list(levels) == [f"{chain.object_id}_{lv.name}" for lv in chain.levels]
+    for level, read in zip(chain.levels, levels.values(), strict=True):
+        np.testing.assert_array_equal(read.translation, chain.origin)
         if level.kind == "mesh":
-            expected, colours = level.mesh.vertices, vertex_colors(level.mesh)
-            np.testing.assert_array_equal(shape.index, level.mesh.faces)
+            mesh = level.mesh
+            assert read.geometry == "IndexedTriangleSet" and len(read.index) == len(mesh.faces)
+            expected = _per_corner(mesh.vertices, vertex_colors(mesh), mesh.faces)
         else:
-            expected, colours = level.points.positions, level.points.colors
-            assert shape.index is None
+            assert read.geometry == "PointSet" and read.index is None
+            expected = (level.points.positions, level.points.colors)
+        coordinates, colours = _per_corner(read.coordinates, read.colors, read.index)
+        world, _ = _per_corner(read.world, None, read.index)
         # 7 significant digits on the largest coordinate: float32-level precision
-        scale = np.abs(expected).max()
-        np.testing.assert_allclose(shape.coordinates, expected, rtol=0, atol=5e-7 * scale)
-        np.testing.assert_allclose(shape.world, expected + chain.origin, rtol=0, atol=1e-6 * scale)
-        if colours is None:
-            assert shape.colors is None
+        scale = np.abs(expected[0]).max()
+        np.testing.assert_allclose(coordinates, expected[0], rtol=0, atol=5e-7 * scale)
+        np.testing.assert_allclose(world, expected[0] + chain.origin, rtol=0, atol=1e-6 * scale)
+        if expected[1] is None:
+            assert colours is None
         else:
-            np.testing.assert_array_equal(shape.colors, colours)
+            np.testing.assert_array_equal(colours, expected[1])
 
 
 def test_round_trip_gives_back_baked_points(chain: LodChain, tmp_path: Path) -> None:
-    _check_round_trip(chain, tmp_path / "torus.x3d")
+    path = tmp_path / "torus.x3d"
+    _check_round_trip(chain, path)
+    # one Shape using every vertex: the mesh comes back exactly as it was indexed
+    mesh = read_x3d_points(path)["torus_LOD4"]
+    np.testing.assert_array_equal(mesh.index, chain.levels[0].mesh.faces)
+    assert len(mesh.coordinates) == len(chain.levels[0].mesh.vertices)
 
 
 def test_far_object_keeps_exact_origin_and_small_coordinates(
@@ -325,8 +362,8 @@ def test_far_object_keeps_exact_origin_and_small_coordinates(
     origin = _floats(transform.get("translation"))
     np.testing.assert_array_equal(origin, chain.origin)  # every float64 digit kept
     assert np.abs(origin - FAR).max() < 1.0
-    for shape in read_x3d_points(path).values():
-        assert np.abs(shape.coordinates).max() < 2.0  # relative to the origin, not millions
+    for level in read_x3d_points(path).values():
+        assert np.abs(level.coordinates).max() < 2.0  # relative to the origin, not millions
 
 
 def test_textured_mesh_gets_texture_colours_per_vertex(chain: LodChain) -> None:
@@ -361,6 +398,77 @@ def test_bunny_round_trip_and_validation(
     chain = _bake(bunny)
     _check_round_trip(chain, tmp_path / "bunny.x3d")
     _assert_valid(schema, (tmp_path / "bunny.x3d").read_bytes())
+
+
+# --- levels split over several Shapes -------------------------------------------------------------
+
+SMALL_VERTICES, SMALL_TRIANGLES = 500, 800
+
+
+def _runs(total: int, size: int) -> list[int]:
+    """Lengths of consecutive runs of at most ``size`` covering ``total`` items."""
+    return [min(size, total - start) for start in range(0, total, size)]
+
+
+@pytest.mark.parametrize("soup", [False, True], ids=["shared-vertices", "triangle-soup"])
+def test_levels_over_the_shape_limits_are_split(
+    schema: etree.XMLSchema,
+    torus: SceneObject,
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+    soup: bool,
+) -> None:
+    monkeypatch.setattr(x3d, "MAX_SHAPE_VERTICES", SMALL_VERTICES)
+    monkeypatch.setattr(x3d, "MAX_SHAPE_TRIANGLES", SMALL_TRIANGLES)
+    surface = torus.surface
+    if soup:  # each face has its own three vertices: the vertex limit binds first
+        faces = surface.faces
+        surface = Surface(
+            surface.vertices[faces].reshape(-1, 3),
+            np.arange(faces.size).reshape(-1, 3),
+            vertex_colors=surface.vertex_colors[faces].reshape(-1, 4),
+        )
+    chain = _bake(SceneObject("big", surface))
+    path = tmp_path / "big.x3d"
+    _check_round_trip(chain, path)
+    data = path.read_bytes()
+    _assert_valid(schema, data)
+    assert _write([chain]) == data  # deterministic
+
+    groups = _lod_children(_lod(data))
+    for group, level in zip(groups, chain.levels, strict=True):
+        appearances = [shape.find("Appearance") for shape in group.iter("Shape")]
+        defined = appearances[0].get("DEF")
+        assert defined == f"{group.get('DEF')}_Appearance" and len(appearances[0]) == 1
+        assert all(a.get("USE") == defined and len(a) == 0 for a in appearances[1:])
+        geometry = _shape_geometry(group)
+        counts = [_point_count(g) for g in geometry]
+        if level.kind == "mesh":
+            triangles = [len(_floats(g.get("index"))) // 3 for g in geometry]
+            per_run = SMALL_VERTICES // 3 if soup else SMALL_TRIANGLES
+            assert triangles == _runs(len(surface.faces), per_run)  # each run as long as allowed
+            assert max(counts) <= SMALL_VERTICES
+        else:
+            assert counts == _runs(level.count, SMALL_VERTICES)
+    shapes = [len(list(g.iter("Shape"))) for g in groups]
+    assert shapes[0] > 1 and shapes[1] > 1 and shapes[-1] == 1  # a level that fits: one Shape
+
+
+@pytest.mark.slow
+def test_dragon_validates_with_default_parser_limits(
+    schema: etree.XMLSchema, tmp_path: Path
+) -> None:
+    """871,414 triangles: without splitting, the index attribute alone would be 17.6 MB, more
+    than libxml2 parses or validates without ``huge_tree``."""
+    obj = read_scene(stanford("dragon_vrip.ply.gz")).objects[0]
+    chain = bake_chain(obj, ChainOptions(), NumpyBackend())
+    path = tmp_path / "dragon.x3d"
+    _check_round_trip(chain, path)
+    doc = etree.parse(str(path))  # default limits: no huge_tree
+    assert schema.validate(doc), "\n".join(str(e) for e in schema.error_log)
+    assert max(len(v) for node in doc.iter() for v in node.attrib.values()) < 4_000_000
+    mesh = doc.find("Scene/Transform/LOD/Group")
+    assert len(mesh.findall("Shape")) >= math.ceil(871_414 / x3d.MAX_SHAPE_TRIANGLES)
 
 
 # --- streaming and determinism ------------------------------------------------------------------
@@ -407,6 +515,15 @@ def test_truncated_or_foreign_files_raise_input_error(chain: LodChain, tmp_path:
     garbled.write_bytes(data.replace(b'point="', b'point="x ', 1))
     with pytest.raises(InputError, match=re.escape(str(garbled))):
         read_x3d_points(garbled)
+    mixed = tmp_path / "mixed.x3d"
+    mixed.write_bytes(
+        b"<X3D><Scene><Group DEF='a'>"
+        b"<Shape><PointSet><Coordinate point='0 0 0'/></PointSet></Shape>"
+        b"<Shape><IndexedTriangleSet index='0 0 0'><Coordinate point='0 0 0'/>"
+        b"</IndexedTriangleSet></Shape></Group></Scene></X3D>"
+    )
+    with pytest.raises(InputError, match=re.escape(f"{mixed}: holds malformed")):
+        read_x3d_points(mixed)
     missing = tmp_path / "missing.x3d"
     with pytest.raises(InputError, match=re.escape(str(missing))):
         read_x3d_points(missing)
@@ -435,6 +552,7 @@ def test_float_ints_colour_and_exact_formatting() -> None:
     v = np.array([[0.1234567891, -0.001, 12.0]])
     assert format_floats(v, significant=4) == "0.12 0 12"
     assert format_floats(np.zeros((0, 3))) == ""
+    assert geometry_decimals(v, significant=4) == 2 and geometry_decimals(np.zeros((0, 3))) == 0
     ints = np.array([0, 7, -12, 10, 999999, -(2**40)])
     assert format_ints(ints) == " ".join(map(str, ints.tolist()))
     bytes_ = np.arange(256, dtype=np.uint8)

@@ -35,6 +35,20 @@ def decimals_for(max_abs: float, significant: int = GEOMETRY_DIGITS) -> int:
     return max(0, significant - 1 - math.floor(math.log10(max_abs)))
 
 
+def geometry_decimals(
+    values: np.ndarray | Iterable[float], significant: int = GEOMETRY_DIGITS
+) -> int:
+    """Decimals that give the largest magnitude among ``values`` ``significant`` significant
+    digits (see :func:`decimals_for`; 0 for no values): the precision :func:`format_floats`
+    prints at, for formatting parts of one array alike with :func:`format_fixed`.
+
+    >>> geometry_decimals([[0.5, -12.25], [3.0, 0.0]])
+    5
+    """
+    flat = np.asarray(values, dtype=np.float64).ravel()
+    return decimals_for(float(np.abs(flat).max()) if len(flat) else 0.0, significant)
+
+
 def _digit_counts(values: np.ndarray) -> np.ndarray:
     """Decimal digits of non-negative int64 ``values`` (0 has one digit)."""
     return np.maximum(np.searchsorted(_POW10, values, side="right"), 1)
@@ -106,9 +120,8 @@ def format_floats(values: np.ndarray | Iterable[float], significant: int = GEOME
     >>> format_floats([0.1234567891, -0.001, 12.0], significant=4)
     '0.12 0 12'
     """
-    flat = np.asarray(values, dtype=np.float64).ravel()
-    max_abs = float(np.abs(flat).max()) if len(flat) else 0.0
-    return format_fixed(flat, decimals_for(max_abs, significant))
+    flat = np.asarray(values, dtype=np.float64)
+    return format_fixed(flat, geometry_decimals(flat, significant))
 
 
 def format_unit_bytes(values: np.ndarray) -> str:

@@ -8,16 +8,28 @@ Layout of a written file (validates against the official x3d-4.0.xsd)::
         <Transform DEF='id' translation='origin (full float64 precision)'>
           <LOD DEF='id_LOD' center=... range='cutoffs' forceTransitions='true'>
             <MetadataSet name='lodconvert' containerField='metadata'> alpha, β, γ, xs, ...
-            <Shape DEF='id_LOD4'> Material + IndexedTriangleSet (the source mesh)
-            <Shape DEF='id_LOD3'> PointProperties + PointSet (baked points) ...
+            <Group DEF='id_LOD4'>   (the source mesh)
+              <MetadataSet name='lodconvert' containerField='metadata'> level parameters
+              <Shape> <Appearance DEF='id_LOD4_Appearance'> Material + IndexedTriangleSet
+              <Shape> <Appearance USE='id_LOD4_Appearance'/> + IndexedTriangleSet ...
+            <Group DEF='id_LOD3'>   (baked points)
+              <MetadataSet ...> + Shapes with PointProperties + PointSet ...
             <Group/>   (only for a culled chain: nothing is drawn beyond the last range)
 
+Each level is a ``Group`` of one or more ``Shape`` s so that no attribute value comes near
+libxml2's 10 MB limit on a text node (``XML_MAX_TEXT_LENGTH``), which default XML parsers and
+schema validators enforce: a ``Shape`` holds at most :data:`MAX_SHAPE_VERTICES` vertices or
+points and :data:`MAX_SHAPE_TRIANGLES` triangles. A mesh is split into runs of consecutive
+faces, each with only the vertices it uses (re-indexed, in their original order); a point
+level into consecutive slices. The level's ``Appearance`` is defined once and re-used.
+
 Geometry inside the ``Transform`` is relative to the chain origin and printed with float32-level
-precision (:data:`~lodconvert.io.numbers.GEOMETRY_DIGITS` significant digits on the largest
-coordinate); the origin itself keeps every digit, so georeferenced data in the millions keeps
-its position. X3D LOD needs ``n + 1`` children for ``n`` ranges: without culling the chain has
-one cutoff fewer than levels; with culling the last cutoff is where the empty ``Group`` takes
-over.
+precision (:data:`~lodconvert.io.numbers.GEOMETRY_DIGITS` significant digits on the level's
+largest coordinate, the same decimals in all its Shapes, so a vertex shared by two Shapes is
+written identically in both); the origin itself keeps every digit, so georeferenced data in the
+millions keeps its position. X3D LOD needs ``n + 1`` children for ``n`` ranges: without culling
+the chain has one cutoff fewer than levels; with culling the last cutoff is where the empty
+``Group`` takes over.
 
 Point sizes follow the X3D 4.0 ``PointProperties`` node, whose attenuation factor is
 ``1 / (a + b·r + c·r²)`` with ``r`` the distance from the viewer to each point; the nominal size
@@ -26,9 +38,6 @@ clipped to ``[pointSizeMinValue, pointSizeMaxValue]`` × the minimum point size.
 ``a = c = 0`` and ``b = s / (p·d)`` a point is ``p·d / r`` pixels wide: ``p`` (the level's
 ``params.point_size``) at its design distance ``d``, shrinking with 1/r like a surface splat.
 The scale factor ``s = max(1, p)`` keeps the XSD's ``pointSizeScaleFactor >= 1``.
-
-Files can hold attribute values longer than libxml2's default 10 MB limit (the index list of a
-large scan), so readers of these files need lxml's ``huge_tree=True``.
 """
 
 from __future__ import annotations
@@ -47,7 +56,7 @@ from lxml import etree
 from ..errors import InputError
 from ..scene import Level, LodChain, Surface
 from . import WRITERS, OutputInfo
-from .numbers import format_exact, format_fixed, format_floats, format_ints, format_unit_bytes
+from .numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
 
 XSI = "http://www.w3.org/2001/XMLSchema-instance"
 SCHEMA_URL = "https://www.web3d.org/specifications/x3d-4.0.xsd"
@@ -58,6 +67,16 @@ Rendering 4, PointProperties needs Shape 5."""
 MAX_POINT_GROWTH = 4.0
 """Cap on how much larger than ``params.point_size`` a point may grow when the viewer comes
 closer than the design distance (a baked finest level shows from distance 0)."""
+
+MAX_SHAPE_VERTICES = 100_000
+"""Most vertices (mesh) or points (point level) in one ``Shape``. With 7 significant digits a
+coordinate takes at most 12 characters and a space while the level's largest coordinate is at
+least 0.001 (10 from 0.1 on), so the ``point`` attribute stays under 3.9 MB, and an RGBA
+``color`` (at most 7 characters a channel) under 2.8 MB."""
+
+MAX_SHAPE_TRIANGLES = 200_000
+"""Most triangles in one ``Shape``: its ``index`` attribute (indices below
+:data:`MAX_SHAPE_VERTICES`, at most 6 characters each) stays under 3.6 MB."""
 
 METADATA_SET = "lodconvert"
 _NOT_NCNAME = re.compile(r"[^A-Za-z0-9_.\-]")
@@ -141,18 +160,24 @@ def _metadata_set(out: _Out, entries: list[Metadata]) -> None:
             out.leaf(tag, {"name": name, "value": value})
 
 
+def _appearance_name(level_def: str) -> str:
+    """DEF of the ``Appearance`` shared by the Shapes of the level ``Group`` ``level_def``."""
+    return f"{level_def}_Appearance"
+
+
 def _unique_names(object_id: str, used: set[str], levels: list[Level]) -> tuple[str, list[str]]:
-    """A DEF base (an XML NCName) for ``object_id`` whose derived names are not yet in
-    ``used``, and the level DEFs; all are added to ``used``."""
+    """A DEF base (an XML NCName) for ``object_id`` whose derived names (LOD, level Groups and
+    their Appearances) are not yet in ``used``, and the level DEFs; all are added to ``used``."""
     base = _NOT_NCNAME.sub("_", object_id) or "_"
     if not (base[0].isalpha() or base[0] == "_"):
         base = "_" + base
     candidate, n = base, 1
     while True:
-        names = [candidate, f"{candidate}_LOD", *(f"{candidate}_{lv.name}" for lv in levels)]
+        level_defs = [f"{candidate}_{lv.name}" for lv in levels]
+        names = [candidate, f"{candidate}_LOD", *level_defs, *map(_appearance_name, level_defs)]
         if not used.intersection(names):
             used.update(names)
-            return candidate, names[2:]
+            return candidate, level_defs
         n += 1
         candidate = f"{base}_{n}"
 
@@ -244,6 +269,40 @@ def _color_node(out: _Out, rgba: np.ndarray) -> None:
         out.leaf("ColorRGBA", {"color": format_unit_bytes(rgba)})
 
 
+def _appearance(out: _Out, name: str, first: bool, tag: str, fields: dict[str, str]) -> None:
+    """A level's ``Appearance``: defined (``DEF``, with one ``tag`` child) in its first
+    ``Shape`` and re-used (``USE``) in the others."""
+    if first:
+        with out.node("Appearance", {"DEF": name}):
+            out.leaf(tag, fields)
+    else:
+        out.leaf("Appearance", {"USE": name})
+
+
+def _face_runs(faces: np.ndarray) -> Iterator[np.ndarray]:
+    """Split ``faces`` (m, 3) into consecutive runs of at most :data:`MAX_SHAPE_TRIANGLES`
+    faces using at most :data:`MAX_SHAPE_VERTICES` distinct vertices (each run as long as
+    both allow; at least one face, and one empty run for a mesh without faces)."""
+    start = 0
+    while True:
+        window = faces[start : start + MAX_SHAPE_TRIANGLES]
+        # distinct vertices of each prefix of the window: the corners where a vertex first occurs
+        _, first = np.unique(window, return_index=True)
+        new_per_face = np.bincount(first // 3, minlength=len(window))
+        fitting = int(np.count_nonzero(np.cumsum(new_per_face) <= MAX_SHAPE_VERTICES))
+        stop = start + max(1, fitting)
+        yield faces[start:stop]
+        if stop >= len(faces):
+            return
+        start = stop
+
+
+def _point_slices(count: int) -> Iterator[slice]:
+    """Consecutive slices of at most :data:`MAX_SHAPE_VERTICES` points (one, empty, for none)."""
+    for start in range(0, max(count, 1), MAX_SHAPE_VERTICES):
+        yield slice(start, start + MAX_SHAPE_VERTICES)
+
+
 def vertex_colors(surface: Surface) -> np.ndarray | None:
     """Per-vertex RGBA (n, 4) uint8 for a mesh written without its texture, or ``None`` when the
     surface has neither vertex colours nor a texture with UVs (its
@@ -268,28 +327,39 @@ def vertex_colors(surface: Surface) -> np.ndarray | None:
     return colors
 
 
-def _mesh_shape(out: _Out, surface: Surface) -> None:
+def _mesh_shapes(out: _Out, surface: Surface, appearance: str) -> None:
+    """The mesh as ``Shape`` s with an ``IndexedTriangleSet`` each, one per run of faces
+    (:func:`_face_runs`), holding the vertices (and colours) that run uses, re-indexed."""
     base = surface.material_color
     material = {"diffuseColor": format_unit_bytes(base[:3])}
     if base[3] < 255:
         material["transparency"] = format_fixed([1.0 - base[3] / 255.0], 4)
-    with out.node("Appearance"):
-        out.leaf("Material", material)
-    index = format_ints(surface.faces)
-    with out.node("IndexedTriangleSet", {"solid": "false", "index": index}):
-        out.leaf("Coordinate", {"point": format_floats(surface.vertices)})
-        colors = vertex_colors(surface)
-        if colors is not None:
-            _color_node(out, colors)
+    colors = vertex_colors(surface)
+    decimals = geometry_decimals(surface.vertices)
+    for k, run in enumerate(_face_runs(surface.faces)):
+        used, index = np.unique(run, return_inverse=True)
+        with out.node("Shape"):
+            _appearance(out, appearance, k == 0, "Material", material)
+            attrib = {"solid": "false", "index": format_ints(index)}
+            with out.node("IndexedTriangleSet", attrib):
+                out.leaf("Coordinate", {"point": format_fixed(surface.vertices[used], decimals)})
+                if colors is not None:
+                    _color_node(out, colors[used])
 
 
-def _points_shape(out: _Out, level: Level, switch_in: float, alpha: float) -> None:
+def _point_shapes(out: _Out, level: Level, switch_in: float, alpha: float, appearance: str) -> None:
+    """The level's points as ``Shape`` s with a ``PointSet`` each, one per slice of
+    :data:`MAX_SHAPE_VERTICES` consecutive points."""
     assert level.points is not None
-    with out.node("Appearance"):
-        out.leaf("PointProperties", point_properties(level, switch_in, alpha))
-    with out.node("PointSet"):
-        _color_node(out, level.points.colors)
-        out.leaf("Coordinate", {"point": format_floats(level.points.positions)})
+    positions, colors = level.points.positions, level.points.colors
+    fields = point_properties(level, switch_in, alpha)
+    decimals = geometry_decimals(positions)
+    for k, part in enumerate(_point_slices(len(positions))):
+        with out.node("Shape"):
+            _appearance(out, appearance, k == 0, "PointProperties", fields)
+            with out.node("PointSet"):
+                _color_node(out, colors[part])
+                out.leaf("Coordinate", {"point": format_fixed(positions[part], decimals)})
 
 
 def _write_chain(out: _Out, chain: LodChain, used: set[str]) -> None:
@@ -307,13 +377,13 @@ def _write_chain(out: _Out, chain: LodChain, used: set[str]) -> None:
         bounds = [0.0, *chain.cutoffs]
         for i, (level, name) in enumerate(zip(chain.levels, level_defs, strict=True)):
             switch_out = bounds[i + 1] if i + 1 < len(bounds) else None
-            with out.node("Shape", {"DEF": name}):
+            with out.node("Group", {"DEF": name}):
                 _metadata_set(out, _level_metadata(level, bounds[i], switch_out))
                 if level.kind == "mesh":
                     assert level.mesh is not None
-                    _mesh_shape(out, level.mesh)
+                    _mesh_shapes(out, level.mesh, _appearance_name(name))
                 else:
-                    _points_shape(out, level, bounds[i], chain.alpha)
+                    _point_shapes(out, level, bounds[i], chain.alpha, _appearance_name(name))
         if chain.culled:
             out.leaf("Group")
 
@@ -346,12 +416,15 @@ WRITERS[".x3d"] = write_x3d
 
 
 @dataclass
-class X3DShape:
-    """One DEF'd ``Shape`` read back from an X3D file.
+class X3DLevel:
+    """The geometry of one DEF'd level ``Group`` read back from an X3D file: its ``Shape`` s
+    joined in document order.
 
     ``coordinates`` (k, 3) float64 are as written, relative to ``translation`` (the sum of the
-    enclosing ``Transform`` translations); ``colors`` (k, 4) uint8 or ``None``; ``index``
-    (m, 3) int64 triangles of an ``IndexedTriangleSet``, ``None`` for a ``PointSet``.
+    ``Transform`` translations enclosing the Group); ``colors`` (k, 4) uint8 or ``None``;
+    ``index`` (m, 3) int64 triangles of ``IndexedTriangleSet`` s into ``coordinates``,
+    ``None`` for ``PointSet`` s. A mesh split over several Shapes comes back with the vertices
+    the Shapes share repeated in each, and without vertices that no face used.
     """
 
     geometry: str
@@ -373,7 +446,8 @@ def _numbers(text: str | None, width: int, dtype: type, what: str) -> np.ndarray
     return values.reshape(-1, width)
 
 
-def _read_shape(shape: etree._Element, translation: np.ndarray) -> X3DShape | None:
+def _read_shape(shape: etree._Element, translation: np.ndarray) -> X3DLevel | None:
+    """The ``PointSet`` or ``IndexedTriangleSet`` of one ``Shape``; ``None`` without one."""
     for geometry in ("PointSet", "IndexedTriangleSet"):
         node = shape.find(geometry)
         if node is not None:
@@ -392,34 +466,62 @@ def _read_shape(shape: etree._Element, translation: np.ndarray) -> X3DShape | No
             rgba[:, :width] = np.clip(np.rint(values * 255.0), 0, 255).astype(np.uint8)
             colors = rgba
     index = _numbers(node.get("index"), 3, np.int64, "index") if geometry != "PointSet" else None
-    return X3DShape(geometry, coords, translation.copy(), colors, index)
+    return X3DLevel(geometry, coords, translation, colors, index)
 
 
-def read_x3d_points(path: str | Path) -> dict[str, X3DShape]:
-    """Read the DEF'd geometry ``Shape`` s (``PointSet`` / ``IndexedTriangleSet``) of an X3D
-    file written by :func:`write_x3d`, keyed by DEF, in document order.
+def _join_shapes(parts: list[X3DLevel]) -> X3DLevel:
+    """One level from the Shapes of its Group: coordinates and colours concatenated, triangle
+    indices shifted by the vertices of the Shapes before."""
+    first = parts[0]
+    if any(part.geometry != first.geometry for part in parts):
+        raise ValueError(f"a level mixes {sorted({part.geometry for part in parts})}")
+    coloured = [part.colors is not None for part in parts]
+    if any(coloured) and not all(coloured):
+        raise ValueError("a level has colours on some Shapes only")
+    colors = np.concatenate([p.colors for p in parts]) if all(coloured) else None
+    index = None
+    if first.index is not None:
+        starts = np.cumsum([0, *(len(part.coordinates) for part in parts[:-1])])
+        index = np.concatenate([p.index + start for p, start in zip(parts, starts, strict=True)])
+    coordinates = np.concatenate([part.coordinates for part in parts])
+    return X3DLevel(first.geometry, coordinates, first.translation, colors, index)
 
-    Raises :class:`~lodconvert.errors.InputError` naming the file when it is missing, not
-    well-formed (truncated, say), not X3D, or holds malformed numbers.
+
+def read_x3d_points(path: str | Path) -> dict[str, X3DLevel]:
+    """Read the levels of an X3D file written by :func:`write_x3d`: for each DEF'd ``Group``
+    the ``PointSet`` s or ``IndexedTriangleSet`` s of the ``Shape`` s directly inside it,
+    joined (see :class:`X3DLevel`), keyed by the Group's DEF, in document order.
+
+    The file is parsed with libxml2's default limits (no ``huge_tree``), which files written
+    by :func:`write_x3d` stay within. Raises :class:`~lodconvert.errors.InputError` naming the
+    file when it is missing, not well-formed (truncated, say), not X3D, or holds malformed
+    numbers or geometry.
     """
-    shapes: dict[str, X3DShape] = {}
+    levels: dict[str, X3DLevel] = {}
     offsets: list[np.ndarray] = []
+    groups: list[tuple[str | None, list[X3DLevel]]] = []
     try:
-        events = etree.iterparse(str(path), events=("start", "end"), huge_tree=True)
+        events = etree.iterparse(str(path), events=("start", "end"))
         for event, element in events:
             if event == "start":
                 if element.tag == "Transform":
                     shift = _numbers(element.get("translation"), 3, np.float64, "translation")
                     offsets.append(shift[0] if len(shift) else np.zeros(3))
+                elif element.tag == "Group":
+                    groups.append((element.get("DEF"), []))
                 continue
             if element.tag == "Transform":
                 offsets.pop()
-            elif element.tag == "Shape" and element.get("DEF"):
+            elif element.tag == "Shape" and groups and groups[-1][0]:
                 translation = np.sum(offsets, axis=0) if offsets else np.zeros(3)
                 shape = _read_shape(element, translation)
                 if shape is not None:
-                    shapes[element.get("DEF")] = shape
+                    groups[-1][1].append(shape)
                 element.clear()
+            elif element.tag == "Group":
+                name, parts = groups.pop()
+                if name and parts:
+                    levels[name] = _join_shapes(parts)
         if events.root is None or events.root.tag != "X3D":
             raise InputError("is not an X3D document", str(path))
     except etree.XMLSyntaxError as err:
@@ -427,5 +529,5 @@ def read_x3d_points(path: str | Path) -> dict[str, X3DShape]:
     except OSError as err:
         raise InputError(f"cannot be read: {err.strerror or err}", str(path)) from None
     except ValueError as err:
-        raise InputError(f"holds malformed numbers: {err}", str(path)) from None
-    return shapes
+        raise InputError(f"holds malformed numbers or geometry: {err}", str(path)) from None
+    return levels
