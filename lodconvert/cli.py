@@ -7,6 +7,7 @@ stderr (``lodconvert: error: FILE: what is wrong``); ``--debug`` adds the traceb
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 import time
@@ -19,11 +20,11 @@ from . import __version__
 from .bake import BACKENDS
 from .bake.filters import FILTERS
 from .chain import MAX_LEVELS, ChainOptions
+from .commands import COMMANDS
 from .errors import LodConvertError, UsageError
 from .ranges import DEFAULT_BETA, DEFAULT_GAMMA
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE = 0, 1, 2
-COMMANDS = ("ranges",)
 
 
 class Parser(argparse.ArgumentParser):
@@ -44,7 +45,7 @@ def parse_list(text: str, kind: type, flag: str) -> tuple:
     return values
 
 
-def _add_range_options(parser: argparse.ArgumentParser) -> None:
+def add_range_options(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("switching ranges (Y = α·β·γˣ)")
     group.add_argument(
         "--levels", type=int, default=4, help=f"levels in the chain, 2..{MAX_LEVELS} (default 4)"
@@ -73,7 +74,9 @@ def build_convert_parser() -> Parser:
         prog="lodconvert",
         description="Bake a CityGML-style LOD chain (LOD4 mesh, coarser point-cloud levels) "
         "for every object of a mesh and write it as X3D LOD or glTF MSFT_lod.",
-        epilog="Other commands: 'lodconvert ranges FILE' prints α, γ and the cutoffs per object.",
+        epilog="Other commands: "
+        + "; ".join(f"'lodconvert {name} --help'" for name in COMMANDS)
+        + ".",
     )
     parser.add_argument("input", help="OBJ, PLY, STL, OFF, GLB or glTF file (optionally .gz)")
     parser.add_argument("-o", "--output", required=True, help="output .x3d, .glb or .gltf")
@@ -89,7 +92,7 @@ def build_convert_parser() -> Parser:
     )
     bake.add_argument("--backend", choices=BACKENDS, default="auto", help="baker (default auto)")
     bake.add_argument("--no-mesh", action="store_true", help="bake the finest level too")
-    _add_range_options(parser)
+    add_range_options(parser)
     out = parser.add_argument_group("output and messages")
     out.add_argument(
         "--report", metavar="FILE", help="write a JSON report (schemas/report.schema.json)"
@@ -97,16 +100,6 @@ def build_convert_parser() -> Parser:
     out.add_argument("-q", "--quiet", action="store_true", help="print errors only")
     out.add_argument("-v", "--verbose", action="store_true", help="print every step")
     out.add_argument("--debug", action="store_true", help="show tracebacks")
-    return parser
-
-
-def build_ranges_parser() -> Parser:
-    """The parser of ``lodconvert ranges FILE``."""
-    parser = Parser(prog="lodconvert ranges", description="Print α, γ and the cutoffs per object.")
-    parser.add_argument("input", help="any input lodconvert reads")
-    _add_range_options(parser)
-    parser.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    parser.add_argument("--debug", action="store_true", help="show tracebacks")
     return parser
 
 
@@ -208,26 +201,6 @@ def _convert(args: argparse.Namespace, console: Console) -> int:
     return EXIT_OK
 
 
-def run_ranges(argv: Sequence[str]) -> int:
-    """``lodconvert ranges FILE``."""
-    args = build_ranges_parser().parse_args(argv)
-    return _guarded(args, Console(False, False), lambda: _ranges(args))
-
-
-def _ranges(args: argparse.Namespace) -> int:
-    from .convert import object_ranges, read_scene
-
-    rows = object_ranges(read_scene(args.input), chain_options(args))
-    if args.json:
-        print(json.dumps(rows, indent=2))
-        return EXIT_OK
-    print(f"{'object':24} {'alpha':>12} {'gamma':>8}  cutoffs (x: Y)")
-    for row in rows:
-        cuts = "  ".join(f"{x:g}: {y:.6g}" for x, y in zip(row["xs"], row["cutoffs"], strict=True))
-        print(f"{row['id']:24} {row['alpha']:12.6g} {row['gamma']:8g}  {cuts}")
-    return EXIT_OK
-
-
 def _guarded(args: argparse.Namespace, console: Console, body: Any) -> int:
     try:
         return body()
@@ -247,16 +220,15 @@ def _guarded(args: argparse.Namespace, console: Console, body: Any) -> int:
         return 130
     except MemoryError:
         console.clear()
-        print(f"lodconvert: error: {args.input}: out of memory", file=sys.stderr)
+        print(f"lodconvert: error: {getattr(args, 'input', '')}: out of memory", file=sys.stderr)
         return EXIT_ERROR
     except Exception as exc:  # an unexpected failure still gets one line
         console.clear()
         _report_traceback(args)
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
         hint = "" if args.debug else " (run with --debug for the traceback)"
-        print(
-            f"lodconvert: error: {args.input}: {type(exc).__name__}: {first}{hint}", file=sys.stderr
-        )
+        where = getattr(args, "input", None) or "lodconvert"
+        print(f"lodconvert: error: {where}: {type(exc).__name__}: {first}{hint}", file=sys.stderr)
         return EXIT_ERROR
 
 
@@ -265,9 +237,20 @@ def _report_traceback(args: argparse.Namespace) -> None:
         traceback.print_exc()
 
 
+def run_command(name: str, argv: Sequence[str]) -> int:
+    """Run the subcommand ``name`` (a module of :mod:`lodconvert.commands`)."""
+    module = importlib.import_module(COMMANDS[name])
+    parser = Parser(prog=f"lodconvert {name}", description=module.DESCRIPTION)
+    module.add_arguments(parser)
+    parser.add_argument("--debug", action="store_true", help="show tracebacks")
+    args = parser.parse_args(argv)
+    console = Console(quiet=getattr(args, "quiet", False), verbose=getattr(args, "verbose", False))
+    return _guarded(args, console, lambda: module.run(args, console))
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lodconvert`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in COMMANDS and not Path(argv[0]).exists():
-        return run_ranges(argv[1:])
+        return run_command(argv[0], argv[1:])
     return run_convert(argv)

@@ -1,0 +1,10 @@
+"""Subcommands of the command line: ``lodconvert NAME ...``.
+
+Each module listed here defines ``DESCRIPTION``, ``add_arguments(parser)`` and
+``run(args, console) -> int`` (an exit code); :mod:`lodconvert.cli` parses, dispatches and turns
+exceptions into one-line errors and exit codes.
+"""
+
+COMMANDS: dict[str, str] = {
+    "ranges": "lodconvert.commands.ranges",
+}
