@@ -6,14 +6,25 @@ looking along the axis, near/far planes clipping the slab and no face culling, i
 bottom, so the image covers ``cells[u]·pitch × cells[v]·pitch`` from ``lo``). The depth test
 keeps the nearest surface per pixel: ``<`` for the view from the low side (sign +1), ``>=``
 after clearing the depth to 0 for the view from the high side (sign -1). Two colour attachments
-receive the hit depth (R32F: the interpolated coordinate along the axis, not the depth buffer)
-and the face (R32I: ``gl_PrimitiveID`` + 1, 0 = empty). The first slab's near plane and the last
-slab's far plane are opened up, as :meth:`Grid.slab_of` clamps depths into range.
+receive the hit depth (R32F, world coordinate along the axis) and the face (R32I,
+``gl_PrimitiveID`` + 1, 0 = empty).
 
-Work per slab stays small: each axis draws its faces sorted by the first slab they reach, so a
-slab draws only a window of faces (plus the few faces spanning many slabs); faces that cover no
-pixel centre and slabs that no face reaches are skipped. Slabs are rendered as tiles of one tall
-framebuffer per axis and read back a batch of tiles at a time.
+The depth is not read from the depth buffer, nor interpolated from the vertices: the
+rasteriser snaps vertices to a sub-pixel grid (1/256 pixel on llvmpipe), which moves the
+interpolated depth of a face seen almost edge-on by a good part of a slab. A geometry shader
+hands each triangle's depth plane to the fragment shader, which evaluates it at the exact pixel
+centre, keeps the fragment only when that depth lies in the slab (as :meth:`Grid.slab_of`
+assigns it: the outer slabs are open) and writes it as the fragment depth. The clip planes lie
+half a slab outside the slab so that no fragment is lost to snapping. Hits then match the numpy
+backend's to float32 precision.
+
+Work per slab stays small: each slab draws only the faces that reach it (one IBO entry per
+face and slab, sorted by slab; faces spanning very many slabs are drawn together for every slab
+any of them reaches), faces that cover no pixel centre and slabs that no face reaches are
+skipped. Slabs are rendered as tiles of one tall framebuffer per axis, a batch of tiles at a
+time; then a compute shader (OpenGL 4.3) lists the covered pixels, so that only they are read
+back instead of whole, mostly empty images (on software renderers, or without 4.3, the images
+are read back and scanned).
 
 Contexts are made when a :class:`GLBackend` is created, never at import: on Mesa llvmpipe a
 process forked after its parent made a context (even a released one) deadlocks in GL calls.
@@ -28,6 +39,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import LodConvertError
+from ..scene import Surface
+from . import SOFTWARE_RENDERERS
 from .grid import Grid, SlabHits
 from .numpy import EPS
 
@@ -36,12 +49,17 @@ if TYPE_CHECKING:
 
 APT_INSTALL = "apt-get install -y --no-install-recommends libegl1 libgl1 libgl1-mesa-dri"
 PIP_INSTALL = "pip install moderngl"
-# Framebuffer bytes per pixel of a slab tile: depth (R32F), face (R32I), depth buffer (24/32 bit).
+# Framebuffer bytes per pixel of a slab tile: depth (R32F), face (R32I), depth buffer.
 TILE_BYTES = 12
 # Framebuffer memory of one batch of slab tiles (rendered, then read back at once).
 BATCH_BYTES = 1 << 27
 # A face is drawn in the slabs it reaches within this fraction of a slab (float32 rounding).
 SLAB_TOL = 1e-4
+# Clip planes lie this fraction of a slab outside the slab, so that fragments the rasteriser's
+# vertex snapping moves across a slab face still reach the exact per-pixel depth test.
+CLIP_MARGIN = 0.5
+# Stands for an unbounded depth in shader uniforms.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 VERTEX_SHADER = """
 #version 330
@@ -50,27 +68,86 @@ uniform vec2 u_map;
 uniform vec2 v_map;
 uniform vec2 z_map;
 in vec3 in_pos;
-out float v_depth;
+out vec3 v_uvw;
 void main() {
-    v_depth = in_pos[axis];
+    v_uvw = vec3(in_pos[(axis + 1) % 3], in_pos[(axis + 2) % 3], in_pos[axis]);
     gl_Position = vec4(
-        in_pos[(axis + 1) % 3] * u_map.x + u_map.y,
-        in_pos[(axis + 2) % 3] * v_map.x + v_map.y,
-        v_depth * z_map.x + z_map.y,
-        1.0);
+        v_uvw.x * u_map.x + u_map.y, v_uvw.y * v_map.x + v_map.y, v_uvw.z * z_map.x + z_map.y, 1.0
+    );
+}
+"""
+
+# Per triangle: its depth plane (a corner and the depth gradient over the image plane), so that
+# fragments get the exact depth at their pixel centre whatever the rasteriser's vertex snapping.
+GEOMETRY_SHADER = """
+#version 330
+layout(triangles) in;
+layout(triangle_strip, max_vertices = 3) out;
+in vec3 v_uvw[];
+flat out vec3 g_corner;
+flat out vec2 g_slope;
+void main() {
+    vec3 n = cross(v_uvw[1] - v_uvw[0], v_uvw[2] - v_uvw[0]);
+    if (n.z == 0.0) return;
+    for (int i = 0; i < 3; ++i) {
+        gl_Position = gl_in[i].gl_Position;
+        gl_PrimitiveID = gl_PrimitiveIDIn;
+        g_corner = v_uvw[0];
+        g_slope = -n.xy / n.z;
+        EmitVertex();
+    }
+    EndPrimitive();
 }
 """
 
 FRAGMENT_SHADER = """
 #version 330
 uniform int first;
-in float v_depth;
+uniform vec2 u_pixel;
+uniform vec3 v_pixel;
+uniform vec2 keep;
+uniform vec2 frag_depth;
+flat in vec3 g_corner;
+flat in vec2 g_slope;
 layout(location = 0) out float out_depth;
 layout(location = 1) out int out_face;
 void main() {
-    out_depth = v_depth;
+    vec2 centre = vec2(
+        u_pixel.x + gl_FragCoord.x * u_pixel.y, v_pixel.x + (gl_FragCoord.y - v_pixel.z) * v_pixel.y
+    );
+    float depth = g_corner.z + dot(g_slope, centre - g_corner.xy);
+    if (!(depth >= keep.x && depth < keep.y)) discard;
+    gl_FragDepth = depth * frag_depth.x + frag_depth.y;
+    out_depth = depth;
     out_face = first + gl_PrimitiveID + 1;
 }
+"""
+
+
+# Work-group side of the compute shader that lists covered pixels.
+LIST_GROUP = 16
+
+LIST_SHADER = f"""
+#version 430
+layout(local_size_x = {LIST_GROUP}, local_size_y = {LIST_GROUP}) in;
+layout(binding = 0) uniform isampler2D face_image;
+layout(binding = 1) uniform sampler2D depth_image;
+layout(std430, binding = 0) buffer Count {{ uint count; }};
+layout(std430, binding = 1) buffer Hits {{ int hits[]; }};
+uniform ivec2 size;
+uniform uint capacity;
+void main() {{
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= size.x || p.y >= size.y) return;
+    int face = texelFetch(face_image, p, 0).r;
+    if (face == 0) return;
+    uint i = atomicAdd(count, 1u);
+    if (i < capacity) {{
+        hits[3 * i] = p.y * size.x + p.x;
+        hits[3 * i + 1] = face;
+        hits[3 * i + 2] = floatBitsToInt(texelFetch(depth_image, p, 0).r);
+    }}
+}}
 """
 
 
@@ -110,9 +187,10 @@ def gl_unavailable_reason() -> str | None:
 @dataclass
 class _AxisPlan:
     """What to draw along one axis. ``order`` holds face indices in draw order: first the
-    ``n_long`` faces that span many slabs, then the others sorted by their first slab. Per
-    rendered slab ``slabs[i]``: draw the long faces when ``long[i]``, and ``count[i]`` sorted
-    faces from entry ``start[i]`` of ``order``, clipped to depths ``near[i] … far[i]``."""
+    ``n_long`` faces that span very many slabs, then one entry per (slab, face) for the others,
+    sorted by slab. Per rendered slab ``slabs[i]``: draw the long faces when ``long[i]``, and the
+    ``count[i]`` entries from ``start[i]`` of ``order``, clipped to depths ``clip[i]`` (low,
+    high), keeping the fragments with depths in ``keep[i]`` (low inclusive, high exclusive)."""
 
     order: np.ndarray
     n_long: int
@@ -120,67 +198,90 @@ class _AxisPlan:
     long: np.ndarray
     start: np.ndarray
     count: np.ndarray
-    near: np.ndarray
-    far: np.ndarray
+    keep: np.ndarray
+    clip: np.ndarray
 
 
-def _covers_centre(p: np.ndarray, n: int) -> np.ndarray:
-    """Per face (pixel coordinates ``p`` (m, 3), centres at integers), whether the bounding
-    range of its corners holds a pixel centre in ``0 … n-1`` (with the numpy backend's EPS)."""
-    first = np.maximum(np.ceil(p.min(axis=1) - EPS), 0)
-    last = np.minimum(np.floor(p.max(axis=1) + EPS), n - 1)
+def _face_bounds(surface: Surface, axis: int) -> dict[str, np.ndarray]:
+    """Per face not degenerate in projection along ``axis`` (the numpy backend's test): its
+    index and the bounds of its corners along u, v and the axis (world coordinates)."""
+    tri = surface.triangles
+    u, v = Grid.plane_axes(axis)
+    pu, pv = tri[:, :, u], tri[:, :, v]
+    area = (pu[:, 1] - pu[:, 0]) * (pv[:, 2] - pv[:, 0]) - (pv[:, 1] - pv[:, 0]) * (
+        pu[:, 2] - pu[:, 0]
+    )
+    extent = float(np.ptp(surface.bounds, axis=0).max())
+    idx = np.flatnonzero(np.abs(area) > 1e-15 * extent * extent)
+    table = {"face": idx}
+    for name, c in (("u", u), ("v", v), ("w", axis)):
+        table[f"{name}min"] = tri[idx, :, c].min(axis=1)
+        table[f"{name}max"] = tri[idx, :, c].max(axis=1)
+    return table
+
+
+def _covers_centre(
+    lo: np.ndarray, hi: np.ndarray, origin: float, pitch: float, n: int
+) -> np.ndarray:
+    """Whether ``[lo, hi]`` (world) holds one of the pixel centres ``0 … n-1`` (with the numpy
+    backend's tolerance): a face whose bounds hold none covers no pixel."""
+    first = np.maximum(np.ceil((lo - origin) / pitch - 0.5 - EPS), 0)
+    last = np.minimum(np.floor((hi - origin) / pitch - 0.5 + EPS), n - 1)
     return last >= first
 
 
-def _plan_axis(tri: np.ndarray, grid: Grid, axis: int) -> _AxisPlan:
+def _plan_axis(table: dict[str, np.ndarray], grid: Grid, axis: int) -> _AxisPlan:
     """Sort the faces for slab-by-slab drawing along ``axis`` (see :class:`_AxisPlan`)."""
     u, v = grid.plane_axes(axis)
     rows, cols = grid.image_shape(axis)
     n_slabs = grid.slabs[axis]
-    keep = _covers_centre((tri[:, :, u] - grid.lo[u]) / grid.pitch - 0.5, cols)
-    keep &= _covers_centre((tri[:, :, v] - grid.lo[v]) / grid.pitch - 0.5, rows)
-    ids = np.flatnonzero(keep)
-    w = tri[ids][:, :, axis]
-    w_min, w_max = w.min(axis=1), w.max(axis=1)
+    keep = _covers_centre(table["umin"], table["umax"], grid.lo[u], grid.pitch, cols)
+    keep &= _covers_centre(table["vmin"], table["vmax"], grid.lo[v], grid.pitch, rows)
+    ids = table["face"][keep]
+    w_min, w_max = table["wmin"][keep], table["wmax"][keep]
     tol = SLAB_TOL * grid.slab
     s0 = grid.slab_of(axis, w_min - tol)
     s1 = grid.slab_of(axis, w_max + tol)
     span = s1 - s0 + 1
-    # Window W: faces spanning more than W slabs are drawn for every slab, the others in the W
-    # slabs from their first; pick the W with the fewest faces drawn in all.
-    n_within = np.cumsum(np.bincount(span, minlength=n_slabs + 1))
-    windows = np.arange(n_slabs + 1)
-    cost = n_slabs * (len(ids) - n_within) + windows * n_within
-    window = int(np.argmin(cost[1:])) + 1
-    is_long = span > window
+    # Faces reaching more than ``most`` slabs ("long") are drawn for every slab that any long
+    # face reaches; the others get one entry per slab they reach. Pick the ``most`` that draws
+    # the fewest faces in all.
+    n_upto = np.cumsum(np.bincount(span, minlength=n_slabs + 1))
+    entries_upto = np.cumsum(np.bincount(span, weights=span, minlength=n_slabs + 1))
+    most = int(np.argmin(entries_upto + n_slabs * (len(ids) - n_upto)))
+    is_long = span > most
     short = np.flatnonzero(~is_long)
-    short = short[np.argsort(s0[short], kind="stable")]
-    short_s0 = s0[short]
+    owner = np.repeat(short, span[short])
+    first_entry = np.cumsum(span[short]) - span[short]
+    entry_slab = s0[owner] + np.arange(len(owner)) - np.repeat(first_entry, span[short])
+    by_slab = np.argsort(entry_slab, kind="stable")
+    owner, entry_slab = owner[by_slab], entry_slab[by_slab]
     n_long = int(is_long.sum())
-    slab_ids = np.arange(n_slabs)
-    start = np.searchsorted(short_s0, slab_ids - window + 1, side="left")
-    count = np.searchsorted(short_s0, slab_ids, side="right") - start
+    start = np.searchsorted(entry_slab, np.arange(n_slabs), side="left")
+    count = np.searchsorted(entry_slab, np.arange(n_slabs), side="right") - start
     reach = np.zeros(n_slabs + 1, dtype=np.int64)
     np.add.at(reach, s0[is_long], 1)
     np.add.at(reach, s1[is_long] + 1, -1)
     long = np.cumsum(reach[:-1]) > 0
     rendered = np.flatnonzero(long | (count > 0))
-    lo_a = grid.lo[axis]
-    near = lo_a + rendered * grid.slab
-    far = near + grid.slab
+    # Depths kept in each slab: exactly the slab, the outer ones open as Grid.slab_of clamps.
+    keep = grid.lo[axis] + np.stack([rendered, rendered + 1], axis=1) * grid.slab
+    keep[rendered == 0, 0] = -FLOAT32_MAX
+    keep[rendered == n_slabs - 1, 1] = FLOAT32_MAX
+    # Clip planes: the slab widened for vertex snapping, the outer ones out to the geometry.
+    clip = keep + np.array([-CLIP_MARGIN, CLIP_MARGIN]) * grid.slab
     if len(ids):
-        # Open the outer planes: depths beyond the first/last slab are clamped into them.
-        near[rendered == 0] = min(lo_a, w_min.min()) - grid.slab
-        far[rendered == n_slabs - 1] = max(lo_a + n_slabs * grid.slab, w_max.max()) + grid.slab
+        clip[:, 0] = np.maximum(clip[:, 0], w_min.min() - CLIP_MARGIN * grid.slab)
+        clip[:, 1] = np.minimum(clip[:, 1], w_max.max() + CLIP_MARGIN * grid.slab)
     return _AxisPlan(
-        order=np.concatenate([ids[is_long], ids[short]]),
+        order=np.concatenate([ids[is_long], ids[owner]]),
         n_long=n_long,
         slabs=rendered,
         long=long[rendered],
         start=start[rendered] + n_long,
         count=count[rendered],
-        near=near,
-        far=far,
+        keep=keep,
+        clip=clip,
     )
 
 
@@ -204,32 +305,53 @@ class GLBackend:
     """FBO slab renderer on an EGL OpenGL context (a GPU driver, or Mesa llvmpipe on the CPU).
 
     Creating one makes the context; raises :class:`~lodconvert.errors.LodConvertError` (one
-    line, with what to install) when that fails. Call :meth:`release` when done.
+    line, with what to install) when that fails. Call :meth:`release` when done. ``compact``
+    chooses how covered pixels come back: a compute shader lists them on the GL side (needs
+    OpenGL 4.3), or whole images are read back and scanned. By default a GPU lists them (whole
+    images would cross the bus) and a software renderer scans (there reading back is a copy,
+    cheaper than the compute pass).
     """
 
     name = "gl"
 
-    def __init__(self) -> None:
+    def __init__(self, compact: bool | None = None) -> None:
         self._ctx: moderngl.Context | None = _create_context()
         self.renderer: str = self._ctx.info["GL_RENDERER"]
-        self._max_size = int(self._ctx.info["GL_MAX_RENDERBUFFER_SIZE"])
-        self._prog = self._ctx.program(
-            vertex_shader=VERTEX_SHADER, fragment_shader=FRAGMENT_SHADER
-        )
+        info = self._ctx.info
+        self._max_size = int(min(info["GL_MAX_TEXTURE_SIZE"], info["GL_MAX_RENDERBUFFER_SIZE"]))
+        try:
+            self._prog = self._ctx.program(
+                vertex_shader=VERTEX_SHADER,
+                geometry_shader=GEOMETRY_SHADER,
+                fragment_shader=FRAGMENT_SHADER,
+            )
+            if compact is None:
+                software = any(name in self.renderer.lower() for name in SOFTWARE_RENDERERS)
+                compact = self._ctx.version_code >= 430 and not software
+            self._lister = self._ctx.compute_shader(LIST_SHADER) if compact else None
+        except Exception:
+            self._ctx.release()
+            raise
 
     def release(self) -> None:
         """Free the GL context (idempotent); the backend cannot rasterise afterwards."""
         if self._ctx is not None:
+            if self._lister is not None:
+                self._lister.release()
             self._prog.release()
             self._ctx.release()
             self._ctx = None
 
-    def rasterize(self, vertices: np.ndarray, faces: np.ndarray, grid: Grid) -> list[SlabHits]:
+    def rasterize(self, surface: Surface, grid: Grid) -> list[SlabHits]:
         """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z)."""
         if self._ctx is None:
             raise LodConvertError("GL backend used after release()")
-        tri = vertices[faces]
-        plans = [_plan_axis(tri, grid, axis) for axis in range(3)]
+        plans = [
+            _plan_axis(
+                surface.derived(f"gl-axis-{a}", lambda a=a: _face_bounds(surface, a)), grid, a
+            )
+            for a in range(3)
+        ]
         if not any(len(p.slabs) for p in plans):
             return [_hits(axis, sign, []) for axis in range(3) for sign in (1, -1)]
         # Geometry relative to the grid centre, so float32 keeps the precision of large
@@ -237,8 +359,10 @@ class GLBackend:
         origin = grid.lo + 0.5 * np.asarray(grid.cells, dtype=np.float64) * grid.pitch
         ctx = self._ctx
         with ctx:
-            vbo = ctx.buffer((vertices - origin).astype(np.float32))
-            ibo = ctx.buffer(np.concatenate([faces[p.order] for p in plans]).astype(np.int32))
+            vbo = ctx.buffer((surface.vertices - origin).astype(np.float32))
+            ibo = ctx.buffer(
+                np.concatenate([surface.faces[p.order] for p in plans]).astype(np.int32)
+            )
             vao = ctx.vertex_array(
                 self._prog, [(vbo, "3f", "in_pos")], index_buffer=ibo, index_element_size=4
             )
@@ -247,7 +371,7 @@ class GLBackend:
                 hits: list[SlabHits] = []
                 base = 0
                 for axis, plan in enumerate(plans):
-                    hits.extend(self._render_axis(vao, grid, axis, plan, base, origin))
+                    hits.extend(self._render_axis(ctx, vao, grid, axis, plan, base, origin))
                     base += len(plan.order)
             finally:
                 vao.release()
@@ -257,6 +381,7 @@ class GLBackend:
 
     def _render_axis(
         self,
+        ctx: moderngl.Context,
         vao: moderngl.VertexArray,
         grid: Grid,
         axis: int,
@@ -267,38 +392,41 @@ class GLBackend:
         """Both directions along ``axis``; ``base`` is the axis's first entry in the IBO."""
         if len(plan.slabs) == 0:
             return [_hits(axis, 1, []), _hits(axis, -1, [])]
-        assert self._ctx is not None
-        ctx = self._ctx
         rows, cols = grid.image_shape(axis)
         per_batch = max(
             1,
             min(len(plan.slabs), self._max_size // rows, BATCH_BYTES // (rows * cols * TILE_BYTES)),
         )
         size = (cols, rows * per_batch)
-        depth_rb = ctx.renderbuffer(size, 1, dtype="f4")
-        face_rb = ctx.renderbuffer(size, 1, dtype="i4")
-        zbuf = ctx.depth_renderbuffer(size)
-        fbo = ctx.framebuffer([depth_rb, face_rb], zbuf)
+        images = _Images(ctx, size)
         u, v = grid.plane_axes(axis)
-        self._prog["axis"].value = axis
-        self._prog["u_map"].value = _ndc_map(grid.lo[u] - origin[u], cols * grid.pitch)
-        self._prog["v_map"].value = _ndc_map(grid.lo[v] - origin[v], rows * grid.pitch)
-        first = self._prog["first"]
-        z_map = self._prog["z_map"]
+        prog = self._prog
+        prog["axis"].value = axis
+        prog["u_map"].value = _ndc_map(grid.lo[u] - origin[u], cols * grid.pitch)
+        prog["v_map"].value = _ndc_map(grid.lo[v] - origin[v], rows * grid.pitch)
+        prog["u_pixel"].value = (grid.lo[u] - origin[u], grid.pitch)
+        first, v_pixel, z_map, keep, frag_depth = (
+            prog[k] for k in ("first", "v_pixel", "z_map", "keep", "frag_depth")
+        )
         out = []
         try:
-            fbo.use()
             for sign, func, clear_depth in ((1, "<", 1.0), (-1, ">=", 0.0)):
-                ctx.depth_func = func
                 parts = []
                 for b in range(0, len(plan.slabs), per_batch):
                     tiles = range(b, min(b + per_batch, len(plan.slabs)))
-                    fbo.clear(depth=clear_depth)
+                    images.fbo.use()
+                    images.fbo.clear(depth=clear_depth)
+                    ctx.depth_func = func
                     for k, i in enumerate(tiles):
                         ctx.viewport = (0, k * rows, cols, rows)
-                        z_map.value = _ndc_map(
-                            plan.near[i] - origin[axis], plan.far[i] - plan.near[i]
+                        v_pixel.value = (grid.lo[v] - origin[v], grid.pitch, k * rows)
+                        clip_lo, clip_hi = plan.clip[i] - origin[axis]
+                        z_map.value = _ndc_map(clip_lo, clip_hi - clip_lo)
+                        frag_depth.value = (
+                            1.0 / (clip_hi - clip_lo),
+                            -clip_lo / (clip_hi - clip_lo),
                         )
+                        keep.value = tuple(plan.keep[i] - origin[axis])
                         if plan.long[i]:
                             first.value = 0
                             vao.render(vertices=3 * plan.n_long, first=3 * base)
@@ -308,40 +436,84 @@ class GLBackend:
                                 vertices=3 * int(plan.count[i]),
                                 first=3 * (base + int(plan.start[i])),
                             )
-                    part = self._read_batch(fbo, plan, b, len(tiles), rows, cols, origin[axis])
-                    if part is not None:
-                        parts.append(part)
+                    pixel, face, depth = (
+                        images.scan(len(tiles) * rows)
+                        if self._lister is None
+                        else images.gather(self._lister, len(tiles) * rows)
+                    )
+                    r, c = np.divmod(pixel, cols)
+                    parts.append(
+                        (
+                            plan.slabs[b + r // rows],
+                            c,
+                            r % rows,
+                            depth.astype(np.float64) + origin[axis],
+                            plan.order[face - 1],
+                        )
+                    )
                 out.append(_hits(axis, sign, parts))
         finally:
-            fbo.release()
-            zbuf.release()
-            face_rb.release()
-            depth_rb.release()
+            images.release()
         return out
 
-    @staticmethod
-    def _read_batch(
-        fbo: moderngl.Framebuffer,
-        plan: _AxisPlan,
-        first_tile: int,
-        n_tiles: int,
-        rows: int,
-        cols: int,
-        offset: float,
-    ) -> tuple[np.ndarray, ...] | None:
-        """(slab, iu, iv, depth, face) of the covered pixels of a batch of tiles, or None."""
-        viewport = (0, 0, cols, rows * n_tiles)
-        face = fbo.read(viewport=viewport, components=1, attachment=1, dtype="i4")
-        face = np.frombuffer(face, dtype=np.int32).reshape(rows * n_tiles, cols)
-        r, c = np.nonzero(face)
-        if len(r) == 0:
-            return None
-        depth = fbo.read(viewport=viewport, components=1, attachment=0, dtype="f4")
-        depth = np.frombuffer(depth, dtype=np.float32).reshape(rows * n_tiles, cols)
-        return (
-            plan.slabs[first_tile + r // rows],
-            c.astype(np.int64),
-            (r % rows).astype(np.int64),
-            depth[r, c].astype(np.float64) + offset,
-            plan.order[face[r, c] - 1].astype(np.int64),
-        )
+
+class _Images:
+    """The framebuffer of one batch of slab tiles: depth (R32F) and face (R32I) textures and a
+    depth buffer, and a buffer for the list of covered pixels."""
+
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
+        self.ctx = ctx
+        self.size = size
+        self.depth = ctx.texture(size, 1, dtype="f4")
+        self.face = ctx.texture(size, 1, dtype="i4")
+        for texture in (self.depth, self.face):
+            texture.filter = (ctx.NEAREST, ctx.NEAREST)
+        self.zbuffer = ctx.depth_renderbuffer(size)
+        self.fbo = ctx.framebuffer([self.depth, self.face], self.zbuffer)
+        self.count = ctx.buffer(reserve=4)
+        # Room for a covered pixel in 1 of 8 (grown when a batch has more).
+        self.capacity = max(1024, size[0] * size[1] // 8)
+        self.hits = ctx.buffer(reserve=12 * self.capacity)
+
+    def scan(self, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(pixel, face, depth) of the covered pixels of the first ``rows`` rows, by reading
+        the whole images back; ``pixel`` is ``row * cols + col``."""
+        viewport = (0, 0, self.size[0], rows)
+        face = self.fbo.read(viewport=viewport, components=1, attachment=1, dtype="i4")
+        face = np.frombuffer(face, dtype=np.int32)
+        pixel = np.flatnonzero(face)
+        depth = self.fbo.read(viewport=viewport, components=1, attachment=0, dtype="f4")
+        return pixel, face[pixel], np.frombuffer(depth, dtype=np.float32)[pixel]
+
+    def gather(
+        self, lister: moderngl.ComputeShader, rows: int
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As :meth:`scan`, but a compute shader lists the covered pixels on the GL side, so
+        that only they come back."""
+        cols = self.size[0]
+        self.face.use(0)
+        self.depth.use(1)
+        self.count.bind_to_storage_buffer(0)
+        lister["size"].value = (cols, rows)
+        while True:
+            self.count.write(b"\0\0\0\0")
+            self.hits.bind_to_storage_buffer(1)
+            lister["capacity"].value = self.capacity
+            lister.run(-(-cols // LIST_GROUP), -(-rows // LIST_GROUP))
+            self.ctx.memory_barrier(self.ctx.BUFFER_UPDATE_BARRIER_BIT)
+            n = int(np.frombuffer(self.count.read(), dtype=np.uint32)[0])
+            if n <= self.capacity:
+                break
+            self.hits.release()
+            self.capacity = n
+            self.hits = self.ctx.buffer(reserve=12 * n)
+        listed = np.zeros((0, 3), dtype=np.int32)
+        if n:
+            listed = np.frombuffer(self.hits.read(size=12 * n), dtype=np.int32).reshape(n, 3)
+        listed = listed[np.argsort(listed[:, 0])]
+        return listed[:, 0].astype(np.int64), listed[:, 1], listed[:, 2].view(np.float32)
+
+    def release(self) -> None:
+        """Free the GL objects."""
+        for obj in (self.fbo, self.zbuffer, self.face, self.depth, self.count, self.hits):
+            obj.release()
