@@ -27,6 +27,9 @@ class NumpyBackend:
     name = "numpy"
     renderer = "numpy axis-ray rasteriser (CPU)"
 
+    def release(self) -> None:
+        """Nothing to free (the GL backend frees its context here)."""
+
     def rasterize(self, surface: Surface, grid: Grid) -> list[SlabHits]:
         """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z)."""
         hits: list[SlabHits] = []
@@ -38,10 +41,14 @@ class NumpyBackend:
 
 def face_table(surface: Surface, axis: int) -> dict[str, np.ndarray]:
     """Per face not degenerate in projection along ``axis``: projected bounds and the planes of
-    two barycentric coordinates and of the depth, as ``(a, b, c)`` of ``a·u + b·v + c``."""
+    two barycentric coordinates and of the depth, as ``(a, b, c)`` of ``a·u + b·v + c``, all
+    relative to ``centre``."""
     tri = surface.triangles
     u, v = Grid.plane_axes(axis)
-    pu, pv, w = tri[:, :, u], tri[:, :, v], tri[:, :, axis]
+    # Planes are set up relative to the bounding-box centre, so that coordinates far from the
+    # origin (georeferenced data) keep their precision.
+    centre = surface.bounds.mean(axis=0)
+    pu, pv, w = tri[:, :, u] - centre[u], tri[:, :, v] - centre[v], tri[:, :, axis] - centre[axis]
     ax, bx, cx = pu[:, 0], pu[:, 1], pu[:, 2]
     ay, by, cy = pv[:, 0], pv[:, 1], pv[:, 2]
     area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
@@ -55,6 +62,7 @@ def face_table(surface: Surface, axis: int) -> dict[str, np.ndarray]:
     plane = (w[:, 0] - w[:, 2])[:, None] * b0 + (w[:, 1] - w[:, 2])[:, None] * b1
     plane[:, 2] += w[:, 2]
     return {
+        "centre": centre,
         "face": idx,
         "umin": pu[idx].min(axis=1),
         "umax": pu[idx].max(axis=1),
@@ -84,8 +92,9 @@ def _candidates(
     """Keep the (face row, pixel) candidates whose pixel centre is inside the face; return
     them with their depth."""
     u, v = grid.plane_axes(axis)
-    x = grid.lo[u] + (iu + 0.5) * grid.pitch
-    y = grid.lo[v] + (iv + 0.5) * grid.pitch
+    centre = table["centre"]
+    x = (grid.lo[u] - centre[u]) + (iu + 0.5) * grid.pitch
+    y = (grid.lo[v] - centre[v]) + (iv + 0.5) * grid.pitch
     b0c = table["b0"][rows]
     b1c = table["b1"][rows]
     b0 = b0c[:, 0] * x + b0c[:, 1] * y + b0c[:, 2]
@@ -93,15 +102,16 @@ def _candidates(
     inside = (b0 >= -EPS) & (b1 >= -EPS) & (b0 + b1 <= 1.0 + EPS)
     rows, iu, iv, x, y = rows[inside], iu[inside], iv[inside], x[inside], y[inside]
     pl = table["plane"][rows]
-    return rows, iu, iv, pl[:, 0] * x + pl[:, 1] * y + pl[:, 2]
+    return rows, iu, iv, pl[:, 0] * x + pl[:, 1] * y + pl[:, 2] + centre[axis]
 
 
 def rasterize_axis(table: dict[str, np.ndarray], grid: Grid, axis: int) -> list[SlabHits]:
     """Nearest hit per (slab, pixel) seen from both sides of ``axis``: two :class:`SlabHits`."""
     u, v = grid.plane_axes(axis)
     rows_n, cols_n = grid.image_shape(axis)
-    iu0, nu = _pixel_range(table["umin"], table["umax"], grid.lo[u], grid.pitch, cols_n)
-    iv0, nv = _pixel_range(table["vmin"], table["vmax"], grid.lo[v], grid.pitch, rows_n)
+    centre = table["centre"]
+    iu0, nu = _pixel_range(table["umin"], table["umax"], grid.lo[u] - centre[u], grid.pitch, cols_n)
+    iv0, nv = _pixel_range(table["vmin"], table["vmax"], grid.lo[v] - centre[v], grid.pitch, rows_n)
     count = nu * nv
     live = np.flatnonzero(count)
     count = count[live]

@@ -33,6 +33,10 @@ class Backend(Protocol):
         """Nearest hit per (slab, pixel) for +x, -x, +y, -y, +z, -z (in any order)."""
         ...
 
+    def release(self) -> None:
+        """Free what the backend holds (a GL context, say)."""
+        ...
+
 
 def occupied_hits(
     surface: Surface, params: BakeParams, backend: Backend, bounds: np.ndarray | None = None
