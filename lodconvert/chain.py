@@ -228,14 +228,3 @@ def bake_chain(
         culled=culled,
         metadata=dict(obj.metadata),
     )
-
-
-def parse_list(text: str, kind: type, flag: str) -> tuple:
-    """Parse a comma-separated option value (``"128,64,32"``) or raise :class:`UsageError`."""
-    try:
-        values = tuple(kind(part) for part in text.split(",") if part.strip())
-    except ValueError:
-        raise UsageError(f"{flag} expects comma-separated numbers, got {text!r}") from None
-    if not values:
-        raise UsageError(f"{flag} expects at least one value")
-    return values

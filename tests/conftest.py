@@ -27,6 +27,22 @@ def require(condition: bool, reason: str, env: str = "LODCONVERT_REQUIRE_VALIDAT
     pytest.skip(reason)
 
 
+def degenerate_meshes() -> list:
+    """Degenerate but valid inputs that must convert: pytest params with ids."""
+    return [
+        pytest.param(
+            trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]]),
+            id="flat-square",
+        ),
+        pytest.param(
+            trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]), id="triangle"
+        ),
+        pytest.param(
+            trimesh.creation.cylinder(radius=0.01, height=10.0, sections=12), id="thin-rod"
+        ),
+    ]
+
+
 def stanford(name: str) -> Path:
     """Path of a Stanford scan in ../shared/data/stanford, or skip the test."""
     path = STANFORD / name

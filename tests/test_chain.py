@@ -14,7 +14,7 @@ from lodconvert.errors import InputError, UsageError
 from lodconvert.ranges import projected_px
 from lodconvert.scene import SceneObject, Surface
 
-from .conftest import surface_of
+from .conftest import degenerate_meshes, surface_of
 
 
 def chain_of(obj: SceneObject, **options):
@@ -106,15 +106,7 @@ def test_far_from_origin_levels_stay_small(torus: SceneObject) -> None:
         assert a.count == b.count
 
 
-@pytest.mark.parametrize(
-    "mesh",
-    [
-        trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]]),
-        trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]),
-        trimesh.creation.cylinder(radius=0.01, height=10.0, sections=12),
-    ],
-    ids=["flat-square", "single-triangle", "thin-rod"],
-)
+@pytest.mark.parametrize("mesh", degenerate_meshes())
 def test_degenerate_but_valid_objects_convert(mesh: trimesh.Trimesh) -> None:
     warnings: list[str] = []
     chain = bake_chain(

@@ -17,7 +17,7 @@ import trimesh
 
 from lodconvert.cli import main
 
-from .conftest import ROOT, SAMPLE
+from .conftest import ROOT, SAMPLE, degenerate_meshes
 
 
 def run(*args: str | Path) -> subprocess.CompletedProcess[str]:
@@ -171,15 +171,7 @@ def test_debug_shows_the_traceback(work: Path) -> None:
     assert result.returncode == 1 and "Traceback" in result.stderr
 
 
-@pytest.mark.parametrize(
-    "mesh",
-    [
-        trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]]),
-        trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]),
-        trimesh.creation.cylinder(radius=0.01, height=10.0, sections=12),
-    ],
-    ids=["flat-square", "single-triangle", "thin-rod"],
-)
+@pytest.mark.parametrize("mesh", degenerate_meshes())
 def test_degenerate_meshes_convert(work: Path, mesh: trimesh.Trimesh) -> None:
     src = work / "thing.obj"
     mesh.export(src)
