@@ -29,14 +29,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import LodConvertError
+from .glcontext import create_context
 from .ranges import REFERENCE_VIEW, ReferenceView
 from .scene import Level, LodChain, Surface
 
 if TYPE_CHECKING:
     import moderngl
 
-APT_INSTALL = "apt-get install -y --no-install-recommends libegl1 libgl1 libgl1-mesa-dri"
-PIP_INSTALL = "pip install moderngl"
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 # Near/far planes lie this fraction outside the geometry's bounding sphere.
 DEPTH_MARGIN = 0.01
@@ -162,7 +161,7 @@ class SilhouetteRenderer:
         self.width = int(size)
         self.height = int(height if height is not None else size)
         self.fov_y_deg = float(fov_y_deg)
-        self.ctx = _create_context()
+        self.ctx = create_context("silhouette evaluation unavailable")
         self.renderer_name = str(self.ctx.info.get("GL_RENDERER", "unknown"))
         self.max_point_size = float(self.ctx.info.get("GL_POINT_SIZE_RANGE", (1.0, 255.0))[1])
         self.ctx.enable(self.ctx.PROGRAM_POINT_SIZE)
@@ -246,24 +245,6 @@ class SilhouetteRenderer:
 
     def __exit__(self, *exc: object) -> None:
         self.release()
-
-
-def _create_context() -> moderngl.Context:
-    """A standalone EGL context (OpenGL 3.3 core or later), or a one-line LodConvertError."""
-    try:
-        import moderngl
-    except ImportError as exc:
-        raise LodConvertError(
-            f"silhouette evaluation needs moderngl, which is not installed; run: {PIP_INSTALL}"
-        ) from exc
-    try:
-        return moderngl.create_standalone_context(backend="egl", require=330)
-    except Exception as exc:
-        reason = " ".join(str(exc).split()) or type(exc).__name__
-        raise LodConvertError(
-            f"silhouette evaluation needs an EGL OpenGL 3.3 context ({reason}); "
-            f"install Mesa EGL with: {APT_INSTALL} (and {PIP_INSTALL})"
-        ) from exc
 
 
 def silhouette_scores(reference_masks: np.ndarray, level_masks: np.ndarray) -> dict[str, float]:

@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import LodConvertError
+from ..glcontext import create_context
 from ..scene import Surface
 from . import SOFTWARE_RENDERERS
 from .grid import Grid, SlabHits
@@ -47,8 +48,6 @@ from .numpy import EPS
 if TYPE_CHECKING:
     import moderngl
 
-APT_INSTALL = "apt-get install -y --no-install-recommends libegl1 libgl1 libgl1-mesa-dri"
-PIP_INSTALL = "pip install moderngl"
 # Framebuffer bytes per pixel of a slab tile: depth (R32F), face (R32I), depth buffer.
 TILE_BYTES = 12
 # Framebuffer memory of one batch of slab tiles (rendered, then read back at once).
@@ -151,24 +150,6 @@ void main() {{
 """
 
 
-def _create_context() -> moderngl.Context:
-    """A standalone EGL context (OpenGL 3.3 core or later), or a one-line LodConvertError."""
-    try:
-        import moderngl
-    except ImportError as exc:
-        raise LodConvertError(
-            f"GL backend unavailable: moderngl is not installed ({exc}); run: {PIP_INSTALL}"
-        ) from exc
-    try:
-        return moderngl.create_standalone_context(backend="egl", require=330)
-    except Exception as exc:
-        reason = " ".join(str(exc).split()) or type(exc).__name__
-        raise LodConvertError(
-            f"GL backend unavailable: no EGL OpenGL 3.3 context ({reason}); "
-            f"install Mesa EGL with: {APT_INSTALL}"
-        ) from exc
-
-
 @functools.cache
 def gl_unavailable_reason() -> str | None:
     """None when an EGL GL context can be made in this process, else the one-line reason.
@@ -177,7 +158,7 @@ def gl_unavailable_reason() -> str | None:
     call this before forking (see the module docstring).
     """
     try:
-        ctx = _create_context()
+        ctx = create_context("GL backend unavailable")
     except LodConvertError as exc:
         return str(exc)
     ctx.release()
@@ -315,7 +296,7 @@ class GLBackend:
     name = "gl"
 
     def __init__(self, compact: bool | None = None) -> None:
-        self._ctx: moderngl.Context | None = _create_context()
+        self._ctx: moderngl.Context | None = create_context("GL backend unavailable")
         self.renderer: str = self._ctx.info["GL_RENDERER"]
         info = self._ctx.info
         self._max_size = int(min(info["GL_MAX_TEXTURE_SIZE"], info["GL_MAX_RENDERBUFFER_SIZE"]))
