@@ -3,7 +3,7 @@
 Default parameters follow from the reference view (:mod:`.ranges`): a point level is designed
 for the distance where it first shows (its switch-in cutoff; ``α·β``, i.e. x = 0, for a baked
 finest level). Its resolution is the smallest T3 whose grid pitch ``L / T3`` projects to at
-most ``spacing_px`` pixels there, and its point size is the projected cell diagonal, so
+most ``spacing_px`` pixels there, and its point size is that projected pitch, so
 neighbouring points close up without gaps. Point counts must fall strictly level by level: a
 level that would not be lighter than the one before is re-baked at a lower resolution, and a
 level that cannot be (the one before has a single point) is dropped with a warning.
@@ -35,6 +35,7 @@ from .scene import BakeParams, Level, LodChain, SceneObject
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
 DEFAULT_SPACING_PX = 1.5
+POINT_SIZE_FACTOR = 1.0  # point size / projected grid pitch; see default_point_size
 MAX_RESOLUTION = 1024
 MIN_RESOLUTION = 2
 
@@ -108,10 +109,14 @@ def default_resolution(longest: float, distance: float, opts: ChainOptions) -> i
 
 
 def default_point_size(pitch: float, distance: float, opts: ChainOptions) -> float:
-    """Projected cell diagonal (≥ 1 px) at ``distance``, rounded up to 0.01 px."""
-    return max(
-        1.0, math.ceil(100 * math.sqrt(2.0) * projected_px(pitch, distance, opts.view)) / 100
-    )
+    """The grid pitch projected at ``distance`` (≥ 1 px), rounded up to 0.01 px.
+
+    Points one pitch wide close up the surface without gaps, and measured silhouette fidelity
+    is best there: larger points spill past the outline, smaller ones open holes
+    (``benchmarks/results/point_size.md``).
+    """
+    size = POINT_SIZE_FACTOR * projected_px(pitch, distance, opts.view)
+    return max(1.0, math.ceil(100 * size - 1e-9) / 100)
 
 
 def _check_geometry(obj: SceneObject) -> None:

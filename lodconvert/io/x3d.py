@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -256,7 +257,10 @@ def point_properties(level: Level, switch_in: float, alpha: float) -> dict[str, 
     return {
         "pointSizeScaleFactor": format_exact([scale]),
         "pointSizeMinValue": "1",
-        "pointSizeMaxValue": format_fixed([max(1.0, size * design / nearest)], 2),
+        # rounded up, so the clamp never cuts the size the attenuation asks for
+        "pointSizeMaxValue": format_fixed(
+            [max(1.0, math.ceil(100 * size * design / nearest - 1e-6) / 100)], 2
+        ),
         "attenuation": "0 " + format_exact([scale / (size * design)]) + " 0",
     }
 
