@@ -70,6 +70,8 @@ def add_range_options(parser: argparse.ArgumentParser) -> None:
 
 def build_convert_parser() -> Parser:
     """The parser of the main command: ``lodconvert INPUT -o OUTPUT [options]``."""
+    from .commands.view import add_viewer_lib_option
+
     parser = Parser(
         prog="lodconvert",
         description="Bake a CityGML-style LOD chain (LOD4 mesh, coarser point-cloud levels) "
@@ -97,6 +99,12 @@ def build_convert_parser() -> Parser:
     out.add_argument(
         "--report", metavar="FILE", help="write a JSON report (schemas/report.schema.json)"
     )
+    out.add_argument(
+        "--html",
+        action="store_true",
+        help="also write a viewer page beside the output (OUTPUT with suffix .html)",
+    )
+    add_viewer_lib_option(out)
     out.add_argument("-q", "--quiet", action="store_true", help="print errors only")
     out.add_argument("-v", "--verbose", action="store_true", help="print every step")
     out.add_argument("--debug", action="store_true", help="show tracebacks")
@@ -177,8 +185,13 @@ def run_convert(argv: Sequence[str]) -> int:
 def _convert(args: argparse.Namespace, console: Console) -> int:
     from .convert import convert
     from .io.atomic import atomic_output
+    from .viewer import check_library, write_page
 
     options = chain_options(args)
+    if args.viewer_lib and not args.html:
+        raise UsageError("--viewer-lib is for the page that --html writes")
+    if args.html:
+        check_library(args.output, args.viewer_lib)  # before baking, not after
     report = convert(
         args.input,
         args.output,
@@ -198,6 +211,8 @@ def _convert(args: argparse.Namespace, console: Console) -> int:
         f"wrote {args.output} ({report['totals']['objects']} object(s), "
         f"{report['backend']} backend, {sum(report['timings'].values()):.2f} s)"
     )
+    if args.html:
+        console.info(f"wrote {write_page(args.output, library=args.viewer_lib)}")
     return EXIT_OK
 
 

@@ -23,6 +23,7 @@ from .errors import InputError
 from .io import OutputInfo, reader_for, writer_for
 from .io.atomic import atomic_output
 from .scene import LodChain, Scene
+from .validate import check_written
 
 Message = Callable[[str], None]
 
@@ -116,9 +117,11 @@ def convert(
 ) -> dict[str, Any]:
     """Convert ``input_path`` into ``output_path`` and return the report (a JSON-able dict).
 
-    Raises :class:`~lodconvert.errors.UsageError` for bad options and
-    :class:`~lodconvert.errors.LodConvertError` for unreadable input or when no object could be
-    baked; in both cases ``output_path`` is left untouched.
+    The written file passes :func:`~lodconvert.validate.check_written` (structural checks of
+    X3D and glTF) before it is renamed into place. Raises
+    :class:`~lodconvert.errors.UsageError` for bad options and
+    :class:`~lodconvert.errors.LodConvertError` for unreadable input, when no object could be
+    baked or when the output fails validation; in all cases ``output_path`` is left untouched.
     """
     options = options or ChainOptions()
     options.check()
@@ -143,8 +146,14 @@ def convert(
             records.append(chain_record(chain))
             yield chain
 
+    def validated(tmp: Path) -> None:
+        started = time.perf_counter()
+        progress(f"validating {Path(output_path).name}")
+        check_written(tmp, output_path)
+        timings["validate"] = time.perf_counter() - started
+
     start = time.perf_counter()
-    with atomic_output(output_path) as handle:
+    with atomic_output(output_path, check=validated) as handle:
         writer(recorded(iter_chains(scene, options, baker, progress, warn, skipped)), handle, info)
         if not records:
             reason = (
@@ -153,7 +162,7 @@ def convert(
                 else f"none of its {len(skipped)} objects could be converted"
             )
             raise InputError(reason, str(input_path))
-    timings["bake_and_write"] = time.perf_counter() - start
+    timings["bake_and_write"] = time.perf_counter() - start - timings["validate"]
     return {
         "lodconvert": __version__,
         "input": str(input_path),

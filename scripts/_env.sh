@@ -1,5 +1,6 @@
 # Shared set-up for scripts/demo.sh and scripts/test.sh (sourced, not run).
-# Creates .venv with a Python >= 3.11 and installs lodconvert with the given extras.
+# Creates .venv with a Python >= 3.11 and installs lodconvert with the given extras; installs
+# pinned npm packages into ./node_modules (git-ignored, never committed).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$ROOT"
@@ -25,4 +26,17 @@ make_venv() {
   fi
   .venv/bin/python -m pip install -q --upgrade pip
   .venv/bin/python -m pip install -q -e ".$1"
+}
+
+npm_install_pinned() {
+  # $@: name@version pins. One `npm install --no-save` for all of them, and only when one is
+  # missing or at another version (a later --no-save install would prune the others).
+  local pin name stale=0
+  for pin in "$@"; do
+    name="${pin%@*}"
+    [ "$(node -p "require('./node_modules/$name/package.json').version" 2>/dev/null)" = "${pin##*@}" ] || stale=1
+  done
+  [ $stale -eq 0 ] && return 0
+  echo "installing npm packages: $*"
+  npm install --no-save --no-audit --no-fund --silent --prefix . "$@"
 }

@@ -7,4 +7,6 @@ exceptions into one-line errors and exit codes.
 
 COMMANDS: dict[str, str] = {
     "ranges": "lodconvert.commands.ranges",
+    "validate": "lodconvert.commands.validate",
+    "view": "lodconvert.commands.view",
 }

@@ -376,20 +376,28 @@ def _write_chain(out: _Out, chain: LodChain, used: set[str]) -> None:
         "forceTransitions": "true",
     }
     transform = {"DEF": base, "translation": format_exact(chain.origin)}
-    with out.node("Transform", transform), out.node("LOD", lod):
+    with out.node("Transform", transform):
+        # The chain's metadata goes on the Transform: X3DOM counts a MetadataSet inside LOD
+        # as its first level.
         _metadata_set(out, _chain_metadata(chain))
-        bounds = [0.0, *chain.cutoffs]
-        for i, (level, name) in enumerate(zip(chain.levels, level_defs, strict=True)):
-            switch_out = bounds[i + 1] if i + 1 < len(bounds) else None
-            with out.node("Group", {"DEF": name}):
-                _metadata_set(out, _level_metadata(level, bounds[i], switch_out))
-                if level.kind == "mesh":
-                    assert level.mesh is not None
-                    _mesh_shapes(out, level.mesh, _appearance_name(name))
-                else:
-                    _point_shapes(out, level, bounds[i], chain.alpha, _appearance_name(name))
-        if chain.culled:
-            out.leaf("Group")
+        with out.node("LOD", lod):
+            _write_levels(out, chain, level_defs)
+
+
+def _write_levels(out: _Out, chain: LodChain, level_defs: list[str]) -> None:
+    """The LOD's children: one Group per level, finest first, then the empty cull child."""
+    bounds = [0.0, *chain.cutoffs]
+    for i, (level, name) in enumerate(zip(chain.levels, level_defs, strict=True)):
+        switch_out = bounds[i + 1] if i + 1 < len(bounds) else None
+        with out.node("Group", {"DEF": name}):
+            _metadata_set(out, _level_metadata(level, bounds[i], switch_out))
+            if level.kind == "mesh":
+                assert level.mesh is not None
+                _mesh_shapes(out, level.mesh, _appearance_name(name))
+            else:
+                _point_shapes(out, level, bounds[i], chain.alpha, _appearance_name(name))
+    if chain.culled:
+        out.leaf("Group")
 
 
 def write_x3d(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) -> None:

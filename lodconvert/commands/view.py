@@ -1,0 +1,52 @@
+"""``lodconvert view OUT``: write the viewer page of an output (and optionally serve it)."""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import urllib.parse
+
+from ..cli import EXIT_OK, Console
+from ..viewer import serve, write_page
+
+DESCRIPTION = (
+    "Write a self-contained HTML page beside an .x3d, .glb or .gltf written by lodconvert that "
+    "shows it switching levels at its cutoffs, with a readout of each object's level and "
+    "distance. The page loads its viewer library (X_ITE for X3D, three.js for glTF) from a CDN "
+    "unless --viewer-lib names another URL or a local copy of the npm package."
+)
+
+
+def add_viewer_lib_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--viewer-lib``, shared with the main command's ``--html``."""
+    parser.add_argument(
+        "--viewer-lib",
+        metavar="URL|DIR",
+        help="base URL or local folder of the viewer library's npm package "
+        "(x_ite for X3D, three for glTF; default: jsDelivr CDN)",
+    )
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of ``lodconvert view``."""
+    parser.add_argument("asset", metavar="OUT", help="an .x3d, .glb or .gltf lodconvert wrote")
+    parser.add_argument("-o", "--output", metavar="HTML", help="page to write (default OUT.html)")
+    add_viewer_lib_option(parser)
+    parser.add_argument(
+        "--serve",
+        action="store_true",
+        help="then serve the page's folder on 127.0.0.1 and print its URL (Ctrl-C stops)",
+    )
+    parser.add_argument("--port", type=int, default=0, help="port for --serve (default: any)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="print errors only")
+
+
+def run(args: argparse.Namespace, console: Console) -> int:
+    """Write the page; with --serve, serve its folder until interrupted."""
+    page = write_page(args.asset, args.output, args.viewer_lib)
+    console.info(f"wrote {page}")
+    if args.serve:
+        with serve(page.parent, args.port) as base:
+            print(f"{base}/{urllib.parse.quote(page.name)}", flush=True)
+            threading.Event().wait()  # until Ctrl-C, which the command line reports
+    return EXIT_OK

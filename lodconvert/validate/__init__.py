@@ -1,0 +1,80 @@
+"""Checks of the files lodconvert writes: ``lodconvert validate`` and the converter's last step.
+
+:func:`validate_file` returns a list of :class:`Finding` s; the converter calls
+:func:`check_written` on its temporary file before renaming it into place. The rules are in
+:mod:`.x3d` (structure of what we emit, optionally the official XSD) and :mod:`.gltf` (GLB
+framing, accessors, ``MSFT_lod``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable
+from pathlib import Path
+
+from lxml import etree
+
+from ..errors import LodConvertError
+from .findings import ERROR, WARNING, Finding, Findings
+from .gltf import check_gltf
+from .x3d import check_x3d, load_x3d_schema
+
+Check = Callable[[Path, Findings, "etree.XMLSchema | None"], None]
+CHECKS: dict[str, Check] = {".x3d": check_x3d, ".glb": check_gltf, ".gltf": check_gltf}
+"""Format suffix → check; the schema argument is used by X3D only."""
+
+
+def validate_file(
+    path: str | Path, x3d_schema: str | Path | None = None, kind: str | None = None
+) -> list[Finding]:
+    """Check ``path`` and return its findings (empty when it passes).
+
+    ``kind`` is the format suffix (``.x3d``, ``.glb``, ``.gltf``; default: ``path``'s suffix).
+    ``x3d_schema`` is an XSD file (or a folder holding ``x3d-4.0.xsd``) that X3D documents are
+    validated against too. Raises :class:`LodConvertError` only when that schema cannot be
+    loaded; every problem of the file itself is a finding.
+    """
+    path = Path(path)
+    kind = (kind or path.suffix).lower()
+    findings = Findings(path)
+    check = CHECKS.get(kind)
+    if check is None:
+        known = ", ".join(sorted(CHECKS))
+        findings.error(
+            "FORMAT", f"cannot validate {kind or 'a file without suffix'}; known: {known}"
+        )
+    elif not path.is_file():
+        findings.error("READ", "no such file")
+    elif path.stat().st_size == 0:
+        findings.error("EMPTY", "the file is empty")
+    else:
+        schema = load_x3d_schema(x3d_schema) if x3d_schema is not None and kind == ".x3d" else None
+        check(path, findings, schema)
+    return findings.items
+
+
+def errors_of(findings: Iterable[Finding]) -> list[Finding]:
+    """The findings of severity error."""
+    return [f for f in findings if f.severity == ERROR]
+
+
+def check_written(written: Path, target: str | Path) -> None:
+    """Raise a one-line :class:`LodConvertError` naming ``target`` when ``written`` (a freshly
+    written temporary file in ``target``'s format) has an error finding."""
+    errors = errors_of(validate_file(written, kind=Path(target).suffix))
+    if errors:
+        first = errors[0]
+        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+        raise LodConvertError(
+            f"output fails validation: {first.code}: {first.message}{more}", str(target)
+        )
+
+
+__all__ = [
+    "ERROR",
+    "WARNING",
+    "Finding",
+    "check_written",
+    "errors_of",
+    "load_x3d_schema",
+    "validate_file",
+]

@@ -1,0 +1,244 @@
+"""X3D checks: well-formed XML with an ``X3D`` root and a ``Scene``; the components that ``LOD``
+(Navigation 2) and ``PointProperties`` (Shape 5) need; every ``LOD`` with strictly increasing,
+non-negative ranges and one child more than ranges; ``PointSet`` s with one colour per point and
+no ``Normal``; ``IndexedTriangleSet`` s of whole triangles indexing existing vertices; and,
+when a schema is given, the XSD (the official X3D 4.0 XSD is a test-time reference, not shipped).
+
+The document is streamed with libxml2's default limits and without resolving entities; each
+``Shape`` is cleared once checked, so memory stays small for large files.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lxml import etree
+
+from ..errors import LodConvertError
+from .findings import Findings
+
+MAX_SCHEMA_FINDINGS = 20
+"""Schema errors listed one by one; any more are summed up in one finding."""
+_FULL_PROFILE = "Full"
+_LOD_PROFILES = ("Immersive", _FULL_PROFILE)
+"""Profiles that include Navigation level 2 (LOD) without a component statement."""
+
+
+class _Catalog(etree.Resolver):
+    """Resolves a schema's imports to the local files an OASIS ``catalog.xml`` lists."""
+
+    def __init__(self, catalog: Path) -> None:
+        super().__init__()
+        entries = etree.parse(str(catalog)).getroot()
+        self.local = {
+            e.get("name") or e.get("systemId"): str(catalog.parent / e.get("uri"))
+            for e in entries
+            if e.get("uri")
+        }
+
+    def resolve(self, url: str, pubid: str | None, context: object) -> Any:
+        local = self.local.get(url)
+        return self.resolve_filename(local, context) if local else None
+
+
+@functools.lru_cache(maxsize=4)
+def _schema_at(path: Path) -> etree.XMLSchema:
+    parser = etree.XMLParser()
+    catalog = path.parent / "catalog.xml"
+    if catalog.is_file():
+        parser.resolvers.add(_Catalog(catalog))
+    return etree.XMLSchema(etree.parse(str(path), parser))
+
+
+def load_x3d_schema(path: str | Path) -> etree.XMLSchema:
+    """The XSD at ``path`` (or ``path/x3d-4.0.xsd`` for a folder), loaded once and cached;
+    :class:`LodConvertError` when it cannot be read or is not a schema."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "x3d-4.0.xsd"
+    try:
+        return _schema_at(path.resolve())
+    except (OSError, etree.XMLSyntaxError, etree.XMLSchemaParseError) as exc:
+        raise LodConvertError(f"cannot load the schema: {exc}", str(path)) from None
+
+
+def _label(element: etree._Element) -> str:
+    """``LOD 'bunny_LOD' (line 12)``: the node type, its DEF if any, and its line."""
+    name = f" {element.get('DEF')!r}" if element.get("DEF") else ""
+    return f"{element.tag}{name} (line {element.sourceline})"
+
+
+def _numbers(
+    element: etree._Element, attribute: str, width: int, findings: Findings, dtype: type = float
+) -> np.ndarray | None:
+    """The attribute's numbers as (k, width) rows; ``None`` (with a finding) when they are not
+    finite numbers or do not fill whole rows."""
+    text = (element.get(attribute) or "").replace(",", " ")
+    try:
+        values = np.array(text.split(), dtype=dtype)
+    except (ValueError, OverflowError):
+        findings.error("NUMBERS", f"{_label(element)} {attribute} holds something not a number")
+        return None
+    if dtype is float and not np.isfinite(values).all():
+        findings.error("NUMBERS", f"{_label(element)} {attribute} holds non-finite numbers")
+        return None
+    if len(values) % width:
+        findings.error(
+            "NUMBERS",
+            f"{_label(element)} {attribute} has {len(values)} values, not rows of {width}",
+        )
+        return None
+    return values.reshape(-1, width)
+
+
+def _child_count(
+    geometry: etree._Element, tags: dict[str, int], attribute: str, findings: Findings
+) -> int | None:
+    """Rows of the first child whose tag is in ``tags`` (tag → row width); ``None`` when there
+    is none, it is a ``USE``, or its numbers are malformed."""
+    for child in geometry:
+        if child.tag in tags and not child.get("USE"):
+            rows = _numbers(child, attribute, tags[child.tag], findings)
+            return None if rows is None else len(rows)
+    return None
+
+
+_COORDINATES = {"Coordinate": 3, "CoordinateDouble": 3}
+_COLORS = {"Color": 3, "ColorRGBA": 4}
+
+
+def _check_point_set(element: etree._Element, findings: Findings) -> None:
+    if element.find("Normal") is not None:
+        findings.error("POINTSET_NORMAL", f"{_label(element)} has a Normal (X3D 4.0 allows none)")
+    points = _child_count(element, _COORDINATES, "point", findings)
+    if points is None:
+        if not any(c.tag in _COORDINATES for c in element):
+            findings.error("POINTSET_COORDINATE", f"{_label(element)} has no Coordinate")
+        return
+    colors = _child_count(element, _COLORS, "color", findings)
+    if colors is not None and colors != points:
+        findings.error(
+            "POINTSET_COLOR_COUNT", f"{_label(element)} has {colors} colours for {points} points"
+        )
+
+
+def _check_triangle_set(element: etree._Element, findings: Findings) -> None:
+    vertices = _child_count(element, _COORDINATES, "point", findings)
+    index = _numbers(element, "index", 3, findings, dtype=np.int64)
+    if vertices is not None and index is not None and index.size:
+        low, high = int(index.min()), int(index.max())
+        if low < 0 or high >= vertices:
+            findings.error(
+                "INDEX_RANGE",
+                f"{_label(element)} index {low if low < 0 else high} is outside its "
+                f"{vertices} vertices",
+            )
+    colors = _child_count(element, _COLORS, "color", findings)
+    if vertices is not None and colors is not None and colors != vertices:
+        findings.error(
+            "COLOR_COUNT", f"{_label(element)} has {colors} colours for {vertices} vertices"
+        )
+
+
+def _check_lod(element: etree._Element, findings: Findings) -> None:
+    if element.get("USE"):
+        return
+    ranges = _numbers(element, "range", 1, findings)
+    if ranges is None:
+        return
+    ranges = ranges.ravel()
+    children = [c for c in element if isinstance(c.tag, str) and not c.tag.startswith("Metadata")]
+    if not len(ranges):
+        if len(children) > 1:
+            findings.warning(
+                "LOD_NO_RANGE", f"{_label(element)} has no range: the browser picks levels freely"
+            )
+        return
+    if len(children) != len(ranges) + 1:
+        findings.error(
+            "LOD_CHILDREN",
+            f"{_label(element)} has {len(ranges)} ranges but {len(children)} children "
+            f"(needs {len(ranges) + 1})",
+        )
+    if (ranges < 0).any():
+        findings.error("LOD_RANGE", f"{_label(element)} has negative ranges")
+    if (np.diff(ranges) <= 0).any():
+        findings.error("LOD_RANGE", f"{_label(element)} ranges do not increase strictly")
+
+
+_X3D_CHECKS: dict[str, Callable[[etree._Element, Findings], None]] = {
+    "LOD": _check_lod,
+    "PointSet": _check_point_set,
+    "IndexedTriangleSet": _check_triangle_set,
+}
+
+
+def _check_components(root: etree._Element, used: set[str], findings: Findings) -> None:
+    """The components that the nodes used need beyond the profile."""
+    profile = root.get("profile", "")
+    levels = {c.get("name"): c.get("level", "1") for c in root.iterfind("head/component")}
+
+    def level(name: str) -> int:
+        try:
+            return int(levels.get(name, "0"))
+        except ValueError:
+            return 0
+
+    if "LOD" in used and profile not in _LOD_PROFILES and level("Navigation") < 2:
+        findings.error(
+            "X3D_COMPONENT",
+            f"LOD needs component Navigation level 2, which profile {profile!r} lacks",
+        )
+    if "PointProperties" in used and profile != _FULL_PROFILE and level("Shape") < 5:
+        findings.error(
+            "X3D_COMPONENT",
+            f"PointProperties needs component Shape level 5, which profile {profile!r} lacks",
+        )
+
+
+def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) -> None:
+    """Stream the document, checking nodes as they close; ``Shape`` s are cleared once checked
+    so that memory stays small for large files."""
+    root: etree._Element | None = None
+    used: set[str] = set()
+    try:
+        events = etree.iterparse(str(path), events=("start", "end"), resolve_entities=False)
+        for event, element in events:
+            if event == "start":
+                if root is None:
+                    root = element
+                    if element.tag != "X3D":
+                        findings.error("X3D_ROOT", f"root element is <{element.tag}>, not <X3D>")
+                        return
+                continue
+            used.add(element.tag)
+            check = _X3D_CHECKS.get(element.tag)
+            if check is not None:
+                check(element, findings)
+            if element.tag == "Shape":
+                element.clear()
+    except etree.XMLSyntaxError as exc:
+        findings.error("XML_SYNTAX", f"not well-formed XML: {exc.msg}")
+        return
+    assert root is not None  # iterparse raises on an empty document
+    if root.get("version") != "4.0":
+        findings.warning("X3D_VERSION", f"version {root.get('version')!r}, lodconvert writes 4.0")
+    if root.find("Scene") is None:
+        findings.error("X3D_SCENE", "the X3D element has no Scene")
+    _check_components(root, used, findings)
+    if schema is not None:
+        _check_schema(path, schema, findings)
+
+
+def _check_schema(path: Path, schema: etree.XMLSchema, findings: Findings) -> None:
+    if schema.validate(etree.parse(str(path), etree.XMLParser(resolve_entities=False))):
+        return
+    errors = list(schema.error_log)
+    for error in errors[:MAX_SCHEMA_FINDINGS]:
+        findings.error("XSD", f"line {error.line}: {error.message}")
+    if len(errors) > MAX_SCHEMA_FINDINGS:
+        findings.error("XSD", f"{len(errors) - MAX_SCHEMA_FINDINGS} more schema errors")

@@ -1,0 +1,206 @@
+"""The viewer page: one HTML file beside an output that shows it switching levels at our cutoffs.
+
+The page holds its own script and the configuration read from the output
+(:func:`~.config.page_config`) and loads two things: the output itself (by a relative URL) and
+one viewer library — three.js for glTF (the levels of each ``MSFT_lod`` chain put in a
+``THREE.LOD`` at the cutoffs, points drawn at our point size) or X_ITE for X3D (its own ``LOD``
+and ``PointProperties``). The library comes from a public CDN unless a URL or a local copy of the
+npm package is given. An on-screen readout shows each object's active level and distance;
+``window.lodconvertViewer`` exposes the same state and ``setDistance(d)``.
+
+Browsers do not let a page opened from a file fetch its neighbours, so the page must be served:
+:func:`serve` (``lodconvert view OUT --serve``) serves a folder on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import html
+import json
+import os
+import re
+import sys
+import threading
+import urllib.parse
+from collections.abc import Iterator
+from dataclasses import dataclass
+from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
+from importlib import resources
+from pathlib import Path
+from typing import Any, ClassVar
+
+from ..errors import UsageError
+from ..io.atomic import atomic_output
+from .config import page_config
+
+
+@dataclass(frozen=True)
+class Library:
+    """A viewer library: its npm package and the import-map entries the page needs."""
+
+    package: str
+    version: str
+    imports: tuple[tuple[str, str], ...]
+    """(import specifier, path inside the package); a specifier ending in ``/`` maps a folder."""
+
+    @property
+    def cdn(self) -> str:
+        """The pinned package on the jsDelivr CDN."""
+        return f"https://cdn.jsdelivr.net/npm/{self.package}@{self.version}"
+
+
+LIBRARIES = {
+    "gltf": Library(
+        "three",
+        "0.187.0",
+        (("three", "build/three.module.js"), ("three/addons/", "examples/jsm/")),
+    ),
+    "x3d": Library("x_ite", "15.0.1", (("x_ite", "dist/x_ite.min.mjs"),)),
+}
+SCRIPTS = {"gltf": "gltf.js", "x3d": "x3d.js"}
+"""Format part of the page script, after the common ``viewer.js``."""
+FORMATS = {".glb": "gltf", ".gltf": "gltf", ".x3d": "x3d"}
+
+MIME_TYPES = {
+    ".mjs": "text/javascript",
+    ".js": "text/javascript",
+    ".glb": "model/gltf-binary",
+    ".gltf": "model/gltf+json",
+    ".x3d": "model/x3d+xml",
+}
+
+
+def page_path(asset: str | Path) -> Path:
+    """Where the page of ``asset`` goes by default: beside it, suffix ``.html``."""
+    return Path(asset).with_suffix(".html")
+
+
+def _url(target: Path, start: Path) -> str:
+    """Relative URL (``./…`` or ``../…``, as import maps need) of ``target`` seen from the
+    folder ``start``; symbolic links are kept, as a web server serving ``start`` follows them."""
+    relative = Path(os.path.relpath(os.path.abspath(target), os.path.abspath(start))).as_posix()
+    return urllib.parse.quote(relative if relative.startswith("../") else f"./{relative}")
+
+
+def library_base(kind: str, library: str | None, page_dir: Path) -> str:
+    """Base URL of the viewer library for a page in ``page_dir``: the CDN by default, a URL as
+    given, or a local npm package folder as a URL relative to the page."""
+    lib = LIBRARIES[kind]
+    if library is None:
+        return lib.cdn
+    folder = Path(library)
+    if folder.is_dir():
+        missing = [path for _, path in lib.imports if not (folder / path).exists()]
+        if missing:
+            raise UsageError(
+                f"--viewer-lib {library}: no {missing[0]} there; give the folder of the "
+                f"{lib.package} npm package (e.g. node_modules/{lib.package})"
+            )
+        return _url(folder, page_dir)
+    if "://" in library or library.startswith("/"):
+        return library.rstrip("/")
+    raise UsageError(f"--viewer-lib {library}: not a folder, nor a URL")
+
+
+def check_library(asset: str | Path, library: str | None, page: str | Path | None = None) -> None:
+    """Raise :class:`~lodconvert.errors.UsageError` unless the page of ``asset`` (which need
+    not exist yet) can use ``library``; see :func:`library_base`."""
+    kind = FORMATS.get(Path(asset).suffix.lower())
+    if kind is None:
+        raise UsageError(f"no viewer page for {Path(asset).suffix or 'files without suffix'}")
+    library_base(kind, library, Path(page or page_path(asset)).parent)
+
+
+def _json_in_html(value: Any) -> str:
+    """JSON that is safe inside a ``<script>`` element."""
+    return json.dumps(value, separators=(",", ":")).replace("<", "\\u003c")
+
+
+def _template(name: str) -> str:
+    return resources.files(__package__).joinpath(name).read_text(encoding="utf-8")
+
+
+def render_page(asset: Path, page: Path, library: str | None = None) -> str:
+    """The HTML of the page at ``page`` showing ``asset``."""
+    config = page_config(asset)
+    config["asset"] = _url(asset, page.parent)
+    kind = config["format"]
+    base = library_base(kind, library, page.parent)
+    imports = {name: f"{base}/{path}" for name, path in LIBRARIES[kind].imports}
+    fields = {
+        "title": html.escape(f"{asset.name} — lodconvert viewer"),
+        "asset": html.escape(asset.name),
+        "importmap": _json_in_html({"imports": imports}),
+        "config": _json_in_html(config),
+        "script": _template("viewer.js") + "\n" + _template(SCRIPTS[kind]),
+    }
+    return re.sub(r"\{\{(\w+)\}\}", lambda m: fields[m.group(1)], _template("page.html"))
+
+
+def write_page(
+    asset: str | Path, page: str | Path | None = None, library: str | None = None
+) -> Path:
+    """Write the viewer page of ``asset`` (atomically; default :func:`page_path`) and return
+    its path. Raises :class:`~lodconvert.errors.InputError` for an asset lodconvert did not
+    write and :class:`~lodconvert.errors.UsageError` for a bad ``library``."""
+    asset = Path(asset)
+    page = Path(page) if page is not None else page_path(asset)
+    text = render_page(asset, page, library)
+    with atomic_output(page) as handle:
+        handle.write(text.encode("utf-8"))
+    return page
+
+
+class _Handler(SimpleHTTPRequestHandler):
+    """Static files with the right types for modules and assets, no caching, no log lines."""
+
+    extensions_map: ClassVar[dict[str, str]] = {
+        **SimpleHTTPRequestHandler.extensions_map,
+        **MIME_TYPES,
+    }
+
+    def end_headers(self) -> None:
+        self.send_header("Cache-Control", "no-store")
+        super().end_headers()
+
+    def log_message(self, format: str, *args: Any) -> None:
+        """Quiet: the page reports its own problems."""
+
+
+class _Server(ThreadingHTTPServer):
+    """Threads that do not outlive the server; a browser that drops a connection (closing a
+    page while it loads) is no error worth a traceback."""
+
+    daemon_threads = True
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        if not isinstance(sys.exc_info()[1], ConnectionError):
+            super().handle_error(request, client_address)
+
+
+@contextlib.contextmanager
+def serve(root: str | Path, port: int = 0) -> Iterator[str]:
+    """Serve the folder ``root`` on 127.0.0.1 (``port`` 0: any free port) from a background
+    thread while the ``with`` block runs; yields the base URL (no trailing slash)."""
+    handler = functools.partial(_Handler, directory=str(root))
+    server = _Server(("127.0.0.1", port), handler)
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"http://127.0.0.1:{server.server_address[1]}"
+    finally:
+        server.shutdown()
+        server.server_close()
+        thread.join()
+
+
+__all__ = [
+    "LIBRARIES",
+    "VIEWABLE",
+    "page_config",
+    "page_path",
+    "render_page",
+    "serve",
+    "write_page",
+]
