@@ -4,9 +4,15 @@ Default parameters follow from the reference view (:mod:`.ranges`): a point leve
 for the distance where it first shows (its switch-in cutoff; ``α·β``, i.e. x = 0, for a baked
 finest level). Its resolution is the smallest T3 whose grid pitch ``L / T3`` projects to at
 most ``spacing_px`` pixels there, and its point size is that projected pitch, so
-neighbouring points close up without gaps. Point counts must fall strictly level by level: a
-level that would not be lighter than the one before is re-baked at a lower resolution, and a
-level that cannot be (the one before has a single point) is dropped with a warning.
+neighbouring points close up without gaps. Each point then sits ``inset`` pitches inside the
+surface (along its face normal, turned inward), so that the square it is drawn as ends at the
+surface instead of straddling it: at the outline it no longer spills half a point width past
+the silhouette (``benchmarks/results/fidelity.md``). Point counts must fall strictly level by
+level: a level that would not be lighter than the one before is re-baked at a lower resolution,
+and a level that cannot be (the one before has a single point) is dropped with a warning.
+
+A level of kind ``qem`` is the source mesh decimated by quadric edge collapse
+(:mod:`.bake.qem`) to the vertex count the point level would have had.
 """
 
 from __future__ import annotations
@@ -30,14 +36,18 @@ from .ranges import (
     default_xs,
     projected_px,
 )
-from .scene import BakeParams, Level, LodChain, SceneObject
+from .scene import BakeParams, Level, LodChain, PointCloud, SceneObject, Surface
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
 DEFAULT_SPACING_PX = 1.5
 POINT_SIZE_FACTOR = 1.0  # point size / projected grid pitch; see default_point_size
+DEFAULT_INSET = 0.5  # how far inside the surface points sit, in grid pitches; see inset_points
+LEVEL_KINDS = ("pcd", "qem")
 MAX_RESOLUTION = 1024
 MIN_RESOLUTION = 2
+# |signed volume| below this × (longest side)³: the surface encloses nothing (no inset).
+VOLUME_EPSILON = 1e-9
 
 Progress = Callable[[str], None]
 
@@ -57,12 +67,21 @@ class ChainOptions:
     xs: tuple[float, ...] | None = None
     cull: float | None = None
     spacing_px: float = DEFAULT_SPACING_PX
+    inset: float = DEFAULT_INSET
+    level_kinds: tuple[str, ...] | None = None
     view: ReferenceView = field(default=REFERENCE_VIEW)
 
     @property
     def pcd_levels(self) -> int:
         """How many levels are baked point clouds."""
         return self.levels - 1 if self.keep_mesh else self.levels
+
+    def level_kind(self, index: int) -> str:
+        """``pcd`` or ``qem`` for baked level ``index`` (0 = the first); a single
+        ``level_kinds`` value applies to every baked level."""
+        if not self.level_kinds:
+            return "pcd"
+        return self.level_kinds[index if len(self.level_kinds) > 1 else 0]
 
     @property
     def exponents(self) -> tuple[float, ...]:
@@ -100,6 +119,19 @@ class ChainOptions:
                 raise UsageError(f"{flag} values must be at most {MAX_RESOLUTION}")
         if self.spacing_px <= 0:
             raise UsageError("the pixel spacing target must be positive")
+        if not 0 <= self.inset <= 1:
+            raise UsageError(f"the point inset must be between 0 and 1 pitch, got {self.inset:g}")
+        if self.level_kinds is not None:
+            if len(self.level_kinds) not in (1, n):
+                raise UsageError(
+                    f"--level-kind needs 1 value or {n} (one per baked level), "
+                    f"got {len(self.level_kinds)}"
+                )
+            unknown = sorted(set(self.level_kinds) - set(LEVEL_KINDS))
+            if unknown:
+                raise UsageError(
+                    f"--level-kind values must be {' or '.join(LEVEL_KINDS)}, got {unknown[0]!r}"
+                )
 
 
 def default_resolution(longest: float, distance: float, opts: ChainOptions) -> int:
@@ -113,10 +145,41 @@ def default_point_size(pitch: float, distance: float, opts: ChainOptions) -> flo
 
     Points one pitch wide close up the surface without gaps, and measured silhouette fidelity
     is best there: larger points spill past the outline, smaller ones open holes
-    (``benchmarks/results/point_size.md``).
+    (``benchmarks/results/fidelity.md``).
     """
     size = POINT_SIZE_FACTOR * projected_px(pitch, distance, opts.view)
     return max(1.0, math.ceil(100 * size - 1e-9) / 100)
+
+
+def outward_sign(surface: Surface) -> float:
+    """+1 when the faces wind so that their normals point out of the solid (positive signed
+    volume), -1 when they point in, 0 for a surface that encloses no volume (flat or open sheet).
+
+    The sign is that of the whole surface: a mesh whose faces wind inconsistently gets the
+    majority's orientation.
+    """
+
+    def compute() -> float:
+        tri = surface.triangles - surface.bounds.mean(axis=0)
+        volume = float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))) / 6.0
+        extent = float((surface.bounds[1] - surface.bounds[0]).max())
+        return 0.0 if abs(volume) <= VOLUME_EPSILON * extent**3 else math.copysign(1.0, volume)
+
+    return surface.derived("outward-sign", compute)
+
+
+def inset_points(cloud: PointCloud, surface: Surface, depth: float) -> PointCloud:
+    """``cloud`` with every point moved ``depth`` into the solid along its face normal.
+
+    A point is drawn as a square one pitch wide centred on it. On the surface, the squares of
+    the points along the outline reach half a pitch past it; ``depth`` = half a pitch puts
+    their outer edges on the surface. Surfaces that enclose no volume are left as they are.
+    """
+    sign = outward_sign(surface)
+    if depth == 0 or sign == 0 or len(cloud) == 0:
+        return cloud
+    inward = -sign * cloud.normals.astype(np.float64)
+    return replace(cloud, positions=cloud.positions + depth * inward)
 
 
 def _check_geometry(obj: SceneObject) -> None:
@@ -149,6 +212,32 @@ def _params_for(
     return BakeParams(
         resolution=int(t3), slices=int(t1), point_size=float(size), filter=opts.filter
     )
+
+
+def _decimated(
+    level: Level, surface: Surface, previous: int, object_id: str, warn: Progress | None
+) -> Level:
+    """The ``qem`` level replacing point level ``level``: the source decimated to the point
+    level's count. When decimation leaves no triangle or cannot get below ``previous`` (the
+    count of the level before), the point level is kept, with a warning; when it stops above
+    the point level's count, the mesh is kept with a warning."""
+    from .bake.qem import decimate
+
+    mesh = decimate(surface, level.count)
+    if len(mesh.faces) == 0 or len(mesh.vertices) >= previous:
+        if warn:
+            warn(
+                f"{object_id}: {level.name} kept as points: decimation to {level.count:,} "
+                f"vertices leaves {len(mesh.vertices):,} in {len(mesh.faces):,} triangles "
+                f"(the level before has {previous:,})"
+            )
+        return level
+    if len(mesh.vertices) > level.count and warn:
+        warn(
+            f"{object_id}: {level.name} decimated to {len(mesh.vertices):,} vertices, not "
+            f"{level.count:,}: the mesh's separate parts and borders stop the collapses"
+        )
+    return Level(name=level.name, kind="mesh", mesh=mesh, design_distance=level.design_distance)
 
 
 def bake_chain(
@@ -203,18 +292,19 @@ def bake_chain(
                     f"{LEVEL_NAMES[n - 1]} has only {previous} point(s)"
                 )
             break
-        levels.append(
-            Level(
-                name=name,
-                kind="pcd",
-                points=cloud,
-                params=params,
-                spacing=grid.pitch,
-                design_distance=distance,
-                bake_seconds=time.perf_counter() - start,
-            )
+        level = Level(
+            name=name,
+            kind="pcd",
+            points=inset_points(cloud, surface, opts.inset * grid.pitch),
+            params=params,
+            spacing=grid.pitch,
+            design_distance=distance,
         )
-        previous = len(cloud)
+        if opts.level_kind(i) == "qem":
+            level = _decimated(level, surface, previous, obj.id, warn)
+        level.bake_seconds = time.perf_counter() - start
+        levels.append(level)
+        previous = level.count
 
     kept_cuts = cuts[: len(levels) - 1]
     culled = opts.cull is not None

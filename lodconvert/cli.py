@@ -93,6 +93,11 @@ def build_convert_parser() -> Parser:
         "--filter", choices=FILTERS, default="median", help="hole filter (default median)"
     )
     bake.add_argument("--backend", choices=BACKENDS, default="auto", help="baker (default auto)")
+    bake.add_argument(
+        "--level-kind",
+        metavar="KIND,..",
+        help="pcd (points, default) or qem (source decimated to the same count), per level or all",
+    )
     bake.add_argument("--no-mesh", action="store_true", help="bake the finest level too")
     add_range_options(parser)
     out = parser.add_argument_group("output and messages")
@@ -127,6 +132,9 @@ def chain_options(args: argparse.Namespace) -> ChainOptions:
         gamma=args.plot_radius,
         xs=parse_list(args.x, float, "--x") if args.x else None,
         cull=args.cull,
+        level_kinds=parse_list(args.level_kind, str, "--level-kind")
+        if getattr(args, "level_kind", None)
+        else None,
     )
 
 

@@ -1,18 +1,33 @@
-"""Silhouette fidelity of LOD levels: the PCD paper's F-measure, rendered with moderngl.
+"""Fidelity of LOD levels against their source mesh: silhouettes, geometric error, counts.
 
-The source mesh and each level are drawn as coverage masks (no shading, no depth test: a pixel
-is covered when any fragment lands on it) from cameras on a sphere around the object's centre
-(:func:`fibonacci_directions`), with a perspective camera of 45° vertical field of view. Per
-pixel and summed over all views, TP = covered by both, FP = by the level only, FN = by the
-reference only; precision = TP / (TP + FP), recall = TP / (TP + FN) and F = 2PR / (P + R)
-(:func:`silhouette_scores`).
+**Silhouettes** (the PCD paper's F-measure). The source mesh and each level are drawn as coverage
+masks (no shading, no depth test: a pixel is covered when any fragment lands on it) from
+cameras on a sphere around the object's centre (:func:`fibonacci_directions`), with a
+perspective camera of 45° vertical field of view. Per pixel and summed over all views,
+TP = covered by both, FP = by the level only, FN = by the reference only; precision =
+TP / (TP + FP), recall = TP / (TP + FN) and F = 2PR / (P + R) (:func:`silhouette_scores`).
+Each level is scored at fixed multiples of the bounding-box diagonal α (the protocol: 4, 8 and
+16 α) and within its own range (:func:`level_window`): where it first shows and in the middle
+of its range, with its declared point size and with 1-pixel points.
 
 Point levels are drawn as square GL points (``gl_PointSize``) of the size the output files
 declare: ``params.point_size`` pixels at ``design_distance`` in the reference view
 (:data:`~lodconvert.ranges.REFERENCE_VIEW`, 1080 pixels high), scaling with 1/distance
 (:func:`point_pixel_size`). A render of another height shows the same scene smaller or larger,
 so the size is multiplied by the ratio of focal lengths (512 / 1080 for a 512-pixel render at
-the same field of view): points keep the footprint on the object they were designed with.
+the same field of view): points keep the footprint on the object they were designed with. The
+X3D ``pointSizeMaxValue`` is not applied: it is the size at the nearest distance the level is
+shown from, so it never binds within the level's range (where the in-range scores are exactly
+what a viewer draws), and applying it on the fixed protocol, which looks at coarse levels from
+nearer than they ever show, would measure the cap instead of the level; glTF declares no cap.
+
+**Geometric error** (:func:`geometric_errors`): symmetric Chamfer and Hausdorff distance
+between dense area-weighted samples of the source surface and the level (its points, or
+samples of its mesh), as fractions of α, with scipy's cKDTree.
+
+**Files read back** (:func:`read_chains`): the chains of a ``.glb``/``.gltf``/``.x3d`` that
+lodconvert wrote, with the parameters the file declares; :func:`match_references` pairs them
+with the objects of the source and checks that their bounds agree.
 
 The GL context (Mesa EGL, llvmpipe on a CPU-only machine) is made when a
 :class:`SilhouetteRenderer` is created, never at import. On llvmpipe a process forked after its
@@ -22,16 +37,22 @@ parent made a context deadlocks in GL calls: worker pools must use the ``spawn``
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from lxml import etree
+from PIL import Image, ImageDraw, ImageFont
 
-from .errors import LodConvertError
+from .errors import InputError, LodConvertError
 from .glcontext import create_context
-from .ranges import REFERENCE_VIEW, ReferenceView
-from .scene import Level, LodChain, Surface
+from .io.gltf import GltfObject, read_lod_gltf
+from .io.x3d import METADATA_SET, read_x3d_points
+from .ranges import REFERENCE_VIEW, ReferenceView, cutoff
+from .scene import BakeParams, Level, LodChain, PointCloud, SceneObject, Surface
 
 if TYPE_CHECKING:
     import moderngl
@@ -39,6 +60,26 @@ if TYPE_CHECKING:
 GOLDEN_ANGLE = math.pi * (3.0 - math.sqrt(5.0))
 # Near/far planes lie this fraction outside the geometry's bounding sphere.
 DEPTH_MARGIN = 0.01
+
+DEFAULT_VIEWS = 64
+DEFAULT_SIZE = 512
+DEFAULT_FOV = 45.0
+DEFAULT_DISTANCES = (4.0, 8.0, 16.0)
+DEFAULT_SAMPLES = 1_000_000
+"""Surface samples for the geometric error: their mean spacing on the Stanford scans is
+about 0.1 % of the diagonal (:func:`sample_spacing`)."""
+SAMPLE_SEED = 0
+BOUNDS_TOLERANCE = 1e-3
+"""How far (fraction of α) REF's bounding-box centre and diagonal may be from OUT's."""
+
+SHEET_VIEWS = 3
+SHEET_TILE = 240
+SHEET_FONT_PX = 13
+SHEET_COLORS = {
+    "both": (150, 150, 150),
+    "level only": (220, 40, 40),
+    "source only": (40, 90, 230),
+}
 
 VERTEX_SHADER = """
 #version 330
@@ -284,9 +325,21 @@ class DistanceScore:
 
 
 @dataclass
+class RangeScores:
+    """A level within its own range (:func:`level_window`): where it first shows (``near``)
+    and in the middle of its range, with the declared point size and (point levels only) with
+    1-pixel points, as glTF viewers draw them."""
+
+    near: DistanceScore
+    middle: DistanceScore
+    near_1px: DistanceScore | None = None
+    middle_1px: DistanceScore | None = None
+
+
+@dataclass
 class LevelScores:
     """Silhouette scores of one level: per requested distance, and (when asked) at the level's
-    own ``design_distance`` (not part of ``mean_f``)."""
+    own ``design_distance`` and within its range (neither is part of ``mean_f``)."""
 
     name: str
     kind: str
@@ -294,11 +347,31 @@ class LevelScores:
     point_size: float | None
     scores: list[DistanceScore]
     at_design: DistanceScore | None = None
+    in_range: RangeScores | None = None
 
     @property
     def mean_f(self) -> float:
         """Mean F over the requested distances."""
         return float(np.mean([s.f for s in self.scores])) if self.scores else 0.0
+
+
+def level_window(chain: LodChain, index: int) -> tuple[float, float]:
+    """(near, middle) distances of level ``index`` of ``chain``.
+
+    A level shows between the cutoffs Y(x) = α·β·γˣ of the exponents around it; the finest
+    level from x = 0 (α·β, the distance a baked finest level is designed for, standing in for
+    "from nearest"). ``near`` is where it first shows, ``middle`` is Y at the mean of the two
+    exponents: the geometric middle of its distances, where the object's on-screen size is
+    halfway in scale. The last level of a chain that is not culled shows without end: its
+    range is taken as one more step as wide, in x, as the one before it.
+    """
+    xs = [0.0, *chain.xs]
+    low = xs[index]
+    high = xs[index + 1] if index + 1 < len(xs) else low + (low - xs[index - 1] if index else 1.0)
+    return (
+        cutoff(chain.alpha, chain.beta, chain.gamma, low),
+        cutoff(chain.alpha, chain.beta, chain.gamma, (low + high) / 2.0),
+    )
 
 
 def _level_geometry(renderer: SilhouetteRenderer, level: Level) -> Geometry:
@@ -309,69 +382,141 @@ def _level_geometry(renderer: SilhouetteRenderer, level: Level) -> Geometry:
     return renderer.points(level.points.positions)
 
 
+def declared_pixel_size(
+    level: Level,
+    distance: float,
+    renderer: SilhouetteRenderer,
+    view: ReferenceView = REFERENCE_VIEW,
+) -> float | None:
+    """Width in pixels of ``renderer``'s render at which ``level``'s points are drawn from
+    ``distance`` (:func:`point_pixel_size`); None for a mesh level."""
+    if level.kind != "pcd":
+        return None
+    return point_pixel_size(
+        level.params.point_size if level.params is not None else 1.0,
+        level.design_distance,
+        distance,
+        view_scale=renderer.view_scale(view),
+        max_size=renderer.max_point_size,
+    )
+
+
+class ReferenceRenders:
+    """The source ``surface`` uploaded to ``renderer`` with its coverage masks from ``views``
+    Fibonacci directions around ``center``, rendered once per distance and kept. One instance
+    serves every chain baked from the same source (levels relative to the same origin), so a
+    heavy mesh is drawn once per distance however many chains are scored against it."""
+
+    def __init__(
+        self, renderer: SilhouetteRenderer, surface: Surface, center: np.ndarray, views: int
+    ) -> None:
+        self.renderer, self.surface = renderer, surface
+        self.center = np.asarray(center, dtype=np.float64)
+        self.directions = fibonacci_directions(views)
+        self.geometry = renderer.mesh(surface.vertices, surface.faces)
+        self.cache: dict[float, np.ndarray] = {}
+
+    def masks(self, distance: float) -> np.ndarray:
+        """Coverage masks (views, height, width) of the source seen from ``distance``."""
+        if distance not in self.cache:
+            masks = self.renderer.render(self.geometry, self.center, distance, self.directions)
+            self.cache[distance] = np.packbits(masks, axis=-1)  # 8× smaller while kept
+        packed = self.cache[distance]
+        return np.unpackbits(packed, axis=-1, count=self.renderer.width).astype(bool)
+
+    def release(self) -> None:
+        """Free the uploaded mesh and the cached masks."""
+        self.geometry.release()
+        self.cache.clear()
+
+
+class _Scorer:
+    """Scores the levels of one chain against :class:`ReferenceRenders`."""
+
+    def __init__(self, references: ReferenceRenders, chain: LodChain, view: ReferenceView) -> None:
+        if not np.allclose(references.center, chain.center):
+            raise ValueError(f"{chain.object_id}: chain centre differs from the reference's")
+        self.references, self.chain, self.view = references, chain, view
+        self.renderer = references.renderer
+
+    def score(
+        self, level: Level, geometry: Geometry, distance: float, pixel_size: float | None = None
+    ) -> DistanceScore:
+        """``level`` from ``distance``, its points ``pixel_size`` wide (default: declared)."""
+        size = declared_pixel_size(level, distance, self.renderer, self.view)
+        if size is not None and pixel_size is not None:
+            size = pixel_size
+        refs = self.references
+        masks = self.renderer.render(geometry, refs.center, distance, refs.directions, size or 1.0)
+        s = silhouette_scores(refs.masks(distance), masks)
+        return DistanceScore(distance, distance / self.chain.alpha, size, **s)
+
+    def in_range(self, index: int, level: Level, geometry: Geometry) -> RangeScores:
+        """:class:`RangeScores` of level ``index``."""
+        near, middle = level_window(self.chain, index)
+        one_px = level.kind == "pcd"
+        return RangeScores(
+            near=self.score(level, geometry, near),
+            middle=self.score(level, geometry, middle),
+            near_1px=self.score(level, geometry, near, 1.0) if one_px else None,
+            middle_1px=self.score(level, geometry, middle, 1.0) if one_px else None,
+        )
+
+
 def evaluate_chain(
-    reference: Surface | None,
+    reference: Surface | ReferenceRenders | None,
     chain: LodChain,
-    distances_in_diagonals: Sequence[float] = (4, 8, 16),
-    views: int = 64,
-    size: int = 512,
+    distances_in_diagonals: Sequence[float] = DEFAULT_DISTANCES,
+    views: int = DEFAULT_VIEWS,
+    size: int = DEFAULT_SIZE,
     *,
     at_design_distance: bool = False,
+    in_range: bool = False,
     pixel_size: float | None = None,
+    levels: Sequence[int] | None = None,
     view: ReferenceView = REFERENCE_VIEW,
     renderer: SilhouetteRenderer | None = None,
 ) -> list[LevelScores]:
-    """Silhouette P/R/F of every level of ``chain`` against the source mesh, finest first.
+    """Silhouette P/R/F of the levels of ``chain`` against the source mesh, finest first.
 
-    ``reference`` is the source surface relative to ``chain.origin`` (as level geometry is);
-    None takes the chain's mesh level. Cameras look at the chain's centre from
-    ``views`` Fibonacci directions at each distance ``k · chain.alpha`` (α, the bounding-box
-    diagonal), rendering ``size × size`` pixels at 45°. Points are drawn at the size the files
-    declare (:func:`point_pixel_size`, ``view`` being the reference view the sizes refer to),
-    or all ``pixel_size`` wide when given. With ``at_design_distance`` each point level is
-    also scored at its own ``design_distance`` (where it switches in).
-    ``renderer`` reuses a :class:`SilhouetteRenderer` (its size then wins over ``size``).
+    ``reference`` is the source surface relative to ``chain.origin`` (as level geometry is),
+    or :class:`ReferenceRenders` of it (whose renderer and views then win over ``renderer``,
+    ``size`` and ``views``); None takes the chain's mesh level. Cameras look at the chain's
+    centre from ``views`` Fibonacci directions at each distance ``k · chain.alpha`` (α, the
+    bounding-box diagonal), rendering ``size × size`` pixels at 45°. Points are drawn at the
+    size the files declare (:func:`point_pixel_size`, ``view`` being the reference view the
+    sizes refer to), or all ``pixel_size`` wide when given. With ``at_design_distance`` each
+    point level is also scored at its own ``design_distance`` (where it switches in); with
+    ``in_range``, every level within its range (:class:`RangeScores`). ``levels`` picks the
+    levels to score by index (default all). ``renderer`` reuses a
+    :class:`SilhouetteRenderer` (its size then wins over ``size``).
     """
     if reference is None:
         meshes = [lv.mesh for lv in chain.levels if lv.kind == "mesh" and lv.mesh is not None]
         if not meshes:
             raise LodConvertError(f"{chain.object_id}: no reference mesh to evaluate against")
         reference = meshes[0]
-    own = renderer is None
-    renderer = renderer or SilhouetteRenderer(size)
-    directions = fibonacci_directions(views)
-    center = np.asarray(chain.center, dtype=np.float64)
-    ref_geometry = renderer.mesh(reference.vertices, reference.faces)
-    ref_masks: dict[float, np.ndarray] = {}
-
-    def score(level: Level, geometry: Geometry, distance: float) -> DistanceScore:
-        if distance not in ref_masks:
-            ref_masks[distance] = renderer.render(ref_geometry, center, distance, directions)
-        size_px = None
-        if level.kind == "pcd":
-            size_px = (
-                pixel_size
-                if pixel_size is not None
-                else point_pixel_size(
-                    level.params.point_size if level.params is not None else 1.0,
-                    level.design_distance,
-                    distance,
-                    view_scale=renderer.view_scale(view),
-                    max_size=renderer.max_point_size,
-                )
-            )
-        masks = renderer.render(geometry, center, distance, directions, size_px or 1.0)
-        s = silhouette_scores(ref_masks[distance], masks)
-        return DistanceScore(distance, distance / chain.alpha, size_px, **s)
-
+    own_renderer = renderer is None and not isinstance(reference, ReferenceRenders)
+    if isinstance(reference, ReferenceRenders):
+        references = reference
+    else:
+        renderer = renderer or SilhouetteRenderer(size)
+        references = ReferenceRenders(renderer, reference, chain.center, views)
     rows: list[LevelScores] = []
     try:
-        for level in chain.levels:
-            geometry = _level_geometry(renderer, level)
-            scores = [score(level, geometry, k * chain.alpha) for k in distances_in_diagonals]
+        scorer = _Scorer(references, chain, view)
+        picked = range(len(chain.levels)) if levels is None else levels
+        for index in picked:
+            level = chain.levels[index]
+            geometry = _level_geometry(references.renderer, level)
+            scores = [
+                scorer.score(level, geometry, k * chain.alpha, pixel_size)
+                for k in distances_in_diagonals
+            ]
             design = None
             if at_design_distance and level.kind == "pcd" and level.design_distance:
-                design = score(level, geometry, level.design_distance)
+                design = scorer.score(level, geometry, level.design_distance, pixel_size)
+            window = scorer.in_range(index, level, geometry) if in_range else None
             geometry.release()
             rows.append(
                 LevelScores(
@@ -381,10 +526,506 @@ def evaluate_chain(
                     point_size=level.params.point_size if level.params is not None else None,
                     scores=scores,
                     at_design=design,
+                    in_range=window,
                 )
             )
     finally:
-        ref_geometry.release()
-        if own:
-            renderer.release()
+        if references is not reference:
+            references.release()
+        if own_renderer:
+            references.renderer.release()
     return rows
+
+
+# --- geometric error ----------------------------------------------------------------------------
+
+
+@dataclass
+class GeometricError:
+    """Distances between a level and the source surface as fractions of α (None for an empty
+    level): ``chamfer`` = the mean of the two mean nearest-neighbour distances (source → level
+    and level → source), ``hausdorff`` = the larger of the two largest."""
+
+    chamfer: float | None
+    hausdorff: float | None
+
+
+def _face_areas(surface: Surface) -> np.ndarray:
+    """Area of every face (m,)."""
+    tri = surface.triangles
+    return np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1) / 2.0
+
+
+def sample_surface(surface: Surface, count: int, seed: int = SAMPLE_SEED) -> np.ndarray:
+    """``count`` points (count, 3) spread uniformly over the area of ``surface``'s faces.
+
+    Deterministic for a given seed; the same faces in the same order give the same points, so
+    a mesh compared with itself is at distance 0.
+    """
+    tri = surface.triangles
+    area = _face_areas(surface)
+    if len(tri) == 0 or not area.sum() > 0:
+        return np.zeros((0, 3))
+    rng = np.random.default_rng(seed)
+    cumulative = np.cumsum(area)
+    faces = np.searchsorted(cumulative, rng.random(count) * cumulative[-1], side="right")
+    faces = np.minimum(faces, len(tri) - 1)
+    r1, r2 = np.sqrt(rng.random(count)), rng.random(count)
+    weights = np.stack([1.0 - r1, r1 * (1.0 - r2), r1 * r2], axis=1)
+    return np.einsum("ij,ijk->ik", weights, tri[faces])
+
+
+def _kdtree(points: np.ndarray) -> Any:
+    """A scipy ``cKDTree`` of ``points`` (scipy is imported on first use)."""
+    try:
+        from scipy.spatial import cKDTree
+    except ImportError as exc:
+        raise LodConvertError(
+            f"geometric error needs scipy ({exc}); run: pip install scipy"
+        ) from exc
+    return cKDTree(points)
+
+
+def geometric_errors(
+    reference: Surface,
+    chain: LodChain,
+    samples: int = DEFAULT_SAMPLES,
+    levels: Sequence[int] | None = None,
+) -> list[GeometricError]:
+    """:class:`GeometricError` of the levels of ``chain`` (all, or those indexed by
+    ``levels``) against ``reference`` (relative to ``chain.origin``), from ``samples`` points
+    on the reference and, for mesh levels, as many on the level (:func:`sample_surface`);
+    point levels are their points."""
+    source = sample_surface(reference, samples)
+    source_tree = _kdtree(source)
+    errors = []
+    for index in range(len(chain.levels)) if levels is None else levels:
+        level = chain.levels[index]
+        if level.kind == "mesh":
+            assert level.mesh is not None
+            points = sample_surface(level.mesh, samples)
+        else:
+            assert level.points is not None
+            points = level.points.positions
+        if len(points) == 0 or len(source) == 0:
+            errors.append(GeometricError(None, None))
+            continue
+        to_level, _ = _kdtree(points).query(source, workers=-1)
+        to_source, _ = source_tree.query(points, workers=-1)
+        errors.append(
+            GeometricError(
+                chamfer=float(to_level.mean() + to_source.mean()) / 2.0 / chain.alpha,
+                hausdorff=float(max(to_level.max(), to_source.max())) / chain.alpha,
+            )
+        )
+    return errors
+
+
+def sample_spacing(surface: Surface, samples: int = DEFAULT_SAMPLES) -> float:
+    """Mean spacing √(area / samples) of :func:`sample_surface`'s points: distances measured
+    against the samples are overestimated by up to about half of it."""
+    return float(math.sqrt(_face_areas(surface).sum() / samples))
+
+
+# --- files read back ----------------------------------------------------------------------------
+
+
+def read_chains(path: str | Path) -> list[LodChain]:
+    """The chains of a ``.glb``, ``.gltf`` or ``.x3d`` file lodconvert wrote, with the level
+    geometry (relative to each chain's origin) and the parameters the file declares.
+
+    Raises :class:`InputError` for another suffix, an unreadable file, or one lodconvert did
+    not write.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix in (".glb", ".gltf"):
+        return [_gltf_chain(obj, path) for obj in read_lod_gltf(path)]
+    if suffix == ".x3d":
+        return _x3d_chains(path)
+    raise InputError("is not a .glb, .gltf or .x3d file written by lodconvert", str(path))
+
+
+def _level_from(
+    facts: dict[str, Any],
+    positions: np.ndarray,
+    faces: np.ndarray | None,
+    colors: np.ndarray | None,
+    where: str,
+) -> Level:
+    """A :class:`Level` from its declared facts (name, kind, bake parameters) and geometry."""
+    name, kind = facts.get("name"), facts.get("kind")
+    design = facts.get("design_distance")
+    if kind == "mesh":
+        if faces is None:
+            faces = np.zeros((0, 3), dtype=np.int64)
+        surface = Surface(positions, faces, vertex_colors=colors)
+        return Level(name=name, kind="mesh", mesh=surface, design_distance=design)
+    if kind != "pcd":
+        raise InputError(f"level {name!r} is of unknown kind {kind!r}", where)
+    try:
+        params = BakeParams(
+            resolution=int(facts["resolution"]),
+            slices=int(facts["slices"]),
+            point_size=float(facts["point_size_px"]),
+            filter=facts.get("filter", "median"),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"point level {name!r} lacks its bake parameters ({exc})", where) from None
+    k = len(positions)
+    cloud = PointCloud(
+        positions=positions,
+        colors=colors if colors is not None else np.full((k, 4), 255, dtype=np.uint8),
+        normals=np.zeros((k, 3), dtype=np.float32),
+    )
+    return Level(
+        name=name,
+        kind="pcd",
+        points=cloud,
+        params=params,
+        spacing=facts.get("spacing"),
+        design_distance=design,
+    )
+
+
+def _chain_from(
+    object_id: str, facts: dict[str, Any], levels: list[Level], origin: np.ndarray, where: str
+) -> LodChain:
+    """A :class:`LodChain` from the chain facts a file declares."""
+    try:
+        return LodChain(
+            object_id=object_id,
+            levels=levels,
+            cutoffs=[float(c) for c in facts["cutoffs"]],
+            origin=np.asarray(origin, dtype=np.float64),
+            center=np.asarray(facts.get("center", np.zeros(3)), dtype=np.float64).reshape(3),
+            alpha=float(facts["alpha"]),
+            beta=float(facts["beta"]),
+            gamma=float(facts["gamma"]),
+            xs=[float(x) for x in facts["xs"]],
+            culled=bool(facts.get("culled", False)),
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"object {object_id!r} lacks its switching data ({exc})", where) from None
+
+
+def _gltf_chain(obj: GltfObject, path: str | Path) -> LodChain:
+    where = f"{path}: object {obj.object_id!r}"
+    levels = [_level_from(lv.extras, lv.positions, lv.faces, lv.colors, where) for lv in obj.levels]
+    return _chain_from(obj.object_id, obj.extras, levels, obj.origin, where)
+
+
+_MFSTRING = re.compile(r'"((?:[^"\\]|\\.)*)"')
+
+
+def _metadata_values(element: etree._Element) -> dict[str, Any]:
+    """The entries of a ``MetadataSet``: single values as scalars, several as lists."""
+    facts: dict[str, Any] = {}
+    for child in element:
+        name, text = child.get("name"), child.get("value") or ""
+        if child.tag == "MetadataString":
+            values: list[Any] = [
+                re.sub(r"\\(.)", r"\1", m.group(1)) for m in _MFSTRING.finditer(text)
+            ]
+        elif child.tag == "MetadataBoolean":
+            values = [v == "true" for v in text.replace(",", " ").split()]
+        elif child.tag == "MetadataInteger":
+            values = [int(v) for v in text.replace(",", " ").split()]
+        elif child.tag == "MetadataDouble":
+            values = [float(v) for v in text.replace(",", " ").split()]
+        else:
+            continue
+        facts[name] = values if len(values) != 1 or name in ("xs", "cutoffs") else values[0]
+    return facts
+
+
+def _vector(text: str | None) -> np.ndarray:
+    values = np.array((text or "").replace(",", " ").split(), dtype=np.float64)
+    return values[:3] if len(values) >= 3 else np.zeros(3)
+
+
+def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
+    """Per ``LOD`` node carrying lodconvert metadata: its origin (the enclosing translations),
+    centre, chain facts (from the ``MetadataSet`` of its ``Transform``, or of the LOD itself)
+    and, per level ``Group``, its DEF and facts. Shapes are skipped."""
+    objects: list[dict[str, Any]] = []
+    transforms: list[dict[str, Any]] = []  # open Transforms: translation and metadata
+    for event, element in etree.iterparse(str(path), events=("start", "end")):
+        tag = element.tag
+        if event == "start":
+            if tag == "Transform":
+                transforms.append({"offset": _vector(element.get("translation")), "facts": {}})
+            elif tag == "LOD":
+                offsets = [t["offset"] for t in transforms]
+                objects.append(
+                    {
+                        "origin": np.sum(offsets, axis=0) if offsets else np.zeros(3),
+                        "center": _vector(element.get("center")),
+                        "facts": dict(transforms[-1]["facts"]) if transforms else {},
+                        "levels": [],
+                        "element": element,
+                    }
+                )
+            elif tag == "Group" and objects and element.getparent() is objects[-1]["element"]:
+                objects[-1]["levels"].append({"def": element.get("DEF"), "facts": {}})
+            continue
+        if tag == "Transform":
+            transforms.pop()
+        elif tag == "Shape":
+            element.clear()
+        elif tag == "MetadataSet" and element.get("name") == METADATA_SET:
+            parent = element.getparent()
+            lod = objects[-1]["element"] if objects else None
+            if parent.tag == "Transform" and transforms:
+                transforms[-1]["facts"] = _metadata_values(element)
+            elif parent is lod:
+                objects[-1]["facts"] = _metadata_values(element)
+            elif objects[-1:] and objects[-1]["levels"] and parent.getparent() is lod:
+                objects[-1]["levels"][-1]["facts"] = _metadata_values(element)
+    return [obj for obj in objects if obj["facts"]]
+
+
+def _x3d_chains(path: str | Path) -> list[LodChain]:
+    try:
+        objects = _x3d_facts(path)
+    except etree.XMLSyntaxError as err:
+        raise InputError(f"is not well-formed X3D: {err}", str(path)) from None
+    except OSError as err:
+        raise InputError(f"cannot be read: {err.strerror or err}", str(path)) from None
+    except ValueError as err:
+        raise InputError(f"holds malformed metadata: {err}", str(path)) from None
+    if not objects:
+        raise InputError("is not an X3D file written by lodconvert (no lodconvert LOD)", str(path))
+    geometry = read_x3d_points(path)
+    chains = []
+    for obj in objects:
+        object_id = obj["facts"].get("object_id", "")
+        where = f"{path}: object {object_id!r}"
+        levels = []
+        for entry in obj["levels"]:
+            facts = {"name": entry["facts"].get("level"), **entry["facts"]}
+            shapes = geometry.get(entry["def"])
+            positions = shapes.coordinates if shapes is not None else np.zeros((0, 3))
+            faces = shapes.index if shapes is not None else None
+            colors = shapes.colors if shapes is not None else None
+            levels.append(_level_from(facts, positions, faces, colors, where))
+        chain_facts = {**obj["facts"], "center": obj["center"]}
+        chains.append(_chain_from(object_id, chain_facts, levels, obj["origin"], where))
+    return chains
+
+
+def match_references(
+    objects: Sequence[SceneObject], chains: Sequence[LodChain], ref_name: str, out_name: str
+) -> list[Surface]:
+    """For each chain, the source object it was baked from, relative to the chain's origin.
+
+    Objects are paired by id (a single object with a single chain in any case). Raises
+    :class:`InputError` naming REF when an object is missing or its bounding box does not
+    match the chain's (centre = origin and diagonal = α, within :data:`BOUNDS_TOLERANCE` α).
+    """
+    by_id = {obj.id: obj for obj in objects}
+    surfaces = []
+    for chain in chains:
+        obj = by_id.get(chain.object_id)
+        if obj is None and len(objects) == 1 and len(chains) == 1:
+            obj = objects[0]
+        if obj is None:
+            raise InputError(f"has no object {chain.object_id!r}, which {out_name} holds", ref_name)
+        lo, hi = obj.surface.bounds
+        shift = float(np.linalg.norm((lo + hi) / 2.0 - chain.origin)) / chain.alpha
+        diagonal = float(np.linalg.norm(hi - lo))
+        if shift > BOUNDS_TOLERANCE or abs(diagonal - chain.alpha) > BOUNDS_TOLERANCE * chain.alpha:
+            raise InputError(
+                f"does not match {out_name}: object {chain.object_id!r} is centred "
+                f"{shift:.3g} diagonals away and {diagonal:.6g} across, against {chain.alpha:.6g} "
+                f"in {out_name} (was it converted from this file?)",
+                ref_name,
+            )
+        surfaces.append(replace(obj.surface, vertices=obj.surface.vertices - chain.origin))
+    return surfaces
+
+
+# --- reports ------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Protocol:
+    """How levels are scored: ``views`` Fibonacci directions, ``size`` × ``size`` renders at
+    ``fov_y_deg``, at ``distances`` (multiples of α), and ``samples`` surface samples for the
+    geometric error. Within each level's range the renders are ``range_size`` pixels high: by
+    default those of the reference view the converter designs levels for (1080 px), so the
+    declared point sizes are drawn as they are and 1-pixel points are one of its pixels."""
+
+    views: int = DEFAULT_VIEWS
+    size: int = DEFAULT_SIZE
+    fov_y_deg: float = DEFAULT_FOV
+    distances: tuple[float, ...] = DEFAULT_DISTANCES
+    samples: int = DEFAULT_SAMPLES
+    range_size: int = REFERENCE_VIEW.height_px
+
+
+@dataclass
+class LevelReport:
+    """One level's silhouette scores, geometric error and its count as a fraction of the
+    source's vertices."""
+
+    scores: LevelScores
+    error: GeometricError
+    fraction: float
+
+
+@dataclass
+class ObjectReport:
+    """Everything measured on one object: α, the source's vertex count, the mean spacing of
+    the surface samples (fraction of α) and each level's report, finest first."""
+
+    object_id: str
+    alpha: float
+    source_vertices: int
+    sample_spacing: float
+    levels: list[LevelReport]
+
+    @property
+    def mean_point_f(self) -> float | None:
+        """Mean F over the point levels and the protocol distances (None without points)."""
+        values = [s.f for lv in self.levels if lv.scores.kind == "pcd" for s in lv.scores.scores]
+        return float(np.mean(values)) if values else None
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-able dict of the report, with ``mean_point_f``."""
+        return {**asdict(self), "mean_point_f": self.mean_point_f}
+
+
+def evaluate_object(
+    references: ReferenceRenders,
+    chain: LodChain,
+    protocol: Protocol,
+    *,
+    range_references: ReferenceRenders | None = None,
+    levels: Sequence[int] | None = None,
+) -> ObjectReport:
+    """Silhouettes on ``protocol`` against ``references`` (and, given ``range_references``,
+    within each level's range against those), geometric errors and counts of the levels of
+    ``chain`` (all, or those indexed by ``levels``); the source is ``references.surface``,
+    relative to the chain origin."""
+    picked = list(range(len(chain.levels)) if levels is None else levels)
+    scores = evaluate_chain(references, chain, protocol.distances, levels=picked)
+    if range_references is not None:
+        ranged = evaluate_chain(range_references, chain, (), levels=picked, in_range=True)
+        for row, other in zip(scores, ranged, strict=True):
+            row.in_range = other.in_range
+    source = references.surface
+    errors = geometric_errors(source, chain, protocol.samples, picked)
+    total = len(source.vertices)
+    return ObjectReport(
+        object_id=chain.object_id,
+        alpha=chain.alpha,
+        source_vertices=total,
+        sample_spacing=sample_spacing(source, protocol.samples) / chain.alpha,
+        levels=[
+            LevelReport(row, error, row.count / total)
+            for row, error in zip(scores, errors, strict=True)
+        ],
+    )
+
+
+# --- contact sheet ------------------------------------------------------------------------------
+
+
+def _coloured(reference: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """RGB image (h, w, 3) uint8: both covered grey, level only red, reference only blue."""
+    image = np.full((*reference.shape, 3), 255, dtype=np.uint8)
+    image[reference & level] = SHEET_COLORS["both"]
+    image[level & ~reference] = SHEET_COLORS["level only"]
+    image[reference & ~level] = SHEET_COLORS["source only"]
+    return image
+
+
+def _crop_box(masks: list[np.ndarray], margin: int) -> tuple[int, int, int]:
+    """A square (top, left, side) around everything covered in ``masks`` (each (views, h, w)),
+    ``margin`` pixels wider on every side."""
+    covered = np.any(np.stack(masks), axis=(0, 1))
+    rows, cols = np.flatnonzero(covered.any(axis=1)), np.flatnonzero(covered.any(axis=0))
+    if len(rows) == 0:
+        return 0, 0, max(covered.shape)
+    side = int(max(rows[-1] - rows[0], cols[-1] - cols[0])) + 1 + 2 * margin
+    top = int((rows[0] + rows[-1]) // 2 - side // 2)
+    left = int((cols[0] + cols[-1]) // 2 - side // 2)
+    return top, left, side
+
+
+def contact_sheet(
+    renderer: SilhouetteRenderer,
+    reference: Surface,
+    chain: LodChain,
+    diagonals: float = DEFAULT_DISTANCES[0],
+    views: int = SHEET_VIEWS,
+    tile: int = SHEET_TILE,
+    view: ReferenceView = REFERENCE_VIEW,
+) -> Image.Image:
+    """The source and every level of ``chain`` side by side (columns) from ``views`` Fibonacci
+    directions (rows), at ``diagonals`` α, as the metric sees them: each level's silhouette
+    against the source's, both grey, level only red, source only blue. Tiles are the
+    renderer's pixels around the object, enlarged (nearest neighbour) to ``tile`` pixels.
+    Captions give each column's count and its F over the views shown."""
+    directions = fibonacci_directions(views)
+    distance = diagonals * chain.alpha
+    center = np.asarray(chain.center, dtype=np.float64)
+    geometry = renderer.mesh(reference.vertices, reference.faces)
+    source = renderer.render(geometry, center, distance, directions)
+    geometry.release()
+    columns = [(f"source\n{len(reference.vertices):,} vertices", source)]
+    for level in chain.levels:
+        geometry = _level_geometry(renderer, level)
+        size = declared_pixel_size(level, distance, renderer, view)
+        masks = renderer.render(geometry, center, distance, directions, size or 1.0)
+        geometry.release()
+        f = silhouette_scores(source, masks)["f"]
+        unit = "points" if level.kind == "pcd" else "vertices"
+        columns.append((f"{level.name} {level.count:,} {unit}\nF {f:.3f}", masks))
+    top, left, side = _crop_box([masks for _, masks in columns], margin=4)
+    font = ImageFont.load_default(size=SHEET_FONT_PX)
+    caption = 3 * SHEET_FONT_PX
+    sheet = Image.new("RGB", (tile * len(columns), caption + tile * views), "white")
+    draw = ImageDraw.Draw(sheet)
+    # Padded by one side all round, so the crop window never leaves the image.
+    pad = ((0, 0), (side, side), (side, side))
+    window = np.s_[top + side : top + 2 * side, left + side : left + 2 * side]
+    source_window = np.pad(source, pad)[:, window[0], window[1]]
+    for c, (text, masks) in enumerate(columns):
+        draw.multiline_text((c * tile + 6, 4), text, fill="black", font=font, spacing=2)
+        cropped = np.pad(masks, pad)[:, window[0], window[1]]
+        for r in range(views):
+            rgb = _coloured(source_window[r], cropped[r])
+            image = Image.fromarray(rgb).resize((tile, tile), Image.Resampling.NEAREST)
+            sheet.paste(image, (c * tile, caption + r * tile))
+    return sheet
+
+
+def legend(width: int, renderer: SilhouetteRenderer, diagonals: float) -> Image.Image:
+    """A strip explaining a contact sheet's colours and scale."""
+    font = ImageFont.load_default(size=SHEET_FONT_PX)
+    strip = Image.new("RGB", (width, 2 * SHEET_FONT_PX + 8), "white")
+    draw = ImageDraw.Draw(strip)
+    x = 6
+    for name, color in SHEET_COLORS.items():
+        draw.rectangle((x, 6, x + SHEET_FONT_PX, 6 + SHEET_FONT_PX), fill=tuple(color))
+        x += SHEET_FONT_PX + 4
+        draw.text((x, 4), name, fill="black", font=font)
+        x += int(draw.textlength(name, font=font)) + 16
+    note = (
+        f"{diagonals:g} diagonals away, {renderer.width} x {renderer.height} px at "
+        f"{renderer.fov_y_deg:g}°, points at their declared size"
+    )
+    draw.text((x, 4), note, fill="black", font=font)
+    return strip
+
+
+def stack_images(images: Sequence[Image.Image]) -> Image.Image:
+    """``images`` one below the other on white, left-aligned."""
+    width = max(image.width for image in images)
+    out = Image.new("RGB", (width, sum(image.height for image in images)), "white")
+    y = 0
+    for image in images:
+        out.paste(image, (0, y))
+        y += image.height
+    return out

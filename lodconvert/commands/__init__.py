@@ -7,6 +7,7 @@ exceptions into one-line errors and exit codes.
 
 COMMANDS: dict[str, str] = {
     "ranges": "lodconvert.commands.ranges",
+    "evaluate": "lodconvert.commands.evaluate",
     "validate": "lodconvert.commands.validate",
     "view": "lodconvert.commands.view",
 }
