@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
+from tables import markdown_table
 
 import lodconvert
 from lodconvert.bake import NumpyBackend
@@ -308,12 +309,6 @@ def measure(name: str, session: Session) -> dict[str, Any]:
 
 
 # --- the report ---------------------------------------------------------------------------------
-
-
-def table(header: list[str], rows: list[list[str]], text_columns: int) -> str:
-    """A markdown table; the columns after the first ``text_columns`` right-aligned."""
-    align = ["---" if i < text_columns else "---:" for i in range(len(header))]
-    return "\n".join("| " + " | ".join(line) + " |" for line in [header, align, *rows])
 
 
 def _f(value: float) -> str:
@@ -642,7 +637,7 @@ def render_markdown(
         "",
         "## Summary",
         "",
-        table(
+        markdown_table(
             [
                 "Model",
                 "Source vertices",
@@ -662,7 +657,7 @@ def render_markdown(
         "",
         "## Default chains, per point level",
         "",
-        table(
+        markdown_table(
             [
                 "Model",
                 "Level",
@@ -689,7 +684,7 @@ def render_markdown(
         " object's diagonal in pixels there, the size the points are drawn at, the level's"
         " scores, and the source's own vertices drawn as 1-pixel points from the same views.",
         "",
-        table(
+        markdown_table(
             [
                 "Model",
                 "Level",
@@ -713,7 +708,7 @@ def render_markdown(
         " distances, the lowest per-level mean, and the mean F at switch-in in the 1080-px"
         " reference view. The default is in bold.",
         "",
-        table(
+        markdown_table(
             [
                 "Model",
                 "Spacing px",
@@ -737,7 +732,7 @@ def render_markdown(
         " buddha 109,486 / 69,952 / 27,251 / 17,478 and 138,967 / 89,022 / 35,492 / 22,301 of"
         " 300,000; dragon_res2 takes the dragon's). F = mean over the protocol distances.",
         "",
-        table(
+        markdown_table(
             [
                 "Model",
                 "Level",
@@ -754,7 +749,7 @@ def render_markdown(
         "`--level-kind qem`: the source decimated (fast-simplification) to the count the point"
         " level has; F = mean over the protocol distances.",
         "",
-        table(
+        markdown_table(
             [
                 "Model",
                 "Level",

@@ -8,6 +8,7 @@ exceptions into one-line errors and exit codes.
 COMMANDS: dict[str, str] = {
     "ranges": "lodconvert.commands.ranges",
     "evaluate": "lodconvert.commands.evaluate",
+    "bench": "lodconvert.commands.bench",
     "validate": "lodconvert.commands.validate",
     "view": "lodconvert.commands.view",
 }

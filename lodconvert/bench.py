@@ -1,0 +1,734 @@
+"""Render benchmark: a grid of instances each drawing the level its distance selects, against
+the same grid drawing the original mesh — the shape of the PCD paper's Tables 4–7.
+
+**Grid.** N = k² instances of one object on a square lattice in the ground plane (world z up),
+``spacing · α`` apart (α the object's bounding-box diagonal, default spacing 1.5): columns
+centred on x = 0, rows at y = 0, s·α, 2·s·α, … going away from the camera. Each instance's LOD
+centre (the bounding-box centre) sits above its lattice point so that the object's lowest point
+touches the ground. Models are taken as y-up (glTF's convention, and the Stanford scans') and
+turned z-up (``up="z"`` leaves them as they are).
+
+**Camera.** Fixed, in units of α, whatever N: the eye at :data:`EYE` (5 α in front of the first
+row, 1.5 α above the ground), looking at :data:`TARGET` (12 α down the middle of the grid, on
+the ground); 45° vertical field of view on a 1920×1080 framebuffer — the reference view the
+files' point sizes refer to, so points are drawn exactly as wide as declared. With the default
+chain (cutoffs 6.4 α, 13.7 α, 30 α) the middle of the first row draws LOD4, the second row
+(at least 6.6 α away) LOD3 already, and from N = 441 on the far rows LOD1: every level is
+exercised, and from N = 4 on the LOD grid submits less than the original.
+
+**Selection and culling.** Each instance draws level ``i`` when its LOD centre is nearer the eye
+than ``cutoffs[i]`` and not nearer than ``cutoffs[i-1]`` (X3D ``LOD`` semantics); beyond the
+last cutoff of a culled chain it draws nothing. Instances whose bounding sphere (radius α/2)
+lies wholly outside the view frustum are skipped in both grids (per-instance frustum culling;
+``frustum_culling=False`` submits them all). The original grid draws the reference mesh at every
+instance, with no cull distance.
+
+**Drawing.** Every level is uploaded once (vertex buffer, index buffer for meshes, RGBA colours)
+and drawn instanced, one instance buffer of LOD-centre positions per level; depth test on, no
+face culling, unlit vertex colours. Points get ``gl_PointSize = point_size · design_distance /
+r`` (``r`` the eye-to-point distance), clamped to [1, the GL maximum] — the size the files
+declare (see :func:`lodconvert.evaluate.point_pixel_size`). Both grids use the same program and
+rules; only the geometry differs. Draw calls submit at most :data:`CHUNK_VERTICES` vertices
+each, so a frame that runs past its time budget is stopped between two of them.
+
+**Timing.** Each geometry is first drawn once (one instance), then ``warmup`` untimed frames,
+then ``frames`` timed frames, each clocked from a finished pipeline (``ctx.finish()``) through
+its clear and draws to ``ctx.finish()``; the median is reported. A frame longer than
+``budget_s`` is stopped and its grid reported "over budget"; larger N of that grid are then
+"skipped". "Submitted" counts vertices (mesh levels) plus points (point levels) per frame.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import statistics
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from lxml import etree
+
+from .errors import InputError, UsageError
+from .evaluate import look_at, perspective
+from .glcontext import create_context
+from .io import suffix_of
+from .ranges import REFERENCE_VIEW, ReferenceView
+
+if TYPE_CHECKING:
+    import moderngl
+
+PAPER_INSTANCES = (121, 441, 961, 1681, 5041, 6561)
+"""The instance counts of the paper's Tables 4–7 (11² … 81²)."""
+GRID_SPACING = 1.5
+"""Default distance between neighbouring instances, in object diagonals α."""
+EYE = (0.0, -5.0, 1.5)
+"""Eye position in α (x across the grid, y along it, z up), relative to the first row's centre."""
+TARGET = (0.0, 12.0, 0.0)
+"""Point looked at, in α."""
+WIDTH, HEIGHT = 1920, 1080
+FOV_Y_DEG = 45.0
+NEAR = 0.05
+"""Near plane in α (the nearest instance is about 5 α from the eye)."""
+CHUNK_VERTICES = 16_000_000
+"""Most vertices plus points one draw call submits: the frame budget is checked between calls."""
+DEFAULT_FRAMES = 5
+DEFAULT_WARMUP = 1
+DEFAULT_BUDGET_S = 300.0
+MESH_GREY = 200
+"""Colour byte of meshes that have no vertex colours."""
+
+Message = Callable[[str], None]
+
+VERTEX_SHADER = """
+#version 330
+uniform mat4 view_proj;
+uniform vec3 eye;
+uniform float point_size;       // pixels at design_distance
+uniform float design_distance;  // 0: constant point_size
+uniform float max_point_size;
+in vec3 in_pos;     // relative to the LOD centre, world axes
+in vec4 in_color;
+in vec3 in_offset;  // per instance: the LOD centre
+out vec4 color;
+void main() {
+    vec3 world = in_pos + in_offset;
+    gl_Position = view_proj * vec4(world, 1.0);
+    float size = point_size;
+    if (design_distance > 0.0) {
+        size *= design_distance / max(distance(world, eye), 1e-9);
+    }
+    gl_PointSize = clamp(size, 1.0, max_point_size);
+    color = in_color;
+}
+"""
+
+FRAGMENT_SHADER = """
+#version 330
+in vec4 color;
+out vec4 frag;
+void main() {
+    frag = color;
+}
+"""
+
+
+# --- the chain read back from a file ------------------------------------------------------------
+
+
+@dataclass
+class BenchLevel:
+    """One level's geometry relative to the chain origin: ``positions`` (k, 3) float64, ``faces``
+    (m, 3) int64 for a mesh (None for points), ``colors`` (k, 4) uint8 or None; points are
+    ``point_size`` pixels wide at ``design_distance`` in the reference view (None: constant)."""
+
+    name: str
+    positions: np.ndarray
+    faces: np.ndarray | None = None
+    colors: np.ndarray | None = None
+    point_size: float = 1.0
+    design_distance: float | None = None
+
+    @property
+    def kind(self) -> str:
+        """ "mesh" or "pcd"."""
+        return "pcd" if self.faces is None else "mesh"
+
+    @property
+    def count(self) -> int:
+        """Vertices (mesh) or points submitted when the level is drawn once."""
+        return len(self.positions)
+
+    @property
+    def triangles(self) -> int:
+        """Triangles of a mesh level (0 for points)."""
+        return 0 if self.faces is None else len(self.faces)
+
+
+@dataclass
+class BenchChain:
+    """An object's LOD chain as a file stores it, finest level first, and the mesh the original
+    grid draws. ``cutoffs`` are distances from ``center`` (relative to ``origin``, like the
+    geometry); one per level for a culled chain, else one fewer. ``objects`` is the number of
+    objects in the file."""
+
+    object_id: str
+    levels: list[BenchLevel]
+    cutoffs: list[float]
+    origin: np.ndarray
+    center: np.ndarray
+    alpha: float
+    objects: int = 1
+    reference: BenchLevel | None = None
+
+    @property
+    def culled(self) -> bool:
+        """Whether the object vanishes beyond the last cutoff."""
+        return len(self.cutoffs) == len(self.levels)
+
+
+def read_chain(
+    path: str | Path, object_id: str | None = None, reference: str | Path | None = None
+) -> BenchChain:
+    """The chain of object ``object_id`` (default: the first) of a ``.glb``/``.gltf``/``.x3d``
+    file lodconvert wrote, with its ``reference``: the finest level when it is a mesh, else (or
+    when given) the mesh read from the ``reference`` file — its object of the same id, or its
+    only object — placed by the chain's origin.
+
+    Raises :class:`InputError` for an unreadable file, an unknown object or a missing reference.
+    """
+    suffix = suffix_of(path)
+    if suffix in (".glb", ".gltf"):
+        chains = _gltf_chains(path)
+    elif suffix == ".x3d":
+        chains = _x3d_chains(path)
+    else:
+        raise InputError("is not a .glb, .gltf or .x3d file lodconvert wrote", str(path))
+    if not chains:
+        raise InputError("holds no LOD object", str(path))
+    ids = [chain.object_id for chain in chains]
+    if object_id is not None and object_id not in ids:
+        raise InputError(f"has no object {object_id!r} (objects: {', '.join(ids)})", str(path))
+    chain = chains[ids.index(object_id) if object_id is not None else 0]
+    chain.objects = len(chains)
+    if reference is not None:
+        chain.reference = _reference_mesh(reference, chain)
+    elif chain.levels[0].kind == "mesh":
+        chain.reference = chain.levels[0]
+    else:
+        raise InputError(
+            "its finest level is a point cloud: give the original mesh with --reference", str(path)
+        )
+    return chain
+
+
+def _gltf_chains(path: str | Path) -> list[BenchChain]:
+    from .io.gltf import read_lod_gltf
+
+    chains = []
+    for obj in read_lod_gltf(path):
+        levels = [
+            BenchLevel(
+                name=lv.name,
+                positions=lv.positions,
+                faces=lv.faces if lv.kind == "mesh" else None,
+                colors=lv.colors,
+                point_size=float(lv.extras.get("point_size_px") or 1.0),
+                design_distance=lv.extras.get("design_distance"),
+            )
+            for lv in obj.levels
+        ]
+        chains.append(
+            BenchChain(
+                object_id=obj.object_id,
+                levels=levels,
+                cutoffs=[float(c) for c in obj.extras["cutoffs"]],
+                origin=obj.origin,
+                center=np.asarray(obj.extras.get("center", [0.0, 0.0, 0.0]), dtype=np.float64),
+                alpha=float(obj.extras["alpha"]),
+            )
+        )
+    return chains
+
+
+_MFSTRING = re.compile(r'"((?:[^"\\]|\\.)*)"')
+
+
+def _metadata(node: etree._Element) -> dict[str, str]:
+    """Name → value text of the ``Metadata*`` entries in ``node``'s lodconvert ``MetadataSet``;
+    MFString values unquoted (their first string)."""
+    entries: dict[str, str] = {}
+    for meta in node.iterfind("MetadataSet[@name='lodconvert']/*"):
+        value = meta.get("value", "")
+        if meta.tag == "MetadataString":
+            strings = _MFSTRING.findall(value)
+            value = re.sub(r"\\(.)", r"\1", strings[0]) if strings else ""
+        entries[meta.get("name", "")] = value
+    return entries
+
+
+def _floats(text: str | None) -> list[float]:
+    return [float(v) for v in (text or "").replace(",", " ").split()]
+
+
+def _x3d_chains(path: str | Path) -> list[BenchChain]:
+    """Chains of an X3D file: geometry from :func:`~lodconvert.io.x3d.read_x3d_points`, and
+    from each ``LOD`` its ``range`` (the cutoffs) and ``center``, α and the object id (the
+    lodconvert metadata of its Transform) and the level Groups' point sizes (theirs)."""
+    from .io.x3d import read_x3d_points
+
+    geometry = read_x3d_points(path)  # raises InputError for unreadable or malformed files
+    chains = []
+    for _, element in etree.iterparse(str(path), events=("end",)):
+        if element.tag == "Shape":
+            element.clear()  # geometry is read above: keep the tree small
+            continue
+        if element.tag != "LOD":
+            continue
+        # the chain's metadata is on the enclosing Transform (or, in older files, the LOD)
+        parent = element.getparent()
+        chain_meta = {**(_metadata(parent) if parent is not None else {}), **_metadata(element)}
+        levels, translation = [], np.zeros(3)
+        for group in element.iterfind("Group[@DEF]"):
+            meta = _metadata(group)
+            name = meta.get("level") or group.get("DEF")
+            part = geometry.get(group.get("DEF"))
+            if part is not None:
+                translation = part.translation
+            design = _floats(meta.get("design_distance"))
+            levels.append(
+                BenchLevel(
+                    name=name,
+                    positions=part.coordinates if part is not None else np.zeros((0, 3)),
+                    faces=part.index if part is not None else None,
+                    colors=part.colors if part is not None else None,
+                    point_size=(_floats(meta.get("point_size_px")) or [1.0])[0],
+                    design_distance=design[0] if design else None,
+                )
+            )
+        center = _floats(element.get("center")) or [0.0, 0.0, 0.0]
+        alpha = _floats(chain_meta.get("alpha"))
+        if not levels or not alpha:
+            raise InputError(
+                "is not an X3D file lodconvert wrote (an LOD without its metadata)", str(path)
+            )
+        chains.append(
+            BenchChain(
+                object_id=chain_meta.get("object_id") or element.get("DEF", ""),
+                levels=levels,
+                cutoffs=_floats(element.get("range")),
+                origin=translation,
+                center=np.asarray(center, dtype=np.float64),
+                alpha=alpha[0],
+            )
+        )
+        element.clear()
+    return chains
+
+
+def _reference_mesh(path: str | Path, chain: BenchChain) -> BenchLevel:
+    """The original mesh for ``chain`` from a mesh file (world coordinates → chain origin)."""
+    from .convert import read_scene
+
+    scene = read_scene(path)
+    matches = [obj for obj in scene.objects if obj.id == chain.object_id]
+    if not matches and len(scene.objects) == 1:
+        matches = scene.objects
+    if not matches:
+        raise InputError(
+            f"has {len(scene.objects)} objects and none is {chain.object_id!r}", str(path)
+        )
+    surface = matches[0].surface
+    return BenchLevel(
+        name="original",
+        positions=surface.vertices - chain.origin,
+        faces=surface.faces,
+        colors=surface.vertex_colors,
+    )
+
+
+# --- grid, camera, selection --------------------------------------------------------------------
+
+
+def grid_side(count: int) -> int:
+    """k for N = k² instances; :class:`UsageError` unless ``count`` is a positive square."""
+    side = math.isqrt(count) if count > 0 else 0
+    if side * side != count or side == 0:
+        raise UsageError(f"--instances must be perfect squares (k×k grids), got {count}")
+    return side
+
+
+def grid_points(count: int, spacing: float) -> np.ndarray:
+    """Ground positions (N, 2) of a k×k grid of pitch ``spacing``: x centred on 0, y from 0
+    away from the camera, row by row."""
+    side = grid_side(count)
+    steps = np.arange(side, dtype=np.float64)
+    x, y = np.meshgrid((steps - (side - 1) / 2.0) * spacing, steps * spacing)
+    return np.column_stack([x.ravel(), y.ravel()])
+
+
+def up_rotation(up: str) -> np.ndarray:
+    """Rotation (3, 3) taking a model's ``up`` axis ("y" or "z") to world +z."""
+    if up == "y":
+        return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    if up == "z":
+        return np.eye(3)
+    raise UsageError(f"--up must be y or z, got {up!r}")
+
+
+def frustum_planes(view_proj: np.ndarray) -> np.ndarray:
+    """The six planes (6, 4) of a view-projection matrix's frustum, normals of unit length
+    pointing inside: a point p is inside when ``planes[:, :3] @ p + planes[:, 3] >= 0``."""
+    m = np.asarray(view_proj, dtype=np.float64)
+    planes = np.stack(
+        [m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1], m[3] + m[2], m[3] - m[2]]
+    )
+    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+
+
+def spheres_in_frustum(centers: np.ndarray, radius: float, planes: np.ndarray) -> np.ndarray:
+    """(N,) bool: which spheres of ``radius`` around ``centers`` (N, 3) reach into the frustum
+    (conservative: a sphere outside near a frustum corner may count as inside)."""
+    signed = centers @ planes[:, :3].T + planes[:, 3]
+    return (signed >= -radius).all(axis=1)
+
+
+def select_levels(distances: np.ndarray, cutoffs: Sequence[float]) -> np.ndarray:
+    """Level index (N,) per distance: ``i`` for ``cutoffs[i-1] <= d < cutoffs[i]``;
+    ``len(cutoffs)`` beyond the last (for a culled chain, one past its last level: nothing)."""
+    return np.searchsorted(np.asarray(cutoffs, dtype=np.float64), distances, side="right")
+
+
+@dataclass
+class GridView:
+    """One grid of N instances seen by the fixed camera: LOD-centre positions (N, 3), which
+    survive frustum culling, the level each selects, and the camera."""
+
+    centers: np.ndarray
+    visible: np.ndarray
+    levels: np.ndarray
+    view_proj: np.ndarray
+    eye: np.ndarray
+
+
+def grid_view(
+    chain: BenchChain,
+    count: int,
+    spacing: float = GRID_SPACING,
+    lift: float = 0.0,
+    frustum_culling: bool = True,
+) -> GridView:
+    """Lay out N = ``count`` instances of ``chain`` ``spacing · α`` apart, with LOD centres
+    ``lift`` above the ground, and select their levels from the camera (module docstring)."""
+    alpha = chain.alpha
+    ground = grid_points(count, spacing * alpha)
+    centers = np.column_stack([ground, np.full(len(ground), lift)])
+    eye, target = np.array(EYE) * alpha, np.array(TARGET) * alpha
+    distances = np.linalg.norm(centers - eye, axis=1)
+    far = float(distances.max()) + alpha
+    view_proj = perspective(FOV_Y_DEG, WIDTH / HEIGHT, NEAR * alpha, far) @ look_at(eye, target)
+    visible = np.ones(count, dtype=bool)
+    if frustum_culling:
+        visible = spheres_in_frustum(centers, alpha / 2.0, frustum_planes(view_proj))
+    levels = select_levels(distances, chain.cutoffs)
+    return GridView(centers, visible, levels, view_proj, eye)
+
+
+# --- rendering and timing -----------------------------------------------------------------------
+
+
+@dataclass
+class Drawable:
+    """A level uploaded to a :class:`GridRenderer`: vertex array, primitive mode, the level,
+    and its instance buffer (LOD-centre positions, 3 floats each)."""
+
+    level: BenchLevel
+    vao: moderngl.VertexArray
+    mode: int
+    instance_buffer: moderngl.Buffer
+    instances: int = 0
+
+
+@dataclass
+class Timing:
+    """Frame times of one grid. ``status``: "ok", "over budget" (a frame was stopped after
+    ``stopped_after_s``) or "skipped" (over budget at a smaller N)."""
+
+    status: str = "ok"
+    frame_seconds: list[float] = field(default_factory=list)
+    stopped_after_s: float | None = None
+
+    @property
+    def median_s(self) -> float | None:
+        """Median frame time, when every frame completed."""
+        if self.status != "ok" or not self.frame_seconds:
+            return None
+        return statistics.median(self.frame_seconds)
+
+    @property
+    def fps(self) -> float | None:
+        """Frames per second of the median frame."""
+        median = self.median_s
+        return 1.0 / median if median else None
+
+
+class GridRenderer:
+    """Instanced drawing of uploaded levels into a 1920×1080 RGBA + depth framebuffer on its
+    own moderngl EGL context. Raises :class:`~lodconvert.errors.LodConvertError` (naming the
+    packages to install) when no EGL OpenGL 3.3 context can be made."""
+
+    def __init__(self) -> None:
+        self.ctx = create_context("render benchmark unavailable")
+        self.renderer_name = str(self.ctx.info.get("GL_RENDERER", "unknown"))
+        self.max_point_size = float(self.ctx.info.get("GL_POINT_SIZE_RANGE", (1.0, 255.0))[1])
+        self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.PROGRAM_POINT_SIZE)
+        self.program = self.ctx.program(
+            vertex_shader=VERTEX_SHADER, fragment_shader=FRAGMENT_SHADER
+        )
+        self.fbo = self.ctx.framebuffer(
+            color_attachments=[self.ctx.renderbuffer((WIDTH, HEIGHT))],
+            depth_attachment=self.ctx.depth_renderbuffer((WIDTH, HEIGHT)),
+        )
+        self.offset_location = self.program["in_offset"].location
+        render_view = ReferenceView(height_px=HEIGHT, fov_y_deg=FOV_Y_DEG)
+        self.view_scale = render_view.focal_px / REFERENCE_VIEW.focal_px
+
+    def upload(self, level: BenchLevel, center: np.ndarray, rotation: np.ndarray) -> Drawable:
+        """Upload ``level`` once: positions relative to ``center``, turned by ``rotation``."""
+        local = (np.asarray(level.positions, dtype=np.float64) - center) @ rotation.T
+        colors = level.colors
+        if colors is None:
+            colors = np.full((level.count, 4), MESH_GREY, dtype=np.uint8)
+            colors[:, 3] = 255
+        vbo = self.ctx.buffer(local.astype(np.float32).tobytes())
+        cbo = self.ctx.buffer(np.ascontiguousarray(colors, dtype=np.uint8).tobytes())
+        instance_buffer = self.ctx.buffer(reserve=12)
+        content = [
+            (vbo, "3f", "in_pos"),
+            (cbo, "4f1", "in_color"),
+            (instance_buffer, "3f/i", "in_offset"),
+        ]
+        ibo = None
+        if level.faces is not None:
+            ibo = self.ctx.buffer(np.asarray(level.faces, dtype=np.uint32).tobytes())
+        vao = self.ctx.vertex_array(self.program, content, index_buffer=ibo, index_element_size=4)
+        mode = self.ctx.POINTS if level.faces is None else self.ctx.TRIANGLES
+        return Drawable(level, vao, mode, instance_buffer)
+
+    def place(self, drawable: Drawable, centers: np.ndarray) -> None:
+        """Set the instances ``drawable`` draws: LOD-centre positions (n, 3)."""
+        data = np.ascontiguousarray(centers, dtype=np.float32).tobytes()
+        if len(data) > drawable.instance_buffer.size:
+            drawable.instance_buffer.orphan(len(data))
+        if data:
+            drawable.instance_buffer.write(data)
+        drawable.instances = len(centers)
+
+    def _draw(self, drawable: Drawable, instances: int, deadline: float) -> bool:
+        """Draw ``instances`` of ``drawable`` in calls of at most :data:`CHUNK_VERTICES`
+        vertices; False when the clock passed ``deadline`` before all were drawn."""
+        level = drawable.level
+        if level.faces is None:
+            point_size, design = level.point_size * self.view_scale, level.design_distance or 0.0
+        else:
+            point_size, design = 1.0, 0.0
+        self.program["point_size"].value = point_size
+        self.program["design_distance"].value = design
+        chunk = max(1, CHUNK_VERTICES // max(level.count, 1))
+        for start in range(0, instances, chunk):
+            if time.perf_counter() > deadline:
+                return False
+            drawable.vao.bind(
+                self.offset_location,
+                "f",
+                drawable.instance_buffer,
+                "3f",
+                offset=12 * start,
+                divisor=1,
+            )
+            drawable.vao.render(drawable.mode, instances=min(chunk, instances - start))
+        return True
+
+    def frame(self, drawables: Sequence[Drawable], budget_s: float) -> tuple[float, bool]:
+        """Clear and draw every drawable's instances; (seconds, completed). The frame is
+        stopped between draw calls once ``budget_s`` has passed."""
+        self.ctx.finish()
+        start = time.perf_counter()
+        self.fbo.use()
+        self.fbo.clear(0.6, 0.7, 0.8, 1.0)
+        completed = all(
+            self._draw(d, d.instances, start + budget_s) for d in drawables if d.level.count
+        )
+        self.ctx.finish()
+        return time.perf_counter() - start, completed
+
+    def measure(
+        self,
+        drawables: Sequence[Drawable],
+        view: GridView,
+        frames: int,
+        warmup: int,
+        budget_s: float,
+    ) -> Timing:
+        """Time ``frames`` frames of the placed ``drawables`` after drawing each once and
+        ``warmup`` untimed frames (see the module docstring)."""
+        self.program["view_proj"].write(view.view_proj.T.astype(np.float32).tobytes())
+        self.program["eye"].value = tuple(float(v) for v in view.eye)
+        self.program["max_point_size"].value = self.max_point_size
+        self.fbo.use()
+        for drawable in drawables:  # compile the shader variants, make buffers resident
+            if drawable.level.count and drawable.instances:
+                self._draw(drawable, 1, math.inf)
+        timing = Timing()
+        for k in range(warmup + frames):
+            seconds, completed = self.frame(drawables, budget_s)
+            if not completed:
+                return Timing("over budget", timing.frame_seconds, seconds)
+            if k >= warmup:
+                timing.frame_seconds.append(seconds)
+        return timing
+
+    def read_image(self) -> np.ndarray:
+        """The last frame as RGB uint8 (height, width, 3), row 0 at the top."""
+        data = self.fbo.read(components=3, alignment=1)
+        return np.frombuffer(data, dtype=np.uint8).reshape(HEIGHT, WIDTH, 3)[::-1]
+
+    def release(self) -> None:
+        """Free the context and every GL object made on it."""
+        self.ctx.release()
+
+    def __enter__(self) -> GridRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+# --- the benchmark ------------------------------------------------------------------------------
+
+
+@dataclass
+class GridResult:
+    """One grid at one N: instances drawn after frustum culling, how many draw each level,
+    vertices + points and triangles submitted per frame, and the frame times."""
+
+    drawn: int
+    level_instances: dict[str, int]
+    submitted: int
+    triangles: int
+    timing: Timing
+
+    def record(self) -> dict[str, Any]:
+        """JSON-able form."""
+        return {
+            "drawn": self.drawn,
+            "level_instances": self.level_instances,
+            "submitted": self.submitted,
+            "triangles": self.triangles,
+            "status": self.timing.status,
+            "frame_seconds": [round(s, 6) for s in self.timing.frame_seconds],
+            "median_s": self.timing.median_s,
+            "fps": self.timing.fps,
+            "stopped_after_s": self.timing.stopped_after_s,
+        }
+
+
+@dataclass
+class BenchRow:
+    """Both grids at N = ``instances``."""
+
+    instances: int
+    lod: GridResult
+    original: GridResult
+
+    @property
+    def speedup(self) -> float | None:
+        """Original median frame time over the LOD grid's, when both were measured."""
+        lod, original = self.lod.timing.median_s, self.original.timing.median_s
+        return original / lod if lod and original else None
+
+    def record(self) -> dict[str, Any]:
+        """JSON-able form."""
+        return {
+            "instances": self.instances,
+            "lod": self.lod.record(),
+            "original": self.original.record(),
+            "speedup": self.speedup,
+        }
+
+
+@dataclass
+class BenchSettings:
+    """What a benchmark run draws and how it times it (defaults as the module docstring)."""
+
+    instances: tuple[int, ...] = PAPER_INSTANCES
+    frames: int = DEFAULT_FRAMES
+    warmup: int = DEFAULT_WARMUP
+    budget_s: float = DEFAULT_BUDGET_S
+    spacing: float = GRID_SPACING
+    frustum_culling: bool = True
+    up: str = "y"
+
+    def check(self) -> None:
+        """Raise :class:`UsageError` for values that cannot be run."""
+        for count in self.instances:
+            grid_side(count)
+        if self.frames < 1 or self.warmup < 0:
+            raise UsageError("--frames must be at least 1 and --warmup at least 0")
+        if not self.budget_s > 0 or not self.spacing > 0:
+            raise UsageError("--budget and --spacing must be positive")
+        up_rotation(self.up)
+
+    def record(self) -> dict[str, Any]:
+        """JSON-able form, with the fixed camera and framebuffer."""
+        return {
+            "instances": list(self.instances),
+            "frames": self.frames,
+            "warmup": self.warmup,
+            "budget_s": self.budget_s,
+            "spacing_alpha": self.spacing,
+            "frustum_culling": self.frustum_culling,
+            "up": self.up,
+            "eye_alpha": list(EYE),
+            "target_alpha": list(TARGET),
+            "fov_y_deg": FOV_Y_DEG,
+            "size": [WIDTH, HEIGHT],
+        }
+
+
+def _grid_result(drawables: list[Drawable], groups: list[np.ndarray], timing: Timing) -> GridResult:
+    counts = [len(group) for group in groups]
+    return GridResult(
+        drawn=sum(counts),
+        level_instances={d.level.name: n for d, n in zip(drawables, counts, strict=True)},
+        submitted=sum(n * d.level.count for d, n in zip(drawables, counts, strict=True)),
+        triangles=sum(n * d.level.triangles for d, n in zip(drawables, counts, strict=True)),
+        timing=timing,
+    )
+
+
+def run_bench(
+    chain: BenchChain,
+    settings: BenchSettings,
+    renderer: GridRenderer,
+    progress: Message | None = None,
+) -> list[BenchRow]:
+    """Time the LOD grid and the original grid of ``chain`` at every N of ``settings``."""
+    settings.check()
+    assert chain.reference is not None, "read_chain sets the reference"
+    rotation = up_rotation(settings.up)
+    center = chain.center
+    lod = [renderer.upload(level, center, rotation) for level in chain.levels]
+    reference = renderer.upload(chain.reference, center, rotation)
+    # LOD centres stand so high that the original's lowest point touches the ground
+    lift = -float(((chain.reference.positions - center) @ rotation.T)[:, 2].min(initial=0.0))
+    rows: list[BenchRow] = []
+    over = {"lod": False, "original": False}
+    for count in settings.instances:
+        view = grid_view(chain, count, settings.spacing, lift, settings.frustum_culling)
+        grids = {
+            "lod": (
+                lod,
+                [view.centers[view.visible & (view.levels == i)] for i in range(len(lod))],
+            ),
+            "original": ([reference], [view.centers[view.visible]]),
+        }
+        results = {}
+        for name, (drawables, groups) in grids.items():
+            if over[name]:
+                timing = Timing("skipped")
+            else:
+                if progress:
+                    progress(f"N = {count}: {name} grid")
+                for drawable, group in zip(drawables, groups, strict=True):
+                    renderer.place(drawable, group)
+                timing = renderer.measure(
+                    drawables, view, settings.frames, settings.warmup, settings.budget_s
+                )
+                over[name] = timing.status != "ok"
+            results[name] = _grid_result(drawables, groups, timing)
+        rows.append(BenchRow(count, results["lod"], results["original"]))
+    return rows
