@@ -53,10 +53,10 @@ from lodconvert.evaluate import (
     evaluate_object,
     legend,
     match_references,
-    read_chains,
     silhouette_scores,
     stack_images,
 )
+from lodconvert.io.readback import read_chains
 from lodconvert.scene import LodChain, SceneObject, Surface
 
 HERE = Path(__file__).resolve().parent

@@ -41,7 +41,6 @@ its clear and draws to ``ctx.finish()``; the median is reported. A frame longer 
 from __future__ import annotations
 
 import math
-import re
 import statistics
 import time
 from collections.abc import Callable, Sequence
@@ -50,13 +49,14 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from lxml import etree
 
 from .errors import InputError, UsageError
 from .evaluate import look_at, perspective
 from .glcontext import create_context
 from .io import suffix_of
+from .io.readback import read_chains
 from .ranges import REFERENCE_VIEW, ReferenceView
+from .scene import Level, LodChain
 
 if TYPE_CHECKING:
     import moderngl
@@ -180,13 +180,9 @@ def read_chain(
 
     Raises :class:`InputError` for an unreadable file, an unknown object or a missing reference.
     """
-    suffix = suffix_of(path)
-    if suffix in (".glb", ".gltf"):
-        chains = _gltf_chains(path)
-    elif suffix == ".x3d":
-        chains = _x3d_chains(path)
-    else:
+    if suffix_of(path) not in (".glb", ".gltf", ".x3d"):
         raise InputError("is not a .glb, .gltf or .x3d file lodconvert wrote", str(path))
+    chains = [_bench_chain(chain) for chain in read_chains(path)]
     if not chains:
         raise InputError("holds no LOD object", str(path))
     ids = [chain.object_id for chain in chains]
@@ -205,108 +201,37 @@ def read_chain(
     return chain
 
 
-def _gltf_chains(path: str | Path) -> list[BenchChain]:
-    from .io.gltf import read_lod_gltf
-
-    chains = []
-    for obj in read_lod_gltf(path):
-        levels = [
-            BenchLevel(
-                name=lv.name,
-                positions=lv.positions,
-                faces=lv.faces if lv.kind == "mesh" else None,
-                colors=lv.colors,
-                point_size=float(lv.extras.get("point_size_px") or 1.0),
-                design_distance=lv.extras.get("design_distance"),
-            )
-            for lv in obj.levels
-        ]
-        chains.append(
-            BenchChain(
-                object_id=obj.object_id,
-                levels=levels,
-                cutoffs=[float(c) for c in obj.extras["cutoffs"]],
-                origin=obj.origin,
-                center=np.asarray(obj.extras.get("center", [0.0, 0.0, 0.0]), dtype=np.float64),
-                alpha=float(obj.extras["alpha"]),
-            )
+def _bench_level(level: Level) -> BenchLevel:
+    """The geometry and point size a :class:`Level` read back draws with."""
+    if level.kind == "mesh":
+        assert level.mesh is not None
+        return BenchLevel(
+            name=level.name,
+            positions=level.mesh.vertices,
+            faces=level.mesh.faces,
+            colors=level.mesh.vertex_colors,
+            design_distance=level.design_distance,
         )
-    return chains
+    assert level.points is not None
+    return BenchLevel(
+        name=level.name,
+        positions=level.points.positions,
+        colors=level.points.colors,
+        point_size=level.params.point_size if level.params is not None else 1.0,
+        design_distance=level.design_distance,
+    )
 
 
-_MFSTRING = re.compile(r'"((?:[^"\\]|\\.)*)"')
-
-
-def _metadata(node: etree._Element) -> dict[str, str]:
-    """Name → value text of the ``Metadata*`` entries in ``node``'s lodconvert ``MetadataSet``;
-    MFString values unquoted (their first string)."""
-    entries: dict[str, str] = {}
-    for meta in node.iterfind("MetadataSet[@name='lodconvert']/*"):
-        value = meta.get("value", "")
-        if meta.tag == "MetadataString":
-            strings = _MFSTRING.findall(value)
-            value = re.sub(r"\\(.)", r"\1", strings[0]) if strings else ""
-        entries[meta.get("name", "")] = value
-    return entries
-
-
-def _floats(text: str | None) -> list[float]:
-    return [float(v) for v in (text or "").replace(",", " ").split()]
-
-
-def _x3d_chains(path: str | Path) -> list[BenchChain]:
-    """Chains of an X3D file: geometry from :func:`~lodconvert.io.x3d.read_x3d_points`, and
-    from each ``LOD`` its ``range`` (the cutoffs) and ``center``, α and the object id (the
-    lodconvert metadata of its Transform) and the level Groups' point sizes (theirs)."""
-    from .io.x3d import read_x3d_points
-
-    geometry = read_x3d_points(path)  # raises InputError for unreadable or malformed files
-    chains = []
-    for _, element in etree.iterparse(str(path), events=("end",)):
-        if element.tag == "Shape":
-            element.clear()  # geometry is read above: keep the tree small
-            continue
-        if element.tag != "LOD":
-            continue
-        # the chain's metadata is on the enclosing Transform (or, in older files, the LOD)
-        parent = element.getparent()
-        chain_meta = {**(_metadata(parent) if parent is not None else {}), **_metadata(element)}
-        levels, translation = [], np.zeros(3)
-        for group in element.iterfind("Group[@DEF]"):
-            meta = _metadata(group)
-            name = meta.get("level") or group.get("DEF")
-            part = geometry.get(group.get("DEF"))
-            if part is not None:
-                translation = part.translation
-            design = _floats(meta.get("design_distance"))
-            levels.append(
-                BenchLevel(
-                    name=name,
-                    positions=part.coordinates if part is not None else np.zeros((0, 3)),
-                    faces=part.index if part is not None else None,
-                    colors=part.colors if part is not None else None,
-                    point_size=(_floats(meta.get("point_size_px")) or [1.0])[0],
-                    design_distance=design[0] if design else None,
-                )
-            )
-        center = _floats(element.get("center")) or [0.0, 0.0, 0.0]
-        alpha = _floats(chain_meta.get("alpha"))
-        if not levels or not alpha:
-            raise InputError(
-                "is not an X3D file lodconvert wrote (an LOD without its metadata)", str(path)
-            )
-        chains.append(
-            BenchChain(
-                object_id=chain_meta.get("object_id") or element.get("DEF", ""),
-                levels=levels,
-                cutoffs=_floats(element.get("range")),
-                origin=translation,
-                center=np.asarray(center, dtype=np.float64),
-                alpha=alpha[0],
-            )
-        )
-        element.clear()
-    return chains
+def _bench_chain(chain: LodChain) -> BenchChain:
+    """A chain read back by :func:`~lodconvert.io.readback.read_chains`, as the bench draws it."""
+    return BenchChain(
+        object_id=chain.object_id,
+        levels=[_bench_level(level) for level in chain.levels],
+        cutoffs=list(chain.cutoffs),
+        origin=chain.origin,
+        center=chain.center,
+        alpha=chain.alpha,
+    )
 
 
 def _reference_mesh(path: str | Path, chain: BenchChain) -> BenchLevel:

@@ -30,11 +30,11 @@ from lodconvert.evaluate import (
     level_window,
     match_references,
     point_pixel_size,
-    read_chains,
     sample_spacing,
     sample_surface,
     silhouette_scores,
 )
+from lodconvert.io.readback import read_chains
 from lodconvert.ranges import cutoff
 from lodconvert.scene import LodChain, PointCloud, SceneObject, Surface
 

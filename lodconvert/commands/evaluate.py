@@ -32,10 +32,10 @@ from ..evaluate import (
     evaluate_object,
     legend,
     match_references,
-    read_chains,
     stack_images,
 )
 from ..io.atomic import atomic_output
+from ..io.readback import read_chains
 from ..ranges import REFERENCE_VIEW
 from ..scene import LodChain, Surface
 
