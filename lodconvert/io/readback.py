@@ -19,7 +19,7 @@ from lxml import etree
 from ..errors import InputError
 from ..scene import BakeParams, Level, LodChain, PointCloud, Surface
 from .gltf import GltfObject, read_lod_gltf
-from .x3d import METADATA_SET, read_x3d_points
+from .x3d import METADATA_SET, read_x3d_points, x3d_read_errors
 
 
 def read_chains(path: str | Path) -> list[LodChain]:
@@ -177,14 +177,8 @@ def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
 
 
 def _x3d_chains(path: str | Path) -> list[LodChain]:
-    try:
+    with x3d_read_errors(path, "metadata"):
         objects = _x3d_facts(path)
-    except etree.XMLSyntaxError as err:
-        raise InputError(f"is not well-formed X3D: {err}", str(path)) from None
-    except OSError as err:
-        raise InputError(f"cannot be read: {err.strerror or err}", str(path)) from None
-    except ValueError as err:
-        raise InputError(f"holds malformed metadata: {err}", str(path)) from None
     if not objects:
         raise InputError("is not an X3D file written by lodconvert (no lodconvert LOD)", str(path))
     geometry = read_x3d_points(path)

@@ -512,7 +512,7 @@ def read_x3d_points(path: str | Path) -> dict[str, X3DLevel]:
     levels: dict[str, X3DLevel] = {}
     offsets: list[np.ndarray] = []
     groups: list[tuple[str | None, list[X3DLevel]]] = []
-    try:
+    with x3d_read_errors(path, "numbers or geometry"):
         events = etree.iterparse(str(path), events=("start", "end"))
         for event, element in events:
             if event == "start":
@@ -536,10 +536,18 @@ def read_x3d_points(path: str | Path) -> dict[str, X3DLevel]:
                     levels[name] = _join_shapes(parts)
         if events.root is None or events.root.tag != "X3D":
             raise InputError("is not an X3D document", str(path))
+    return levels
+
+
+@contextlib.contextmanager
+def x3d_read_errors(path: str | Path, malformed: str) -> Iterator[None]:
+    """Turn what reading an X3D file can raise into a one-line :class:`InputError` naming
+    ``path``; ``malformed`` says what a ``ValueError`` means (e.g. "numbers or geometry")."""
+    try:
+        yield
     except etree.XMLSyntaxError as err:
         raise InputError(f"is not well-formed X3D: {err}", str(path)) from None
     except OSError as err:
         raise InputError(f"cannot be read: {err.strerror or err}", str(path)) from None
     except ValueError as err:
-        raise InputError(f"holds malformed numbers or geometry: {err}", str(path)) from None
-    return levels
+        raise InputError(f"holds malformed {malformed}: {err}", str(path)) from None
