@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 
 from lodconvert.bake import NumpyBackend, get_backend  # noqa: E402
 from lodconvert.chain import ChainOptions, bake_chain  # noqa: E402
-from lodconvert.convert import read_scene  # noqa: E402
+from lodconvert.pipeline import read_scene  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 STANFORD = HERE.parents[1] / "shared" / "data" / "stanford"
@@ -50,7 +50,7 @@ def bake_times(obj, backend, runs: int) -> tuple[list[dict], float]:
     per_level: dict[str, list[float]] = {}
     totals, chain = [], None
     for _ in range(runs):
-        fresh = type(obj)(obj.id, type(obj.surface)(obj.surface.vertices, obj.surface.faces))
+        fresh = type(obj)(obj.id, type(obj.geometry)(obj.geometry.vertices, obj.geometry.faces))
         start = time.perf_counter()
         chain = bake_chain(fresh, ChainOptions(), backend)
         totals.append(time.perf_counter() - start)
@@ -72,8 +72,8 @@ def decimation(obj, counts: list[int], runs: int) -> list[dict]:
     """Quadric decimation to each vertex count: median time and the count reached."""
     import fast_simplification
 
-    v = obj.surface.vertices.astype(np.float32)
-    f = obj.surface.faces.astype(np.int32)
+    v = obj.geometry.vertices.astype(np.float32)
+    f = obj.geometry.faces.astype(np.int32)
     rows = []
     for target in counts:
         reduction = 1.0 - target / len(v)
@@ -90,10 +90,10 @@ def peak_memory(path: Path) -> dict:
     """Peak RSS (MiB) of a fresh process that loads ``path`` and bakes the default chain."""
     code = (
         "import resource,sys,time;"
-        "from lodconvert.convert import read_scene;"
+        "from lodconvert.pipeline import read_scene;"
         "from lodconvert.chain import ChainOptions,bake_chain;"
         "from lodconvert.bake import NumpyBackend;"
-        f"o=read_scene({str(path)!r}).objects[0];"
+        f"o=next(read_scene({str(path)!r}).with_geometry());"
         "base=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss;"
         "t=time.perf_counter();bake_chain(o,ChainOptions(),NumpyBackend());t=time.perf_counter()-t;"
         "peak=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss;"
@@ -141,8 +141,8 @@ def main() -> None:
         if not path.exists():
             lines += [f"## {name}: skipped ({path} absent)", ""]
             continue
-        obj = read_scene(path).objects[0]
-        n_v, n_f = len(obj.surface.vertices), len(obj.surface.faces)
+        obj = next(read_scene(path).with_geometry())
+        n_v, n_f = len(obj.geometry.vertices), len(obj.geometry.faces)
         numpy_rows, numpy_total = bake_times(obj, NumpyBackend(), args.runs)
         gl_rows, gl_total = bake_times(obj, gl, args.gl_runs) if gl else ([], float("nan"))
         dec = decimation(obj, [r["points"] for r in numpy_rows], args.runs)

@@ -41,7 +41,6 @@ from tables import markdown_table
 import lodconvert
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import DEFAULT_INSET, DEFAULT_SPACING_PX, ChainOptions, bake_chain
-from lodconvert.convert import read_scene
 from lodconvert.evaluate import (
     LevelScores,
     ObjectReport,
@@ -57,7 +56,8 @@ from lodconvert.evaluate import (
     stack_images,
 )
 from lodconvert.io.readback import read_chains
-from lodconvert.scene import LodChain, SceneObject, Surface
+from lodconvert.model import LodChain, Node, Surface
+from lodconvert.pipeline import read_scene
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -119,15 +119,15 @@ class Session:
     def __init__(
         self,
         name: str,
-        obj: SceneObject,
+        obj: Node,
         protocol: Protocol,
         renderers: tuple[SilhouetteRenderer, SilhouetteRenderer],
         scratch: Path,
     ) -> None:
         self.name, self.obj, self.protocol, self.scratch = name, obj, protocol, scratch
         self.small, large = renderers
-        lo, hi = obj.surface.bounds
-        source = dataclasses.replace(obj.surface, vertices=obj.surface.vertices - (lo + hi) / 2)
+        lo, hi = obj.geometry.bounds
+        source = obj.geometry.translated(-(lo + hi) / 2)
         self.refs = ReferenceRenders(self.small, source, np.zeros(3), protocol.views)
         self.range_refs = ReferenceRenders(large, source, np.zeros(3), protocol.views)
 
@@ -231,7 +231,7 @@ def budgets(name: str, vertices: int) -> list[int]:
     return [round(c * vertices / paper_vertices) for c in counts]
 
 
-def resolution_for(obj: SceneObject, target: int, known: dict[int, int]) -> int:
+def resolution_for(obj: Node, target: int, known: dict[int, int]) -> int:
     """The resolution whose point count is nearest ``target``. Counts grow about as T3²:
     each guess scales the nearest known resolution by √(target / count). ``known`` maps
     resolutions to counts already baked, and is extended."""
@@ -265,7 +265,7 @@ def paper_section(session: Session, default: LodChain) -> dict[str, Any]:
     """Five-level chains at the paper's budgets: the budgets, resolutions found and, per
     variant of :data:`PAPER_VARIANTS`, the protocol scores of the four baked levels. The
     search starts from the default chain's resolutions and counts."""
-    targets = budgets(session.name, len(session.obj.surface.vertices))
+    targets = budgets(session.name, len(session.obj.geometry.vertices))
     known = {lv.params.resolution: lv.count for lv in default.levels[1:]}
     resolutions = [resolution_for(session.obj, target, known) for target in targets]
     log(f"{session.name}: paper budgets {targets} → T3 {resolutions}")
@@ -300,7 +300,7 @@ def connected_parts(surface: Surface) -> int:
 def measure(name: str, session: Session) -> dict[str, Any]:
     """Every section for one model."""
     result = default_section(session)
-    result["parts"] = connected_parts(session.obj.surface)
+    result["parts"] = connected_parts(session.obj.geometry)
     result["qem"] = qem_section(session)
     result["paper"] = paper_section(session, result["chain"])
     if name in SWEEP_MODELS:
@@ -792,7 +792,7 @@ def main(argv: list[str] | None = None) -> int:
                     log(f"skipping {name}: {path} is absent")
                     continue
                 log(f"{name}: reading {path.name}")
-                (obj,) = read_scene(path).objects
+                (obj,) = list(read_scene(path).with_geometry())
                 session = Session(name, obj, protocol, renderers, Path(scratch))
                 try:
                     results[name] = measure(name, session)

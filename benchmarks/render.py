@@ -39,7 +39,7 @@ from lodconvert.commands.bench import (
     bench_view_text,
     speedup_of,
 )
-from lodconvert.convert import convert
+from lodconvert.pipeline import convert
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

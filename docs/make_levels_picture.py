@@ -17,7 +17,7 @@ from PIL import Image, ImageDraw
 from lodconvert.bake import NumpyBackend
 from lodconvert.bake.grid import Grid
 from lodconvert.chain import ChainOptions, bake_chain
-from lodconvert.convert import read_scene
+from lodconvert.pipeline import read_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 PANEL = 360

@@ -19,20 +19,18 @@ from pathlib import Path
 
 from .chain import ChainOptions
 from .errors import InputError, LodConvertError, UsageError
+from .model import LodChain, Node, Scene
 from .ranges import cutoffs
-from .scene import LodChain, Scene, SceneObject
 
 
 def read(path: str | Path) -> Scene:
     """Read a supported input file into a :class:`Scene` of objects."""
-    from .convert import read_scene
+    from .pipeline import read_scene
 
     return read_scene(path)
 
 
-def bake_levels(
-    obj: SceneObject, options: ChainOptions | None = None, backend: str = "auto"
-) -> LodChain:
+def bake_levels(obj: Node, options: ChainOptions | None = None, backend: str = "auto") -> LodChain:
     """Bake one object's LOD chain (see :mod:`lodconvert.chain` for how defaults are derived)."""
     from .bake import get_backend
     from .chain import bake_chain
@@ -55,7 +53,7 @@ def write(
 
 def convert(input_path: str | Path, output_path: str | Path, **kwargs: object) -> dict:
     """Read, bake and write in one call; return the report (see :mod:`lodconvert.convert`)."""
-    from .convert import convert as _convert
+    from .pipeline import convert as _convert
 
     return _convert(input_path, output_path, **kwargs)  # type: ignore[arg-type]
 

@@ -55,8 +55,8 @@ from .evaluate import look_at, perspective
 from .glcontext import create_context
 from .io import suffix_of
 from .io.readback import read_chains
+from .model import Level, LodChain
 from .ranges import REFERENCE_VIEW, ReferenceView
-from .scene import Level, LodChain
 
 if TYPE_CHECKING:
     import moderngl
@@ -192,7 +192,7 @@ def read_chain(
     chain.objects = len(chains)
     if reference is not None:
         chain.reference = _reference_mesh(reference, chain)
-    elif chain.levels[0].kind == "mesh":
+    elif chain.levels[0].faces is not None:
         chain.reference = chain.levels[0]
     else:
         raise InputError(
@@ -203,7 +203,7 @@ def read_chain(
 
 def _bench_level(level: Level) -> BenchLevel:
     """The geometry and point size a :class:`Level` read back draws with."""
-    if level.kind == "mesh":
+    if not level.is_points:
         assert level.mesh is not None
         return BenchLevel(
             name=level.name,
@@ -236,17 +236,16 @@ def _bench_chain(chain: LodChain) -> BenchChain:
 
 def _reference_mesh(path: str | Path, chain: BenchChain) -> BenchLevel:
     """The original mesh for ``chain`` from a mesh file (world coordinates → chain origin)."""
-    from .convert import read_scene
+    from .pipeline import read_scene
 
     scene = read_scene(path)
-    matches = [obj for obj in scene.objects if obj.id == chain.object_id]
-    if not matches and len(scene.objects) == 1:
-        matches = scene.objects
+    nodes = list(scene.with_geometry())
+    matches = [obj for obj in nodes if obj.id == chain.object_id]
+    if not matches and len(nodes) == 1:
+        matches = nodes
     if not matches:
-        raise InputError(
-            f"has {len(scene.objects)} objects and none is {chain.object_id!r}", str(path)
-        )
-    surface = matches[0].surface
+        raise InputError(f"has {len(nodes)} objects and none is {chain.object_id!r}", str(path))
+    surface = matches[0].geometry
     return BenchLevel(
         name="original",
         positions=surface.vertices - chain.origin,

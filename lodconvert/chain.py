@@ -26,6 +26,7 @@ import numpy as np
 
 from .bake import Backend, bake_points
 from .errors import InputError, UsageError
+from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
 from .ranges import (
     DEFAULT_BETA,
     DEFAULT_GAMMA,
@@ -36,7 +37,6 @@ from .ranges import (
     default_xs,
     projected_px,
 )
-from .scene import BakeParams, Level, LodChain, PointCloud, SceneObject, Surface
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
@@ -151,7 +151,7 @@ def default_point_size(pitch: float, distance: float, opts: ChainOptions) -> flo
     return max(1.0, math.ceil(100 * size - 1e-9) / 100)
 
 
-def outward_sign(surface: Surface) -> float:
+def outward_sign(surface: Mesh) -> float:
     """+1 when the faces wind so that their normals point out of the solid (positive signed
     volume), -1 when they point in, 0 for a surface that encloses no volume (flat or open sheet).
 
@@ -168,7 +168,7 @@ def outward_sign(surface: Surface) -> float:
     return surface.derived("outward-sign", compute)
 
 
-def inset_points(cloud: PointCloud, surface: Surface, depth: float) -> PointCloud:
+def inset_points(cloud: PointCloud, surface: Mesh, depth: float) -> PointCloud:
     """``cloud`` with every point moved ``depth`` into the solid along its face normal.
 
     A point is drawn as a square one pitch wide centred on it. On the surface, the squares of
@@ -182,8 +182,8 @@ def inset_points(cloud: PointCloud, surface: Surface, depth: float) -> PointClou
     return replace(cloud, positions=cloud.positions + depth * inward)
 
 
-def _check_geometry(obj: SceneObject) -> None:
-    surface = obj.surface
+def _check_geometry(obj: Node) -> None:
+    surface = obj.geometry
     if len(surface.faces) == 0:
         raise InputError("has no faces (a point cloud or empty mesh cannot be baked)", obj.id)
     if not np.isfinite(surface.vertices).all():
@@ -215,7 +215,7 @@ def _params_for(
 
 
 def _decimated(
-    level: Level, surface: Surface, previous: int, object_id: str, warn: Progress | None
+    level: Level, surface: Mesh, previous: int, object_id: str, warn: Progress | None
 ) -> Level:
     """The ``qem`` level replacing point level ``level``: the source decimated to the point
     level's count. When decimation leaves no triangle or cannot get below ``previous`` (the
@@ -237,11 +237,11 @@ def _decimated(
             f"{object_id}: {level.name} decimated to {len(mesh.vertices):,} vertices, not "
             f"{level.count:,}: the mesh's separate parts and borders stop the collapses"
         )
-    return Level(name=level.name, kind="mesh", mesh=mesh, design_distance=level.design_distance)
+    return Level(name=level.name, kind="qem", mesh=mesh, design_distance=level.design_distance)
 
 
 def bake_chain(
-    obj: SceneObject,
+    obj: Node,
     opts: ChainOptions,
     backend: Backend,
     progress: Progress | None = None,
@@ -250,9 +250,9 @@ def bake_chain(
     """Bake ``obj`` into a chain (levels relative to its bounding-box centre)."""
     opts.check()
     _check_geometry(obj)
-    world_bounds = obj.surface.bounds
+    world_bounds = obj.geometry.bounds
     origin = (world_bounds[0] + world_bounds[1]) / 2.0
-    surface = replace(obj.surface, vertices=obj.surface.vertices - origin)
+    surface = obj.geometry.translated(-origin)
     bounds = world_bounds - origin
     alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
     longest = float((world_bounds[1] - world_bounds[0]).max())
@@ -321,5 +321,5 @@ def bake_chain(
         gamma=opts.gamma,
         xs=xs[: len(levels) - 1] + ([opts.cull] if culled else []),
         culled=culled,
-        metadata=dict(obj.metadata),
+        metadata=dict(obj.attributes),
     )

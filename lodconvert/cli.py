@@ -191,8 +191,8 @@ def run_convert(argv: Sequence[str]) -> int:
 
 
 def _convert(args: argparse.Namespace, console: Console) -> int:
-    from .convert import convert
     from .io.atomic import atomic_output
+    from .pipeline import convert
     from .viewer import check_library, write_page
 
     options = chain_options(args)

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -47,8 +47,8 @@ from PIL import Image, ImageDraw, ImageFont
 
 from .errors import InputError, LodConvertError
 from .glcontext import create_context
+from .model import Level, LodChain, Node, Surface
 from .ranges import REFERENCE_VIEW, ReferenceView, cutoff
-from .scene import Level, LodChain, SceneObject, Surface
 
 if TYPE_CHECKING:
     import moderngl
@@ -371,7 +371,7 @@ def level_window(chain: LodChain, index: int) -> tuple[float, float]:
 
 
 def _level_geometry(renderer: SilhouetteRenderer, level: Level) -> Geometry:
-    if level.kind == "mesh":
+    if not level.is_points:
         assert level.mesh is not None
         return renderer.mesh(level.mesh.vertices, level.mesh.faces)
     assert level.points is not None
@@ -386,7 +386,7 @@ def declared_pixel_size(
 ) -> float | None:
     """Width in pixels of ``renderer``'s render at which ``level``'s points are drawn from
     ``distance`` (:func:`point_pixel_size`); None for a mesh level."""
-    if level.kind != "pcd":
+    if not level.is_points:
         return None
     return point_pixel_size(
         level.params.point_size if level.params is not None else 1.0,
@@ -450,7 +450,7 @@ class _Scorer:
     def in_range(self, index: int, level: Level, geometry: Geometry) -> RangeScores:
         """:class:`RangeScores` of level ``index``."""
         near, middle = level_window(self.chain, index)
-        one_px = level.kind == "pcd"
+        one_px = level.is_points
         return RangeScores(
             near=self.score(level, geometry, near),
             middle=self.score(level, geometry, middle),
@@ -488,7 +488,7 @@ def evaluate_chain(
     :class:`SilhouetteRenderer` (its size then wins over ``size``).
     """
     if reference is None:
-        meshes = [lv.mesh for lv in chain.levels if lv.kind == "mesh" and lv.mesh is not None]
+        meshes = [lv.mesh for lv in chain.levels if not lv.is_points and lv.mesh is not None]
         if not meshes:
             raise LodConvertError(f"{chain.object_id}: no reference mesh to evaluate against")
         reference = meshes[0]
@@ -510,7 +510,7 @@ def evaluate_chain(
                 for k in distances_in_diagonals
             ]
             design = None
-            if at_design_distance and level.kind == "pcd" and level.design_distance:
+            if at_design_distance and level.is_points and level.design_distance:
                 design = scorer.score(level, geometry, level.design_distance, pixel_size)
             window = scorer.in_range(index, level, geometry) if in_range else None
             geometry.release()
@@ -597,7 +597,7 @@ def geometric_errors(
     errors = []
     for index in range(len(chain.levels)) if levels is None else levels:
         level = chain.levels[index]
-        if level.kind == "mesh":
+        if not level.is_points:
             assert level.mesh is not None
             points = sample_surface(level.mesh, samples)
         else:
@@ -627,7 +627,7 @@ def sample_spacing(surface: Surface, samples: int = DEFAULT_SAMPLES) -> float:
 
 
 def match_references(
-    objects: Sequence[SceneObject], chains: Sequence[LodChain], ref_name: str, out_name: str
+    objects: Sequence[Node], chains: Sequence[LodChain], ref_name: str, out_name: str
 ) -> list[Surface]:
     """For each chain, the source object it was baked from, relative to the chain's origin.
 
@@ -643,7 +643,7 @@ def match_references(
             obj = objects[0]
         if obj is None:
             raise InputError(f"has no object {chain.object_id!r}, which {out_name} holds", ref_name)
-        lo, hi = obj.surface.bounds
+        lo, hi = obj.geometry.bounds
         shift = float(np.linalg.norm((lo + hi) / 2.0 - chain.origin)) / chain.alpha
         diagonal = float(np.linalg.norm(hi - lo))
         if shift > BOUNDS_TOLERANCE or abs(diagonal - chain.alpha) > BOUNDS_TOLERANCE * chain.alpha:
@@ -653,7 +653,7 @@ def match_references(
                 f"in {out_name} (was it converted from this file?)",
                 ref_name,
             )
-        surfaces.append(replace(obj.surface, vertices=obj.surface.vertices - chain.origin))
+        surfaces.append(obj.geometry.translated(-chain.origin))
     return surfaces
 
 
@@ -793,7 +793,7 @@ def contact_sheet(
         masks = renderer.render(geometry, center, distance, directions, size or 1.0)
         geometry.release()
         f = silhouette_scores(source, masks)["f"]
-        unit = "points" if level.kind == "pcd" else "vertices"
+        unit = "points" if level.is_points else "vertices"
         columns.append((f"{level.name} {level.count:,} {unit}\nF {f:.3f}", masks))
     top, left, side = _crop_box([masks for _, masks in columns], margin=4)
     font = ImageFont.load_default(size=SHEET_FONT_PX)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from lodconvert.scene import SceneObject, Surface
+from lodconvert.model import Node, Surface
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"
@@ -70,13 +70,13 @@ def bunny_mesh() -> trimesh.Trimesh:
 
 
 @pytest.fixture(scope="session")
-def bunny(bunny_mesh: trimesh.Trimesh) -> SceneObject:
-    """The bunny as a SceneObject."""
-    return SceneObject("bunny", surface_of(bunny_mesh))
+def bunny(bunny_mesh: trimesh.Trimesh) -> Node:
+    """The bunny as a Node."""
+    return Node("bunny", surface_of(bunny_mesh))
 
 
 @pytest.fixture
-def torus() -> SceneObject:
+def torus() -> Node:
     """A torus (major radius 1, minor 0.3) with a colour gradient over its vertices."""
     mesh = trimesh.creation.torus(
         major_radius=1.0, minor_radius=0.3, major_sections=64, minor_sections=24
@@ -85,4 +85,4 @@ def torus() -> SceneObject:
     t = (v[:, 0] - v[:, 0].min()) / np.ptp(v[:, 0])
     colors = np.stack([255 * t, 128 + 0 * t, 255 * (1 - t), 255 + 0 * t], axis=1)
     mesh.visual.vertex_colors = np.rint(colors).astype(np.uint8)
-    return SceneObject("torus", surface_of(mesh))
+    return Node("torus", surface_of(mesh))

@@ -8,7 +8,7 @@ import trimesh
 
 from lodconvert.bake import NumpyBackend, bake_points
 from lodconvert.bake.pcd import occupied_hits
-from lodconvert.scene import BakeParams, SceneObject, Surface
+from lodconvert.model import BakeParams, Node, Surface
 
 from .conftest import surface_of
 
@@ -24,43 +24,43 @@ def distances_to(mesh: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
 
 
 @pytest.mark.parametrize("resolution", [24, 64])
-def test_points_lie_within_one_pitch_of_the_torus(torus: SceneObject, resolution: int) -> None:
-    mesh = trimesh.Trimesh(torus.surface.vertices, torus.surface.faces, process=False)
-    cloud, grid = bake_points(torus.surface, params(resolution), NumpyBackend())
+def test_points_lie_within_one_pitch_of_the_torus(torus: Node, resolution: int) -> None:
+    mesh = trimesh.Trimesh(torus.geometry.vertices, torus.geometry.faces, process=False)
+    cloud, grid = bake_points(torus.geometry, params(resolution), NumpyBackend())
     assert len(cloud) > 100
     assert distances_to(mesh, cloud.positions).max() <= grid.pitch
 
 
-def test_points_cover_the_whole_extent(torus: SceneObject) -> None:
-    cloud, grid = bake_points(torus.surface, params(32), NumpyBackend())
-    bounds = torus.surface.bounds
+def test_points_cover_the_whole_extent(torus: Node) -> None:
+    cloud, grid = bake_points(torus.geometry, params(32), NumpyBackend())
+    bounds = torus.geometry.bounds
     assert np.all(cloud.positions.min(axis=0) <= bounds[0] + grid.pitch)
     assert np.all(cloud.positions.max(axis=0) >= bounds[1] - grid.pitch)
 
 
-def test_one_point_per_cell_and_counts_fall_with_resolution(torus: SceneObject) -> None:
+def test_one_point_per_cell_and_counts_fall_with_resolution(torus: Node) -> None:
     counts = []
     for resolution in (96, 48, 24, 12):
-        cloud, grid = bake_points(torus.surface, params(resolution), NumpyBackend())
+        cloud, grid = bake_points(torus.geometry, params(resolution), NumpyBackend())
         keys = grid.cell_keys(cloud.positions)
         assert len(np.unique(keys)) == len(keys)
         counts.append(len(cloud))
     assert counts == sorted(counts, reverse=True) and len(set(counts)) == 4
 
 
-def test_hole_filters_only_add_points(bunny: SceneObject) -> None:
+def test_hole_filters_only_add_points(bunny: Node) -> None:
     backend = NumpyBackend()
-    grid, plain, _ = occupied_hits(bunny.surface, params(64, "none"), backend)
+    grid, plain, _ = occupied_hits(bunny.geometry, params(64, "none"), backend)
     plain_cells = set(grid.cell_keys(plain).tolist())
     for kind in ("median", "gaussian"):
-        _, filled, _ = occupied_hits(bunny.surface, params(64, kind), backend)
+        _, filled, _ = occupied_hits(bunny.geometry, params(64, kind), backend)
         cells = set(grid.cell_keys(filled).tolist())
         assert plain_cells <= cells
         assert len(cells) > len(plain_cells)  # the bunny's holes and slab edges get filled
 
 
-def test_colours_come_from_the_surface(torus: SceneObject) -> None:
-    cloud, _ = bake_points(torus.surface, params(48), NumpyBackend())
+def test_colours_come_from_the_surface(torus: Node) -> None:
+    cloud, _ = bake_points(torus.geometry, params(48), NumpyBackend())
     x = cloud.positions[:, 0]
     red, blue = cloud.colors[:, 0].astype(float), cloud.colors[:, 2].astype(float)
     # the torus fixture runs from blue (low x) to red (high x)
@@ -69,8 +69,8 @@ def test_colours_come_from_the_surface(torus: SceneObject) -> None:
     assert np.all(cloud.colors[:, 1] == 128)
 
 
-def test_normals_are_unit_and_point_away_from_the_torus_core(torus: SceneObject) -> None:
-    cloud, _ = bake_points(torus.surface, params(48), NumpyBackend())
+def test_normals_are_unit_and_point_away_from_the_torus_core(torus: Node) -> None:
+    cloud, _ = bake_points(torus.geometry, params(48), NumpyBackend())
     assert np.allclose(np.linalg.norm(cloud.normals, axis=1), 1.0, atol=1e-5)
     p = cloud.positions
     ring = p.copy()
@@ -82,9 +82,9 @@ def test_normals_are_unit_and_point_away_from_the_torus_core(torus: SceneObject)
     assert np.mean(np.einsum("ij,ij->i", outward, cloud.normals) > 0.5) > 0.98
 
 
-def test_baking_is_deterministic(bunny: SceneObject) -> None:
-    a, _ = bake_points(bunny.surface, params(48), NumpyBackend())
-    b, _ = bake_points(bunny.surface, params(48), NumpyBackend())
+def test_baking_is_deterministic(bunny: Node) -> None:
+    a, _ = bake_points(bunny.geometry, params(48), NumpyBackend())
+    b, _ = bake_points(bunny.geometry, params(48), NumpyBackend())
     assert np.array_equal(a.positions, b.positions)
     assert np.array_equal(a.colors, b.colors)
 
@@ -110,9 +110,9 @@ def test_thin_rod_is_not_lost() -> None:
 
 
 @pytest.mark.slow
-def test_bunny_points_lie_on_the_scan(bunny_mesh: trimesh.Trimesh, bunny: SceneObject) -> None:
+def test_bunny_points_lie_on_the_scan(bunny_mesh: trimesh.Trimesh, bunny: Node) -> None:
     for resolution in (128, 64, 32):
-        cloud, grid = bake_points(bunny.surface, params(resolution), NumpyBackend())
+        cloud, grid = bake_points(bunny.geometry, params(resolution), NumpyBackend())
         assert distances_to(bunny_mesh, cloud.positions).max() <= grid.pitch
 
 
@@ -127,11 +127,11 @@ def test_a_texture_without_uvs_falls_back_to_the_material_colour() -> None:
     assert np.all(cloud.colors == [10, 20, 30, 255])
 
 
-def test_georeferenced_coordinates_bake_like_centred_ones(torus: SceneObject) -> None:
+def test_georeferenced_coordinates_bake_like_centred_ones(torus: Node) -> None:
     """Far from the origin (UTM-sized values) the baker keeps its precision."""
     offset = np.array([5.0e6, 3.0e5, 400.0])
-    moved = Surface(torus.surface.vertices + offset, torus.surface.faces)
-    near, grid = bake_points(torus.surface, params(64, "none"), NumpyBackend())
+    moved = Surface(torus.geometry.vertices + offset, torus.geometry.faces)
+    near, grid = bake_points(torus.geometry, params(64, "none"), NumpyBackend())
     far, _ = bake_points(moved, params(64, "none"), NumpyBackend())
     assert len(far) == len(near)
     error = np.abs(far.positions - offset - near.positions).max(axis=1)

@@ -23,9 +23,9 @@ from lodconvert.bench import (
     spheres_in_frustum,
 )
 from lodconvert.cli import main
-from lodconvert.convert import convert
 from lodconvert.errors import InputError, LodConvertError
 from lodconvert.evaluate import look_at, perspective
+from lodconvert.pipeline import convert
 
 from .conftest import SAMPLE, require
 

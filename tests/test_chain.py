@@ -11,28 +11,28 @@ import trimesh
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.errors import InputError, UsageError
+from lodconvert.model import Node, Surface
 from lodconvert.ranges import projected_px
-from lodconvert.scene import SceneObject, Surface
 
 from .conftest import degenerate_meshes, surface_of
 
 
-def chain_of(obj: SceneObject, **options):
+def chain_of(obj: Node, **options):
     return bake_chain(obj, ChainOptions(**options), NumpyBackend())
 
 
-def test_default_chain_is_mesh_then_three_point_levels(bunny: SceneObject) -> None:
+def test_default_chain_is_mesh_then_three_point_levels(bunny: Node) -> None:
     chain = chain_of(bunny)
     assert [lv.name for lv in chain.levels] == ["LOD4", "LOD3", "LOD2", "LOD1"]
     assert [lv.kind for lv in chain.levels] == ["mesh", "pcd", "pcd", "pcd"]
     counts = [lv.count for lv in chain.levels]
-    assert counts[0] == len(bunny.surface.vertices)
+    assert counts[0] == len(bunny.geometry.vertices)
     assert all(b < a for a, b in itertools.pairwise(counts)), counts
 
 
-def test_cutoffs_follow_alpha_beta_gamma(bunny: SceneObject) -> None:
+def test_cutoffs_follow_alpha_beta_gamma(bunny: Node) -> None:
     chain = chain_of(bunny, gamma=20.0)
-    lo, hi = bunny.surface.bounds
+    lo, hi = bunny.geometry.bounds
     alpha = float(np.linalg.norm(hi - lo))
     assert chain.alpha == pytest.approx(alpha)
     expected = [alpha * 3.0 * 20.0**x for x in (0.33, 0.66, 1.0)]
@@ -40,7 +40,7 @@ def test_cutoffs_follow_alpha_beta_gamma(bunny: SceneObject) -> None:
     assert np.allclose(chain.origin, (lo + hi) / 2)
 
 
-def test_default_resolution_keeps_spacing_within_budget(bunny: SceneObject) -> None:
+def test_default_resolution_keeps_spacing_within_budget(bunny: Node) -> None:
     opts = ChainOptions()
     chain = chain_of(bunny)
     for level in chain.levels[1:]:
@@ -53,7 +53,7 @@ def test_default_resolution_keeps_spacing_within_budget(bunny: SceneObject) -> N
     assert [lv.design_distance for lv in chain.levels[1:]] == pytest.approx(chain.cutoffs)
 
 
-def test_explicit_parameters_are_used(bunny: SceneObject) -> None:
+def test_explicit_parameters_are_used(bunny: Node) -> None:
     chain = chain_of(bunny, resolutions=(40, 20, 10), slices=(20, 10, 5), point_sizes=(3, 4, 5))
     params = [lv.params for lv in chain.levels[1:]]
     assert [p.resolution for p in params] == [40, 20, 10]
@@ -61,7 +61,7 @@ def test_explicit_parameters_are_used(bunny: SceneObject) -> None:
     assert [p.point_size for p in params] == [3, 4, 5]
 
 
-def test_a_level_heavier_than_the_one_before_is_lowered(torus: SceneObject) -> None:
+def test_a_level_heavier_than_the_one_before_is_lowered(torus: Node) -> None:
     warnings: list[str] = []
     chain = bake_chain(
         torus, ChainOptions(resolutions=(64, 20, 10)), NumpyBackend(), warn=warnings.append
@@ -71,14 +71,14 @@ def test_a_level_heavier_than_the_one_before_is_lowered(torus: SceneObject) -> N
     assert any("LOD3" in w and "64" in w for w in warnings)
 
 
-def test_no_mesh_bakes_every_level(torus: SceneObject) -> None:
+def test_no_mesh_bakes_every_level(torus: Node) -> None:
     chain = chain_of(torus, keep_mesh=False)
     assert [lv.kind for lv in chain.levels] == ["pcd"] * 4
     counts = [lv.count for lv in chain.levels]
     assert all(b < a for a, b in itertools.pairwise(counts))
 
 
-def test_levels_and_exponents(torus: SceneObject) -> None:
+def test_levels_and_exponents(torus: Node) -> None:
     chain = chain_of(torus, levels=3)
     assert [lv.name for lv in chain.levels] == ["LOD4", "LOD3", "LOD2"]
     assert chain.xs == [0.5, 1.0]
@@ -86,7 +86,7 @@ def test_levels_and_exponents(torus: SceneObject) -> None:
         chain_of(torus, levels=3, xs=(0.3, 0.6, 1.0))
 
 
-def test_cull_adds_a_last_cutoff(torus: SceneObject) -> None:
+def test_cull_adds_a_last_cutoff(torus: Node) -> None:
     chain = chain_of(torus, cull=1.5)
     assert chain.culled
     assert len(chain.cutoffs) == len(chain.levels)
@@ -95,9 +95,9 @@ def test_cull_adds_a_last_cutoff(torus: SceneObject) -> None:
         chain_of(torus, cull=0.9)
 
 
-def test_far_from_origin_levels_stay_small(torus: SceneObject) -> None:
+def test_far_from_origin_levels_stay_small(torus: Node) -> None:
     offset = np.array([500000.0, 5400000.0, 100.0])
-    moved = SceneObject("far", Surface(torus.surface.vertices + offset, torus.surface.faces))
+    moved = Node("far", Surface(torus.geometry.vertices + offset, torus.geometry.faces))
     chain = chain_of(moved)
     assert np.allclose(chain.origin, offset, atol=1e-6)
     near = chain_of(torus)
@@ -110,7 +110,7 @@ def test_far_from_origin_levels_stay_small(torus: SceneObject) -> None:
 def test_degenerate_but_valid_objects_convert(mesh: trimesh.Trimesh) -> None:
     warnings: list[str] = []
     chain = bake_chain(
-        SceneObject("thing", surface_of(mesh)), ChainOptions(), NumpyBackend(), warn=warnings.append
+        Node("thing", surface_of(mesh)), ChainOptions(), NumpyBackend(), warn=warnings.append
     )
     counts = [lv.count for lv in chain.levels]
     assert len(chain.levels) >= 2 and counts[1] >= 1
@@ -123,7 +123,7 @@ def test_degenerate_but_valid_objects_convert(mesh: trimesh.Trimesh) -> None:
 def test_bad_geometry_is_an_input_error() -> None:
     nan = Surface(np.array([[0, 0, 0], [1, np.nan, 0], [0, 1, 0]]), np.array([[0, 1, 2]]))
     with pytest.raises(InputError, match="NaN"):
-        chain_of(SceneObject("bad", nan))
+        chain_of(Node("bad", nan))
     empty = Surface(np.zeros((3, 3)), np.zeros((0, 3), dtype=np.int64))
     with pytest.raises(InputError, match="no faces"):
-        chain_of(SceneObject("empty", empty))
+        chain_of(Node("empty", empty))

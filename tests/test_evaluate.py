@@ -35,8 +35,8 @@ from lodconvert.evaluate import (
     silhouette_scores,
 )
 from lodconvert.io.readback import read_chains
+from lodconvert.model import LodChain, Node, PointCloud, Surface
 from lodconvert.ranges import cutoff
-from lodconvert.scene import LodChain, PointCloud, SceneObject, Surface
 
 from .conftest import degenerate_meshes, require, surface_of
 
@@ -62,7 +62,7 @@ def renderer() -> Iterator[SilhouetteRenderer]:
 def torus_chain() -> LodChain:
     """The default chain (mesh + 3 point levels) of a torus of diagonal ≈ 3.7."""
     mesh = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3)
-    return bake_chain(SceneObject("torus", surface_of(mesh)), ChainOptions(), NumpyBackend())
+    return bake_chain(Node("torus", surface_of(mesh)), ChainOptions(), NumpyBackend())
 
 
 def evaluate(chain: LodChain, renderer: SilhouetteRenderer, **kwargs: object) -> list:
@@ -175,7 +175,7 @@ def test_level_windows_follow_the_cutoffs(torus_chain: LodChain) -> None:
     assert [middle for _, middle in windows] == pytest.approx(expected)
     assert windows[0][0] == pytest.approx(a * b)
     culled = bake_chain(
-        SceneObject("t", torus_chain.levels[0].mesh), ChainOptions(cull=2.0), NumpyBackend()
+        Node("t", torus_chain.levels[0].mesh), ChainOptions(cull=2.0), NumpyBackend()
     )
     assert level_window(culled, 3)[1] == pytest.approx(cutoff(a, b, g, 1.5))
 
@@ -189,14 +189,14 @@ def test_points_sit_half_a_pitch_inside_whatever_the_winding() -> None:
     inward = Surface(sphere.vertices, sphere.faces[:, ::-1].astype(np.int64))
     assert (outward_sign(outward), outward_sign(inward)) == (1.0, -1.0)
     for surface in (outward, inward):
-        chain = bake_chain(SceneObject("s", surface), ChainOptions(), NumpyBackend())
+        chain = bake_chain(Node("s", surface), ChainOptions(), NumpyBackend())
         for level in chain.levels[1:]:
             radius = np.linalg.norm(level.points.positions, axis=1)
             # on the sphere (within the faceting) less half a pitch
             assert np.median(radius) == pytest.approx(1.0 - 0.5 * level.spacing, abs=0.01)
     flat = Surface(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.0]]), np.array([[0, 1, 2]]))
     assert outward_sign(flat) == 0.0
-    chain = bake_chain(SceneObject("f", flat), ChainOptions(), NumpyBackend())
+    chain = bake_chain(Node("f", flat), ChainOptions(), NumpyBackend())
     assert np.all(chain.levels[1].points.positions[:, 2] == 0.0)  # no inside: left in place
 
 
@@ -204,7 +204,7 @@ def test_inset_points_follow_the_outline_better(
     torus_chain: LodChain, renderer: SilhouetteRenderer
 ) -> None:
     mesh = torus_chain.levels[0].mesh
-    on_surface = bake_chain(SceneObject("torus", mesh), ChainOptions(inset=0.0), NumpyBackend())
+    on_surface = bake_chain(Node("torus", mesh), ChainOptions(inset=0.0), NumpyBackend())
     inset, plain = evaluate(torus_chain, renderer)[1:], evaluate(on_surface, renderer)[1:]
     for a, b in zip(inset, plain, strict=True):
         assert a.count == b.count
@@ -217,8 +217,8 @@ def test_qem_levels_are_decimated_meshes_of_the_point_counts(
 ) -> None:
     mesh = torus_chain.levels[0].mesh
     options = ChainOptions(level_kinds=("pcd", "qem", "qem"))
-    chain = bake_chain(SceneObject("torus", mesh), options, NumpyBackend())
-    assert [lv.kind for lv in chain.levels] == ["mesh", "pcd", "mesh", "mesh"]
+    chain = bake_chain(Node("torus", mesh), options, NumpyBackend())
+    assert [lv.kind for lv in chain.levels] == ["mesh", "pcd", "qem", "qem"]
     counts = [lv.count for lv in chain.levels]
     assert all(b < a for a, b in itertools.pairwise(counts)), counts
     for qem, pcd in zip(chain.levels[2:], torus_chain.levels[2:], strict=True):
@@ -234,7 +234,7 @@ def test_qem_levels_are_decimated_meshes_of_the_point_counts(
 def test_qem_levels_that_cannot_be_lighter_stay_points(mesh: trimesh.Trimesh) -> None:
     warnings: list[str] = []
     options = ChainOptions(level_kinds=("qem",))
-    obj = SceneObject("thing", surface_of(mesh))
+    obj = Node("thing", surface_of(mesh))
     chain = bake_chain(obj, options, NumpyBackend(), warn=warnings.append)
     counts = [lv.count for lv in chain.levels]
     assert all(b < a for a, b in itertools.pairwise(counts)) and counts[-1] >= 1, counts
@@ -331,11 +331,11 @@ def test_references_are_matched_by_id_and_bounds(
     torus_chain: LodChain, written: dict[str, Path]
 ) -> None:
     (chain,) = read_chains(written[".glb"])
-    source = torus_chain.levels[0].mesh
-    right = SceneObject("anything", replace(source, vertices=source.vertices + chain.origin))
+    source = torus_chain.levels[0].mesh.parts[0]
+    right = Node("anything", replace(source, vertices=source.vertices + chain.origin))
     (surface,) = match_references([right], [chain], "ref.ply", "out.glb")
     np.testing.assert_allclose(surface.vertices, source.vertices)
-    bigger = SceneObject("torus", replace(source, vertices=source.vertices * 1.1))
+    bigger = Node("torus", replace(source, vertices=source.vertices * 1.1))
     with pytest.raises(InputError, match=r"does not match out\.glb"):
         match_references([bigger], [chain], "ref.ply", "out.glb")
     with pytest.raises(InputError, match="no object 'torus'"):
@@ -343,7 +343,7 @@ def test_references_are_matched_by_id_and_bounds(
 
 
 def test_object_report_is_json_ready(torus_chain: LodChain, renderer: SilhouetteRenderer) -> None:
-    source = torus_chain.levels[0].mesh
+    source = torus_chain.levels[0].mesh.parts[0]
     protocol = Protocol(views=4, size=SIZE, distances=(4.0,), samples=5_000, range_size=SIZE)
     references = ReferenceRenders(renderer, source, torus_chain.center, protocol.views)
     report = evaluate_object(references, torus_chain, protocol, range_references=references)

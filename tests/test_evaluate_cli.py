@@ -95,7 +95,7 @@ def test_level_kind_qem_writes_meshes_that_score_higher(outputs: dict[str, Path]
         assert result.returncode == 0 and result.stdout == "", result.stderr
         scores[key] = json.loads(path.read_text())["objects"][0]["levels"]
     kinds = [lv["scores"]["kind"] for lv in scores["qem"]]
-    assert kinds == ["mesh", "pcd", "mesh", "mesh"]
+    assert kinds == ["mesh", "pcd", "qem", "qem"]
     for qem, pcd in zip(scores["qem"][2:], scores["glb"][2:], strict=True):
         assert qem["scores"]["count"] <= pcd["scores"]["count"]
         assert qem["error"]["chamfer"] < pcd["error"]["chamfer"]

@@ -20,7 +20,7 @@ from lodconvert.bake.gl import GLBackend, gl_unavailable_reason
 from lodconvert.bake.grid import Grid, SlabHits
 from lodconvert.bake.pcd import occupied_hits
 from lodconvert.errors import LodConvertError
-from lodconvert.scene import BakeParams, Surface
+from lodconvert.model import BakeParams, Surface
 
 from .conftest import require
 

@@ -23,8 +23,8 @@ from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.errors import InputError
 from lodconvert.io import WRITERS, OutputInfo
 from lodconvert.io.gltf import SRGB_TO_LINEAR, read_lod_gltf, write_glb, write_gltf
+from lodconvert.model import LodChain, Node, PointCloud, Surface
 from lodconvert.ranges import screen_coverage
-from lodconvert.scene import LodChain, PointCloud, SceneObject, Surface
 
 from .conftest import require
 
@@ -48,7 +48,7 @@ WRITE = {".glb": write_glb, ".gltf": write_gltf}
 
 def _bake(surface: Surface, object_id: str, **options) -> LodChain:
     opts = ChainOptions(**{"resolutions": (32, 16, 8), **options})
-    return bake_chain(SceneObject(object_id, surface), opts, NumpyBackend())
+    return bake_chain(Node(object_id, surface), opts, NumpyBackend())
 
 
 def _coloured_sphere() -> Surface:
@@ -180,7 +180,7 @@ def test_khronos_validator_passes(
 
 
 def test_bunny_round_trips_and_validates(tmp_path, request, bunny):
-    chain = _bake(bunny.surface, "bunny", resolutions=(48, 24, 12))
+    chain = _bake(bunny.geometry, "bunny", resolutions=(48, 24, 12))
     path = _write(tmp_path, [chain], ".glb", "bunny")
     (obj,) = read_lod_gltf(path)
     assert [len(lv.positions) for lv in obj.levels] == [lv.count for lv in chain.levels]
@@ -304,7 +304,7 @@ def test_point_material_is_unlit(tmp_path, sphere_chain):
     assert point_material["pbrMetallicRoughness"]["baseColorFactor"] == [1.0, 1.0, 1.0, 1.0]
 
     red = np.array([255, 128, 0, 64], dtype=np.uint8)
-    mesh = replace(sphere_chain.levels[0].mesh, vertex_colors=None, base_color=red)
+    mesh = replace(sphere_chain.levels[0].mesh.parts[0], vertex_colors=None, base_color=red)
     chain = replace(sphere_chain, levels=[replace(sphere_chain.levels[0], mesh=mesh)], cutoffs=[])
     doc, _ = _load(_write(tmp_path, [chain], name="red"))
     mesh_material = doc["materials"][doc["meshes"][0]["primitives"][0]["material"]]
@@ -428,7 +428,7 @@ def test_texture_is_embedded_with_flipped_v(tmp_path, culled_chain):
     assert image["mimeType"] == "image/png"
     view = doc["bufferViews"][image["bufferView"]]
     png = blob[view["byteOffset"] : view["byteOffset"] + view["byteLength"]]
-    mesh = culled_chain.levels[0].mesh
+    mesh = culled_chain.levels[0].mesh.parts[0]
     np.testing.assert_array_equal(np.asarray(Image.open(io.BytesIO(png))), mesh.texture)
     uv = _accessor(doc, blob, primitive["attributes"]["TEXCOORD_0"])
     np.testing.assert_allclose(uv[:, 0], mesh.uv[:, 0], atol=1e-6)

@@ -12,8 +12,8 @@ from PIL import Image
 
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
-from lodconvert.convert import read_scene
 from lodconvert.errors import InputError
+from lodconvert.pipeline import read_scene
 
 FORMATS = ("obj", "ply", "stl", "off", "glb", "gltf")
 
@@ -33,10 +33,10 @@ def test_every_format_reads_with_its_geometry(tmp_path: Path, fmt: str, gz: bool
         packed.write_bytes(gzip.compress(path.read_bytes(), mtime=0))
         path.unlink()
         path = packed
-    (obj,) = read_scene(path).objects
+    (obj,) = list(read_scene(path).with_geometry())
     assert obj.id == "torus"
-    assert len(obj.surface.faces) == len(mesh.faces)
-    assert np.allclose(obj.surface.bounds, mesh.bounds, atol=1e-6)
+    assert len(obj.geometry.faces) == len(mesh.faces)
+    assert np.allclose(obj.geometry.bounds, mesh.bounds, atol=1e-6)
 
 
 def test_ply_vertex_colours_are_kept(tmp_path: Path) -> None:
@@ -47,8 +47,8 @@ def test_ply_vertex_colours_are_kept(tmp_path: Path) -> None:
     mesh.visual.vertex_colors = colors
     path = tmp_path / "c.ply"
     mesh.export(path)
-    (obj,) = read_scene(path).objects
-    assert np.array_equal(obj.surface.vertex_colors, colors)
+    (obj,) = list(read_scene(path).with_geometry())
+    assert np.array_equal(obj.geometry.vertex_colors, colors)
 
 
 def test_glb_material_base_colour_reaches_the_points(tmp_path: Path) -> None:
@@ -58,8 +58,8 @@ def test_glb_material_base_colour_reaches_the_points(tmp_path: Path) -> None:
     )
     path = tmp_path / "m.glb"
     mesh.export(path)
-    (obj,) = read_scene(path).objects
-    assert list(obj.surface.material_color) == [200, 40, 10, 255]
+    (obj,) = list(read_scene(path).with_geometry())
+    assert list(obj.geometry.parts[0].material_color) == [200, 40, 10, 255]
     chain = bake_chain(obj, ChainOptions(resolutions=(24, 12, 6)), NumpyBackend())
     assert np.all(chain.levels[1].points.colors == [200, 40, 10, 255])
 
@@ -74,8 +74,8 @@ def test_texture_colours_are_sampled(tmp_path: Path) -> None:
     box.visual = trimesh.visual.TextureVisuals(uv=uv, image=Image.fromarray(image))
     path = tmp_path / "box.glb"
     box.export(path)
-    (obj,) = read_scene(path).objects
-    assert obj.surface.texture is not None and obj.surface.uv is not None
+    (obj,) = list(read_scene(path).with_geometry())
+    assert obj.geometry.parts[0].texture is not None and obj.geometry.parts[0].uv is not None
     chain = bake_chain(obj, ChainOptions(resolutions=(32, 16, 8)), NumpyBackend())
     points = chain.levels[1].points
     left = points.positions[:, 0] < -0.2
@@ -92,9 +92,9 @@ def test_scene_nodes_stay_objects_with_their_transforms(tmp_path: Path) -> None:
         scene.add_geometry(torus(), node_name=f"ring {i}", geom_name="ring", transform=place)
     path = tmp_path / "rings.glb"
     scene.export(path)
-    objects = read_scene(path).objects
+    objects = list(read_scene(path).with_geometry())
     assert [o.id for o in objects] == ["ring_0", "ring_1", "ring_2"]
-    centres = [o.surface.bounds.mean(axis=0)[0] for o in objects]
+    centres = [o.geometry.bounds.mean(axis=0)[0] for o in objects]
     assert centres == pytest.approx([0.0, 10.0, 20.0], abs=1e-6)
 
 

@@ -20,7 +20,7 @@ from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.errors import LodConvertError
 from lodconvert.io import WRITERS, OutputInfo, writer_for
-from lodconvert.scene import LodChain, SceneObject
+from lodconvert.model import LodChain, Node
 from lodconvert.validate import Finding, errors_of, validate_file
 
 from .conftest import SAMPLE, X3D_SCHEMAS, require, surface_of
@@ -34,8 +34,8 @@ def chains() -> list[LodChain]:
     """A plain and a culled chain of a small torus."""
     torus = surface_of(trimesh.creation.torus(major_radius=1.0, minor_radius=0.3))
     options = ChainOptions(resolutions=(24, 12, 6))
-    plain = bake_chain(SceneObject("torus", torus), options, NumpyBackend())
-    culled = bake_chain(SceneObject("culled", torus), replace(options, cull=1.5), NumpyBackend())
+    plain = bake_chain(Node("torus", torus), options, NumpyBackend())
+    culled = bake_chain(Node("culled", torus), replace(options, cull=1.5), NumpyBackend())
     return [plain, culled]
 
 

@@ -18,7 +18,6 @@ from lxml import etree
 
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
-from lodconvert.convert import read_scene
 from lodconvert.errors import InputError
 from lodconvert.io import WRITERS, OutputInfo, x3d
 from lodconvert.io.numbers import (
@@ -31,7 +30,8 @@ from lodconvert.io.numbers import (
     geometry_decimals,
 )
 from lodconvert.io.x3d import point_properties, read_x3d_points, vertex_colors, write_x3d
-from lodconvert.scene import LodChain, SceneObject, Surface
+from lodconvert.model import LodChain, Node, Surface
+from lodconvert.pipeline import read_scene
 
 from .conftest import X3D_SCHEMAS, require, stanford
 
@@ -70,7 +70,7 @@ def schema() -> etree.XMLSchema:
     return etree.XMLSchema(etree.parse(str(xsd), parser))
 
 
-def _bake(obj: SceneObject, opts: ChainOptions = OPTIONS) -> LodChain:
+def _bake(obj: Node, opts: ChainOptions = OPTIONS) -> LodChain:
     return bake_chain(obj, opts, NumpyBackend())
 
 
@@ -87,12 +87,12 @@ def _assert_valid(schema: etree.XMLSchema, data: bytes) -> None:
 
 
 @pytest.fixture
-def chain(torus: SceneObject) -> LodChain:
+def chain(torus: Node) -> LodChain:
     return _bake(torus)
 
 
 @pytest.fixture
-def culled(torus: SceneObject) -> LodChain:
+def culled(torus: Node) -> LodChain:
     return _bake(torus, replace(OPTIONS, cull=1.5))
 
 
@@ -327,7 +327,7 @@ def _check_round_trip(chain: LodChain, path: Path) -> None:
         if level.kind == "mesh":
             mesh = level.mesh
             assert read.geometry == "IndexedTriangleSet" and len(read.index) == len(mesh.faces)
-            expected = _per_corner(mesh.vertices, vertex_colors(mesh), mesh.faces)
+            expected = _per_corner(mesh.vertices, vertex_colors(mesh.parts[0]), mesh.faces)
         else:
             assert read.geometry == "PointSet" and read.index is None
             expected = (level.points.positions, level.points.colors)
@@ -352,11 +352,9 @@ def test_round_trip_gives_back_baked_points(chain: LodChain, tmp_path: Path) -> 
     assert len(mesh.coordinates) == len(chain.levels[0].mesh.vertices)
 
 
-def test_far_object_keeps_exact_origin_and_small_coordinates(
-    torus: SceneObject, tmp_path: Path
-) -> None:
-    surface = replace(torus.surface, vertices=torus.surface.vertices + FAR)
-    chain = _bake(SceneObject("far", surface))
+def test_far_object_keeps_exact_origin_and_small_coordinates(torus: Node, tmp_path: Path) -> None:
+    surface = torus.geometry.translated(FAR)
+    chain = _bake(Node("far", surface))
     path = tmp_path / "far.x3d"
     _check_round_trip(chain, path)
     transform = etree.parse(str(path)).find("Scene/Transform")
@@ -394,7 +392,7 @@ def test_uncoloured_mesh_uses_material_colour(chain: LodChain) -> None:
 
 
 def test_bunny_round_trip_and_validation(
-    schema: etree.XMLSchema, bunny: SceneObject, tmp_path: Path
+    schema: etree.XMLSchema, bunny: Node, tmp_path: Path
 ) -> None:
     chain = _bake(bunny)
     _check_round_trip(chain, tmp_path / "bunny.x3d")
@@ -414,14 +412,14 @@ def _runs(total: int, size: int) -> list[int]:
 @pytest.mark.parametrize("soup", [False, True], ids=["shared-vertices", "triangle-soup"])
 def test_levels_over_the_shape_limits_are_split(
     schema: etree.XMLSchema,
-    torus: SceneObject,
+    torus: Node,
     monkeypatch: pytest.MonkeyPatch,
     tmp_path: Path,
     soup: bool,
 ) -> None:
     monkeypatch.setattr(x3d, "MAX_SHAPE_VERTICES", SMALL_VERTICES)
     monkeypatch.setattr(x3d, "MAX_SHAPE_TRIANGLES", SMALL_TRIANGLES)
-    surface = torus.surface
+    surface = torus.geometry.parts[0]
     if soup:  # each face has its own three vertices: the vertex limit binds first
         faces = surface.faces
         surface = Surface(
@@ -429,7 +427,7 @@ def test_levels_over_the_shape_limits_are_split(
             np.arange(faces.size).reshape(-1, 3),
             vertex_colors=surface.vertex_colors[faces].reshape(-1, 4),
         )
-    chain = _bake(SceneObject("big", surface))
+    chain = _bake(Node("big", surface))
     path = tmp_path / "big.x3d"
     _check_round_trip(chain, path)
     data = path.read_bytes()
@@ -461,7 +459,7 @@ def test_dragon_validates_with_default_parser_limits(
 ) -> None:
     """871,414 triangles: without splitting, the index attribute alone would be 17.6 MB, more
     than libxml2 parses or validates without ``huge_tree``."""
-    obj = read_scene(stanford("dragon_vrip.ply.gz")).objects[0]
+    obj = list(read_scene(stanford("dragon_vrip.ply.gz")).with_geometry())[0]
     chain = bake_chain(obj, ChainOptions(), NumpyBackend())
     path = tmp_path / "dragon.x3d"
     _check_round_trip(chain, path)

@@ -40,7 +40,7 @@ import numpy as np
 
 from ..errors import LodConvertError
 from ..glcontext import create_context
-from ..scene import Surface
+from ..model import Mesh
 from . import SOFTWARE_RENDERERS
 from .grid import Grid, SlabHits
 from .numpy import EPS
@@ -183,7 +183,7 @@ class _AxisPlan:
     clip: np.ndarray
 
 
-def _face_bounds(surface: Surface, axis: int) -> dict[str, np.ndarray]:
+def _face_bounds(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
     """Per face not degenerate in projection along ``axis`` (the numpy backend's test): its
     index and the bounds of its corners along u, v and the axis (world coordinates)."""
     tri = surface.triangles
@@ -323,7 +323,7 @@ class GLBackend:
             self._ctx.release()
             self._ctx = None
 
-    def rasterize(self, surface: Surface, grid: Grid) -> list[SlabHits]:
+    def rasterize(self, surface: Mesh, grid: Grid) -> list[SlabHits]:
         """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z)."""
         if self._ctx is None:
             raise LodConvertError("GL backend used after release()")

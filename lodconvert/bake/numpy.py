@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..scene import Surface
+from ..model import Mesh
 from .grid import Grid, SlabHits
 
 # Candidate (face, pixel) pairs tested at once; bounds peak memory (~150 bytes per candidate).
@@ -30,7 +30,7 @@ class NumpyBackend:
     def release(self) -> None:
         """Nothing to free (the GL backend frees its context here)."""
 
-    def rasterize(self, surface: Surface, grid: Grid) -> list[SlabHits]:
+    def rasterize(self, surface: Mesh, grid: Grid) -> list[SlabHits]:
         """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z)."""
         hits: list[SlabHits] = []
         for axis in range(3):
@@ -39,7 +39,7 @@ class NumpyBackend:
         return hits
 
 
-def face_table(surface: Surface, axis: int) -> dict[str, np.ndarray]:
+def face_table(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
     """Per face not degenerate in projection along ``axis``: projected bounds and the planes of
     two barycentric coordinates and of the depth, as ``(a, b, c)`` of ``a·u + b·v + c``, all
     relative to ``centre``."""

@@ -18,7 +18,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..scene import BakeParams, PointCloud, Surface
+from ..model import BakeParams, Mesh, PointCloud
 from .filters import fill_holes
 from .grid import Grid, SlabHits
 
@@ -29,7 +29,7 @@ class Backend(Protocol):
     name: str
     renderer: str
 
-    def rasterize(self, surface: Surface, grid: Grid) -> list[SlabHits]:
+    def rasterize(self, surface: Mesh, grid: Grid) -> list[SlabHits]:
         """Nearest hit per (slab, pixel) for +x, -x, +y, -y, +z, -z (in any order)."""
         ...
 
@@ -39,7 +39,7 @@ class Backend(Protocol):
 
 
 def occupied_hits(
-    surface: Surface, params: BakeParams, backend: Backend, bounds: np.ndarray | None = None
+    surface: Mesh, params: BakeParams, backend: Backend, bounds: np.ndarray | None = None
 ) -> tuple[Grid, np.ndarray, np.ndarray]:
     """Grid, hit positions (k, 3) and hit faces (k,) after hole filling, before rescue."""
     grid = Grid.for_bounds(
@@ -56,7 +56,7 @@ def occupied_hits(
     return grid, positions, faces
 
 
-def _edge_table(surface: Surface) -> dict[str, np.ndarray]:
+def _edge_table(surface: Mesh) -> dict[str, np.ndarray]:
     """Per non-degenerate face: centroid, and start, vector and length of its longest edge."""
     tri = surface.triangles
     edges = tri[:, [1, 2, 0]] - tri
@@ -75,7 +75,7 @@ def _edge_table(surface: Surface) -> dict[str, np.ndarray]:
     }
 
 
-def surface_samples(surface: Surface, pitch: float) -> tuple[np.ndarray, np.ndarray]:
+def surface_samples(surface: Mesh, pitch: float) -> tuple[np.ndarray, np.ndarray]:
     """Points on every non-degenerate face: its centroid, and samples at most ``pitch`` apart
     along its longest edge (a sliver thinner than the pitch lies within a pitch of them)."""
     table = surface.derived("edge-table", lambda: _edge_table(surface))
@@ -93,7 +93,7 @@ def surface_samples(surface: Surface, pitch: float) -> tuple[np.ndarray, np.ndar
 
 
 def rescue_thin_features(
-    surface: Surface, grid: Grid, positions: np.ndarray, faces: np.ndarray
+    surface: Mesh, grid: Grid, positions: np.ndarray, faces: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """Add the surface samples that no hit is near (see module docstring)."""
     samples, sample_faces = surface_samples(surface, grid.pitch)
@@ -123,7 +123,7 @@ def one_per_cell(grid: Grid, positions: np.ndarray, faces: np.ndarray) -> np.nda
 
 
 def bake_points(
-    surface: Surface, params: BakeParams, backend: Backend, bounds: np.ndarray | None = None
+    surface: Mesh, params: BakeParams, backend: Backend, bounds: np.ndarray | None = None
 ) -> tuple[PointCloud, Grid]:
     """Bake one point level of ``surface`` (world coordinates) on the grid of ``params``."""
     grid, positions, faces = occupied_hits(surface, params, backend, bounds)

@@ -15,7 +15,7 @@ from types import ModuleType
 import numpy as np
 
 from ..errors import LodConvertError
-from ..scene import Surface
+from ..model import Mesh, Surface
 
 PIP_INSTALL = "pip install fast-simplification"
 # Face targets tried before giving up on reaching the vertex target.
@@ -33,8 +33,8 @@ def _simplifier() -> ModuleType:
     return fast_simplification
 
 
-def decimate(surface: Surface, vertices: int) -> Surface:
-    """``surface`` decimated to at most ``vertices`` vertices (when the face targets tried
+def decimate(surface: Mesh, vertices: int) -> Surface:
+    """``surface`` (all its parts as one) decimated to at most ``vertices`` vertices (when the face targets tried
     allow it). Vertices used by no face are dropped; a target of a few vertices can leave
     none."""
     fs = _simplifier()
@@ -54,13 +54,13 @@ def decimate(surface: Surface, vertices: int) -> Surface:
 
 
 def _coloured(
-    surface: Surface, fs: ModuleType, collapses: np.ndarray, points: np.ndarray, faces: np.ndarray
+    surface: Mesh, fs: ModuleType, collapses: np.ndarray, points: np.ndarray, faces: np.ndarray
 ) -> Surface:
-    """The decimated mesh with the source's colours sampled at its vertices (when it has any
-    beyond the base colour)."""
-    textured = surface.texture is not None and surface.uv is not None
-    if not textured and surface.vertex_colors is None:
-        return Surface(points, faces, base_color=surface.base_color)
+    """The decimated mesh with the source's colours sampled at its vertices (one base colour
+    when the source is a single part with nothing beyond it)."""
+    single = surface.single
+    if single is not None and single.texture is None and single.vertex_colors is None:
+        return Surface(points, faces, base_color=single.base_color)
     _, _, mapping = fs.replay_simplification(surface.vertices, surface.faces, collapses)
     # A source face for each new vertex: one that uses a source vertex collapsed into it.
     corners = surface.faces.ravel()

@@ -15,7 +15,6 @@ from pathlib import Path
 from typing import Any
 
 from ..cli import EXIT_OK, Console, parse_list
-from ..convert import read_scene
 from ..errors import UsageError
 from ..evaluate import (
     DEFAULT_DISTANCES,
@@ -36,8 +35,9 @@ from ..evaluate import (
 )
 from ..io.atomic import atomic_output
 from ..io.readback import read_chains
+from ..model import LodChain, Surface
+from ..pipeline import read_scene
 from ..ranges import REFERENCE_VIEW
-from ..scene import LodChain, Surface
 
 DESCRIPTION = (
     "Score every level of a file lodconvert wrote against the source mesh it was converted "
@@ -127,7 +127,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     protocol = protocol_of(args)
     chains = read_chains(args.output)
     console.progress(f"reading {args.reference}")
-    objects = read_scene(args.reference).objects
+    objects = list(read_scene(args.reference).with_geometry())
     sources = match_references(objects, chains, args.reference, args.output)
     renderer = SilhouetteRenderer(protocol.size, protocol.fov_y_deg)
     reports: list[ObjectReport] = []

@@ -6,7 +6,7 @@ import argparse
 import json
 
 from ..cli import EXIT_OK, Console, add_range_options, chain_options
-from ..convert import object_ranges, read_scene
+from ..pipeline import object_ranges, read_scene
 
 DESCRIPTION = "Print α (bounding-box diagonal), γ and the cutoffs Y = α·β·γˣ per object."
 

@@ -13,8 +13,8 @@ from pathlib import Path
 from typing import Any, BinaryIO
 
 from ..errors import InputError
+from ..model import LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
-from ..scene import LodChain, Scene
 
 
 @dataclass

@@ -31,8 +31,8 @@ import pygltflib as gl
 from PIL import Image as PILImage
 
 from ..errors import InputError
+from ..model import Level, LodChain, PointCloud, Surface
 from ..ranges import ReferenceView, screen_coverage
-from ..scene import Level, LodChain, PointCloud, Surface
 from . import WRITERS, OutputInfo
 
 MSFT_LOD = "MSFT_lod"
@@ -144,7 +144,7 @@ def _plain(value: Any) -> Any:
 
 def _level_params(level: Level) -> dict[str, Any]:
     """Bake parameters of a point level (empty for a mesh level)."""
-    if level.kind != "pcd":
+    if not level.is_points:
         return {}
     params = level.params
     out: dict[str, Any] = {}
@@ -340,11 +340,11 @@ class _Document:
         name = f"{chain.object_id}_{level.name}"
         node = gl.Node(name=name)
         if level.count:
-            if level.kind == "mesh":
-                primitive = self._mesh_primitive(level.mesh)
+            if level.mesh is not None:
+                primitives = [self._mesh_primitive(part) for part in level.mesh.parts]
             else:
-                primitive = self._point_primitive(level.points)
-            node.mesh = self._append(self.gltf.meshes, gl.Mesh(name=name, primitives=[primitive]))
+                primitives = [self._point_primitive(level.points)]
+            node.mesh = self._append(self.gltf.meshes, gl.Mesh(name=name, primitives=primitives))
         return node
 
     def add_chain(self, chain: LodChain) -> None:

@@ -1,6 +1,6 @@
 """Mesh reader: OBJ, PLY, STL, OFF, GLB, glTF (and ``.gz`` of each) through trimesh.
 
-Every geometry instance of the file's scene graph becomes one :class:`SceneObject` with its
+Every geometry instance of the file's scene graph becomes one :class:`Node` with its
 transform applied (world coordinates, float64). Vertex colours, material base colours and
 textures (with UVs, via Pillow) are kept so baked points can take the surface's colour.
 """
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import InputError
-from ..scene import Scene, SceneObject, Surface
+from ..model import Node, Scene, Surface
 from . import READERS, suffix_of
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -120,7 +120,8 @@ def read_mesh(path: Path) -> Scene:
 
     import trimesh
 
-    scene = Scene(source=str(path))
+    nodes: list[Node] = []
+    scene = Scene(source=str(path), nodes=nodes)
     taken: set[str] = set()
     graph = loaded.graph  # type: ignore[attr-defined]
     for node in sorted(graph.nodes_geometry):
@@ -129,14 +130,14 @@ def read_mesh(path: Path) -> Scene:
         if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
             continue
         name = node if len(graph.nodes_geometry) > 1 else path.name.split(".")[0]
-        scene.objects.append(
-            SceneObject(
+        nodes.append(
+            Node(
                 id=object_id(str(name), taken),
-                surface=surface_from_trimesh(mesh, np.asarray(transform, dtype=np.float64)),
-                metadata={"source_node": str(node), "geometry": str(geometry_name)},
+                geometry=surface_from_trimesh(mesh, np.asarray(transform, dtype=np.float64)),
+                attributes={"source_node": str(node), "geometry": str(geometry_name)},
             )
         )
-    if not scene.objects:
+    if not nodes:
         raise InputError("has no faces (empty, or points only: nothing to bake)", str(path))
     return scene
 

@@ -17,7 +17,7 @@ import numpy as np
 from lxml import etree
 
 from ..errors import InputError
-from ..scene import BakeParams, Level, LodChain, PointCloud, Surface
+from ..model import MESH_KINDS, BakeParams, Level, LodChain, PointCloud, Surface
 from .gltf import GltfObject, read_lod_gltf
 from .x3d import METADATA_SET, read_x3d_points, x3d_read_errors
 
@@ -47,11 +47,11 @@ def _level_from(
     """A :class:`Level` from its declared facts (name, kind, bake parameters) and geometry."""
     name, kind = facts.get("name"), facts.get("kind")
     design = facts.get("design_distance")
-    if kind == "mesh":
+    if kind in MESH_KINDS:
         if faces is None:
             faces = np.zeros((0, 3), dtype=np.int64)
         surface = Surface(positions, faces, vertex_colors=colors)
-        return Level(name=name, kind="mesh", mesh=surface, design_distance=design)
+        return Level(name=name, kind=kind, mesh=surface, design_distance=design)
     if kind != "pcd":
         raise InputError(f"level {name!r} is of unknown kind {kind!r}", where)
     try:

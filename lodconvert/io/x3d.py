@@ -55,7 +55,7 @@ import numpy as np
 from lxml import etree
 
 from ..errors import InputError
-from ..scene import Level, LodChain, Surface
+from ..model import Level, LodChain, Mesh, Surface
 from . import WRITERS, OutputInfo
 from .numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
 
@@ -331,8 +331,15 @@ def vertex_colors(surface: Surface) -> np.ndarray | None:
     return colors
 
 
-def _mesh_shapes(out: _Out, surface: Surface, appearance: str) -> None:
-    """The mesh as ``Shape`` s with an ``IndexedTriangleSet`` each, one per run of faces
+def _mesh_shapes(out: _Out, mesh: Mesh, appearance: str) -> None:
+    """Every part of ``mesh`` as Shapes (:func:`_part_shapes`); parts after the first name their
+    Appearance ``<appearance>_<part>``."""
+    for i, part in enumerate(mesh.parts):
+        _part_shapes(out, part, appearance if i == 0 else f"{appearance}_{i}")
+
+
+def _part_shapes(out: _Out, surface: Surface, appearance: str) -> None:
+    """One part as ``Shape`` s with an ``IndexedTriangleSet`` each, one per run of faces
     (:func:`_face_runs`), holding the vertices (and colours) that run uses, re-indexed."""
     base = surface.material_color
     material = {"diffuseColor": format_unit_bytes(base[:3])}
@@ -391,7 +398,7 @@ def _write_levels(out: _Out, chain: LodChain, level_defs: list[str]) -> None:
         switch_out = bounds[i + 1] if i + 1 < len(bounds) else None
         with out.node("Group", {"DEF": name}):
             _metadata_set(out, _level_metadata(level, bounds[i], switch_out))
-            if level.kind == "mesh":
+            if not level.is_points:
                 assert level.mesh is not None
                 _mesh_shapes(out, level.mesh, _appearance_name(name))
             else:

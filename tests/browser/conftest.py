@@ -23,7 +23,7 @@ from typing import Any
 import pytest
 
 from lodconvert.chain import ChainOptions
-from lodconvert.convert import convert
+from lodconvert.pipeline import convert
 from lodconvert.viewer import LIBRARIES, serve, write_page
 
 from ..conftest import ROOT, SAMPLE, require

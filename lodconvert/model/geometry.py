@@ -1,17 +1,15 @@
-"""The data model: Scene → SceneObject → LodChain → Level.
+"""Geometry of the model: :class:`Surface` (one part: triangles with its own colours or
+texture), :class:`Mesh` (the parts of one node or level, baked and measured as one) and
+:class:`PointCloud` (a baked point level).
 
-Readers yield :class:`SceneObject` s whose :class:`Surface` is in world coordinates (float64,
-instance transforms already applied, georeferenced values kept as they are). Baking turns each
-object into a :class:`LodChain` whose levels are stored relative to ``chain.origin`` (the
-bounding-box centre) so that float32 output buffers keep their precision; writers put the origin
-back as a parent transform / node translation.
+Coordinates are float64. No file format is known here.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
-from typing import Any, Literal
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -128,28 +126,6 @@ class Surface:
 
 
 @dataclass
-class SceneObject:
-    """One object of a scene: a surface in world coordinates plus identity and metadata."""
-
-    id: str
-    surface: Surface
-    metadata: dict[str, Any] = field(default_factory=dict)
-
-
-@dataclass
-class Scene:
-    """What a reader produced: objects plus scene-wide facts (source, CRS, units)."""
-
-    source: str
-    objects: list[SceneObject] = field(default_factory=list)
-    crs: str | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
-
-    def __iter__(self) -> Iterator[SceneObject]:
-        return iter(self.objects)
-
-
-@dataclass
 class PointCloud:
     """Baked points relative to the chain origin: positions (k, 3) float64, colors (k, 4) uint8,
     normals (k, 3) float32 unit vectors."""
@@ -162,67 +138,126 @@ class PointCloud:
         return len(self.positions)
 
 
-@dataclass(frozen=True)
-class BakeParams:
-    """The paper's per-level parameters: T3 resolution (cells along the longest side), T1 slices
-    (slabs along the longest side), T2 point size in pixels at the level's switch-in distance at
-    the reference view, and the hole filter."""
-
-    resolution: int
-    slices: int
-    point_size: float
-    filter: Literal["median", "gaussian", "none"] = "median"
+def _parts_bounds(parts: Sequence[Surface]) -> np.ndarray:
+    boxes = np.stack([part.bounds for part in parts])
+    return np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
 
 
-@dataclass
-class Level:
-    """One level of a chain. ``kind`` is "mesh" (``mesh`` set) or "pcd" (``points`` set).
+class Mesh:
+    """The triangle parts of one node or level, seen as one surface.
 
-    ``spacing`` is the grid pitch of a point level in scene units; ``design_distance`` the
-    distance (from the chain centre) its resolution and point size were chosen for: where it
-    first shows, or α·β for a baked finest level. At that distance, at the reference view, its
-    points are ``params.point_size`` pixels wide; viewers scale them with 1/distance.
-    ``bake_seconds`` is the time spent baking it. Geometry is relative to the chain's origin.
+    Each part keeps its own colours, UVs and texture (a building's walls and roof, a model's
+    materials); the baker, the planner and the evaluators see the concatenated ``vertices`` and
+    ``faces``, and :meth:`colors_at` asks the part a face belongs to. A single-part mesh shares
+    that part's arrays and derived tables.
     """
 
-    name: str
-    kind: Literal["mesh", "pcd"]
-    mesh: Surface | None = None
-    points: PointCloud | None = None
-    params: BakeParams | None = None
-    spacing: float | None = None
-    design_distance: float | None = None
-    bake_seconds: float = 0.0
+    def __init__(self, parts: Sequence[Surface]) -> None:
+        if not parts:
+            raise ValueError("a mesh needs at least one part")
+        self.parts: tuple[Surface, ...] = tuple(parts)
+        self._derived: dict[str, Any] = {}
+        if len(self.parts) == 1:
+            self._derived = self.parts[0]._derived
+
+    @classmethod
+    def of(cls, geometry: Mesh | Surface) -> Mesh:
+        """``geometry`` as a mesh (a surface becomes a one-part mesh)."""
+        return geometry if isinstance(geometry, Mesh) else cls([geometry])
+
+    def derived(self, key: str, compute: Callable[[], Any]) -> Any:
+        """``compute()`` once per mesh and key (see :meth:`Surface.derived`)."""
+        if key not in self._derived:
+            self._derived[key] = compute()
+        return self._derived[key]
 
     @property
-    def count(self) -> int:
-        """Vertices of a mesh level, points of a point level."""
-        if self.kind == "mesh":
-            assert self.mesh is not None
-            return len(self.mesh.vertices)
-        assert self.points is not None
-        return len(self.points)
+    def single(self) -> Surface | None:
+        """The only part, or ``None`` when there are several."""
+        return self.parts[0] if len(self.parts) == 1 else None
 
+    @property
+    def vertices(self) -> np.ndarray:
+        """(n, 3) float64 vertices of all parts, in part order."""
+        if self.single is not None:
+            return self.single.vertices
+        return self.derived("vertices", lambda: np.concatenate([p.vertices for p in self.parts]))
 
-@dataclass
-class LodChain:
-    """All levels of one object, finest first, and the distances at which they switch.
+    @property
+    def faces(self) -> np.ndarray:
+        """(m, 3) int64 faces of all parts, indexing :attr:`vertices`."""
+        if self.single is not None:
+            return self.single.faces
+        return self.derived("faces", self._concatenated_faces)
 
-    ``cutoffs[i]`` is the distance (scene units, from ``center``) beyond which ``levels[i+1]``
-    replaces ``levels[i]``. With culling, ``len(cutoffs) == len(levels)`` and the last cutoff is
-    where the object disappears; otherwise ``len(cutoffs) == len(levels) - 1``.
-    ``origin`` is the world position that level geometry is relative to; ``center`` the
-    bounding-box centre relative to that origin (zero unless a writer re-bases it).
-    """
+    def _concatenated_faces(self) -> np.ndarray:
+        offsets = np.cumsum([0] + [len(p.vertices) for p in self.parts[:-1]])
+        return np.concatenate([p.faces + o for p, o in zip(self.parts, offsets, strict=True)])
 
-    object_id: str
-    levels: list[Level]
-    cutoffs: list[float]
-    origin: np.ndarray
-    center: np.ndarray
-    alpha: float
-    beta: float
-    gamma: float
-    xs: list[float]
-    culled: bool = False
-    metadata: dict[str, Any] = field(default_factory=dict)
+    @property
+    def vertex_colors(self) -> np.ndarray | None:
+        """(n, 4) uint8 RGBA per vertex when a part has vertex colours (other parts give their
+        material colour), else ``None``."""
+        if all(p.vertex_colors is None for p in self.parts):
+            return None
+        return np.concatenate(
+            [
+                p.vertex_colors
+                if p.vertex_colors is not None
+                else np.repeat(p.material_color[None], len(p.vertices), axis=0)
+                for p in self.parts
+            ]
+        )
+
+    @property
+    def face_part(self) -> np.ndarray:
+        """(m,) index of the part each face belongs to."""
+        return self.derived(
+            "face-part",
+            lambda: np.repeat(np.arange(len(self.parts)), [len(p.faces) for p in self.parts]),
+        )
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) min and max corner of the vertices used by faces, over all parts."""
+        if self.single is not None:
+            return self.single.bounds
+        return self.derived("bounds", lambda: _parts_bounds(self.parts))
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """Corner positions (m, 3, 3) of every face."""
+        return self.derived("triangles", lambda: self.vertices[self.faces])
+
+    @property
+    def vertex_count(self) -> int:
+        """Vertices over all parts."""
+        return sum(len(p.vertices) for p in self.parts)
+
+    @property
+    def face_count(self) -> int:
+        """Triangles over all parts."""
+        return sum(len(p.faces) for p in self.parts)
+
+    def face_normals(self, face_ids: np.ndarray) -> np.ndarray:
+        """Unit normals (k, 3) float32 of the given faces; degenerate faces get +z."""
+        if self.single is not None:
+            return self.single.face_normals(face_ids)
+        return Surface(self.vertices, self.faces).face_normals(face_ids)
+
+    def colors_at(self, face_ids: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """RGBA uint8 (k, 4) at ``points`` lying on faces ``face_ids``, each from its part."""
+        if self.single is not None:
+            return self.single.colors_at(face_ids, points)
+        out = np.zeros((len(face_ids), 4), dtype=np.uint8)
+        part_of = self.face_part[face_ids]
+        first_face = np.cumsum([0] + [len(p.faces) for p in self.parts[:-1]])
+        for index in np.unique(part_of):
+            mask = part_of == index
+            local = face_ids[mask] - first_face[index]
+            out[mask] = self.parts[index].colors_at(local, points[mask])
+        return out
+
+    def translated(self, offset: np.ndarray) -> Mesh:
+        """This mesh moved by ``offset`` (new parts sharing colours, texture and UVs)."""
+        return Mesh([replace(p, vertices=p.vertices + offset) for p in self.parts])

@@ -22,7 +22,7 @@ from .chain import ChainOptions, bake_chain
 from .errors import InputError
 from .io import OutputInfo, reader_for, writer_for
 from .io.atomic import atomic_output
-from .scene import LodChain, Scene
+from .model import LodChain, Scene
 from .validate import check_written
 
 Message = Callable[[str], None]
@@ -45,7 +45,7 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
     levels = []
     for level in chain.levels:
         entry: dict[str, Any] = {"name": level.name, "kind": level.kind, "count": level.count}
-        if level.kind == "mesh":
+        if not level.is_points:
             assert level.mesh is not None
             entry["faces"] = len(level.mesh.faces)
         else:
@@ -88,8 +88,8 @@ def iter_chains(
 ) -> Iterator[LodChain]:
     """Bake the scene's objects one at a time; objects with bad geometry are reported through
     ``warn``, recorded in ``skipped`` and left out."""
-    total = len(scene.objects)
-    for i, obj in enumerate(scene.objects, start=1):
+    total = len(scene.nodes) if isinstance(scene.nodes, list) else "?"
+    for i, obj in enumerate(scene.with_geometry(), start=1):
         try:
             chain = bake_chain(
                 obj,
@@ -99,7 +99,7 @@ def iter_chains(
                 warn=warn,
             )
         except InputError as exc:
-            if total > 1:
+            if total != 1:
                 warn(f"{scene.source}: object {exc} — skipped")
             if skipped is not None:
                 skipped.append({"id": obj.id, "reason": str(exc)})
@@ -189,8 +189,8 @@ def object_ranges(scene: Scene, options: ChainOptions) -> list[dict[str, Any]]:
 
     options.check()
     rows = []
-    for obj in scene.objects:
-        bounds = obj.surface.bounds
+    for obj in scene.with_geometry():
+        bounds = obj.geometry.bounds
         alpha = float(np.linalg.norm(bounds[1] - bounds[0]))
         xs = list(options.exponents) + ([options.cull] if options.cull is not None else [])
         rows.append(

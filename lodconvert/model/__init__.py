@@ -1,0 +1,19 @@
+"""The data model, free of file formats: Scene → Node (tree) → geometry parts; LodChain → Level."""
+
+from .chain import MESH_KINDS, BakeParams, Level, LodChain
+from .geometry import GREY, WHITE, Mesh, PointCloud, Surface
+from .tree import Node, Scene
+
+__all__ = [
+    "GREY",
+    "MESH_KINDS",
+    "WHITE",
+    "BakeParams",
+    "Level",
+    "LodChain",
+    "Mesh",
+    "Node",
+    "PointCloud",
+    "Scene",
+    "Surface",
+]

@@ -1,0 +1,95 @@
+"""Level-of-detail chains: :class:`LodChain` (the levels of one object and where they switch),
+:class:`Level` and the bake parameters of a point level."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+import numpy as np
+
+from .geometry import Mesh, PointCloud
+
+
+@dataclass(frozen=True)
+class BakeParams:
+    """The paper's per-level parameters: T3 resolution (cells along the longest side), T1 slices
+    (slabs along the longest side), T2 point size in pixels at the level's switch-in distance at
+    the reference view, and the hole filter."""
+
+    resolution: int
+    slices: int
+    point_size: float
+    filter: Literal["median", "gaussian", "none"] = "median"
+
+
+MESH_KINDS = ("mesh", "qem")
+"""Level kinds drawn as triangles: the source mesh, and the source decimated by quadric edge
+collapse. ``pcd`` levels are baked point clouds. Kinds are data: readers of our own files and
+later planners (source LoDs, prisms) may add others, drawn as triangles when ``mesh`` is set."""
+
+
+@dataclass
+class Level:
+    """One level of a chain: its ``name`` (``LOD4`` … ``LOD1``, as data, not by position), its
+    ``kind`` (``mesh``, ``qem``, ``pcd``, …) and its geometry: ``mesh`` (triangles, one or more
+    parts) or ``points``.
+
+    ``spacing`` is the grid pitch of a point level in scene units; ``design_distance`` the
+    distance (from the chain centre) its resolution and point size were chosen for: where it
+    first shows, or α·β for a baked finest level. At that distance, at the reference view, its
+    points are ``params.point_size`` pixels wide; viewers scale them with 1/distance.
+    ``bake_seconds`` is the time spent baking it. Geometry is relative to the chain's origin.
+    """
+
+    name: str
+    kind: str
+    mesh: Mesh | None = None
+    points: PointCloud | None = None
+    params: BakeParams | None = None
+    spacing: float | None = None
+    design_distance: float | None = None
+    bake_seconds: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.mesh is not None and not isinstance(self.mesh, Mesh):
+            self.mesh = Mesh.of(self.mesh)
+        if (self.mesh is None) == (self.points is None):
+            raise ValueError(f"level {self.name} needs either a mesh or points")
+
+    @property
+    def is_points(self) -> bool:
+        """Whether the level is drawn as points (else as triangles)."""
+        return self.points is not None
+
+    @property
+    def count(self) -> int:
+        """Vertices of a mesh level, points of a point level."""
+        if self.mesh is not None:
+            return self.mesh.vertex_count
+        assert self.points is not None
+        return len(self.points)
+
+
+@dataclass
+class LodChain:
+    """All levels of one object, finest first, and the distances at which they switch.
+
+    ``cutoffs[i]`` is the distance (scene units, from ``center``) beyond which ``levels[i+1]``
+    replaces ``levels[i]``. With culling, ``len(cutoffs) == len(levels)`` and the last cutoff is
+    where the object disappears; otherwise ``len(cutoffs) == len(levels) - 1``.
+    ``origin`` is the world position that level geometry is relative to; ``center`` the
+    bounding-box centre relative to that origin (zero unless a writer re-bases it).
+    """
+
+    object_id: str
+    levels: list[Level]
+    cutoffs: list[float]
+    origin: np.ndarray
+    center: np.ndarray
+    alpha: float
+    beta: float
+    gamma: float
+    xs: list[float]
+    culled: bool = False
+    metadata: dict[str, Any] = field(default_factory=dict)

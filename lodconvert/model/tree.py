@@ -1,0 +1,81 @@
+"""The scene tree: a :class:`Scene` of :class:`Node` s, each with identity, attributes, an
+optional geometry (one or more parts), an optional placement and children.
+
+A node's geometry is in its own frame. World coordinates are ``origin + transform · local``:
+``origin`` is a float64 offset (georeferenced data keeps its millions here, so local values stay
+small), ``transform`` a 4×4 placement (a mesh instanced by several scene-graph nodes keeps one
+shared :class:`~.geometry.Mesh` and one transform per instance). Children are placed in their
+parent's frame. Readers may yield nodes lazily; nothing here knows a file format.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .geometry import Mesh, Surface
+
+
+@dataclass
+class Node:
+    """One object of a scene.
+
+    ``type`` says what it is (``mesh`` for a mesh file's objects; ``Building``,
+    ``BuildingPart``, ``group``… for city models); ``attributes`` are JSON-able facts kept with
+    it; ``crs`` names the coordinate reference system of ``origin`` and the geometry, where known.
+    """
+
+    id: str
+    geometry: Mesh | None = None
+    type: str = "mesh"
+    attributes: dict[str, Any] = field(default_factory=dict)
+    crs: str | None = None
+    origin: np.ndarray | None = None
+    transform: np.ndarray | None = None
+    children: list[Node] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        if isinstance(self.geometry, Surface):
+            self.geometry = Mesh.of(self.geometry)
+
+    @property
+    def offset(self) -> np.ndarray:
+        """``origin`` as a float64 (3,) vector (zero when none is set)."""
+        return np.zeros(3) if self.origin is None else np.asarray(self.origin, dtype=np.float64)
+
+    @property
+    def instanced(self) -> bool:
+        """Whether the geometry is placed by a transform other than the identity."""
+        return self.transform is not None and not np.allclose(self.transform, np.eye(4))
+
+    def walk(self) -> Iterator[Node]:
+        """This node and its descendants, depth first."""
+        yield self
+        for child in self.children:
+            yield from child.walk()
+
+
+@dataclass
+class Scene:
+    """What a reader produced: its nodes (a list, or an iterator consumed once) and scene-wide
+    facts (source file, CRS, attributes)."""
+
+    source: str
+    nodes: Iterable[Node] = field(default_factory=list)
+    crs: str | None = None
+    attributes: dict[str, Any] = field(default_factory=dict)
+
+    def __iter__(self) -> Iterator[Node]:
+        return iter(self.nodes)
+
+    def walk(self) -> Iterator[Node]:
+        """Every node, depth first (consumes a lazy scene)."""
+        for node in self.nodes:
+            yield from node.walk()
+
+    def with_geometry(self) -> Iterator[Node]:
+        """The nodes that carry geometry, depth first."""
+        return (node for node in self.walk() if node.geometry is not None)
