@@ -459,7 +459,7 @@ def test_dragon_validates_with_default_parser_limits(
 ) -> None:
     """871,414 triangles: without splitting, the index attribute alone would be 17.6 MB, more
     than libxml2 parses or validates without ``huge_tree``."""
-    obj = list(read_scene(stanford("dragon_vrip.ply.gz")).with_geometry())[0]
+    obj = next(read_scene(stanford("dragon_vrip.ply.gz")).with_geometry())
     chain = bake_chain(obj, ChainOptions(), NumpyBackend())
     path = tmp_path / "dragon.x3d"
     _check_round_trip(chain, path)

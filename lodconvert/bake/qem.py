@@ -34,9 +34,9 @@ def _simplifier() -> ModuleType:
 
 
 def decimate(surface: Mesh, vertices: int) -> Surface:
-    """``surface`` (all its parts as one) decimated to at most ``vertices`` vertices (when the face targets tried
-    allow it). Vertices used by no face are dropped; a target of a few vertices can leave
-    none."""
+    """``surface`` (all its parts as one) decimated to at most ``vertices`` vertices (when the
+    face targets tried allow it). Vertices used by no face are dropped; a target of a few
+    vertices can leave none."""
     fs = _simplifier()
     points = np.asarray(surface.vertices, dtype=np.float64)
     faces = np.asarray(surface.faces, dtype=np.int64)
