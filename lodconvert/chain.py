@@ -27,6 +27,7 @@ import numpy as np
 from .bake import Backend, bake_points
 from .errors import InputError, UsageError
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
+from .plan import POINT_COST, level_cost, may_pay, silhouette_estimate
 from .ranges import (
     DEFAULT_BETA,
     DEFAULT_GAMMA,
@@ -215,29 +216,86 @@ def _params_for(
 
 
 def _decimated(
-    level: Level, surface: Mesh, previous: int, object_id: str, warn: Progress | None
+    level: Level, surface: Mesh, budget: float, object_id: str, warn: Progress | None
 ) -> Level:
     """The ``qem`` level replacing point level ``level``: the source decimated to the point
-    level's count. When decimation leaves no triangle or cannot get below ``previous`` (the
-    count of the level before), the point level is kept, with a warning; when it stops above
-    the point level's count, the mesh is kept with a warning."""
+    level's count, or fewer where a mesh of that many vertices would cost ``budget`` (the draw
+    cost of the level before) or more. When decimation leaves no triangle or cannot get below
+    ``budget``, the point level is kept, with a warning; when it stops above the point level's
+    count, the mesh is kept with a warning."""
     from .bake.qem import decimate
 
-    mesh = decimate(surface, level.count)
-    if len(mesh.faces) == 0 or len(mesh.vertices) >= previous:
+    target = int(min(level.count, math.ceil(budget) - 1))
+    mesh = decimate(surface, max(target, 1))
+    if len(mesh.faces) == 0 or len(mesh.vertices) >= budget:
         if warn:
             warn(
-                f"{object_id}: {level.name} kept as points: decimation to {level.count:,} "
+                f"{object_id}: {level.name} kept as points: decimation to {target:,} "
                 f"vertices leaves {len(mesh.vertices):,} in {len(mesh.faces):,} triangles "
-                f"(the level before has {previous:,})"
+                f"(the level before costs {budget:,.0f})"
             )
         return level
-    if len(mesh.vertices) > level.count and warn:
+    if len(mesh.vertices) > target and warn:
         warn(
             f"{object_id}: {level.name} decimated to {len(mesh.vertices):,} vertices, not "
-            f"{level.count:,}: the mesh's separate parts and borders stop the collapses"
+            f"{target:,}: the mesh's separate parts and borders stop the collapses"
         )
     return Level(name=level.name, kind="qem", mesh=mesh, design_distance=level.design_distance)
+
+
+def _point_level(
+    surface: Mesh,
+    bounds: np.ndarray,
+    name: str,
+    index: int,
+    distance: float,
+    previous: Level | None,
+    opts: ChainOptions,
+    backend: Backend,
+    object_id: str,
+    warn: Progress | None,
+) -> Level | str:
+    """Point level ``index`` (``qem`` when asked) designed for ``distance``, or why it is left
+    out: it cannot be made cheaper than ``previous``, or (default resolutions only, and where a
+    finer level can stay on instead) its silhouette at ``distance`` is not within
+    :data:`~.plan.MIN_SILHOUETTE` of the source's."""
+    longest = float(np.ptp(bounds, axis=0).max())
+    budget = math.inf if previous is None else level_cost(previous)
+    params = _params_for(index, longest, distance, opts)
+    start = time.perf_counter()
+    cloud, grid = bake_points(surface, params, backend, bounds)
+    while len(cloud) * POINT_COST >= budget and params.resolution > 1:
+        shrink = math.sqrt((budget / POINT_COST - 1) / max(len(cloud), 1)) * 0.95
+        smaller = max(1, min(params.resolution - 1, math.floor(params.resolution * shrink)))
+        params = _params_for(index, longest, distance, opts, resolution=smaller)
+        cloud, grid = bake_points(surface, params, backend, bounds)
+    if len(cloud) * POINT_COST >= budget or len(cloud) == 0:
+        return f"no point level is cheaper than {previous.name if previous else 'nothing'}"
+    if warn and opts.resolutions and params.resolution != opts.resolutions[index]:
+        warn(
+            f"{object_id}: {name} baked at resolution {params.resolution} instead of "
+            f"{opts.resolutions[index]}: it must cost less than {previous.name if previous else ''}"
+        )
+    points = inset_points(cloud, surface, opts.inset * grid.pitch)
+    if previous is not None and not opts.resolutions:
+        estimate = silhouette_estimate(surface, points, params.point_size, distance, opts.view)
+        if not estimate.passes:
+            return (
+                f"points at resolution {params.resolution} would not look like the object "
+                f"(silhouette precision {estimate.precision:.2f}, recall {estimate.recall:.2f})"
+            )
+    level = Level(
+        name=name,
+        kind="pcd",
+        points=points,
+        params=params,
+        spacing=grid.pitch,
+        design_distance=distance,
+    )
+    if opts.level_kind(index) == "qem":
+        level = _decimated(level, surface, budget, object_id, warn)
+    level.bake_seconds = time.perf_counter() - start
+    return level
 
 
 def bake_chain(
@@ -255,61 +313,45 @@ def bake_chain(
     surface = obj.geometry.translated(-origin)
     bounds = world_bounds - origin
     alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
-    longest = float((world_bounds[1] - world_bounds[0]).max())
     xs = list(opts.exponents)
     cuts = [cutoff(alpha, opts.beta, opts.gamma, x) for x in xs]
     # Distance each level first shows at; a baked finest level is designed for x = 0.
     design = [cutoff(alpha, opts.beta, opts.gamma, 0.0), *cuts]
 
     levels: list[Level] = []
+    kept_cuts: list[float] = []
+    kept_xs: list[float] = []
+    dropped: dict[str, str] = {}
     if opts.keep_mesh:
         levels.append(Level(name=LEVEL_NAMES[0], kind="mesh", mesh=surface))
-    previous = len(surface.vertices) if opts.keep_mesh else math.inf
     for i in range(opts.pcd_levels):
-        n = len(levels)
+        n = i + 1 if opts.keep_mesh else i
         name = LEVEL_NAMES[n]
-        distance = design[n]
-        params = _params_for(i, longest, distance, opts)
+        previous = levels[-1] if levels else None
+        if (
+            previous is not None
+            and not opts.resolutions
+            and not may_pay(surface, level_cost(previous))
+        ):
+            dropped[name] = "no point level could be both cheaper and faithful"
+            continue
         if progress:
-            progress(f"{obj.id}: baking {name} at {params.resolution}")
-        start = time.perf_counter()
-        cloud, grid = bake_points(surface, params, backend, bounds)
-        while len(cloud) >= previous and params.resolution > 1:
-            shrink = math.sqrt((previous - 1) / max(len(cloud), 1)) * 0.95
-            smaller = max(1, min(params.resolution - 1, math.floor(params.resolution * shrink)))
-            params = _params_for(i, longest, distance, opts, resolution=smaller)
-            cloud, grid = bake_points(surface, params, backend, bounds)
-        if warn and opts.resolutions and params.resolution != opts.resolutions[i]:
-            warn(
-                f"{obj.id}: {name} baked at resolution {params.resolution} instead of "
-                f"{opts.resolutions[i]}: it must have fewer points than {LEVEL_NAMES[n - 1]} "
-                f"({previous:,})"
-            )
-        if len(cloud) >= previous:
-            if warn:
-                warn(
-                    f"{obj.id}: {name} and coarser levels dropped: "
-                    f"{LEVEL_NAMES[n - 1]} has only {previous} point(s)"
-                )
-            break
-        level = Level(
-            name=name,
-            kind="pcd",
-            points=inset_points(cloud, surface, opts.inset * grid.pitch),
-            params=params,
-            spacing=grid.pitch,
-            design_distance=distance,
+            progress(f"{obj.id}: baking {name}")
+        level = _point_level(
+            surface, bounds, name, i, design[n], previous, opts, backend, obj.id, warn
         )
-        if opts.level_kind(i) == "qem":
-            level = _decimated(level, surface, previous, obj.id, warn)
-        level.bake_seconds = time.perf_counter() - start
+        if isinstance(level, str):
+            dropped[name] = level
+            continue
         levels.append(level)
-        previous = level.count
+        if n > 0:
+            kept_cuts.append(cuts[n - 1])
+            kept_xs.append(xs[n - 1])
 
-    kept_cuts = cuts[: len(levels) - 1]
     culled = opts.cull is not None
     if culled:
         kept_cuts.append(cutoff(alpha, opts.beta, opts.gamma, opts.cull))
+        kept_xs.append(opts.cull)
     return LodChain(
         object_id=obj.id,
         levels=levels,
@@ -319,7 +361,8 @@ def bake_chain(
         alpha=alpha,
         beta=opts.beta,
         gamma=opts.gamma,
-        xs=xs[: len(levels) - 1] + ([opts.cull] if culled else []),
+        xs=kept_xs,
         culled=culled,
+        dropped=dropped,
         metadata=dict(obj.attributes),
     )

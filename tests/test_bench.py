@@ -26,6 +26,7 @@ from lodconvert.cli import main
 from lodconvert.errors import InputError, LodConvertError
 from lodconvert.evaluate import look_at, perspective
 from lodconvert.pipeline import convert
+from lodconvert.plan import POINT_COST
 
 from .conftest import SAMPLE, require
 
@@ -119,7 +120,7 @@ def test_a_point_cloud_finest_level_needs_the_reference_mesh(knot: dict[str, Pat
 
 @pytest.mark.gl
 @pytest.mark.usefixtures("renderer")
-def test_lod_grid_submits_fewer_vertices_than_the_original_at_every_n(
+def test_lod_grid_costs_less_to_draw_than_the_original_at_every_n(
     knot: dict[str, Path],
 ) -> None:
     code, out, err = cli("bench", knot["glb"], "--instances", SMALL, "--frames", "1", "--json")
@@ -129,10 +130,16 @@ def test_lod_grid_submits_fewer_vertices_than_the_original_at_every_n(
     assert report["renderer"]
     assert report["settings"]["instances"] == [4, 9, 25]
     counts = {lv["name"]: lv["count"] for lv in report["levels"]}
+    # Draw cost in mesh-vertex units: a point costs POINT_COST (the planner's cost model).
+    costs = {
+        lv["name"]: lv["count"] * (POINT_COST if lv["kind"] == "pcd" else 1.0)
+        for lv in report["levels"]
+    }
     assert [row["instances"] for row in report["rows"]] == [4, 9, 25]
     for row in report["rows"]:
         lod, original = row["lod"], row["original"]
-        assert lod["submitted"] < original["submitted"], row
+        lod_cost = sum(n * costs[k] for k, n in lod["level_instances"].items())
+        assert lod_cost < original["submitted"], row
         assert sum(n > 0 for n in lod["level_instances"].values()) > 1, row
         assert lod["submitted"] == sum(n * counts[k] for k, n in lod["level_instances"].items())
         assert lod["drawn"] == original["drawn"] == row["instances"]
@@ -167,7 +174,9 @@ def test_a_frame_over_budget_is_reported_and_larger_grids_skipped(
     assert first.lod.timing.status == first.original.timing.status == "over budget"
     assert second.lod.timing.status == second.original.timing.status == "skipped"
     assert first.speedup is None and first.lod.timing.median_s is None
-    assert second.lod.submitted < second.original.submitted  # counted, not timed
+    costs = {lv.name: lv.count * (POINT_COST if lv.kind == "pcd" else 1.0) for lv in chain.levels}
+    lod_cost = sum(n * costs[name] for name, n in second.lod.level_instances.items())
+    assert lod_cost < second.original.submitted  # counted, not timed
     run_bench(chain, BenchSettings(instances=(9,), frames=1, warmup=0), renderer)
     image = renderer.read_image()
     sky = np.all(image == image[0, 0], axis=2)

@@ -36,6 +36,7 @@ from lodconvert.evaluate import (
 )
 from lodconvert.io.readback import read_chains
 from lodconvert.model import LodChain, Node, PointCloud, Surface
+from lodconvert.plan import level_cost
 from lodconvert.ranges import cutoff
 
 from .conftest import degenerate_meshes, require, surface_of
@@ -196,15 +197,17 @@ def test_points_sit_half_a_pitch_inside_whatever_the_winding() -> None:
             assert np.median(radius) == pytest.approx(1.0 - 0.5 * level.spacing, abs=0.01)
     flat = Surface(np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0.0]]), np.array([[0, 1, 2]]))
     assert outward_sign(flat) == 0.0
-    chain = bake_chain(Node("f", flat), ChainOptions(), NumpyBackend())
-    assert np.all(chain.levels[1].points.positions[:, 2] == 0.0)  # no inside: left in place
+    chain = bake_chain(Node("f", flat), ChainOptions(keep_mesh=False), NumpyBackend())
+    assert np.all(chain.levels[0].points.positions[:, 2] == 0.0)  # no inside: left in place
 
 
 def test_inset_points_follow_the_outline_better(
     torus_chain: LodChain, renderer: SilhouetteRenderer
 ) -> None:
     mesh = torus_chain.levels[0].mesh
-    on_surface = bake_chain(Node("torus", mesh), ChainOptions(inset=0.0), NumpyBackend())
+    same = tuple(lv.params.resolution for lv in torus_chain.levels[1:])
+    options = ChainOptions(inset=0.0, resolutions=same)
+    on_surface = bake_chain(Node("torus", mesh), options, NumpyBackend())
     inset, plain = evaluate(torus_chain, renderer)[1:], evaluate(on_surface, renderer)[1:]
     for a, b in zip(inset, plain, strict=True):
         assert a.count == b.count
@@ -219,10 +222,12 @@ def test_qem_levels_are_decimated_meshes_of_the_point_counts(
     options = ChainOptions(level_kinds=("pcd", "qem", "qem"))
     chain = bake_chain(Node("torus", mesh), options, NumpyBackend())
     assert [lv.kind for lv in chain.levels] == ["mesh", "pcd", "qem", "qem"]
-    counts = [lv.count for lv in chain.levels]
-    assert all(b < a for a, b in itertools.pairwise(counts)), counts
-    for qem, pcd in zip(chain.levels[2:], torus_chain.levels[2:], strict=True):
-        assert 0.8 * pcd.count <= qem.count <= pcd.count
+    costs = [level_cost(lv) for lv in chain.levels]
+    assert all(b < a for a, b in itertools.pairwise(costs)), costs
+    for before, qem, pcd in zip(chain.levels[1:], chain.levels[2:], torus_chain.levels[2:]):
+        # decimated to the point count, or below the draw cost of the level before
+        target = min(pcd.count, level_cost(before))
+        assert 0.8 * target <= qem.count <= target
         assert qem.design_distance == pcd.design_distance
     scores = evaluate(chain, renderer)
     assert all(row.mean_f > 0.97 for row in scores[2:])

@@ -13,6 +13,7 @@ from PIL import Image
 
 from lodconvert.errors import LodConvertError
 from lodconvert.evaluate import SHEET_VIEWS, SilhouetteRenderer
+from lodconvert.plan import POINT_COST
 
 from .conftest import SAMPLE, require, stanford
 from .test_cli import assert_one_line_error, run
@@ -74,9 +75,12 @@ def test_table_json_and_contact_sheet(kind: str, outputs: dict[str, Path], tmp_p
     levels = obj["levels"]
     assert [lv["scores"]["name"] for lv in levels] == ["LOD4", "LOD3", "LOD2", "LOD1"]
     assert all(s["f"] == pytest.approx(1.0, abs=1e-3) for s in levels[0]["scores"]["scores"])
-    counts = [lv["scores"]["count"] for lv in levels]
-    assert counts == sorted(counts, reverse=True)
-    assert all(0 < lv["fraction"] <= 1 for lv in levels)
+    costs = [
+        lv["scores"]["count"] * (POINT_COST if lv["scores"]["kind"] == "pcd" else 1.0)
+        for lv in levels
+    ]
+    assert costs == sorted(costs, reverse=True)
+    assert all(0 < lv["fraction"] < 1 / POINT_COST for lv in levels)
     # a thin knot, 128 px wide at most: far from perfect, far from empty
     assert all(0.5 < s["f"] <= 1 for lv in levels for s in lv["scores"]["scores"])
     assert obj["mean_point_f"] > 0.7

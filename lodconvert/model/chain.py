@@ -93,3 +93,5 @@ class LodChain:
     xs: list[float]
     culled: bool = False
     metadata: dict[str, Any] = field(default_factory=dict)
+    dropped: dict[str, str] = field(default_factory=dict)
+    """Levels the planner left out (name → why): the finer level stays on in their place."""

@@ -1,0 +1,149 @@
+"""Which levels an object gets: a coarser level only where it is cheaper to draw than the level
+before it and still looks like the object where it first shows.
+
+**Cheaper.** A level's draw cost is counted in mesh-vertex units: a mesh level costs its vertex
+count, a point level :data:`POINT_COST` per point. On an H100, point levels drew 1.6–3.2× faster
+than mesh levels with the same vertex count (``DESIGN.md`` §5), so a point costs at most
+1 / 1.6 of a mesh vertex; the bound is the conservative end.
+
+**Looks like the object.** At its switch-in distance in the reference view (1080 px, 45°), the
+level's silhouette precision and recall against the source must both be at least
+:data:`MIN_SILHOUETTE`. Planning runs without GL: :func:`silhouette_estimate` rasterises the
+source and the level along the three axes with the CPU baker's axis rays at the pixel size of
+that distance (orthographic: at the switch-in distances, ≥ 6 object diagonals away, perspective
+changes a silhouette by a few per cent) and draws every point as the square the viewer draws.
+``tests/test_plan.py`` holds the estimate against GL renders of the evaluation code.
+
+When no coarser representation passes, the object keeps fewer levels: the finer level stays on
+to the next cutoff (or to the cull distance).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bake.grid import Grid
+from .bake.numpy import NumpyBackend
+from .model import Level, Mesh, PointCloud
+from .ranges import REFERENCE_VIEW, ReferenceView
+
+POINT_COST = 1 / 1.6
+"""Draw cost of one point in mesh-vertex units (the slowest measured speed-up of points)."""
+MIN_SILHOUETTE = 0.9
+"""Least silhouette precision and recall of a level at its switch-in distance."""
+MIN_CELLS_ACROSS = 8
+"""Fewest grid cells along the longest side that can give a silhouette within
+:data:`MIN_SILHOUETTE`: the squares of a coarser grid err by a large share of the outline. Used
+to skip baking where even that many cells would not be cheaper."""
+
+
+def level_cost(level: Level) -> float:
+    """Draw cost of a level in mesh-vertex units."""
+    return level.count * (POINT_COST if level.is_points else 1.0)
+
+
+def surface_area(mesh: Mesh) -> float:
+    """Total triangle area of ``mesh``."""
+
+    def compute() -> float:
+        tri = mesh.triangles
+        cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        return float(0.5 * np.linalg.norm(cross, axis=1).sum())
+
+    return mesh.derived("area", compute)
+
+
+def fewest_points(mesh: Mesh) -> float:
+    """A lower estimate of the points of any point level that could look like ``mesh``: the
+    cells of a :data:`MIN_CELLS_ACROSS` grid that the surface passes through (each holds one
+    point), taken as half the surface area over a cell face."""
+    pitch = float(np.ptp(mesh.bounds, axis=0).max()) / MIN_CELLS_ACROSS
+    return surface_area(mesh) / pitch**2 / 2.0
+
+
+def may_pay(mesh: Mesh, previous_cost: float) -> bool:
+    """Whether a point level of ``mesh`` could be both cheaper than ``previous_cost`` and
+    faithful; when not, baking one is skipped."""
+    return fewest_points(mesh) * POINT_COST < previous_cost
+
+
+@dataclass(frozen=True)
+class SilhouetteEstimate:
+    """Silhouette precision and recall of a level against its source: the worst of the three
+    axis views."""
+
+    precision: float
+    recall: float
+
+    @property
+    def passes(self) -> bool:
+        """Both at least :data:`MIN_SILHOUETTE`."""
+        return self.precision >= MIN_SILHOUETTE and self.recall >= MIN_SILHOUETTE
+
+
+def _source_masks(mesh: Mesh, pixel: float) -> tuple[Grid, list[np.ndarray]]:
+    """The source's silhouettes along x, y and z on a grid of pitch ``pixel``."""
+    bounds = mesh.bounds
+    resolution = max(1, math.ceil(float(np.ptp(bounds, axis=0).max()) / pixel - 1e-9))
+    grid = Grid.for_bounds(bounds, resolution, 1)
+    hits = NumpyBackend().rasterize(mesh, grid)
+    masks = []
+    for axis in range(3):
+        mask = np.zeros(grid.image_shape(axis), dtype=bool)
+        for h in hits:
+            if h.axis == axis:
+                mask[h.iv, h.iu] = True
+        masks.append(mask)
+    return grid, masks
+
+
+def _splat(centres: np.ndarray, size: float, shape: tuple[int, int], pad: int) -> np.ndarray:
+    """Pixels (of an image padded by ``pad`` on every side) whose centres lie in the squares of
+    side ``size`` around ``centres`` ((k, 2) pixel coordinates (col, row), centre of pixel
+    (0, 0) at (0, 0))."""
+    rows, cols = shape[0] + 2 * pad, shape[1] + 2 * pad
+    half = max(size, 1.0) / 2.0
+    lo = np.ceil(centres - half - 1e-9).astype(np.int64) + pad
+    hi = np.floor(centres + half + 1e-9).astype(np.int64) + pad
+    lo, hi = np.clip(lo, 0, [cols, rows]), np.clip(hi, -1, [cols - 1, rows - 1])
+    keep = (hi >= lo).all(axis=1)
+    lo, hi = lo[keep], hi[keep]
+    acc = np.zeros((rows + 1, cols + 1), dtype=np.int32)
+    np.add.at(acc, (lo[:, 1], lo[:, 0]), 1)
+    np.add.at(acc, (lo[:, 1], hi[:, 0] + 1), -1)
+    np.add.at(acc, (hi[:, 1] + 1, lo[:, 0]), -1)
+    np.add.at(acc, (hi[:, 1] + 1, hi[:, 0] + 1), 1)
+    return acc.cumsum(axis=0).cumsum(axis=1)[:rows, :cols] > 0
+
+
+def silhouette_estimate(
+    mesh: Mesh,
+    cloud: PointCloud,
+    point_px: float,
+    distance: float,
+    view: ReferenceView = REFERENCE_VIEW,
+) -> SilhouetteEstimate:
+    """Silhouette precision and recall of ``cloud`` (points ``point_px`` wide) against ``mesh``
+    seen from ``distance`` in ``view``, both in the same frame; the worst over the axis views."""
+    pixel = distance / view.focal_px
+    grid, masks = _source_masks(mesh, pixel)
+    pad = math.ceil(max(point_px, 1.0))
+    if not any(mask.any() for mask in masks):  # thinner than a pixel: nothing to look like
+        return SilhouetteEstimate(precision=0.0, recall=0.0)
+    precision = recall = 1.0
+    for axis, source in enumerate(masks):
+        if not source.any():  # seen edge-on from this axis
+            continue
+        u, v = grid.plane_axes(axis)
+        centres = (cloud.positions[:, [u, v]] - grid.lo[[u, v]]) / grid.pitch - 0.5
+        drawn = _splat(centres, point_px, source.shape, pad)
+        padded = np.pad(source, pad)
+        tp = int(np.count_nonzero(drawn & padded))
+        fp = int(np.count_nonzero(drawn & ~padded))
+        fn = int(np.count_nonzero(~drawn & padded))
+        precision = min(precision, tp / (tp + fp) if tp + fp else 0.0)
+        recall = min(recall, tp / (tp + fn) if tp + fn else 1.0)
+    return SilhouetteEstimate(precision=precision, recall=recall)
