@@ -4,6 +4,7 @@ streaming, determinism, number formatting and errors on bad files."""
 
 from __future__ import annotations
 
+import base64
 import io
 import math
 import re
@@ -15,6 +16,7 @@ import numpy as np
 import pytest
 import trimesh
 from lxml import etree
+from PIL import Image
 
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
@@ -365,19 +367,97 @@ def test_far_object_keeps_exact_origin_and_small_coordinates(torus: Node, tmp_pa
         assert np.abs(level.coordinates).max() < 2.0  # relative to the origin, not millions
 
 
-def test_textured_mesh_gets_texture_colours_per_vertex(chain: LodChain) -> None:
+def _textured_box(**fields: np.ndarray) -> Surface:
+    """A box with a 6 × 10 random RGBA texture and a distinct UV (inside the image) per vertex."""
     mesh = trimesh.creation.box()
-    texture = np.zeros((2, 2, 4), dtype=np.uint8)
-    texture[:, 0] = (255, 0, 0, 255)  # left half red
-    texture[:, 1] = (0, 0, 255, 255)  # right half blue
-    uv = np.column_stack([np.where(mesh.vertices[:, 0] < 0, 0.25, 0.75), np.full(8, 0.5)])
-    surface = Surface(mesh.vertices, mesh.faces.astype(np.int64), uv=uv, texture=texture)
-    textured = replace(chain, levels=[replace(chain.levels[0], mesh=surface), *chain.levels[1:]])
-    shape = etree.fromstring(_write([textured])).find(".//IndexedTriangleSet")
-    colours = _floats(shape.find("Color").get("color")).reshape(-1, 3)
-    left = mesh.vertices[:, 0] < 0
-    np.testing.assert_array_equal(colours[left], [[1, 0, 0]] * left.sum())
-    np.testing.assert_array_equal(colours[~left], [[0, 0, 1]] * (~left).sum())
+    texture = np.random.default_rng(3).integers(0, 256, size=(6, 10, 4), dtype=np.uint8)
+    uv = (mesh.vertices[:, :2] + 0.5) * [0.8, 0.6] + [0.1, 0.2] + mesh.vertices[:, 2:] * 0.05
+    return Surface(mesh.vertices, mesh.faces.astype(np.int64), uv=uv, texture=texture, **fields)
+
+
+def _with_mesh(chain: LodChain, surface: Surface) -> LodChain:
+    return replace(chain, levels=[replace(chain.levels[0], mesh=surface), *chain.levels[1:]])
+
+
+def _texture_pixels(url: str) -> np.ndarray:
+    """The image of an ImageTexture url holding one PNG data URI."""
+    (uri,) = re.fullmatch(r'"([^"\\]*)"', url).groups()
+    assert uri.startswith("data:image/png;base64,")
+    with Image.open(io.BytesIO(base64.b64decode(uri.split(",", 1)[1], validate=True))) as png:
+        assert png.format == "PNG" and png.mode == "RGBA"
+        return np.asarray(png)
+
+
+def test_textured_mesh_keeps_its_texture(chain: LodChain) -> None:
+    red = np.array([255, 0, 0, 255], np.uint8)
+    surface = _textured_box(base_color=red)
+    shape = etree.fromstring(_write([_with_mesh(chain, surface)])).find(".//Group/Shape")
+    appearance = shape.find("Appearance")
+    assert [c.tag for c in appearance] == ["Material", "ImageTexture"]
+    assert appearance.find("Material").get("diffuseColor") == "1 0 0"  # modulates the texture
+    pixels = _texture_pixels(appearance.find("ImageTexture").get("url"))
+    np.testing.assert_array_equal(pixels, surface.texture)
+    triangles = shape.find("IndexedTriangleSet")
+    assert triangles.find("Color") is None  # no colours sampled from the texture
+    index = _floats(triangles.get("index")).astype(int)
+    st = _floats(triangles.find("TextureCoordinate").get("point")).reshape(-1, 2)
+    np.testing.assert_allclose(st[index], surface.uv[surface.faces].reshape(-1, 2), atol=5e-7)
+    # X3D's t runs up from the image's bottom row: each corner shows the model's texel
+    h, w = pixels.shape[:2]
+    texels = pixels[((1 - st[:, 1]) * h).astype(int), (st[:, 0] * w).astype(int)]
+    plain = replace(surface, base_color=None)
+    expected = plain.colors_at(np.repeat(np.arange(12), 3), surface.vertices[surface.faces.ravel()])
+    np.testing.assert_array_equal(texels[index], expected)
+
+
+def test_textured_mesh_validates_shares_its_appearance_and_is_deterministic(
+    schema: etree.XMLSchema, chain: LodChain, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    monkeypatch.setattr(x3d, "MAX_SHAPE_TRIANGLES", 5)  # the box's 12 triangles in 3 Shapes
+    textured = _with_mesh(chain, _textured_box())
+    path = tmp_path / "box.x3d"
+    path.write_bytes(_write([textured]))
+    data = path.read_bytes()
+    _assert_valid(schema, data)
+    assert _write([textured]) == data  # same PNG, same bytes
+    group = _lod_children(_lod(data))[0]
+    appearances = [shape.find("Appearance") for shape in group.iter("Shape")]
+    assert len(appearances) == 3 and len(list(group.iter("ImageTexture"))) == 1
+    assert appearances[0].get("DEF") == "torus_LOD4_Appearance"
+    assert all(a.get("USE") == "torus_LOD4_Appearance" for a in appearances[1:])
+    assert all(g.find("TextureCoordinate") is not None for g in _shape_geometry(group))
+    mesh = read_x3d_points(path)["torus_LOD4"]  # the reader skips texture nodes
+    np.testing.assert_allclose(
+        mesh.coordinates[mesh.index], textured.levels[0].mesh.triangles, atol=1e-6
+    )
+    assert mesh.colors is None
+
+
+def test_textured_part_with_vertex_colours_keeps_both(chain: LodChain) -> None:
+    box = _textured_box(base_color=np.array([255, 128, 0, 255], np.uint8))
+    box.vertex_colors = np.random.default_rng(5).integers(0, 256, (8, 4), dtype=np.uint8)
+    box.vertex_colors[:, 3] = 255
+    triangles = etree.fromstring(_write([_with_mesh(chain, box)])).find(".//IndexedTriangleSet")
+    assert triangles.find("TextureCoordinate") is not None
+    # X3D multiplies the texture by the Color node: vertex colour × base colour, as glTF does
+    colours = _floats(triangles.find("Color").get("color")).reshape(-1, 3)
+    index = np.unique(box.faces)
+    expected = np.rint(box.vertex_colors[index, :3] * [1, 128 / 255, 0]).astype(int)
+    np.testing.assert_array_equal(np.rint(colours * 255).astype(int), expected)
+    np.testing.assert_array_equal(vertex_colors(box)[:, :3], expected)
+
+
+def test_large_texture_is_halved_until_its_url_fits(monkeypatch: pytest.MonkeyPatch) -> None:
+    texture = np.random.default_rng(9).integers(0, 256, size=(40, 64, 4), dtype=np.uint8)
+    texture[..., 3] = 255  # opaque: plain 2 × 2 averages (Pillow weighs colours by alpha)
+    full = x3d.texture_url(texture)
+    monkeypatch.setattr(x3d, "MAX_TEXTURE_URL", len(full) - 1)
+    url = x3d.texture_url(texture)
+    assert len(url) < len(full)
+    pixels = _texture_pixels(f'"{url}"')
+    assert pixels.shape == (20, 32, 4)  # halved once: a quarter of the pixels fits
+    boxes = texture.reshape(20, 2, 32, 2, 4).astype(float).mean(axis=(1, 3))
+    np.testing.assert_allclose(pixels, boxes, atol=1)
 
 
 def test_uncoloured_mesh_uses_material_colour(chain: LodChain) -> None:

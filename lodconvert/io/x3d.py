@@ -10,7 +10,8 @@ Layout of a written file (validates against the official x3d-4.0.xsd)::
             <MetadataSet name='lodconvert' containerField='metadata'> alpha, β, γ, xs, ...
             <Group DEF='id_LOD4'>   (the source mesh)
               <MetadataSet name='lodconvert' containerField='metadata'> level parameters
-              <Shape> <Appearance DEF='id_LOD4_Appearance'> Material + IndexedTriangleSet
+              <Shape> <Appearance DEF='id_LOD4_Appearance'> Material (+ ImageTexture)
+                      + IndexedTriangleSet: Coordinate (+ Color) (+ TextureCoordinate)
               <Shape> <Appearance USE='id_LOD4_Appearance'/> + IndexedTriangleSet ...
             <Group DEF='id_LOD3'>   (baked points)
               <MetadataSet ...> + Shapes with PointProperties + PointSet ...
@@ -22,6 +23,11 @@ schema validators enforce: a ``Shape`` holds at most :data:`MAX_SHAPE_VERTICES` 
 points and :data:`MAX_SHAPE_TRIANGLES` triangles. A mesh is split into runs of consecutive
 faces, each with only the vertices it uses (re-indexed, in their original order); a point
 level into consecutive slices. The level's ``Appearance`` is defined once and re-used.
+
+A textured mesh part keeps its texture, as in glTF: an ``ImageTexture`` whose ``url`` is the image
+as a PNG ``data:`` URI (see :func:`texture_url`) and a ``TextureCoordinate`` per vertex. X3D 4.0
+multiplies the texture by the Material's ``diffuseColor`` (or by the ``Color`` node where the part
+also has vertex colours), so the base colour modulates it as glTF's ``baseColorFactor`` does.
 
 Geometry inside the ``Transform`` is relative to the chain origin and printed with float32-level
 precision (:data:`~lodconvert.io.numbers.GEOMETRY_DIGITS` significant digits on the level's
@@ -42,17 +48,20 @@ The scale factor ``s = max(1, p)`` keeps the XSD's ``pointSizeScaleFactor >= 1``
 
 from __future__ import annotations
 
+import base64
 import contextlib
+import io
 import json
 import math
 import re
-from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
 from lxml import etree
+from PIL import Image as PILImage
 
 from ..errors import InputError
 from ..model import Level, LodChain, Mesh, Surface
@@ -78,6 +87,12 @@ least 0.001 (10 from 0.1 on), so the ``point`` attribute stays under 3.9 MB, and
 MAX_SHAPE_TRIANGLES = 200_000
 """Most triangles in one ``Shape``: its ``index`` attribute (indices below
 :data:`MAX_SHAPE_VERTICES`, at most 6 characters each) stays under 3.6 MB."""
+
+MAX_TEXTURE_URL = 8_000_000
+"""Most characters of a texture's PNG ``data:`` URI, so that the ``url`` attribute stays under
+libxml2's 10 MB limit like every other: a larger image is halved until it fits."""
+
+PNG_DATA_URI = "data:image/png;base64,"
 
 METADATA_SET = "lodconvert"
 _NOT_NCNAME = re.compile(r"[^A-Za-z0-9_.\-]")
@@ -273,12 +288,15 @@ def _color_node(out: _Out, rgba: np.ndarray) -> None:
         out.leaf("ColorRGBA", {"color": format_unit_bytes(rgba)})
 
 
-def _appearance(out: _Out, name: str, first: bool, tag: str, fields: dict[str, str]) -> None:
-    """A level's ``Appearance``: defined (``DEF``, with one ``tag`` child) in its first
-    ``Shape`` and re-used (``USE``) in the others."""
+def _appearance(
+    out: _Out, name: str, first: bool, children: Sequence[tuple[str, dict[str, str]]]
+) -> None:
+    """A level's or part's ``Appearance``: defined (``DEF``, with the ``(tag, fields)``
+    ``children``) in its first ``Shape`` and re-used (``USE``) in the others."""
     if first:
         with out.node("Appearance", {"DEF": name}):
-            out.leaf(tag, fields)
+            for tag, fields in children:
+                out.leaf(tag, fields)
     else:
         out.leaf("Appearance", {"USE": name})
 
@@ -307,19 +325,42 @@ def _point_slices(count: int) -> Iterator[slice]:
         yield slice(start, start + MAX_SHAPE_VERTICES)
 
 
-def vertex_colors(surface: Surface) -> np.ndarray | None:
-    """Per-vertex RGBA (n, 4) uint8 for a mesh written without its texture, or ``None`` when the
-    surface has neither vertex colours nor a texture with UVs (its
-    :attr:`~Surface.material_color` then goes to the Material).
+def _textured(surface: Surface) -> bool:
+    return surface.texture is not None and surface.uv is not None
 
-    Each vertex takes :meth:`Surface.colors_at` at its own position on the first face that
-    uses it: the texture sampled at the vertex UV (nearest texel) or the vertex colour, both
-    modulated by the base colour. Texture detail between vertices is lost; vertices used by
-    no face get the material colour.
+
+def texture_url(rgba: np.ndarray) -> str:
+    """The image ``rgba`` (h, w, 4) uint8, top row first, as a PNG ``data:`` URI for an
+    ``ImageTexture`` ``url``: same pixels, same text.
+
+    Pillow writes the PNG with fixed options and no timestamp or text chunk. An image whose URI
+    would be longer than :data:`MAX_TEXTURE_URL` is halved (2×2 box average, odd edges
+    rounded up) until it fits; texture coordinates stay valid as they are relative.
     """
-    textured = surface.texture is not None and surface.uv is not None
-    if not textured and surface.vertex_colors is None:
+    image = PILImage.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8))
+    while True:
+        png = io.BytesIO()
+        image.save(png, format="PNG", optimize=False, compress_level=6)
+        url = PNG_DATA_URI + base64.b64encode(png.getvalue()).decode("ascii")
+        if len(url) <= MAX_TEXTURE_URL or max(image.size) == 1:
+            return url
+        image = image.reduce(2)
+
+
+def vertex_colors(surface: Surface) -> np.ndarray | None:
+    """Per-vertex RGBA (n, 4) uint8 of the ``Color`` node of ``surface``'s Shapes, or ``None``
+    when the surface has no vertex colours (its :attr:`~Surface.material_color` then goes to
+    the Material, and a texture to an ``ImageTexture``).
+
+    Each vertex takes :meth:`Surface.colors_at` of the surface without its texture at its own
+    position on the first face that uses it: the vertex colour modulated by the base colour
+    (the texture is written as a texture, which X3D multiplies by these colours). Vertices used
+    by no face get the material colour.
+    """
+    if surface.vertex_colors is None:
         return None
+    if _textured(surface):
+        surface = replace(surface, uv=None, texture=None)
     colors = np.repeat(surface.material_color[None, :], len(surface.vertices), axis=0)
     corners = surface.faces.ravel()
     order = np.argsort(corners, kind="stable")
@@ -340,22 +381,31 @@ def _mesh_shapes(out: _Out, mesh: Mesh, appearance: str) -> None:
 
 def _part_shapes(out: _Out, surface: Surface, appearance: str) -> None:
     """One part as ``Shape`` s with an ``IndexedTriangleSet`` each, one per run of faces
-    (:func:`_face_runs`), holding the vertices (and colours) that run uses, re-indexed."""
+    (:func:`_face_runs`), holding the vertices (colours, texture coordinates) that run uses,
+    re-indexed. A textured part's ``Appearance`` holds its ``ImageTexture``."""
     base = surface.material_color
     material = {"diffuseColor": format_unit_bytes(base[:3])}
     if base[3] < 255:
         material["transparency"] = format_fixed([1.0 - base[3] / 255.0], 4)
+    children = [("Material", material)]
+    uv = surface.uv if _textured(surface) else None
+    if uv is not None:
+        assert surface.texture is not None
+        children.append(("ImageTexture", {"url": _mfstring([texture_url(surface.texture)])}))
     colors = vertex_colors(surface)
     decimals = geometry_decimals(surface.vertices)
+    uv_decimals = geometry_decimals(uv) if uv is not None else 0
     for k, run in enumerate(_face_runs(surface.faces)):
         used, index = np.unique(run, return_inverse=True)
         with out.node("Shape"):
-            _appearance(out, appearance, k == 0, "Material", material)
+            _appearance(out, appearance, k == 0, children)
             attrib = {"solid": "false", "index": format_ints(index)}
             with out.node("IndexedTriangleSet", attrib):
                 out.leaf("Coordinate", {"point": format_fixed(surface.vertices[used], decimals)})
                 if colors is not None:
                     _color_node(out, colors[used])
+                if uv is not None:
+                    out.leaf("TextureCoordinate", {"point": format_fixed(uv[used], uv_decimals)})
 
 
 def _point_shapes(out: _Out, level: Level, switch_in: float, alpha: float, appearance: str) -> None:
@@ -367,7 +417,7 @@ def _point_shapes(out: _Out, level: Level, switch_in: float, alpha: float, appea
     decimals = geometry_decimals(positions)
     for k, part in enumerate(_point_slices(len(positions))):
         with out.node("Shape"):
-            _appearance(out, appearance, k == 0, "PointProperties", fields)
+            _appearance(out, appearance, k == 0, [("PointProperties", fields)])
             with out.node("PointSet"):
                 _color_node(out, colors[part])
                 out.leaf("Coordinate", {"point": format_fixed(positions[part], decimals)})
