@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 
 from lodconvert.bake import NumpyBackend, get_backend  # noqa: E402
 from lodconvert.chain import ChainOptions, bake_chain  # noqa: E402
-from lodconvert.pipeline import read_scene  # noqa: E402
+from lodconvert.io import read_scene  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 STANFORD = HERE.parents[1] / "shared" / "data" / "stanford"
@@ -90,7 +90,7 @@ def peak_memory(path: Path) -> dict:
     """Peak RSS (MiB) of a fresh process that loads ``path`` and bakes the default chain."""
     code = (
         "import resource,sys,time;"
-        "from lodconvert.pipeline import read_scene;"
+        "from lodconvert.io import read_scene;"
         "from lodconvert.chain import ChainOptions,bake_chain;"
         "from lodconvert.bake import NumpyBackend;"
         f"o=next(read_scene({str(path)!r}).with_geometry());"

@@ -55,9 +55,9 @@ from lodconvert.evaluate import (
     silhouette_scores,
     stack_images,
 )
-from lodconvert.io.readback import read_chains
+from lodconvert.io import read_chains
 from lodconvert.model import LodChain, Node, Surface
-from lodconvert.pipeline import read_scene
+from lodconvert.io import read_scene
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

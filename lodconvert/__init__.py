@@ -5,7 +5,7 @@ Library API (the command line is a thin layer over it)::
     import lodconvert
     report = lodconvert.convert("bunny.ply", "bunny.x3d")
     scene = lodconvert.read("bunny.ply")
-    chains = [lodconvert.bake_levels(obj) for obj in scene]
+    chains = [lodconvert.bake(node) for node in scene.with_geometry()]
     lodconvert.write(chains, "bunny.glb", source="bunny.ply")
     lodconvert.cutoffs(alpha=0.25, gamma=10)          # Y = α·β·γˣ
 """
@@ -16,6 +16,7 @@ __version__ = "0.1.0"
 
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 from .chain import ChainOptions
 from .errors import InputError, LodConvertError, UsageError
@@ -23,14 +24,15 @@ from .model import LodChain, Node, Scene
 from .ranges import cutoffs
 
 
-def read(path: str | Path) -> Scene:
-    """Read a supported input file into a :class:`Scene` of objects."""
-    from .pipeline import read_scene
+def read(path: str | Path, **options: Any) -> Scene:
+    """Read a supported input file into a :class:`Scene` of nodes (the format's reader
+    options, such as ``merge_groups`` for OBJ, pass through)."""
+    from .io import read_scene
 
-    return read_scene(path)
+    return read_scene(path, **options)
 
 
-def bake_levels(obj: Node, options: ChainOptions | None = None, backend: str = "auto") -> LodChain:
+def bake(obj: Node, options: ChainOptions | None = None, backend: str = "auto") -> LodChain:
     """Bake one object's LOD chain (see :mod:`lodconvert.chain` for how defaults are derived)."""
     from .bake import get_backend
     from .chain import bake_chain
@@ -39,23 +41,38 @@ def bake_levels(obj: Node, options: ChainOptions | None = None, backend: str = "
 
 
 def write(
-    chains: Iterable[LodChain], path: str | Path, source: str = "", crs: str | None = None
+    chains: Iterable[LodChain],
+    path: str | Path,
+    source: str = "",
+    crs: str | None = None,
+    **options: Any,
 ) -> None:
-    """Write chains to ``path`` (format from the suffix), atomically."""
-    from .io import OutputInfo, writer_for
-    from .io.atomic import atomic_output
+    """Write chains to ``path`` (format from the suffix) as the command line does: the path is
+    checked first, the file is staged, checked by its format and only then put in place; on any
+    failure nothing is written and an existing file is left as it was."""
+    from .io import OutputInfo, output_format
+    from .sinks import Outputs
+    from .validate import check_written
 
-    writer = writer_for(path)
+    target = output_format(path)
     info = OutputInfo(generator=f"lodconvert {__version__}", source=source, crs=crs)
-    with atomic_output(path) as handle:
-        writer(chains, handle, info)
+    with Outputs() as outputs:
+        sink = outputs.file(path)
+        target.write_chains(chains, sink, info, **options)
+        check_written(sink.staged.temp, path)
 
 
-def convert(input_path: str | Path, output_path: str | Path, **kwargs: object) -> dict:
-    """Read, bake and write in one call; return the report (see :mod:`lodconvert.convert`)."""
-    from .pipeline import convert as _convert
+def convert(
+    input_path: str | Path,
+    output_path: str | Path,
+    options: ChainOptions | None = None,
+    **kwargs: Any,
+) -> dict:
+    """Read, bake and write in one call, with every guarantee of the command line; return the
+    report (see :func:`lodconvert.pipeline.convert` for the other keyword arguments)."""
+    from .pipeline import convert as run
 
-    return _convert(input_path, output_path, **kwargs)  # type: ignore[arg-type]
+    return run(input_path, output_path, options, **kwargs)
 
 
 __all__ = [
@@ -66,7 +83,7 @@ __all__ = [
     "Scene",
     "UsageError",
     "__version__",
-    "bake_levels",
+    "bake",
     "convert",
     "cutoffs",
     "read",

@@ -53,8 +53,7 @@ import numpy as np
 from .errors import InputError, UsageError
 from .evaluate import look_at, perspective
 from .glcontext import create_context
-from .io import suffix_of
-from .io.readback import read_chains
+from .io import read_chains, suffix_of
 from .model import Level, LodChain
 from .ranges import REFERENCE_VIEW, ReferenceView
 
@@ -236,7 +235,7 @@ def _bench_chain(chain: LodChain) -> BenchChain:
 
 def _reference_mesh(path: str | Path, chain: BenchChain) -> BenchLevel:
     """The original mesh for ``chain`` from a mesh file (world coordinates → chain origin)."""
-    from .pipeline import read_scene
+    from .io import read_scene
 
     scene = read_scene(path)
     nodes = list(scene.with_geometry())
@@ -261,7 +260,7 @@ def grid_side(count: int) -> int:
     """k for N = k² instances; :class:`UsageError` unless ``count`` is a positive square."""
     side = math.isqrt(count) if count > 0 else 0
     if side * side != count or side == 0:
-        raise UsageError(f"--instances must be perfect squares (k×k grids), got {count}")
+        raise UsageError(f"must be perfect squares (k×k grids), got {count}", "instances")
     return side
 
 
@@ -280,7 +279,7 @@ def up_rotation(up: str) -> np.ndarray:
         return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
     if up == "z":
         return np.eye(3)
-    raise UsageError(f"--up must be y or z, got {up!r}")
+    raise UsageError(f"must be y or z, got {up!r}", "up")
 
 
 def frustum_planes(view_proj: np.ndarray) -> np.ndarray:
@@ -581,9 +580,9 @@ class BenchSettings:
         for count in self.instances:
             grid_side(count)
         if self.frames < 1 or self.warmup < 0:
-            raise UsageError("--frames must be at least 1 and --warmup at least 0")
+            raise UsageError("must be at least 1, and warmup at least 0", "frames")
         if not self.budget_s > 0 or not self.spacing > 0:
-            raise UsageError("--budget and --spacing must be positive")
+            raise UsageError("and spacing must be positive", "budget")
         up_rotation(self.up)
 
     def record(self) -> dict[str, Any]:

@@ -92,46 +92,47 @@ class ChainOptions:
     def check(self) -> None:
         """Raise :class:`UsageError` for inconsistent or out-of-range options."""
         if not 2 <= self.levels <= MAX_LEVELS:
-            raise UsageError(f"--levels must be between 2 and {MAX_LEVELS}, got {self.levels}")
+            raise UsageError(f"must be between 2 and {MAX_LEVELS}, got {self.levels}", "levels")
         xs = self.exponents
         if len(xs) != self.levels - 1:
             raise UsageError(
-                f"--x needs {self.levels - 1} exponents for {self.levels} levels, got {len(xs)}"
+                f"needs {self.levels - 1} exponents for {self.levels} levels, got {len(xs)}", "xs"
             )
         check_range_parameters(self.beta, self.gamma, xs)
         if self.cull is not None and not (math.isfinite(self.cull) and self.cull > xs[-1]):
-            raise UsageError(f"--cull must be greater than the last --x ({xs[-1]:g})")
+            raise UsageError(f"must be greater than the last exponent ({xs[-1]:g})", "cull")
         n = self.pcd_levels
-        for flag, values in (
-            ("--resolution", self.resolutions),
-            ("--slices", self.slices),
-            ("--point-size", self.point_sizes),
+        for name, values in (
+            ("resolutions", self.resolutions),
+            ("slices", self.slices),
+            ("point_sizes", self.point_sizes),
         ):
             if values is None:
                 continue
             if len(values) != n:
-                raise UsageError(
-                    f"{flag} needs {n} values (one per point level), got {len(values)}"
-                )
+                raise UsageError(f"needs {n} values (one per point level), got {len(values)}", name)
             if any(not (math.isfinite(v) and v > 0) for v in values):
-                raise UsageError(f"{flag} values must be positive")
-        for flag, values in (("--resolution", self.resolutions), ("--slices", self.slices)):
+                raise UsageError("values must be positive", name)
+        for name, values in (("resolutions", self.resolutions), ("slices", self.slices)):
             if values is not None and any(v > MAX_RESOLUTION for v in values):
-                raise UsageError(f"{flag} values must be at most {MAX_RESOLUTION}")
+                raise UsageError(f"values must be at most {MAX_RESOLUTION}", name)
         if self.spacing_px <= 0:
-            raise UsageError("the pixel spacing target must be positive")
+            raise UsageError("(the pixel spacing target) must be positive", "spacing_px")
         if not 0 <= self.inset <= 1:
-            raise UsageError(f"the point inset must be between 0 and 1 pitch, got {self.inset:g}")
+            raise UsageError(
+                f"(the point inset) must be between 0 and 1 pitch, got {self.inset:g}", "inset"
+            )
         if self.level_kinds is not None:
             if len(self.level_kinds) not in (1, n):
                 raise UsageError(
-                    f"--level-kind needs 1 value or {n} (one per baked level), "
-                    f"got {len(self.level_kinds)}"
+                    f"needs 1 value or {n} (one per baked level), got {len(self.level_kinds)}",
+                    "level_kinds",
                 )
             unknown = sorted(set(self.level_kinds) - set(LEVEL_KINDS))
             if unknown:
                 raise UsageError(
-                    f"--level-kind values must be {' or '.join(LEVEL_KINDS)}, got {unknown[0]!r}"
+                    f"values must be {' or '.join(LEVEL_KINDS)}, got {unknown[0]!r}",
+                    "level_kinds",
                 )
 
 

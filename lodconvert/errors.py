@@ -16,4 +16,13 @@ class InputError(LodConvertError):
 
 
 class UsageError(Exception):
-    """An option value is out of range or inconsistent with the others (exit code 2)."""
+    """An option value is out of range or inconsistent with the others (exit code 2).
+
+    ``field`` names the option of the library API the message is about (``levels``,
+    ``gamma``…); the message reads after it (``str(exc)`` is ``"gamma must be > 1"``). The
+    command line shows the flag it maps that field to instead.
+    """
+
+    def __init__(self, message: str, field: str | None = None) -> None:
+        self.message, self.field = message, field
+        super().__init__(f"{field} {message}" if field else message)

@@ -7,10 +7,11 @@ skipped; when none can, the conversion fails and no output file appears.
 
 from __future__ import annotations
 
+import json
 import platform
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -20,16 +21,22 @@ from . import __version__
 from .bake import Backend, get_backend
 from .chain import ChainOptions, bake_chain
 from .errors import InputError
-from .io import OutputInfo, reader_for, writer_for
-from .io.atomic import atomic_output
+from .io import OutputInfo, input_format, output_format
 from .model import LodChain, Scene
+from .sinks import FileSink, Outputs
 from .validate import check_written
 
 Message = Callable[[str], None]
+Step = Callable[[str, int, "int | None"], None]
+"""``step(stage, done, total)``: ``done`` of ``total`` (``None``: unknown) items finished."""
 
 
 def _quiet(_: str) -> None:
     """Discard a message."""
+
+
+def _no_step(stage: str, done: int, total: int | None) -> None:
+    """Discard a progress count."""
 
 
 def options_record(options: ChainOptions) -> dict[str, Any]:
@@ -70,12 +77,8 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
         "culled": chain.culled,
         "origin": [float(v) for v in chain.origin],
         "levels": levels,
+        "dropped": dict(chain.dropped),
     }
-
-
-def read_scene(path: str | Path) -> Scene:
-    """Read any supported input into a Scene (the registry picks the reader by suffix)."""
-    return reader_for(path)(Path(path))
 
 
 def iter_chains(
@@ -85,25 +88,30 @@ def iter_chains(
     progress: Message = _quiet,
     warn: Message = _quiet,
     skipped: list[dict[str, str]] | None = None,
+    step: Step = _no_step,
 ) -> Iterator[LodChain]:
     """Bake the scene's objects one at a time; objects with bad geometry are reported through
-    ``warn``, recorded in ``skipped`` and left out."""
-    total = len(scene.nodes) if isinstance(scene.nodes, list) else "?"
+    ``warn``, recorded in ``skipped`` and left out. ``step`` hears how many are done."""
+    total = len(scene.nodes) if isinstance(scene.nodes, list) else None
+    shared: dict[int, LodChain] = {}  # geometry placed by several nodes: baked once
     for i, obj in enumerate(scene.with_geometry(), start=1):
         try:
-            chain = bake_chain(
-                obj,
-                options,
-                backend,
-                progress=lambda m, i=i: progress(f"[{i}/{total}] {m}"),
-                warn=warn,
-            )
+            if obj.transform is not None and id(obj.geometry) in shared:
+                base = shared[id(obj.geometry)]
+                chain = replace(base, object_id=obj.id, metadata=dict(obj.attributes))
+            else:
+                chain = bake_chain(obj, options, backend, progress=progress, warn=warn)
+            if obj.transform is not None:
+                shared.setdefault(id(obj.geometry), chain)
+                chain = replace(chain, transform=np.asarray(obj.transform, dtype=np.float64))
         except InputError as exc:
-            if total != 1:
+            if total != 1:  # with one object, the run's error says it
                 warn(f"{scene.source}: object {exc} — skipped")
             if skipped is not None:
                 skipped.append({"id": obj.id, "reason": str(exc)})
             continue
+        finally:
+            step("converting", i, total)
         yield chain
 
 
@@ -114,47 +122,55 @@ def convert(
     backend: str = "auto",
     progress: Message = _quiet,
     warn: Message = _quiet,
+    report_path: str | Path | None = None,
+    step: Step = _no_step,
+    read_options: dict[str, Any] | None = None,
+    write_options: dict[str, Any] | None = None,
+    also: Callable[[Outputs, FileSink, dict[str, Any]], None] | None = None,
 ) -> dict[str, Any]:
     """Convert ``input_path`` into ``output_path`` and return the report (a JSON-able dict).
 
-    The written file passes :func:`~lodconvert.validate.check_written` (structural checks of
-    X3D and glTF) before it is renamed into place. Raises
-    :class:`~lodconvert.errors.UsageError` for bad options and
-    :class:`~lodconvert.errors.LodConvertError` for unreadable input, when no object could be
-    baked or when the output fails validation; in all cases ``output_path`` is left untouched.
+    Every output of the run is staged and committed together (:mod:`~lodconvert.sinks`): the
+    model file, after it passes its format's structural checks; the report at
+    ``report_path`` when given; and whatever ``also`` stages (it is called with the run's
+    :class:`~lodconvert.sinks.Outputs`, the model's sink and the report before the commit).
+    Output paths are checked before any work. Raises
+    :class:`~lodconvert.errors.UsageError` for bad options or an unknown output suffix and
+    :class:`~lodconvert.errors.LodConvertError` for a bad output path, unreadable input, when
+    no object could be baked or when the output fails its checks; then nothing is written and
+    existing files are left as they were.
     """
     options = options or ChainOptions()
     options.check()
-    writer = writer_for(output_path)
+    target = output_format(output_path)
+    source = input_format(input_path)
     timings: dict[str, float] = {}
-    start = time.perf_counter()
-    scene = read_scene(input_path)
-    timings["read"] = time.perf_counter() - start
-    baker = get_backend(backend)
-    info = OutputInfo(
-        generator=f"lodconvert {__version__}",
-        source=Path(input_path).name,
-        crs=scene.crs,
-        view=options.view,
-        options=options_record(options),
-    )
     records: list[dict[str, Any]] = []
     skipped: list[dict[str, str]] = []
+    with Outputs(inputs=[input_path]) as outputs:
+        sink = outputs.file(output_path)
+        report_sink = outputs.file(report_path) if report_path is not None else None
+        start = time.perf_counter()
+        scene = source.read_file(input_path, **(read_options or {}))
+        timings["read"] = time.perf_counter() - start
+        baker = get_backend(backend)
+        info = OutputInfo(
+            generator=f"lodconvert {__version__}",
+            source=Path(input_path).name,
+            crs=scene.crs,
+            view=options.view,
+            options=options_record(options),
+        )
 
-    def recorded(chains: Iterator[LodChain]) -> Iterator[LodChain]:
-        for chain in chains:
-            records.append(chain_record(chain))
-            yield chain
+        def recorded(chains: Iterator[LodChain]) -> Iterator[LodChain]:
+            for chain in chains:
+                records.append(chain_record(chain))
+                yield chain
 
-    def validated(tmp: Path) -> None:
-        started = time.perf_counter()
-        progress(f"validating {Path(output_path).name}")
-        check_written(tmp, output_path)
-        timings["validate"] = time.perf_counter() - started
-
-    start = time.perf_counter()
-    with atomic_output(output_path, check=validated) as handle:
-        writer(recorded(iter_chains(scene, options, baker, progress, warn, skipped)), handle, info)
+        start = time.perf_counter()
+        chains = recorded(iter_chains(scene, options, baker, progress, warn, skipped, step))
+        target.write_chains(chains, sink, info, **(write_options or {}))
+        timings["bake_and_write"] = time.perf_counter() - start
         if not records:
             reason = (
                 skipped[0]["reason"]
@@ -162,7 +178,30 @@ def convert(
                 else f"none of its {len(skipped)} objects could be converted"
             )
             raise InputError(reason, str(input_path))
-    timings["bake_and_write"] = time.perf_counter() - start - timings["validate"]
+        step("checking", 0, 1)
+        start = time.perf_counter()
+        check_written(sink.staged.temp, output_path)
+        timings["validate"] = time.perf_counter() - start
+        step("checking", 1, 1)
+        report = _report(input_path, output_path, baker, options, records, skipped, timings)
+        if also is not None:
+            also(outputs, sink, report)
+        if report_sink is not None:
+            report_sink.write_bytes((json.dumps(report, indent=2) + "\n").encode())
+    return report
+
+
+def _report(
+    input_path: str | Path,
+    output_path: str | Path,
+    baker: Backend,
+    options: ChainOptions,
+    records: list[dict[str, Any]],
+    skipped: list[dict[str, str]],
+    timings: dict[str, float],
+) -> dict[str, Any]:
+    """What ``--report`` records of a run."""
+    reduced = [r for r in records if r["dropped"]]
     return {
         "lodconvert": __version__,
         "input": str(input_path),
@@ -175,6 +214,7 @@ def convert(
         "skipped": skipped,
         "totals": {
             "objects": len(records),
+            "fewer_levels": len(reduced),
             "points": int(
                 sum(lv["count"] for r in records for lv in r["levels"] if lv["kind"] == "pcd")
             ),

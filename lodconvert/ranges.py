@@ -40,7 +40,7 @@ REFERENCE_VIEW = ReferenceView()
 def default_xs(n_cutoffs: int) -> list[float]:
     """Evenly spread exponents ending at 1.0, truncated to two decimals (3 → 0.33, 0.66, 1.0)."""
     if n_cutoffs < 1:
-        raise UsageError("a chain needs at least one cutoff (two levels)")
+        raise UsageError("must be at least 2: a chain needs at least one cutoff", "levels")
     return [math.floor(100 * k / n_cutoffs) / 100 for k in range(1, n_cutoffs + 1)]
 
 
@@ -48,18 +48,18 @@ def check_range_parameters(beta: float, gamma: float, xs: Sequence[float]) -> No
     """Raise :class:`UsageError` unless β > 0, γ > 1 and the exponents are positive and
     strictly increasing (the conditions for cutoffs that grow level by level)."""
     if not math.isfinite(beta) or beta <= 0:
-        raise UsageError(f"--beta must be a positive number, got {beta:g}")
+        raise UsageError(f"must be a positive number, got {beta:g}", "beta")
     if not math.isfinite(gamma) or gamma <= 1:
         raise UsageError(
-            f"--plot-radius (γ) must be greater than 1 so that cutoffs increase, got {gamma:g}"
+            f"(γ) must be greater than 1 so that cutoffs increase, got {gamma:g}", "gamma"
         )
     if not xs:
-        raise UsageError("--x needs at least one exponent")
+        raise UsageError("needs at least one exponent", "xs")
     if any(not math.isfinite(x) or x <= 0 for x in xs):
-        raise UsageError(f"--x exponents must be positive, got {', '.join(f'{x:g}' for x in xs)}")
+        raise UsageError(f"exponents must be positive, got {', '.join(f'{x:g}' for x in xs)}", "xs")
     if any(b <= a for a, b in itertools.pairwise(xs)):
         raise UsageError(
-            f"--x exponents must be strictly increasing, got {', '.join(f'{x:g}' for x in xs)}"
+            f"exponents must be strictly increasing, got {', '.join(f'{x:g}' for x in xs)}", "xs"
         )
 
 
@@ -81,7 +81,7 @@ def cutoffs(
     """
     check_range_parameters(beta, gamma, xs)
     if not math.isfinite(alpha) or alpha <= 0:
-        raise UsageError(f"the object's diagonal α must be positive, got {alpha:g}")
+        raise UsageError(f"(the object's diagonal α) must be positive, got {alpha:g}", "alpha")
     return [cutoff(alpha, beta, gamma, x) for x in xs]
 
 

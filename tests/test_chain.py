@@ -92,7 +92,7 @@ def test_cull_adds_a_last_cutoff(torus: Node) -> None:
     assert chain.culled
     assert len(chain.cutoffs) == len(chain.levels)
     assert chain.cutoffs[-1] == pytest.approx(chain.alpha * 3 * 10**1.5)
-    with pytest.raises(UsageError, match="--cull"):
+    with pytest.raises(UsageError, match="cull must be greater than the last exponent"):
         chain_of(torus, cull=0.9)
 
 

@@ -134,7 +134,7 @@ def test_truncated_files_are_reported(work: Path) -> None:
 
 
 def test_unknown_output_format(work: Path) -> None:
-    assert_one_line_error(run(SAMPLE, "-o", work / "out.fbx"), 1, "out.fbx", "unknown output")
+    assert_one_line_error(run(SAMPLE, "-o", work / "out.fbx"), 2, "out.fbx", "unknown output")
 
 
 def test_existing_output_survives_a_failed_run(work: Path) -> None:

@@ -121,7 +121,7 @@ def test_file_lodconvert_did_not_write_is_an_error(tmp_path: Path) -> None:
     foreign = tmp_path / "foreign.x3d"
     foreign.write_text("<X3D><Scene/></X3D>")
     assert_one_line_error(run("evaluate", SAMPLE, foreign), 1, "foreign.x3d", "not an X3D")
-    assert_one_line_error(run("evaluate", SAMPLE, SAMPLE), 1, "not a .glb, .gltf or .x3d")
+    assert_one_line_error(run("evaluate", SAMPLE, SAMPLE), 1, "is not a file lodconvert writes")
     missing = tmp_path / "missing.glb"
     assert_one_line_error(run("evaluate", SAMPLE, missing), 1, "missing.glb")
 

@@ -21,7 +21,7 @@ from PIL import Image
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.errors import InputError
-from lodconvert.io import WRITERS, OutputInfo
+from lodconvert.io import OutputInfo, gltf, output_format, own_format
 from lodconvert.io.gltf import SRGB_TO_LINEAR, read_lod_gltf, write_glb, write_gltf
 from lodconvert.model import LodChain, Node, PointCloud, Surface
 from lodconvert.ranges import screen_coverage
@@ -445,9 +445,10 @@ def test_output_is_deterministic(tmp_path, suffix, sphere_chain, culled_chain):
     assert first.read_bytes() == second.read_bytes()
 
 
-def test_writers_are_registered():
-    assert WRITERS[".glb"] is write_glb
-    assert WRITERS[".gltf"] is write_gltf
+def test_one_registry_entry_writes_reads_back_and_checks_both_suffixes():
+    entry = gltf.FORMAT
+    assert output_format("a.glb") is output_format("a.GLTF") is own_format("a.glb") is entry
+    assert entry.write and entry.read_back and entry.check and entry.read is None
 
 
 # --- bad input ----------------------------------------------------------------------------------

@@ -126,8 +126,8 @@ def test_the_estimate_agrees_with_rendered_silhouettes() -> None:
     """Over shapes and resolutions at the middle switch-in distance (the object ~95 px tall in
     the 1080-px reference view): the estimate never passes a level whose rendered silhouette
     (16 views on a sphere, declared point sizes) fails, its F is within 0.1 of a rendered F
-    above 0.9, and it takes the same decision in most cases (it is the stricter of the two: it keeps the
-    worst of three axis views)."""
+    above 0.9, and it takes the same decision in most cases (it is the stricter of the two: it
+    keeps the worst of three axis views)."""
     from lodconvert.evaluate import fibonacci_directions, silhouette_scores
 
     renderer = _gl_renderer()

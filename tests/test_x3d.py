@@ -20,8 +20,8 @@ from PIL import Image
 
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
-from lodconvert.errors import InputError
-from lodconvert.io import WRITERS, OutputInfo, x3d
+from lodconvert.errors import InputError, UsageError
+from lodconvert.io import OutputInfo, output_format, own_format, read_scene, x3d
 from lodconvert.io.numbers import (
     decimals_for,
     format_exact,
@@ -33,9 +33,8 @@ from lodconvert.io.numbers import (
 )
 from lodconvert.io.x3d import point_properties, read_x3d_points, vertex_colors, write_x3d
 from lodconvert.model import LodChain, Node, Surface
-from lodconvert.pipeline import read_scene
 
-from .conftest import X3D_SCHEMAS, require, stanford
+from .conftest import stanford
 
 FAR = np.array([500000.0, 5400000.0, 100.0])
 INFO = OutputInfo(
@@ -45,31 +44,6 @@ OPTIONS = ChainOptions(resolutions=(48, 24, 12))
 
 
 # --- helpers and fixtures -----------------------------------------------------------------------
-
-
-class _Catalog(etree.Resolver):
-    """Resolve the XSD's remote imports (xmldsig) to the local copies listed in catalog.xml."""
-
-    def __init__(self, catalog: Path) -> None:
-        super().__init__()
-        entries = etree.parse(str(catalog)).getroot()
-        self.local = {
-            e.get("name") or e.get("systemId"): str(catalog.parent / e.get("uri")) for e in entries
-        }
-
-    def resolve(self, url: str, pubid: str | None, context: object) -> object:
-        path = self.local.get(url)
-        return self.resolve_filename(path, context) if path else None
-
-
-@pytest.fixture(scope="module")
-def schema() -> etree.XMLSchema:
-    """The official X3D 4.0 schema, loaded offline; skipped (or failed in CI) when absent."""
-    xsd = X3D_SCHEMAS / "x3d-4.0.xsd"
-    require(xsd.exists(), f"{xsd} is absent (shared schemas not checked out)")
-    parser = etree.XMLParser()
-    parser.resolvers.add(_Catalog(X3D_SCHEMAS / "catalog.xml"))
-    return etree.XMLSchema(etree.parse(str(xsd), parser))
 
 
 def _bake(obj: Node, opts: ChainOptions = OPTIONS) -> LodChain:
@@ -413,7 +387,7 @@ def test_textured_mesh_keeps_its_texture(chain: LodChain) -> None:
 def test_textured_mesh_validates_shares_its_appearance_and_is_deterministic(
     schema: etree.XMLSchema, chain: LodChain, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    monkeypatch.setattr(x3d, "MAX_SHAPE_TRIANGLES", 5)  # the box's 12 triangles in 3 Shapes
+    monkeypatch.setattr(x3d.writer, "MAX_SHAPE_TRIANGLES", 5)  # the box's 12 triangles in 3 Shapes
     textured = _with_mesh(chain, _textured_box())
     path = tmp_path / "box.x3d"
     path.write_bytes(_write([textured]))
@@ -450,9 +424,9 @@ def test_textured_part_with_vertex_colours_keeps_both(chain: LodChain) -> None:
 def test_large_texture_is_halved_until_its_url_fits(monkeypatch: pytest.MonkeyPatch) -> None:
     texture = np.random.default_rng(9).integers(0, 256, size=(40, 64, 4), dtype=np.uint8)
     texture[..., 3] = 255  # opaque: plain 2 × 2 averages (Pillow weighs colours by alpha)
-    full = x3d.texture_url(texture)
-    monkeypatch.setattr(x3d, "MAX_TEXTURE_URL", len(full) - 1)
-    url = x3d.texture_url(texture)
+    full = x3d.writer.texture_url(texture)
+    monkeypatch.setattr(x3d.writer, "MAX_TEXTURE_URL", len(full) - 1)
+    url = x3d.writer.texture_url(texture)
     assert len(url) < len(full)
     pixels = _texture_pixels(f'"{url}"')
     assert pixels.shape == (20, 32, 4)  # halved once: a quarter of the pixels fits
@@ -497,8 +471,8 @@ def test_levels_over_the_shape_limits_are_split(
     tmp_path: Path,
     soup: bool,
 ) -> None:
-    monkeypatch.setattr(x3d, "MAX_SHAPE_VERTICES", SMALL_VERTICES)
-    monkeypatch.setattr(x3d, "MAX_SHAPE_TRIANGLES", SMALL_TRIANGLES)
+    monkeypatch.setattr(x3d.writer, "MAX_SHAPE_VERTICES", SMALL_VERTICES)
+    monkeypatch.setattr(x3d.writer, "MAX_SHAPE_TRIANGLES", SMALL_TRIANGLES)
     surface = torus.geometry.parts[0]
     if soup:  # each face has its own three vertices: the vertex limit binds first
         faces = surface.faces
@@ -547,7 +521,7 @@ def test_dragon_validates_with_default_parser_limits(
     assert schema.validate(doc), "\n".join(str(e) for e in schema.error_log)
     assert max(len(v) for node in doc.iter() for v in node.attrib.values()) < 4_000_000
     mesh = doc.find("Scene/Transform/LOD/Group")
-    assert len(mesh.findall("Shape")) >= math.ceil(871_414 / x3d.MAX_SHAPE_TRIANGLES)
+    assert len(mesh.findall("Shape")) >= math.ceil(871_414 / x3d.writer.MAX_SHAPE_TRIANGLES)
 
 
 # --- streaming and determinism ------------------------------------------------------------------
@@ -573,8 +547,11 @@ def test_chains_are_streamed_as_they_come(chain: LodChain) -> None:
     assert len(seen) == 2 and out.getvalue().endswith(b"</X3D>\n")
 
 
-def test_writer_is_registered() -> None:
-    assert WRITERS[".x3d"] is write_x3d
+def test_one_registry_entry_writes_reads_back_and_checks() -> None:
+    assert output_format("a.x3d") is own_format("a.X3D") is x3d.FORMAT
+    assert x3d.FORMAT.write and x3d.FORMAT.read_back and x3d.FORMAT.check
+    with pytest.raises(UsageError, match=r"unknown output format '\.vrml'"):
+        output_format("a.vrml")
 
 
 # --- reader errors ------------------------------------------------------------------------------

@@ -5,7 +5,11 @@ Each module listed here defines ``DESCRIPTION``, ``add_arguments(parser)`` and
 exceptions into one-line errors and exit codes.
 """
 
+MAIN_COMMAND = "convert"
+"""What ``lodconvert FILE ...`` runs."""
+
 COMMANDS: dict[str, str] = {
+    "convert": "lodconvert.commands.convert",
     "ranges": "lodconvert.commands.ranges",
     "evaluate": "lodconvert.commands.evaluate",
     "bench": "lodconvert.commands.bench",

@@ -33,11 +33,10 @@ from ..evaluate import (
     match_references,
     stack_images,
 )
-from ..io.atomic import atomic_output
-from ..io.readback import read_chains
+from ..io import read_chains, read_scene
 from ..model import LodChain, Surface
-from ..pipeline import read_scene
 from ..ranges import REFERENCE_VIEW
+from ..sinks import Outputs
 
 DESCRIPTION = (
     "Score every level of a file lodconvert wrote against the source mesh it was converted "
@@ -123,40 +122,43 @@ def protocol_of(args: argparse.Namespace) -> Protocol:
 
 
 def run(args: argparse.Namespace, console: Console) -> int:
-    """Evaluate, print the table and write the files asked for."""
+    """Evaluate, print the table and write the files asked for (paths checked first)."""
     protocol = protocol_of(args)
-    chains = read_chains(args.output)
-    console.progress(f"reading {args.reference}")
-    objects = list(read_scene(args.reference).with_geometry())
-    sources = match_references(objects, chains, args.reference, args.output)
-    renderer = SilhouetteRenderer(protocol.size, protocol.fov_y_deg)
-    reports: list[ObjectReport] = []
-    sheets = []
-    try:
-        in_range = SilhouetteRenderer(protocol.range_size, protocol.fov_y_deg)
+    with Outputs(inputs=[args.reference, args.output]) as outputs:
+        json_sink = outputs.file(args.json) if args.json else None
+        sheet_sink = outputs.file(args.contact_sheet) if args.contact_sheet else None
+        chains = read_chains(args.output)
+        console.progress(f"reading {args.reference}")
+        objects = list(read_scene(args.reference).with_geometry())
+        sources = match_references(objects, chains, args.reference, args.output)
+        renderer = SilhouetteRenderer(protocol.size, protocol.fov_y_deg)
+        reports: list[ObjectReport] = []
+        sheets = []
         try:
-            for source, chain in zip(sources, chains, strict=True):
-                console.progress(f"{chain.object_id}: rendering {protocol.views} views a distance")
-                reports.append(_evaluate(renderer, in_range, source, chain, protocol))
-                if args.contact_sheet:
-                    sheets.append(contact_sheet(renderer, source, chain, protocol.distances[0]))
+            in_range = SilhouetteRenderer(protocol.range_size, protocol.fov_y_deg)
+            try:
+                for source, chain in zip(sources, chains, strict=True):
+                    console.progress(f"{chain.object_id}: rendering {protocol.views} views")
+                    reports.append(_evaluate(renderer, in_range, source, chain, protocol))
+                    if sheet_sink is not None:
+                        distance = protocol.distances[0]
+                        sheets.append(contact_sheet(renderer, source, chain, distance))
+            finally:
+                in_range.release()
+            if sheets:
+                sheets.append(legend(sheets[0].width, renderer, protocol.distances[0]))
         finally:
-            in_range.release()
-        if sheets:
-            sheets.append(legend(sheets[0].width, renderer, protocol.distances[0]))
-    finally:
-        renderer_name = renderer.renderer_name
-        renderer.release()
-    console.clear()
-    if not args.quiet:
-        print(format_report(reports, protocol, renderer_name))
-    if args.json:
-        record = report_record(args.reference, args.output, protocol, renderer_name, reports)
-        with atomic_output(args.json) as handle:
-            handle.write((json.dumps(record, indent=2) + "\n").encode())
-    if sheets:
-        with atomic_output(args.contact_sheet) as handle:
-            stack_images(sheets).save(handle, format="PNG")
+            renderer_name = renderer.renderer_name
+            renderer.release()
+        console.clear()
+        if not args.quiet:
+            print(format_report(reports, protocol, renderer_name))
+        if json_sink is not None:
+            record = report_record(args.reference, args.output, protocol, renderer_name, reports)
+            json_sink.write_bytes((json.dumps(record, indent=2) + "\n").encode())
+        if sheet_sink is not None:
+            with sheet_sink.open() as handle:
+                stack_images(sheets).save(handle, format="PNG")
     return EXIT_OK
 
 

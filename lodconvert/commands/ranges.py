@@ -6,7 +6,8 @@ import argparse
 import json
 
 from ..cli import EXIT_OK, Console, add_range_options, chain_options
-from ..pipeline import object_ranges, read_scene
+from ..io import read_scene
+from ..pipeline import object_ranges
 
 DESCRIPTION = "Print α (bounding-box diagonal), γ and the cutoffs Y = α·β·γˣ per object."
 

@@ -1,20 +1,35 @@
-"""File formats: one module per format, and a registry mapping suffixes to readers/writers.
+"""File formats: one module (or package) per format, each declaring one :class:`Format` entry.
 
-A reader takes a path and returns a :class:`~lodconvert.scene.Scene`. A writer takes an
-iterable of :class:`~lodconvert.scene.LodChain` (consumed once, so chains can be baked and
-written one at a time), an open binary file and an :class:`OutputInfo`.
+An entry says everything the rest of lodconvert may know of a format: its suffixes, and
+whichever of these it offers —
+
+- ``read(path, **options) -> Scene``: an input (nodes may be yielded lazily);
+- ``write(chains, sink, info, **options)``: an output, streamed from an iterable of
+  :class:`~lodconvert.model.LodChain` into a :class:`~lodconvert.sinks.FileSink`;
+- ``read_back(path, geometry=True) -> list[LodChain]``: our own files, with their chains,
+  ranges, point sizes and bake parameters (used by evaluate, bench and the viewer page, which
+  needs no geometry);
+- ``check(path, findings, options)``: the structural checks ``validate`` runs, and every
+  conversion runs on its staged output before committing it.
+
+``read_options`` and ``write_options`` name the keyword options the format takes; the others
+are not passed to it. No other module parses our files or looks at suffixes.
 """
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
-from ..errors import InputError
+from ..errors import InputError, UsageError
 from ..model import LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
+
+FORMAT_MODULES = ("lodconvert.io.mesh", "lodconvert.io.x3d", "lodconvert.io.gltf")
+"""Modules that declare a ``FORMAT`` (or ``FORMATS``), in lookup order."""
 
 
 @dataclass
@@ -29,11 +44,43 @@ class OutputInfo:
     options: dict[str, Any] = field(default_factory=dict)
 
 
-Reader = Callable[[Path], Scene]
-Writer = Callable[[Iterable[LodChain], BinaryIO, OutputInfo], None]
+@dataclass(frozen=True)
+class Format:
+    """One format's registry entry (see the module docstring)."""
 
-READERS: dict[str, Reader] = {}
-WRITERS: dict[str, Writer] = {}
+    name: str
+    suffixes: tuple[str, ...]
+    read: Callable[..., Scene] | None = None
+    write: Callable[..., None] | None = None
+    read_back: Callable[..., list[LodChain]] | None = None
+    check: Callable[..., None] | None = None
+    read_options: tuple[str, ...] = ()
+    write_options: tuple[str, ...] = ()
+
+    def read_file(self, path: str | Path, **options: Any) -> Scene:
+        """``read`` with the options this format takes."""
+        assert self.read is not None
+        return self.read(Path(path), **_taken(options, self.read_options))
+
+    def write_chains(
+        self, chains: Iterable[LodChain], sink: Any, info: OutputInfo, **options: Any
+    ) -> None:
+        """``write`` with the options this format takes."""
+        assert self.write is not None
+        self.write(chains, sink, info, **_taken(options, self.write_options))
+
+
+def _taken(options: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
+    return {k: v for k, v in options.items() if k in names and v is not None}
+
+
+def formats() -> list[Format]:
+    """Every registered format, in lookup order."""
+    found: list[Format] = []
+    for name in FORMAT_MODULES:
+        module = importlib.import_module(name)
+        found.extend(getattr(module, "FORMATS", None) or [module.FORMAT])
+    return found
 
 
 def suffix_of(path: str | Path) -> str:
@@ -44,30 +91,61 @@ def suffix_of(path: str | Path) -> str:
     return suffixes[-1] if suffixes else ""
 
 
-def reader_for(path: str | Path) -> Reader:
-    """The reader registered for ``path``'s suffix, or :class:`InputError`."""
-    _load_formats()
+def _find(path: str | Path, role: str, suffix: str) -> Format | None:
+    for entry in formats():
+        if suffix in entry.suffixes and getattr(entry, role) is not None:
+            return entry
+    return None
+
+
+def _known(role: str) -> str:
+    return ", ".join(sorted({s for f in formats() if getattr(f, role) for s in f.suffixes}))
+
+
+def input_format(path: str | Path) -> Format:
+    """The format that reads ``path``, or :class:`InputError` naming the known suffixes."""
     suffix = suffix_of(path)
-    if suffix not in READERS:
-        known = ", ".join(sorted(READERS))
+    entry = _find(path, "read", suffix)
+    if entry is None:
         raise InputError(
-            f"unknown input format {suffix or '(no suffix)'!r}; known: {known}", str(path)
+            f"unknown input format {suffix or '(no suffix)'!r}; known: {_known('read')}",
+            str(path),
         )
-    return READERS[suffix]
+    return entry
 
 
-def writer_for(path: str | Path) -> Writer:
-    """The writer registered for ``path``'s suffix, or :class:`InputError`."""
-    _load_formats()
+def output_format(path: str | Path) -> Format:
+    """The format that writes ``path``, or :class:`UsageError` naming the known suffixes."""
     suffix = Path(path).suffix.lower()
-    if suffix not in WRITERS:
-        known = ", ".join(sorted(WRITERS))
-        raise InputError(
-            f"unknown output format {suffix or '(no suffix)'!r}; known: {known}", str(path)
+    entry = _find(path, "write", suffix)
+    if entry is None:
+        raise UsageError(
+            f"{path}: unknown output format {suffix or '(no suffix)'!r}; known: {_known('write')}"
         )
-    return WRITERS[suffix]
+    return entry
 
 
-def _load_formats() -> None:
-    """Import the format modules, which register themselves."""
-    from . import gltf, mesh, x3d  # noqa: F401
+def own_format(path: str | Path, role: str = "read_back") -> Format:
+    """The format that reads back (``role='read_back'``) or checks (``'check'``) files
+    lodconvert wrote, like ``path``; :class:`InputError` for other suffixes."""
+    suffix = Path(path).suffix.lower()
+    entry = _find(path, role, suffix)
+    if entry is None:
+        raise InputError(
+            f"is not a file lodconvert writes ({_known(role)})",
+            str(path),
+        )
+    return entry
+
+
+def read_scene(path: str | Path, **options: Any) -> Scene:
+    """Read any supported input (the registry picks the reader by suffix)."""
+    return input_format(path).read_file(path, **options)
+
+
+def read_chains(path: str | Path, geometry: bool = True) -> list[LodChain]:
+    """The chains of a file lodconvert wrote, read back by its format (without level geometry
+    when ``geometry`` is false)."""
+    entry = own_format(path)
+    assert entry.read_back is not None
+    return entry.read_back(Path(path), geometry=geometry)

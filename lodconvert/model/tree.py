@@ -46,11 +46,6 @@ class Node:
         """``origin`` as a float64 (3,) vector (zero when none is set)."""
         return np.zeros(3) if self.origin is None else np.asarray(self.origin, dtype=np.float64)
 
-    @property
-    def instanced(self) -> bool:
-        """Whether the geometry is placed by a transform other than the identity."""
-        return self.transform is not None and not np.allclose(self.transform, np.eye(4))
-
     def walk(self) -> Iterator[Node]:
         """This node and its descendants, depth first."""
         yield self

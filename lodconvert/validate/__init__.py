@@ -8,19 +8,13 @@ framing, accessors, ``MSFT_lod``).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from pathlib import Path
 
-from lxml import etree
-
-from ..errors import LodConvertError
+from ..errors import InputError, LodConvertError
+from ..io import own_format
 from .findings import ERROR, WARNING, Finding, Findings
-from .gltf import check_gltf
-from .x3d import check_x3d, load_x3d_schema
-
-Check = Callable[[Path, Findings, "etree.XMLSchema | None"], None]
-CHECKS: dict[str, Check] = {".x3d": check_x3d, ".glb": check_gltf, ".gltf": check_gltf}
-"""Format suffix → check; the schema argument is used by X3D only."""
+from .x3d import load_x3d_schema
 
 
 def validate_file(
@@ -36,13 +30,14 @@ def validate_file(
     path = Path(path)
     kind = (kind or path.suffix).lower()
     findings = Findings(path)
-    check = CHECKS.get(kind)
+    try:
+        check = own_format(path.with_name(f"file{kind}"), role="check").check
+    except InputError:
+        check = None
+        findings.error("FORMAT", f"cannot validate {kind or 'a file without suffix'}")
     if check is None:
-        known = ", ".join(sorted(CHECKS))
-        findings.error(
-            "FORMAT", f"cannot validate {kind or 'a file without suffix'}; known: {known}"
-        )
-    elif not path.is_file():
+        return findings.items
+    if not path.is_file():
         findings.error("READ", "no such file")
     elif path.stat().st_size == 0:
         findings.error("EMPTY", "the file is empty")

@@ -16,24 +16,20 @@ sRGB bytes that were written.
 from __future__ import annotations
 
 import base64
-import binascii
 import io
 import json
 import math
 import struct
 from collections.abc import Iterable
-from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, BinaryIO
 
 import numpy as np
 import pygltflib as gl
 from PIL import Image as PILImage
 
-from ..errors import InputError
-from ..model import Level, LodChain, PointCloud, Surface
-from ..ranges import ReferenceView, screen_coverage
-from . import WRITERS, OutputInfo
+from ...model import Level, LodChain, PointCloud, Surface
+from ...ranges import ReferenceView, screen_coverage
+from .. import OutputInfo
 
 MSFT_LOD = "MSFT_lod"
 UNLIT = "KHR_materials_unlit"
@@ -170,6 +166,11 @@ def _chain_extras(chain: LodChain) -> dict[str, Any]:
             "xs": chain.xs,
             "culled": chain.culled,
             "center": chain.center,
+            **(
+                {"transform": chain.transform.ravel(), "origin": chain.origin}
+                if chain.transform is not None
+                else {}
+            ),
             "levels": [
                 {"name": lv.name, "kind": lv.kind, "count": lv.count, **_level_params(lv)}
                 for lv in chain.levels
@@ -212,6 +213,7 @@ class _Document:
         )
         self.blob = bytearray()
         self._point_materials: dict[str, int] = {}
+        self._shared: dict[int, tuple[Level, int]] = {}  # level of an instance → its mesh
 
     @staticmethod
     def _append(items: list[Any], item: Any) -> int:
@@ -336,21 +338,34 @@ class _Document:
         )
 
     def _level_node(self, chain: LodChain, level: Level) -> gl.Node:
-        """A node holding one level's geometry (no mesh when the level is empty)."""
+        """A node holding one level's geometry (no mesh when the level is empty). The levels
+        of instances of one geometry share their meshes."""
         name = f"{chain.object_id}_{level.name}"
         node = gl.Node(name=name)
-        if level.count:
-            if level.mesh is not None:
-                primitives = [self._mesh_primitive(part) for part in level.mesh.parts]
-            else:
-                primitives = [self._point_primitive(level.points)]
-            node.mesh = self._append(self.gltf.meshes, gl.Mesh(name=name, primitives=primitives))
+        if not level.count:
+            return node
+        if id(level) in self._shared:
+            node.mesh = self._shared[id(level)][1]
+            return node
+        if level.mesh is not None:
+            primitives = [self._mesh_primitive(part) for part in level.mesh.parts]
+        else:
+            primitives = [self._point_primitive(level.points)]
+        node.mesh = self._append(self.gltf.meshes, gl.Mesh(name=name, primitives=primitives))
+        if chain.transform is not None:  # kept alive with the level, so its id stays unique
+            self._shared[id(level)] = (level, node.mesh)
         return node
 
     def add_chain(self, chain: LodChain) -> None:
-        """Add a chain's root node (to the scene), finest node (its child) and coarser nodes."""
+        """Add a chain's root node (to the scene), finest node (its child) and coarser nodes.
+        The root is translated to the chain's origin, or placed by the instance's matrix."""
         nodes = self.gltf.nodes
-        root = gl.Node(name=chain.object_id, translation=[float(v) for v in chain.origin])
+        placed = np.eye(4) if chain.transform is None else chain.transform.copy()
+        placed[:3, 3] += placed[:3, :3] @ chain.origin
+        if np.allclose(placed[:3, :3], np.eye(3), rtol=0, atol=0):
+            root = gl.Node(name=chain.object_id, translation=[float(v) for v in placed[:3, 3]])
+        else:
+            root = gl.Node(name=chain.object_id, matrix=[float(v) for v in placed.T.ravel()])
         root_index = self._append(nodes, root)
         self.gltf.scenes[0].nodes.append(root_index)
         finest = self._level_node(chain, chain.levels[0])
@@ -433,171 +448,3 @@ def write_gltf(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) -
     obj, _ = _document(chains, info).finish(data_uri=True)
     handle.write(_json_bytes(obj, indent=1))
     handle.write(b"\n")
-
-
-WRITERS[".glb"] = write_glb
-WRITERS[".gltf"] = write_gltf
-
-
-# --- reading our own output ---------------------------------------------------------------------
-
-
-@dataclass
-class GltfLevel:
-    """One level as stored: geometry relative to the object's origin, sRGB colours.
-
-    ``positions`` (k, 3) float64 (the float32 buffer values), ``colors`` (k, 4) uint8 or
-    ``None``, ``normals`` (k, 3) float32 or ``None``, ``faces`` (m, 3) int64 for a mesh level,
-    ``extras`` the level's facts from the finest node's ``extras.lodconvert.levels``.
-    """
-
-    name: str
-    kind: str
-    positions: np.ndarray
-    colors: np.ndarray | None
-    normals: np.ndarray | None
-    faces: np.ndarray | None
-    extras: dict[str, Any]
-
-
-@dataclass
-class GltfObject:
-    """One object (root node): id, float64 origin, levels finest first, coverage thresholds and
-    the finest node's ``extras.lodconvert``."""
-
-    object_id: str
-    origin: np.ndarray
-    levels: list[GltfLevel]
-    screen_coverage: list[float]
-    extras: dict[str, Any]
-
-
-def read_lod_gltf(path: str | Path) -> list[GltfObject]:
-    """Read a ``.glb``/``.gltf`` that lodconvert wrote: one :class:`GltfObject` per root node,
-    with levels in ``MSFT_lod`` order.
-
-    Raises :class:`InputError` when the file cannot be read, is truncated or malformed, or was
-    not written by lodconvert.
-    """
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", str(path)) from None
-    try:
-        obj, blob = _parse(data)
-        if not isinstance(obj.get("asset", {}).get("extras", {}).get("lodconvert"), dict):
-            raise InputError("not a glTF written by lodconvert (no asset.extras.lodconvert)")
-        scene = obj["scenes"][obj.get("scene", 0)]
-        return [_read_object(obj, blob, i) for i in scene.get("nodes", [])]
-    except InputError as exc:
-        raise InputError(str(exc), str(path)) from None
-    except (ValueError, KeyError, IndexError, TypeError, AttributeError, struct.error) as exc:
-        raise InputError(f"malformed glTF ({type(exc).__name__}: {exc})", str(path)) from None
-
-
-def _parse(data: bytes) -> tuple[dict[str, Any], bytes]:
-    """JSON object and binary buffer of GLB or glTF-with-data-URI bytes."""
-    if data[:4] != GLB_MAGIC:
-        obj = json.loads(data.decode("utf-8"))
-        buffers = obj.get("buffers", [])
-        if not buffers:
-            return obj, b""
-        uri = buffers[0].get("uri", "")
-        if not uri.startswith("data:") or "," not in uri:
-            raise InputError("buffer is not an embedded data URI")
-        try:
-            return obj, base64.b64decode(uri.split(",", 1)[1], validate=True)
-        except binascii.Error as exc:
-            raise InputError(f"bad base64 buffer ({exc})") from None
-    if len(data) < 20:
-        raise InputError(f"truncated GLB ({len(data)} bytes)")
-    _, version, total = struct.unpack_from("<4sII", data)
-    if version != 2:
-        raise InputError(f"GLB version {version}, expected 2")
-    if total != len(data):
-        raise InputError(f"truncated GLB (header says {total} bytes, file has {len(data)})")
-    chunks: dict[bytes, bytes] = {}
-    offset = 12
-    while offset < total:
-        length, kind = struct.unpack_from("<I4s", data, offset)
-        if offset + 8 + length > total:
-            raise InputError(f"truncated GLB chunk {kind!r}")
-        chunks.setdefault(kind, data[offset + 8 : offset + 8 + length])
-        offset += 8 + length
-    if GLB_JSON not in chunks:
-        raise InputError("GLB has no JSON chunk")
-    return json.loads(chunks[GLB_JSON].decode("utf-8")), chunks.get(GLB_BIN, b"")
-
-
-def _accessor_data(obj: dict[str, Any], blob: bytes, index: int) -> np.ndarray:
-    """Accessor values as an array of the buffer's dtype, (count,) or (count, width)."""
-    accessor = obj["accessors"][index]
-    view = obj["bufferViews"][accessor["bufferView"]]
-    dtype = np.dtype(_DTYPES[accessor["componentType"]]).newbyteorder("<")
-    width = _WIDTHS[accessor["type"]]
-    if view.get("byteStride", dtype.itemsize * width) != dtype.itemsize * width:
-        raise InputError("interleaved buffer views are not supported")
-    start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
-    count = accessor["count"]
-    values = np.frombuffer(blob, dtype=dtype, count=count * width, offset=start)
-    return values.reshape(count, width) if width > 1 else values
-
-
-def _normalized(values: np.ndarray) -> np.ndarray:
-    """Normalised integers (or floats) as float64 in [0, 1]."""
-    if values.dtype.kind == "f":
-        return values.astype(np.float64)
-    return values / float(np.iinfo(values.dtype).max)
-
-
-def _read_level(obj: dict[str, Any], blob: bytes, node: dict[str, Any], facts: dict) -> GltfLevel:
-    positions = np.zeros((0, 3))
-    colors = normals = faces = None
-    if "mesh" in node:
-        primitive = obj["meshes"][node["mesh"]]["primitives"][0]
-        attributes = primitive["attributes"]
-        positions = _accessor_data(obj, blob, attributes["POSITION"]).astype(np.float64)
-        if "COLOR_0" in attributes:
-            linear = _normalized(_accessor_data(obj, blob, attributes["COLOR_0"]))
-            if linear.shape[1] == 3:
-                linear = np.column_stack([linear, np.ones(len(linear))])
-            colors = srgb_rgba(linear)
-        if "NORMAL" in attributes:
-            normals = _accessor_data(obj, blob, attributes["NORMAL"]).copy()
-        if "indices" in primitive:
-            faces = _accessor_data(obj, blob, primitive["indices"]).astype(np.int64).reshape(-1, 3)
-    return GltfLevel(
-        name=facts["name"],
-        kind=facts["kind"],
-        positions=positions,
-        colors=colors,
-        normals=normals,
-        faces=faces,
-        extras=facts,
-    )
-
-
-def _read_object(obj: dict[str, Any], blob: bytes, root_index: int) -> GltfObject:
-    nodes = obj["nodes"]
-    root = nodes[root_index]
-    finest = nodes[root["children"][0]]
-    extras = finest.get("extras", {})
-    facts = extras["lodconvert"]
-    ids = finest.get("extensions", {}).get(MSFT_LOD, {}).get("ids", [])
-    level_nodes = [finest, *(nodes[i] for i in ids)]
-    if len(level_nodes) != len(facts["levels"]):
-        raise InputError(
-            f"{root.get('name')!r}: {len(level_nodes)} level nodes but "
-            f"{len(facts['levels'])} levels in extras"
-        )
-    return GltfObject(
-        object_id=root["name"],
-        origin=np.array(root.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64),
-        levels=[
-            _read_level(obj, blob, node, level)
-            for node, level in zip(level_nodes, facts["levels"], strict=True)
-        ],
-        screen_coverage=list(extras.get("MSFT_screencoverage", [])),
-        extras=facts,
-    )

@@ -55,18 +55,16 @@ import json
 import math
 import re
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass, replace
-from pathlib import Path
+from dataclasses import replace
 from typing import Any, BinaryIO
 
 import numpy as np
 from lxml import etree
 from PIL import Image as PILImage
 
-from ..errors import InputError
-from ..model import Level, LodChain, Mesh, Surface
-from . import WRITERS, OutputInfo
-from .numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
+from ...model import Level, LodChain, Mesh, Surface
+from .. import OutputInfo
+from ..numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
 
 XSI = "http://www.w3.org/2001/XMLSchema-instance"
 SCHEMA_URL = "https://www.web3d.org/specifications/x3d-4.0.xsd"
@@ -190,7 +188,13 @@ def _unique_names(object_id: str, used: set[str], levels: list[Level]) -> tuple[
     candidate, n = base, 1
     while True:
         level_defs = [f"{candidate}_{lv.name}" for lv in levels]
-        names = [candidate, f"{candidate}_LOD", *level_defs, *map(_appearance_name, level_defs)]
+        names = [
+            candidate,
+            f"{candidate}_LOD",
+            f"{candidate}_instance",
+            *level_defs,
+            *map(_appearance_name, level_defs),
+        ]
         if not used.intersection(names):
             used.update(names)
             return candidate, level_defs
@@ -222,6 +226,8 @@ def _chain_metadata(chain: LodChain) -> list[Metadata]:
         ("MetadataDouble", "cutoffs", format_exact(chain.cutoffs)),
         ("MetadataBoolean", "culled", "true" if chain.culled else "false"),
     ]
+    if chain.transform is not None:
+        entries.append(("MetadataDouble", "transform", format_exact(chain.transform.ravel())))
     if chain.metadata:
         attributes = json.dumps(chain.metadata, sort_keys=True, default=str, ensure_ascii=False)
         entries.append(("MetadataString", "attributes", _mfstring([attributes])))
@@ -423,22 +429,66 @@ def _point_shapes(out: _Out, level: Level, switch_in: float, alpha: float, appea
                 out.leaf("Coordinate", {"point": format_fixed(positions[part], decimals)})
 
 
-def _write_chain(out: _Out, chain: LodChain, used: set[str]) -> None:
-    _check_chain(chain)
-    base, level_defs = _unique_names(chain.object_id, used, chain.levels)
-    lod = {
-        "DEF": f"{base}_LOD",
-        "center": format_exact(chain.center),
-        "range": format_exact(chain.cutoffs),
-        "forceTransitions": "true",
+def instance_fields(matrix: np.ndarray) -> dict[str, str]:
+    """``Transform`` fields equal to the 4×4 ``matrix`` (no projective part): the linear part
+    split by SVD into rotation · (scale along the axes of ``scaleOrientation``), as X3D
+    composes them; reflections become a negative scale."""
+    from scipy.spatial.transform import Rotation
+
+    u, sigma, vt = np.linalg.svd(np.asarray(matrix, dtype=np.float64)[:3, :3])
+    if np.linalg.det(u @ vt) < 0:
+        u[:, -1], sigma[-1] = -u[:, -1], -sigma[-1]
+    v = vt.T
+    if np.linalg.det(v) < 0:
+        v[:, -1] = -v[:, -1]
+        u[:, -1] = -u[:, -1] if np.linalg.det(u @ v.T) < 0 else u[:, -1]
+
+    def axis_angle(rotation: np.ndarray) -> list[float]:
+        vector = Rotation.from_matrix(rotation).as_rotvec()
+        angle = float(np.linalg.norm(vector))
+        return [*(vector / angle if angle > 0 else (0.0, 0.0, 1.0)), angle]
+
+    fields = {
+        "translation": format_exact(np.asarray(matrix)[:3, 3]),
+        "rotation": format_exact(axis_angle(u @ v.T)),
+        "scale": format_exact(sigma),
     }
+    if not np.allclose(sigma, sigma[0]):  # uniform scale needs no orientation
+        fields["scaleOrientation"] = format_exact(axis_angle(v))
+    return fields
+
+
+def _write_chain(
+    out: _Out, chain: LodChain, used: set[str], written: dict[int, tuple[list[Level], str]]
+) -> None:
+    """One chain: its ``Transform`` (inside one more for an instance of shared geometry) with
+    the chain's metadata, and its ``LOD`` — defined the first time its levels are written,
+    ``USE`` d by later instances."""
+    _check_chain(chain)
+    shared = written[id(chain.levels)][1] if id(chain.levels) in written else None
+    base, level_defs = _unique_names(chain.object_id, used, [] if shared else chain.levels)
     transform = {"DEF": base, "translation": format_exact(chain.origin)}
-    with out.node("Transform", transform):
-        # The chain's metadata goes on the Transform: X3DOM counts a MetadataSet inside LOD
-        # as its first level.
-        _metadata_set(out, _chain_metadata(chain))
-        with out.node("LOD", lod):
-            _write_levels(out, chain, level_defs)
+    with contextlib.ExitStack() as stack:
+        if chain.transform is not None:
+            fields = {"DEF": f"{base}_instance", **instance_fields(chain.transform)}
+            stack.enter_context(out.node("Transform", fields))
+        with out.node("Transform", transform):
+            # The chain's metadata goes on the Transform: X3DOM counts a MetadataSet inside
+            # LOD as its first level.
+            _metadata_set(out, _chain_metadata(chain))
+            if shared:
+                out.leaf("LOD", {"USE": shared})
+                return
+            lod = {
+                "DEF": f"{base}_LOD",
+                "center": format_exact(chain.center),
+                "range": format_exact(chain.cutoffs),
+                "forceTransitions": "true",
+            }
+            if chain.transform is not None:
+                written[id(chain.levels)] = (chain.levels, lod["DEF"])
+            with out.node("LOD", lod):
+                _write_levels(out, chain, level_defs)
 
 
 def _write_levels(out: _Out, chain: LodChain, level_defs: list[str]) -> None:
@@ -464,6 +514,8 @@ def write_x3d(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) ->
     only one chain's text is held in memory. Same input, same bytes.
     """
     used: set[str] = set()
+    # instances: id of a levels list → (the list, kept alive so ids stay unique; its LOD's DEF)
+    written: dict[int, tuple[list[Level], str]] = {}
     with etree.xmlfile(handle, encoding="UTF-8") as xf:
         xf.write_declaration()
         out = _Out(xf)
@@ -476,135 +528,6 @@ def write_x3d(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) ->
             _head(out, info)
             with out.node("Scene"):
                 for chain in chains:
-                    _write_chain(out, chain, used)
+                    _write_chain(out, chain, used, written)
                     xf.flush()
     handle.write(b"\n")
-
-
-WRITERS[".x3d"] = write_x3d
-
-
-@dataclass
-class X3DLevel:
-    """The geometry of one DEF'd level ``Group`` read back from an X3D file: its ``Shape`` s
-    joined in document order.
-
-    ``coordinates`` (k, 3) float64 are as written, relative to ``translation`` (the sum of the
-    ``Transform`` translations enclosing the Group); ``colors`` (k, 4) uint8 or ``None``;
-    ``index`` (m, 3) int64 triangles of ``IndexedTriangleSet`` s into ``coordinates``,
-    ``None`` for ``PointSet`` s. A mesh split over several Shapes comes back with the vertices
-    the Shapes share repeated in each, and without vertices that no face used.
-    """
-
-    geometry: str
-    coordinates: np.ndarray
-    translation: np.ndarray
-    colors: np.ndarray | None = None
-    index: np.ndarray | None = None
-
-    @property
-    def world(self) -> np.ndarray:
-        """Coordinates in world units (float64)."""
-        return self.coordinates + self.translation
-
-
-def _numbers(text: str | None, width: int, dtype: type, what: str) -> np.ndarray:
-    values = np.array((text or "").replace(",", " ").split(), dtype=dtype)
-    if len(values) % width:
-        raise ValueError(f"{what} has {len(values)} values, not a multiple of {width}")
-    return values.reshape(-1, width)
-
-
-def _read_shape(shape: etree._Element, translation: np.ndarray) -> X3DLevel | None:
-    """The ``PointSet`` or ``IndexedTriangleSet`` of one ``Shape``; ``None`` without one."""
-    for geometry in ("PointSet", "IndexedTriangleSet"):
-        node = shape.find(geometry)
-        if node is not None:
-            break
-    else:
-        return None
-    coordinate = node.find("Coordinate")
-    points = coordinate.get("point") if coordinate is not None else None
-    coords = _numbers(points, 3, np.float64, "point")
-    colors = None
-    for tag, width in (("Color", 3), ("ColorRGBA", 4)):
-        color = node.find(tag)
-        if color is not None:
-            values = _numbers(color.get("color"), width, np.float64, "color")
-            rgba = np.full((len(values), 4), 255, dtype=np.uint8)
-            rgba[:, :width] = np.clip(np.rint(values * 255.0), 0, 255).astype(np.uint8)
-            colors = rgba
-    index = _numbers(node.get("index"), 3, np.int64, "index") if geometry != "PointSet" else None
-    return X3DLevel(geometry, coords, translation, colors, index)
-
-
-def _join_shapes(parts: list[X3DLevel]) -> X3DLevel:
-    """One level from the Shapes of its Group: coordinates and colours concatenated, triangle
-    indices shifted by the vertices of the Shapes before."""
-    first = parts[0]
-    if any(part.geometry != first.geometry for part in parts):
-        raise ValueError(f"a level mixes {sorted({part.geometry for part in parts})}")
-    coloured = [part.colors is not None for part in parts]
-    if any(coloured) and not all(coloured):
-        raise ValueError("a level has colours on some Shapes only")
-    colors = np.concatenate([p.colors for p in parts]) if all(coloured) else None
-    index = None
-    if first.index is not None:
-        starts = np.cumsum([0, *(len(part.coordinates) for part in parts[:-1])])
-        index = np.concatenate([p.index + start for p, start in zip(parts, starts, strict=True)])
-    coordinates = np.concatenate([part.coordinates for part in parts])
-    return X3DLevel(first.geometry, coordinates, first.translation, colors, index)
-
-
-def read_x3d_points(path: str | Path) -> dict[str, X3DLevel]:
-    """Read the levels of an X3D file written by :func:`write_x3d`: for each DEF'd ``Group``
-    the ``PointSet`` s or ``IndexedTriangleSet`` s of the ``Shape`` s directly inside it,
-    joined (see :class:`X3DLevel`), keyed by the Group's DEF, in document order.
-
-    The file is parsed with libxml2's default limits (no ``huge_tree``), which files written
-    by :func:`write_x3d` stay within. Raises :class:`~lodconvert.errors.InputError` naming the
-    file when it is missing, not well-formed (truncated, say), not X3D, or holds malformed
-    numbers or geometry.
-    """
-    levels: dict[str, X3DLevel] = {}
-    offsets: list[np.ndarray] = []
-    groups: list[tuple[str | None, list[X3DLevel]]] = []
-    with x3d_read_errors(path, "numbers or geometry"):
-        events = etree.iterparse(str(path), events=("start", "end"))
-        for event, element in events:
-            if event == "start":
-                if element.tag == "Transform":
-                    shift = _numbers(element.get("translation"), 3, np.float64, "translation")
-                    offsets.append(shift[0] if len(shift) else np.zeros(3))
-                elif element.tag == "Group":
-                    groups.append((element.get("DEF"), []))
-                continue
-            if element.tag == "Transform":
-                offsets.pop()
-            elif element.tag == "Shape" and groups and groups[-1][0]:
-                translation = np.sum(offsets, axis=0) if offsets else np.zeros(3)
-                shape = _read_shape(element, translation)
-                if shape is not None:
-                    groups[-1][1].append(shape)
-                element.clear()
-            elif element.tag == "Group":
-                name, parts = groups.pop()
-                if name and parts:
-                    levels[name] = _join_shapes(parts)
-        if events.root is None or events.root.tag != "X3D":
-            raise InputError("is not an X3D document", str(path))
-    return levels
-
-
-@contextlib.contextmanager
-def x3d_read_errors(path: str | Path, malformed: str) -> Iterator[None]:
-    """Turn what reading an X3D file can raise into a one-line :class:`InputError` naming
-    ``path``; ``malformed`` says what a ``ValueError`` means (e.g. "numbers or geometry")."""
-    try:
-        yield
-    except etree.XMLSyntaxError as err:
-        raise InputError(f"is not well-formed X3D: {err}", str(path)) from None
-    except OSError as err:
-        raise InputError(f"cannot be read: {err.strerror or err}", str(path)) from None
-    except ValueError as err:
-        raise InputError(f"holds malformed {malformed}: {err}", str(path)) from None

@@ -1,0 +1,135 @@
+"""Command line: ``lodconvert FILE... -o OUT`` and ``lodconvert COMMAND ...``. No geometry here.
+
+The first argument picks a command when it is a command name (see
+:data:`~lodconvert.commands.COMMANDS`), else the main command, ``convert``, converts it (a file
+named like a command is converted as ``./NAME``). Every command is a module with ``DESCRIPTION``,
+``add_arguments(parser)`` and ``run(args, console) -> int``.
+
+Exit codes: 0 success, 1 input or processing error, 2 usage error, 130 interrupted, 143
+terminated. Errors are one line on stderr (``lodconvert: error: FILE: what is wrong``);
+``--debug`` adds the traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+from types import FrameType
+
+from ..commands import COMMANDS, MAIN_COMMAND
+from ..errors import LodConvertError, UsageError
+from .console import Console
+from .options import (
+    EXIT_ERROR,
+    EXIT_OK,
+    EXIT_USAGE,
+    Parser,
+    add_range_options,
+    chain_options,
+    flag_of,
+    parse_list,
+)
+
+EXIT_INTERRUPTED, EXIT_TERMINATED = 130, 143
+
+
+class Terminated(BaseException):
+    """SIGTERM arrived: unwind (so staged outputs are removed) and exit 143."""
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    raise Terminated
+
+
+def _guarded(args: argparse.Namespace, console: Console, body: Callable[[], int]) -> int:
+    """Run a command, turning every failure into one line on stderr and an exit code."""
+    try:
+        return body()
+    except UsageError as exc:
+        console.clear()
+        _report_traceback(args)
+        message = f"{flag_of(exc.field)} {exc.message}" if exc.field else exc.message
+        print(f"lodconvert: usage error: {message}", file=sys.stderr)
+        return EXIT_USAGE
+    except LodConvertError as exc:
+        console.clear()
+        _report_traceback(args)
+        print(f"lodconvert: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        console.clear()
+        print("lodconvert: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Terminated:
+        console.clear()
+        print("lodconvert: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
+    except MemoryError:
+        console.clear()
+        print(f"lodconvert: error: {_where(args)}: out of memory", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as exc:  # an unexpected failure still gets one line
+        console.clear()
+        _report_traceback(args)
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        hint = "" if args.debug else " (run with --debug for the traceback)"
+        print(
+            f"lodconvert: error: {_where(args)}: {type(exc).__name__}: {first}{hint}",
+            file=sys.stderr,
+        )
+        return EXIT_ERROR
+
+
+def _where(args: argparse.Namespace) -> str:
+    inputs = getattr(args, "input", None)
+    if isinstance(inputs, list):
+        inputs = inputs[0] if len(inputs) == 1 else ", ".join(inputs)
+    return inputs or "lodconvert"
+
+
+def _report_traceback(args: argparse.Namespace) -> None:
+    if getattr(args, "debug", False):
+        traceback.print_exc()
+
+
+def run_command(name: str, argv: Sequence[str]) -> int:
+    """Parse ``argv`` for command ``name`` and run it."""
+    module = importlib.import_module(COMMANDS[name])
+    prog = "lodconvert" if name == MAIN_COMMAND else f"lodconvert {name}"
+    parser = Parser(
+        prog=prog, description=module.DESCRIPTION, epilog=getattr(module, "EPILOG", None)
+    )
+    module.add_arguments(parser)
+    parser.add_argument("--debug", action="store_true", help="show tracebacks")
+    args = parser.parse_args(argv)
+    console = Console(quiet=getattr(args, "quiet", 0) or 0, verbose=getattr(args, "verbose", False))
+    return _guarded(args, console, lambda: module.run(args, console))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``lodconvert`` console script."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        if argv and argv[0] in COMMANDS:
+            return run_command(argv[0], argv[1:])
+        return run_command(MAIN_COMMAND, argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+__all__ = [
+    "EXIT_ERROR",
+    "EXIT_OK",
+    "EXIT_USAGE",
+    "Console",
+    "Parser",
+    "add_range_options",
+    "chain_options",
+    "main",
+    "parse_list",
+]

@@ -1,0 +1,100 @@
+"""Argument parsing shared by the commands: the parser class, list values, the range options,
+and the mapping from the library's option fields to the flags that set them."""
+
+from __future__ import annotations
+
+import argparse
+from typing import NoReturn
+
+from ..chain import MAX_LEVELS, ChainOptions
+from ..errors import UsageError
+from ..ranges import DEFAULT_BETA, DEFAULT_GAMMA
+
+EXIT_OK, EXIT_ERROR, EXIT_USAGE = 0, 1, 2
+
+FLAGS = {
+    "resolutions": "--resolution",
+    "point_sizes": "--point-size",
+    "gamma": "--plot-radius",
+    "xs": "--x",
+    "level_kinds": "--level-kind",
+    "keep_mesh": "--no-mesh",
+}
+"""Library option field → command-line flag, where the flag is not ``--`` + the field."""
+
+
+def flag_of(field: str) -> str:
+    """The flag that sets the library option ``field`` (``gamma`` → ``--plot-radius``)."""
+    return FLAGS.get(field, "--" + field.replace("_", "-"))
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors and exit code 2."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(EXIT_USAGE, f"{self.prog}: usage error: {message} (see --help)\n")
+
+
+def parse_list(text: str, kind: type, flag: str) -> tuple:
+    """Parse a comma-separated option value (``"128,64,32"``) or raise :class:`UsageError`."""
+    try:
+        values = tuple(kind(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise UsageError(f"{flag} expects comma-separated numbers, got {text!r}") from None
+    if not values:
+        raise UsageError(f"{flag} expects at least one value")
+    return values
+
+
+def add_range_options(parser: argparse.ArgumentParser) -> None:
+    """``--levels``, ``--beta``, ``--plot-radius``, ``--x`` and ``--cull``."""
+    group = parser.add_argument_group("switching ranges (Y = α·β·γˣ)")
+    group.add_argument(
+        "--levels", type=int, default=4, help=f"levels in the chain, 2..{MAX_LEVELS} (default 4)"
+    )
+    group.add_argument(
+        "--beta", type=float, default=DEFAULT_BETA, help="β (default 3, the user-study optimum)"
+    )
+    group.add_argument(
+        "--plot-radius",
+        type=float,
+        default=DEFAULT_GAMMA,
+        metavar="GAMMA",
+        help=f"γ, must be > 1 (default {DEFAULT_GAMMA:g}; see README)",
+    )
+    group.add_argument(
+        "--x", metavar="X1,X2,..", help="exponents, one per switch (default 0.33,0.66,1.0)"
+    )
+    group.add_argument(
+        "--cull", type=float, metavar="X", help="add a cutoff Y(X) beyond which the object vanishes"
+    )
+
+
+def _ints(text: str | None, flag: str) -> tuple[int, ...] | None:
+    if not text:
+        return None
+    values = parse_list(text, float, flag)
+    if any(v != int(v) for v in values):
+        raise UsageError(f"{flag} expects whole numbers, got {text!r}")
+    return tuple(int(v) for v in values)
+
+
+def chain_options(args: argparse.Namespace) -> ChainOptions:
+    """Build :class:`ChainOptions` from parsed arguments (raises UsageError)."""
+    return ChainOptions(
+        levels=args.levels,
+        keep_mesh=not getattr(args, "no_mesh", False),
+        resolutions=_ints(getattr(args, "resolution", None), "--resolution"),
+        slices=_ints(getattr(args, "slices", None), "--slices"),
+        point_sizes=parse_list(args.point_size, float, "--point-size")
+        if getattr(args, "point_size", None)
+        else None,
+        filter=getattr(args, "filter", "median"),
+        beta=args.beta,
+        gamma=args.plot_radius,
+        xs=parse_list(args.x, float, "--x") if args.x else None,
+        cull=args.cull,
+        level_kinds=parse_list(args.level_kind, str, "--level-kind")
+        if getattr(args, "level_kind", None)
+        else None,
+    )

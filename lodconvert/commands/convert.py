@@ -1,0 +1,131 @@
+"""``lodconvert FILE -o OUT``: bake every object's LOD chain and write it (the main command)."""
+
+from __future__ import annotations
+
+import argparse
+from collections import Counter
+from typing import Any
+
+from ..bake import BACKENDS
+from ..bake.filters import FILTERS
+from ..cli.console import Console
+from ..cli.options import EXIT_OK, add_range_options, chain_options
+from ..errors import UsageError
+from ..sinks import FileSink, Outputs
+from . import COMMANDS
+from .view import add_viewer_lib_option
+
+DESCRIPTION = (
+    "Bake a CityGML-style LOD chain (LOD4 mesh, coarser point-cloud levels where they pay) for "
+    "every object of a mesh and write it as X3D LOD or glTF MSFT_lod."
+)
+EPILOG = (
+    "Other commands: "
+    + "; ".join(f"'lodconvert {name} --help'" for name in COMMANDS if name != "convert")
+    + ". A file named like a command is converted as ./NAME."
+)
+OBJECT_LINES = 20
+"""Up to this many objects, a line each; beyond, the summary only (``-v`` prints them all)."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options of the main command."""
+    from .. import __version__
+
+    parser.add_argument("input", help="OBJ, PLY, STL, OFF, GLB or glTF file (optionally .gz)")
+    parser.add_argument("-o", "--output", required=True, help="output .x3d, .glb or .gltf")
+    parser.add_argument("--version", action="version", version=f"lodconvert {__version__}")
+    read = parser.add_argument_group("reading")
+    read.add_argument(
+        "--merge-groups",
+        action="store_true",
+        help="read an OBJ file's objects and groups as one object",
+    )
+    bake = parser.add_argument_group("baking (one value per point level, finest first)")
+    bake.add_argument("--resolution", metavar="T3,..", help="grid cells along the longest side")
+    bake.add_argument(
+        "--slices", metavar="T1,..", help="slabs along the longest side (default = T3)"
+    )
+    bake.add_argument("--point-size", metavar="T2,..", help="point size in pixels at switch-in")
+    bake.add_argument(
+        "--filter", choices=FILTERS, default="median", help="hole filter (default median)"
+    )
+    bake.add_argument("--backend", choices=BACKENDS, default="auto", help="baker (default auto)")
+    bake.add_argument(
+        "--level-kind",
+        metavar="KIND,..",
+        help="pcd (points, default) or qem (source decimated to the same count), per level or all",
+    )
+    bake.add_argument("--no-mesh", action="store_true", help="bake the finest level too")
+    add_range_options(parser)
+    out = parser.add_argument_group("output and messages")
+    out.add_argument(
+        "--report", metavar="FILE", help="write a JSON report (schemas/report.schema.json)"
+    )
+    out.add_argument(
+        "--html",
+        action="store_true",
+        help="also write a viewer page beside the output (OUTPUT.html)",
+    )
+    add_viewer_lib_option(out)
+    out.add_argument(
+        "-q",
+        "--quiet",
+        action="count",
+        default=0,
+        help="-q: the summary line only; -qq: errors only",
+    )
+    out.add_argument("--silent", dest="quiet", action="store_const", const=2, help="= -qq")
+    out.add_argument("-v", "--verbose", action="store_true", help="print every step")
+
+
+def run(args: argparse.Namespace, console: Console) -> int:
+    """Convert, print what was made, return the exit code."""
+    from ..pipeline import convert
+    from ..viewer import check_library, page_path, render_page
+
+    options = chain_options(args)
+    if args.viewer_lib and not args.html:
+        raise UsageError("--viewer-lib is for the page that --html writes")
+    if args.html:
+        check_library(args.output, args.viewer_lib)  # before baking, not after
+
+    def stage_page(outputs: Outputs, sink: FileSink, report: dict[str, Any]) -> None:
+        page = page_path(args.output)
+        text = render_page(sink.path, page, args.viewer_lib, source=sink.staged.temp)
+        outputs.file(page).write_bytes(text.encode("utf-8"))
+        report["page"] = str(page)
+
+    report = convert(
+        args.input,
+        args.output,
+        options,
+        backend=args.backend,
+        progress=console.progress,
+        step=console.step,
+        warn=console.warn,
+        report_path=args.report,
+        read_options={"merge_groups": args.merge_groups or None},
+        also=stage_page if args.html else None,
+    )
+    objects = report["objects"]
+    if len(objects) <= OBJECT_LINES or args.verbose:
+        for obj in objects:
+            counts = " → ".join(f"{lv['name']} {lv['count']:,}" for lv in obj["levels"])
+            cuts = ", ".join(f"{c:.4g}" for c in obj["cutoffs"])
+            console.info(f"{obj['id']}: {counts}" + (f"; cutoffs {cuts}" if cuts else ""))
+    fewer = Counter(len(obj["levels"]) for obj in objects if obj["dropped"])
+    if fewer:
+        kept = ", ".join(f"{n:,} with {k}" for k, n in sorted(fewer.items()))
+        console.info(
+            f"{sum(fewer.values()):,} object(s) keep fewer levels ({kept} level(s)): no coarser "
+            "level was both cheaper and faithful there, so the finer one stays on (see README)"
+        )
+    skipped = len(report["skipped"])
+    console.summary(
+        f"wrote {args.output} ({report['totals']['objects']:,} object(s)"
+        + (f", {skipped:,} skipped" if skipped else "")
+        + f", {report['backend']} backend, {sum(report['timings'].values()):.2f} s)"
+        + (f" and {report['page']}" if "page" in report else "")
+    )
+    return EXIT_OK

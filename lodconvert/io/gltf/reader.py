@@ -1,0 +1,245 @@
+"""Reading back the glTF files lodconvert wrote: per root node its levels in ``MSFT_lod`` order
+(:func:`read_lod_gltf`) and chains with the facts of ``extras.lodconvert`` (:func:`read_back`)."""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import json
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...errors import InputError
+from ...model import LodChain
+from ..declared import chain_from_facts, level_from_facts
+from .writer import (
+    _DTYPES,
+    _WIDTHS,
+    GLB_BIN,
+    GLB_JSON,
+    GLB_MAGIC,
+    MSFT_LOD,
+    srgb_rgba,
+)
+
+# --- reading our own output ---------------------------------------------------------------------
+
+
+@dataclass
+class GltfLevel:
+    """One level as stored: geometry relative to the object's origin, sRGB colours.
+
+    ``positions`` (k, 3) float64 (the float32 buffer values), ``colors`` (k, 4) uint8 or
+    ``None``, ``normals`` (k, 3) float32 or ``None``, ``faces`` (m, 3) int64 for a mesh level,
+    ``extras`` the level's facts from the finest node's ``extras.lodconvert.levels``.
+    """
+
+    name: str
+    kind: str
+    positions: np.ndarray
+    colors: np.ndarray | None
+    normals: np.ndarray | None
+    faces: np.ndarray | None
+    extras: dict[str, Any]
+
+
+@dataclass
+class GltfObject:
+    """One object (root node): id, float64 origin, levels finest first, coverage thresholds,
+    the finest node's ``extras.lodconvert``, its node index and its ``MSFT_lod`` ids."""
+
+    object_id: str
+    origin: np.ndarray
+    levels: list[GltfLevel]
+    screen_coverage: list[float]
+    extras: dict[str, Any]
+    node: int
+    ids: list[int]
+
+
+def read_lod_gltf(path: str | Path, geometry: bool = True) -> list[GltfObject]:
+    """Read a ``.glb``/``.gltf`` that lodconvert wrote: one :class:`GltfObject` per root node,
+    with levels in ``MSFT_lod`` order.
+
+    Raises :class:`InputError` when the file cannot be read, is truncated or malformed, or was
+    not written by lodconvert.
+    """
+    path = Path(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}", str(path)) from None
+    try:
+        obj, blob = _parse(data)
+        if not isinstance(obj.get("asset", {}).get("extras", {}).get("lodconvert"), dict):
+            raise InputError("not a glTF written by lodconvert (no asset.extras.lodconvert)")
+        scene = obj["scenes"][obj.get("scene", 0)]
+        return [_read_object(obj, blob, i, geometry) for i in scene.get("nodes", [])]
+    except InputError as exc:
+        raise InputError(str(exc), str(path)) from None
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError, struct.error) as exc:
+        raise InputError(f"malformed glTF ({type(exc).__name__}: {exc})", str(path)) from None
+
+
+def _parse(data: bytes) -> tuple[dict[str, Any], bytes]:
+    """JSON object and binary buffer of GLB or glTF-with-data-URI bytes."""
+    if data[:4] != GLB_MAGIC:
+        obj = json.loads(data.decode("utf-8"))
+        buffers = obj.get("buffers", [])
+        if not buffers:
+            return obj, b""
+        uri = buffers[0].get("uri", "")
+        if not uri.startswith("data:") or "," not in uri:
+            raise InputError("buffer is not an embedded data URI")
+        try:
+            return obj, base64.b64decode(uri.split(",", 1)[1], validate=True)
+        except binascii.Error as exc:
+            raise InputError(f"bad base64 buffer ({exc})") from None
+    if len(data) < 20:
+        raise InputError(f"truncated GLB ({len(data)} bytes)")
+    _, version, total = struct.unpack_from("<4sII", data)
+    if version != 2:
+        raise InputError(f"GLB version {version}, expected 2")
+    if total != len(data):
+        raise InputError(f"truncated GLB (header says {total} bytes, file has {len(data)})")
+    chunks: dict[bytes, bytes] = {}
+    offset = 12
+    while offset < total:
+        length, kind = struct.unpack_from("<I4s", data, offset)
+        if offset + 8 + length > total:
+            raise InputError(f"truncated GLB chunk {kind!r}")
+        chunks.setdefault(kind, data[offset + 8 : offset + 8 + length])
+        offset += 8 + length
+    if GLB_JSON not in chunks:
+        raise InputError("GLB has no JSON chunk")
+    return json.loads(chunks[GLB_JSON].decode("utf-8")), chunks.get(GLB_BIN, b"")
+
+
+def _accessor_data(obj: dict[str, Any], blob: bytes, index: int) -> np.ndarray:
+    """Accessor values as an array of the buffer's dtype, (count,) or (count, width)."""
+    accessor = obj["accessors"][index]
+    view = obj["bufferViews"][accessor["bufferView"]]
+    dtype = np.dtype(_DTYPES[accessor["componentType"]]).newbyteorder("<")
+    width = _WIDTHS[accessor["type"]]
+    if view.get("byteStride", dtype.itemsize * width) != dtype.itemsize * width:
+        raise InputError("interleaved buffer views are not supported")
+    start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
+    count = accessor["count"]
+    values = np.frombuffer(blob, dtype=dtype, count=count * width, offset=start)
+    return values.reshape(count, width) if width > 1 else values
+
+
+def _normalized(values: np.ndarray) -> np.ndarray:
+    """Normalised integers (or floats) as float64 in [0, 1]."""
+    if values.dtype.kind == "f":
+        return values.astype(np.float64)
+    return values / float(np.iinfo(values.dtype).max)
+
+
+def _primitive(obj: dict[str, Any], blob: bytes, primitive: dict[str, Any]) -> dict[str, Any]:
+    """Positions (float64), sRGB colours, normals and faces of one primitive (``None`` where
+    absent)."""
+    attributes = primitive["attributes"]
+    out: dict[str, Any] = {
+        "positions": _accessor_data(obj, blob, attributes["POSITION"]).astype(np.float64),
+        "colors": None,
+        "normals": None,
+        "faces": None,
+    }
+    if "COLOR_0" in attributes:
+        linear = _normalized(_accessor_data(obj, blob, attributes["COLOR_0"]))
+        if linear.shape[1] == 3:
+            linear = np.column_stack([linear, np.ones(len(linear))])
+        out["colors"] = srgb_rgba(linear)
+    if "NORMAL" in attributes:
+        out["normals"] = _accessor_data(obj, blob, attributes["NORMAL"]).copy()
+    if "indices" in primitive:
+        indices = _accessor_data(obj, blob, primitive["indices"])
+        out["faces"] = indices.astype(np.int64).reshape(-1, 3)
+    return out
+
+
+def _read_level(obj: dict[str, Any], blob: bytes, node: dict[str, Any], facts: dict) -> GltfLevel:
+    """One level node's geometry: its mesh's primitives (one per part) joined in order."""
+    positions = np.zeros((0, 3))
+    colors = normals = faces = None
+    if "mesh" in node:
+        parts = [_primitive(obj, blob, p) for p in obj["meshes"][node["mesh"]]["primitives"]]
+        positions = np.concatenate([p["positions"] for p in parts])
+        if any(p["colors"] is not None for p in parts):
+            colors = np.concatenate(
+                [
+                    p["colors"]
+                    if p["colors"] is not None
+                    else np.full((len(p["positions"]), 4), 255, dtype=np.uint8)
+                    for p in parts
+                ]
+            )
+        if all(p["normals"] is not None for p in parts):
+            normals = np.concatenate([p["normals"] for p in parts])
+        if all(p["faces"] is not None for p in parts):
+            starts = np.cumsum([0, *(len(p["positions"]) for p in parts[:-1])])
+            faces = np.concatenate([p["faces"] + s for p, s in zip(parts, starts, strict=True)])
+    return GltfLevel(
+        name=facts["name"],
+        kind=facts["kind"],
+        positions=positions,
+        colors=colors,
+        normals=normals,
+        faces=faces,
+        extras=facts,
+    )
+
+
+def _read_object(
+    obj: dict[str, Any], blob: bytes, root_index: int, geometry: bool = True
+) -> GltfObject:
+    nodes = obj["nodes"]
+    root = nodes[root_index]
+    finest_index = root["children"][0]
+    finest = nodes[finest_index]
+    extras = finest.get("extras", {})
+    facts = extras["lodconvert"]
+    ids = finest.get("extensions", {}).get(MSFT_LOD, {}).get("ids", [])
+    level_nodes = [finest, *(nodes[i] for i in ids)]
+    if len(level_nodes) != len(facts["levels"]):
+        raise InputError(
+            f"{root.get('name')!r}: {len(level_nodes)} level nodes but "
+            f"{len(facts['levels'])} levels in extras"
+        )
+    return GltfObject(
+        object_id=root["name"],
+        origin=np.array(
+            facts.get("origin", root.get("translation", [0.0, 0.0, 0.0])), dtype=np.float64
+        ),
+        levels=[
+            _read_level(obj, blob, node if geometry else {}, level)
+            for node, level in zip(level_nodes, facts["levels"], strict=True)
+        ],
+        screen_coverage=list(extras.get("MSFT_screencoverage", [])),
+        extras=facts,
+        node=finest_index,
+        ids=list(ids),
+    )
+
+
+def read_back(path: Path, geometry: bool = True) -> list[LodChain]:
+    """The chains of a ``.glb``/``.gltf`` lodconvert wrote, with the facts of
+    ``extras.lodconvert`` and (unless ``geometry`` is false) the level geometry, relative to
+    each chain's origin. The finest level's node index and the ``MSFT_lod`` ids are kept in
+    ``chain.metadata["gltf"]``."""
+    chains = []
+    for obj in read_lod_gltf(path, geometry):
+        where = f"{path}: object {obj.object_id!r}"
+        levels = [
+            level_from_facts(lv.extras, lv.positions, lv.faces, lv.colors, where)
+            for lv in obj.levels
+        ]
+        chain = chain_from_facts(obj.object_id, obj.extras, levels, obj.origin, where)
+        chain.metadata["gltf"] = {"node": obj.node, "ids": obj.ids}
+        chains.append(chain)
+    return chains

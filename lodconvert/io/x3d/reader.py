@@ -1,0 +1,257 @@
+"""Reading back the X3D files lodconvert wrote: level geometry (:func:`read_x3d_points`) and
+chains with the facts declared in the lodconvert ``MetadataSet`` s (:func:`read_back`)."""
+
+from __future__ import annotations
+
+import contextlib
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lxml import etree
+
+from ...errors import InputError
+from ...model import LodChain
+from ..declared import chain_from_facts, level_from_facts
+from .writer import METADATA_SET
+
+
+@dataclass
+class X3DLevel:
+    """The geometry of one DEF'd level ``Group`` read back from an X3D file: its ``Shape`` s
+    joined in document order.
+
+    ``coordinates`` (k, 3) float64 are as written, relative to ``translation`` (the sum of the
+    ``Transform`` translations enclosing the Group); ``colors`` (k, 4) uint8 or ``None``;
+    ``index`` (m, 3) int64 triangles of ``IndexedTriangleSet`` s into ``coordinates``,
+    ``None`` for ``PointSet`` s. A mesh split over several Shapes comes back with the vertices
+    the Shapes share repeated in each, and without vertices that no face used.
+    """
+
+    geometry: str
+    coordinates: np.ndarray
+    translation: np.ndarray
+    colors: np.ndarray | None = None
+    index: np.ndarray | None = None
+
+    @property
+    def world(self) -> np.ndarray:
+        """Coordinates in world units (float64)."""
+        return self.coordinates + self.translation
+
+
+def _numbers(text: str | None, width: int, dtype: type, what: str) -> np.ndarray:
+    values = np.array((text or "").replace(",", " ").split(), dtype=dtype)
+    if len(values) % width:
+        raise ValueError(f"{what} has {len(values)} values, not a multiple of {width}")
+    return values.reshape(-1, width)
+
+
+def _read_shape(shape: etree._Element, translation: np.ndarray) -> X3DLevel | None:
+    """The ``PointSet`` or ``IndexedTriangleSet`` of one ``Shape``; ``None`` without one."""
+    for geometry in ("PointSet", "IndexedTriangleSet"):
+        node = shape.find(geometry)
+        if node is not None:
+            break
+    else:
+        return None
+    coordinate = node.find("Coordinate")
+    points = coordinate.get("point") if coordinate is not None else None
+    coords = _numbers(points, 3, np.float64, "point")
+    colors = None
+    for tag, width in (("Color", 3), ("ColorRGBA", 4)):
+        color = node.find(tag)
+        if color is not None:
+            values = _numbers(color.get("color"), width, np.float64, "color")
+            rgba = np.full((len(values), 4), 255, dtype=np.uint8)
+            rgba[:, :width] = np.clip(np.rint(values * 255.0), 0, 255).astype(np.uint8)
+            colors = rgba
+    index = _numbers(node.get("index"), 3, np.int64, "index") if geometry != "PointSet" else None
+    return X3DLevel(geometry, coords, translation, colors, index)
+
+
+def _join_shapes(parts: list[X3DLevel]) -> X3DLevel:
+    """One level from the Shapes of its Group: coordinates and colours concatenated, triangle
+    indices shifted by the vertices of the Shapes before."""
+    first = parts[0]
+    if any(part.geometry != first.geometry for part in parts):
+        raise ValueError(f"a level mixes {sorted({part.geometry for part in parts})}")
+    coloured = [part.colors is not None for part in parts]
+    if any(coloured) and not all(coloured):
+        raise ValueError("a level has colours on some Shapes only")
+    colors = np.concatenate([p.colors for p in parts]) if all(coloured) else None
+    index = None
+    if first.index is not None:
+        starts = np.cumsum([0, *(len(part.coordinates) for part in parts[:-1])])
+        index = np.concatenate([p.index + start for p, start in zip(parts, starts, strict=True)])
+    coordinates = np.concatenate([part.coordinates for part in parts])
+    return X3DLevel(first.geometry, coordinates, first.translation, colors, index)
+
+
+def read_x3d_points(path: str | Path) -> dict[str, X3DLevel]:
+    """Read the levels of an X3D file written by :func:`write_x3d`: for each DEF'd ``Group``
+    the ``PointSet`` s or ``IndexedTriangleSet`` s of the ``Shape`` s directly inside it,
+    joined (see :class:`X3DLevel`), keyed by the Group's DEF, in document order.
+
+    The file is parsed with libxml2's default limits (no ``huge_tree``), which files written
+    by :func:`write_x3d` stay within. Raises :class:`~lodconvert.errors.InputError` naming the
+    file when it is missing, not well-formed (truncated, say), not X3D, or holds malformed
+    numbers or geometry.
+    """
+    levels: dict[str, X3DLevel] = {}
+    offsets: list[np.ndarray] = []
+    groups: list[tuple[str | None, list[X3DLevel]]] = []
+    with x3d_read_errors(path, "numbers or geometry"):
+        events = etree.iterparse(str(path), events=("start", "end"))
+        for event, element in events:
+            if event == "start":
+                if element.tag == "Transform":
+                    shift = _numbers(element.get("translation"), 3, np.float64, "translation")
+                    offsets.append(shift[0] if len(shift) else np.zeros(3))
+                elif element.tag == "Group":
+                    groups.append((element.get("DEF"), []))
+                continue
+            if element.tag == "Transform":
+                offsets.pop()
+            elif element.tag == "Shape" and groups and groups[-1][0]:
+                translation = np.sum(offsets, axis=0) if offsets else np.zeros(3)
+                shape = _read_shape(element, translation)
+                if shape is not None:
+                    groups[-1][1].append(shape)
+                element.clear()
+            elif element.tag == "Group":
+                name, parts = groups.pop()
+                if name and parts:
+                    levels[name] = _join_shapes(parts)
+        if events.root is None or events.root.tag != "X3D":
+            raise InputError("is not an X3D document", str(path))
+    return levels
+
+
+@contextlib.contextmanager
+def x3d_read_errors(path: str | Path, malformed: str) -> Iterator[None]:
+    """Turn what reading an X3D file can raise into a one-line :class:`InputError` naming
+    ``path``; ``malformed`` says what a ``ValueError`` means (e.g. "numbers or geometry")."""
+    try:
+        yield
+    except etree.XMLSyntaxError as err:
+        raise InputError(f"is not well-formed X3D: {err}", str(path)) from None
+    except OSError as err:
+        raise InputError(f"cannot be read: {err.strerror or err}", str(path)) from None
+    except ValueError as err:
+        raise InputError(f"holds malformed {malformed}: {err}", str(path)) from None
+
+
+_MFSTRING = re.compile(r'"((?:[^"\\]|\\.)*)"')
+
+
+def _metadata_values(element: etree._Element) -> dict[str, Any]:
+    """The entries of a ``MetadataSet``: single values as scalars, several as lists."""
+    facts: dict[str, Any] = {}
+    for child in element:
+        name, text = child.get("name"), child.get("value") or ""
+        if child.tag == "MetadataString":
+            values: list[Any] = [
+                re.sub(r"\\(.)", r"\1", m.group(1)) for m in _MFSTRING.finditer(text)
+            ]
+        elif child.tag == "MetadataBoolean":
+            values = [v == "true" for v in text.replace(",", " ").split()]
+        elif child.tag == "MetadataInteger":
+            values = [int(v) for v in text.replace(",", " ").split()]
+        elif child.tag == "MetadataDouble":
+            values = [float(v) for v in text.replace(",", " ").split()]
+        else:
+            continue
+        facts[name] = values if len(values) != 1 or name in ("xs", "cutoffs") else values[0]
+    return facts
+
+
+def _vector(text: str | None) -> np.ndarray:
+    values = np.array((text or "").replace(",", " ").split(), dtype=np.float64)
+    return values[:3] if len(values) >= 3 else np.zeros(3)
+
+
+def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
+    """Per ``LOD`` node carrying lodconvert metadata: its origin (the enclosing translations),
+    centre, chain facts (from the ``MetadataSet`` of its ``Transform``, or of the LOD itself)
+    and, per level ``Group``, its DEF and facts. Shapes are skipped."""
+    objects: list[dict[str, Any]] = []
+    lods: dict[str, dict[str, Any]] = {}  # DEF → entry, for LODs that instances USE
+    transforms: list[dict[str, Any]] = []  # open Transforms: translation and metadata
+    for event, element in etree.iterparse(str(path), events=("start", "end")):
+        tag = element.tag
+        if event == "start":
+            if tag == "Transform":
+                transforms.append({"offset": _vector(element.get("translation")), "facts": {}})
+            elif tag == "LOD":
+                facts = dict(transforms[-1]["facts"]) if transforms else {}
+                # an instance's own Transform is declared in its facts; the origin is the
+                # translation of the chain's Transform alone
+                offsets = [t["offset"] for t in transforms[-1:] if "transform" in facts] or [
+                    t["offset"] for t in transforms
+                ]
+                used = lods.get(element.get("USE", ""))
+                entry = {
+                    "origin": np.sum(offsets, axis=0) if offsets else np.zeros(3),
+                    "center": _vector(element.get("center")) if used is None else used["center"],
+                    "facts": facts,
+                    "levels": [] if used is None else [dict(lv) for lv in used["levels"]],
+                    "element": element,
+                    "lod": element.get("DEF") or element.get("USE"),
+                }
+                objects.append(entry)
+                if element.get("DEF"):
+                    lods[element.get("DEF")] = entry
+            elif (
+                tag == "Group"
+                and objects
+                and element.getparent() is objects[-1]["element"]
+                and element.get("DEF")  # the empty child of a culled chain has none
+            ):
+                objects[-1]["levels"].append({"def": element.get("DEF"), "facts": {}})
+            continue
+        if tag == "Transform":
+            transforms.pop()
+        elif tag == "Shape":
+            element.clear()
+        elif tag == "MetadataSet" and element.get("name") == METADATA_SET:
+            parent = element.getparent()
+            lod = objects[-1]["element"] if objects else None
+            if parent.tag == "Transform" and transforms:
+                transforms[-1]["facts"] = _metadata_values(element)
+            elif parent is lod:
+                objects[-1]["facts"] = _metadata_values(element)
+            elif objects[-1:] and objects[-1]["levels"] and parent.getparent() is lod:
+                objects[-1]["levels"][-1]["facts"] = _metadata_values(element)
+    return [obj for obj in objects if obj["facts"]]
+
+
+def read_back(path: Path, geometry: bool = True) -> list[LodChain]:
+    """The chains of an ``.x3d`` lodconvert wrote, with the facts of its lodconvert
+    ``MetadataSet`` s and (unless ``geometry`` is false) the level geometry, relative to each
+    chain's origin. The ``LOD`` node's DEF is kept in ``chain.metadata["x3d"]``."""
+    with x3d_read_errors(path, "metadata"):
+        objects = _x3d_facts(path)
+    if not objects:
+        raise InputError("is not an X3D file written by lodconvert (no lodconvert LOD)", str(path))
+    shapes_of = read_x3d_points(path) if geometry else {}
+    chains = []
+    for obj in objects:
+        object_id = obj["facts"].get("object_id", "")
+        where = f"{path}: object {object_id!r}"
+        levels = []
+        for entry in obj["levels"]:
+            facts = {"name": entry["facts"].get("level"), **entry["facts"]}
+            shapes = shapes_of.get(entry["def"])
+            positions = shapes.coordinates if shapes is not None else np.zeros((0, 3))
+            faces = shapes.index if shapes is not None else None
+            colors = shapes.colors if shapes is not None else None
+            levels.append(level_from_facts(facts, positions, faces, colors, where))
+        chain_facts = {**obj["facts"], "center": obj["center"]}
+        chain = chain_from_facts(object_id, chain_facts, levels, obj["origin"], where)
+        chain.metadata["x3d"] = {"lod": obj["lod"]}
+        chains.append(chain)
+    return chains

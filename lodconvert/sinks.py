@@ -1,0 +1,200 @@
+"""Where outputs go: a file or a directory, staged beside its target and committed together.
+
+One run's outputs (the model file, ``--report``, ``--html``, files written beside them, or a
+directory of tiles) form one :class:`Outputs`. Each target is checked before any work is done
+(its folder exists and is writable, it is not a directory, not an input of the run, not claimed
+twice). Everything is written to temporary names in the target folders; :meth:`Outputs.commit`
+renames them all into place, and puts back what it replaced if a rename fails. A run that fails
+at any step, or is interrupted, leaves no new file and every existing output untouched.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO
+
+from .errors import InputError
+
+Check = Callable[[Path], None]
+"""Called with a complete staged file (or directory) before the commit; raises to refuse it."""
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name one file (same resolved path, or same device and inode)."""
+    if a.resolve() == b.resolve():
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+@dataclass
+class _Staged:
+    target: Path
+    temp: Path
+    check: Check | None = None
+
+
+@dataclass
+class FileSink:
+    """One output file: :meth:`open` writes its staged copy; :meth:`beside` stages another file
+    in the same folder (a texture, a buffer) that is committed with it."""
+
+    outputs: Outputs
+    path: Path
+    staged: _Staged
+
+    @contextlib.contextmanager
+    def open(self) -> Iterator[BinaryIO]:
+        """The staged file, opened for binary writing (flushed to disk when the block ends)."""
+        with self.staged.temp.open("wb") as handle:
+            yield handle
+            handle.flush()
+            os.fsync(handle.fileno())
+
+    def write_bytes(self, data: bytes) -> None:
+        """Write the whole file."""
+        with self.open() as handle:
+            handle.write(data)
+
+    def beside(self, name: str) -> FileSink:
+        """A sink for ``name`` in this output's folder."""
+        return self.outputs.file(self.path.parent / name)
+
+
+@dataclass
+class DirectorySink:
+    """One output directory, staged as a whole: :meth:`file` writes a file inside it."""
+
+    outputs: Outputs
+    path: Path
+    staged: _Staged
+
+    @contextlib.contextmanager
+    def file(self, relative: str | Path) -> Iterator[BinaryIO]:
+        """A file at ``relative`` inside the staged directory (folders made as needed)."""
+        relative = Path(relative)
+        if relative.is_absolute() or ".." in relative.parts:
+            raise ValueError(f"{relative} is not a path inside the output directory")
+        target = self.staged.temp / relative
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with target.open("wb") as handle:
+            yield handle
+
+
+@dataclass
+class Outputs:
+    """The outputs of one run. Use as a context manager: commit when the block succeeds,
+    discard everything staged when it raises (an interrupt included)."""
+
+    inputs: Sequence[str | Path] = ()
+    _staged: list[_Staged] = field(default_factory=list)
+
+    def __enter__(self) -> Outputs:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, *_: object) -> None:
+        if kind is None:
+            self.commit()
+        else:
+            self.discard()
+
+    def target(self, path: str | Path, directory: bool = False) -> Path:
+        """``path`` checked as an output: raise :class:`InputError` naming it when its folder is
+        missing or not writable, when it is a directory (a file, for a directory output), when
+        it is one of the run's inputs, or when this run already writes it."""
+        path = Path(path)
+        where = str(path)
+        folder = path.parent if str(path.parent) else Path(".")
+        if not folder.is_dir():
+            raise InputError(f"cannot write here: no folder {str(folder)!r}", where)
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise InputError(f"cannot write here: folder {str(folder)!r} is not writable", where)
+        if path.exists() and path.is_dir() != directory:
+            kind = "a directory" if path.is_dir() else "a file"
+            raise InputError(f"is {kind}; the output must not be", where)
+        for source in self.inputs:
+            if Path(source).exists() and path.exists() and _same_file(Path(source), path):
+                raise InputError("is an input of this run; it would be overwritten", where)
+        for staged in self._staged:
+            if staged.target.resolve() == path.resolve():
+                raise InputError("is written twice by this run", where)
+        return path
+
+    def file(self, path: str | Path, check: Check | None = None) -> FileSink:
+        """Stage the output file ``path`` (checked first, see :meth:`target`)."""
+        target = self.target(path)
+        # ``.name.XXXX.tmp.suffix``: hidden, marked as temporary, and still of its format
+        fd, temp = tempfile.mkstemp(
+            prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent
+        )
+        os.close(fd)
+        staged = _Staged(target, Path(temp), check)
+        self._staged.append(staged)
+        return FileSink(self, target, staged)
+
+    def directory(self, path: str | Path, check: Check | None = None) -> DirectorySink:
+        """Stage the output directory ``path`` (replacing an existing one on commit)."""
+        target = self.target(path, directory=True)
+        temp = tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+        staged = _Staged(target, Path(temp), check)
+        self._staged.append(staged)
+        return DirectorySink(self, target, staged)
+
+    def commit(self) -> list[Path]:
+        """Check every staged output, then rename all into place; on any failure nothing is
+        left changed. Returns the targets written."""
+        try:
+            for staged in self._staged:
+                if staged.check is not None:
+                    staged.check(staged.temp)
+        except BaseException:
+            self.discard()
+            raise
+        done: list[tuple[_Staged, Path | None]] = []
+        try:
+            for staged in self._staged:
+                backup = None
+                if staged.target.exists():
+                    backup = Path(f"{staged.temp}.old")
+                    os.replace(staged.target, backup)
+                done.append((staged, backup))
+                if staged.temp.is_file():
+                    staged.temp.chmod(0o644)
+                os.replace(staged.temp, staged.target)
+        except BaseException:
+            for staged, backup in reversed(done):
+                if staged.target.exists() and not staged.temp.exists():
+                    os.replace(staged.target, staged.temp)
+                if backup is not None:
+                    os.replace(backup, staged.target)
+            self.discard()
+            raise
+        for _, backup in done:
+            if backup is not None:
+                _remove(backup)
+        written = [staged.target for staged in self._staged]
+        self._staged.clear()
+        return written
+
+    def discard(self) -> None:
+        """Remove everything staged; targets stay as they were."""
+        for staged in self._staged:
+            _remove(staged.temp)
+        self._staged.clear()
+
+
+def _remove(path: Path) -> None:
+    """Remove a file or a directory tree, if it exists."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
