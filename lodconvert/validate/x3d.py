@@ -1,8 +1,10 @@
 """X3D checks: well-formed XML with an ``X3D`` root and a ``Scene``; the components that ``LOD``
 (Navigation 2) and ``PointProperties`` (Shape 5) need; every ``LOD`` with strictly increasing,
 non-negative ranges and one child more than ranges; ``PointSet`` s with one colour per point and
-no ``Normal``; ``IndexedTriangleSet`` s of whole triangles indexing existing vertices; and,
-when a schema is given, the XSD (the official X3D 4.0 XSD is a test-time reference, not shipped).
+no ``Normal``; ``IndexedTriangleSet`` s of whole triangles indexing existing vertices; at least
+one lodconvert chain (an ``LOD`` in a ``Transform`` holding ``MetadataSet name='lodconvert'``);
+and, when a schema is given, the XSD (the official X3D 4.0 XSD is a test-time reference, not
+shipped).
 
 The document is streamed with libxml2's default limits and without resolving entities; each
 ``Shape`` is cleared once checked, so memory stays small for large files.
@@ -19,6 +21,7 @@ import numpy as np
 from lxml import etree
 
 from ..errors import LodConvertError
+from ..io.x3d import METADATA_SET
 from .findings import Findings
 
 MAX_SCHEMA_FINDINGS = 20
@@ -170,6 +173,17 @@ def _check_lod(element: etree._Element, findings: Findings) -> None:
         findings.error("LOD_RANGE", f"{_label(element)} ranges do not increase strictly")
 
 
+def _is_chain(lod: etree._Element) -> bool:
+    """Whether ``lod`` is a lodconvert chain: its parent ``Transform`` holds the chain's
+    ``MetadataSet name='lodconvert'``."""
+    parent = lod.getparent()
+    return (
+        parent is not None
+        and parent.tag == "Transform"
+        and any(c.tag == "MetadataSet" and c.get("name") == METADATA_SET for c in parent)
+    )
+
+
 _X3D_CHECKS: dict[str, Callable[[etree._Element, Findings], None]] = {
     "LOD": _check_lod,
     "PointSet": _check_point_set,
@@ -205,6 +219,7 @@ def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) ->
     so that memory stays small for large files."""
     root: etree._Element | None = None
     used: set[str] = set()
+    chains = 0
     try:
         events = etree.iterparse(str(path), events=("start", "end"), resolve_entities=False)
         for event, element in events:
@@ -219,16 +234,27 @@ def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) ->
             check = _X3D_CHECKS.get(element.tag)
             if check is not None:
                 check(element, findings)
+            if element.tag == "LOD" and _is_chain(element):
+                chains += 1
             if element.tag == "Shape":
                 element.clear()
     except etree.XMLSyntaxError as exc:
         findings.error("XML_SYNTAX", f"not well-formed XML: {exc.msg}")
+        return
+    except OSError as exc:
+        findings.error("READ", f"cannot read: {exc.strerror or exc}")
         return
     assert root is not None  # iterparse raises on an empty document
     if root.get("version") != "4.0":
         findings.warning("X3D_VERSION", f"version {root.get('version')!r}, lodconvert writes 4.0")
     if root.find("Scene") is None:
         findings.error("X3D_SCENE", "the X3D element has no Scene")
+    elif not chains:
+        findings.error(
+            "NO_LOD_CHAIN",
+            "no lodconvert LOD chain: no LOD inside a Transform holding "
+            f"MetadataSet name='{METADATA_SET}'",
+        )
     _check_components(root, used, findings)
     if schema is not None:
         _check_schema(path, schema, findings)
