@@ -1,9 +1,10 @@
 """Checks of the files lodconvert writes: ``lodconvert validate`` and the converter's last step.
 
 :func:`validate_file` returns a list of :class:`Finding` s; the converter calls
-:func:`check_written` on its temporary file before renaming it into place. The rules are in
-:mod:`.x3d` (structure of what we emit, optionally the official XSD) and :mod:`.gltf` (GLB
-framing, accessors, ``MSFT_lod``).
+:func:`check_written` on its staged file before committing it. The rules belong to each
+format's registry entry (``check``): :mod:`lodconvert.io.x3d.check` (structure of what we emit,
+optionally the official XSD) and :mod:`lodconvert.io.gltf.check` (GLB framing, accessors,
+``MSFT_lod``).
 """
 
 from __future__ import annotations
@@ -13,8 +14,8 @@ from pathlib import Path
 
 from ..errors import InputError, LodConvertError
 from ..io import own_format
+from ..io.x3d.check import load_x3d_schema
 from .findings import ERROR, WARNING, Finding, Findings
-from .x3d import load_x3d_schema
 
 
 def validate_file(

@@ -34,7 +34,7 @@ def write(chains: Iterable[LodChain], sink: FileSink, info: OutputInfo) -> None:
 
 def check(path: Path, findings: Any, schema: Any = None) -> None:
     """Structural checks of a glTF file lodconvert wrote (GLB framing, accessors, MSFT_lod)."""
-    from ...validate.gltf import check_gltf
+    from .check import check_gltf
 
     check_gltf(path, findings, schema)
 

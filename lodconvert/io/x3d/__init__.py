@@ -22,7 +22,7 @@ def write(chains: Iterable[LodChain], sink: FileSink, info: OutputInfo) -> None:
 
 def check(path: Path, findings: Any, schema: Any = None) -> None:
     """Structural checks of an X3D file lodconvert wrote (and the official XSD when given)."""
-    from ...validate.x3d import check_x3d
+    from .check import check_x3d
 
     check_x3d(path, findings, schema)
 

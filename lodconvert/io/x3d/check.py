@@ -20,9 +20,9 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from ..errors import LodConvertError
-from ..io.x3d import METADATA_SET
-from .findings import Findings
+from ...errors import LodConvertError
+from ...validate.findings import Findings
+from .writer import METADATA_SET
 
 MAX_SCHEMA_FINDINGS = 20
 """Schema errors listed one by one; any more are summed up in one finding."""

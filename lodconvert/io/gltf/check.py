@@ -30,8 +30,8 @@ from typing import Any
 import numpy as np
 from lxml import etree
 
-from ..io.gltf import GLB_BIN, GLB_JSON, GLB_MAGIC, MSFT_LOD
-from .findings import Findings
+from ...validate.findings import Findings
+from .writer import GLB_BIN, GLB_JSON, GLB_MAGIC, MSFT_LOD
 
 _COMPONENT_SIZES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
 _COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
