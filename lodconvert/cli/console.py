@@ -14,6 +14,8 @@ from typing import TextIO
 
 LINE_SECONDS = 5.0
 """Least time between two progress lines when stderr is not a terminal."""
+BAR_SECONDS = 0.2
+"""Least time between two redraws of a progress bar."""
 
 
 class Console:
@@ -47,7 +49,14 @@ class Console:
             if self.live:
                 from tqdm import tqdm
 
-                self._bar = tqdm(total=total, desc=stage, unit="obj", file=self.stream, leave=False)
+                self._bar = tqdm(
+                    total=total,
+                    desc=stage,
+                    unit="obj",
+                    file=self.stream,
+                    leave=False,
+                    mininterval=BAR_SECONDS,
+                )
         self._done, self._total = done, total
         if self._bar is not None:
             self._bar.total = total
