@@ -39,25 +39,22 @@ from scipy.sparse.csgraph import connected_components
 from tables import markdown_table
 
 import lodconvert
-from lodconvert.bake import NumpyBackend
-from lodconvert.chain import DEFAULT_INSET, DEFAULT_SPACING_PX, ChainOptions, bake_chain
-from lodconvert.evaluate import (
+from lodconvert.analysis.contact_sheet import contact_sheet, legend, stack_images
+from lodconvert.analysis.evaluate import (
     LevelScores,
     ObjectReport,
     Protocol,
     ReferenceRenders,
-    SilhouetteRenderer,
-    contact_sheet,
     evaluate_chain,
     evaluate_object,
-    legend,
     match_references,
     silhouette_scores,
-    stack_images,
 )
-from lodconvert.io import read_chains
+from lodconvert.analysis.silhouette import SilhouetteRenderer
+from lodconvert.bake import NumpyBackend
+from lodconvert.chain import DEFAULT_INSET, DEFAULT_SPACING_PX, ChainOptions, bake_chain
+from lodconvert.io import read_chains, read_scene
 from lodconvert.model import LodChain, Node, Surface
-from lodconvert.io import read_scene
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

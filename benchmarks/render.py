@@ -31,7 +31,7 @@ from typing import Any
 
 from tables import markdown_table
 
-from lodconvert.bench import PAPER_INSTANCES
+from lodconvert.analysis.bench import PAPER_INSTANCES
 from lodconvert.commands.bench import (
     bench_object_text,
     bench_table,

@@ -11,20 +11,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lodconvert.bench import (
+from lodconvert.analysis.bench import (
     BenchSettings,
     GridRenderer,
     frustum_planes,
     grid_points,
     grid_view,
-    read_chain,
+    level_kind,
+    read_object,
     run_bench,
     select_levels,
     spheres_in_frustum,
 )
+from lodconvert.analysis.render import look_at, perspective
 from lodconvert.cli import main
 from lodconvert.errors import InputError, LodConvertError
-from lodconvert.evaluate import look_at, perspective
 from lodconvert.pipeline import convert
 from lodconvert.plan import POINT_COST
 
@@ -92,17 +93,18 @@ def test_frustum_culling_drops_spheres_behind_and_beside_the_camera() -> None:
 
 
 def test_x3d_and_glb_give_the_same_chain_and_level_mix(knot: dict[str, Path]) -> None:
-    glb, x3d = read_chain(knot["glb"]), read_chain(knot["x3d"])
+    glb_object, x3d_object = read_object(knot["glb"]), read_object(knot["x3d"])
+    glb, x3d = glb_object.chain, x3d_object.chain
     assert [lv.name for lv in glb.levels] == [lv.name for lv in x3d.levels]
     assert [lv.count for lv in glb.levels] == [lv.count for lv in x3d.levels]
-    assert [lv.kind for lv in x3d.levels] == ["mesh", "pcd", "pcd", "pcd"]
+    assert [level_kind(lv) for lv in x3d.levels] == ["mesh", "pcd", "pcd", "pcd"]
     np.testing.assert_allclose(glb.cutoffs, x3d.cutoffs, rtol=1e-12)
     np.testing.assert_allclose(glb.alpha, x3d.alpha, rtol=1e-12)
     for a, b in zip(glb.levels[1:], x3d.levels[1:], strict=True):
-        assert a.point_size == pytest.approx(b.point_size)
+        assert a.params.point_size == pytest.approx(b.params.point_size)
         assert a.design_distance == pytest.approx(b.design_distance)
     np.testing.assert_allclose(glb.origin + glb.center, x3d.origin + x3d.center, atol=1e-6)
-    assert glb.reference is glb.levels[0] and x3d.reference is x3d.levels[0]
+    assert glb_object.reference is glb.levels[0] and x3d_object.reference is x3d.levels[0]
     for chain in (glb, x3d):
         view = grid_view(chain, 6561)
         assert set(np.unique(view.levels[view.visible])) == {0, 1, 2, 3}
@@ -111,11 +113,11 @@ def test_x3d_and_glb_give_the_same_chain_and_level_mix(knot: dict[str, Path]) ->
 
 def test_a_point_cloud_finest_level_needs_the_reference_mesh(knot: dict[str, Path]) -> None:
     with pytest.raises(InputError, match="--reference"):
-        read_chain(knot["points"])
-    chain = read_chain(knot["points"], reference=SAMPLE)
-    assert chain.levels[0].kind == "pcd"
-    assert chain.reference.kind == "mesh"
-    assert chain.reference.count == read_chain(knot["glb"]).levels[0].count
+        read_object(knot["points"])
+    target = read_object(knot["points"], reference=SAMPLE)
+    assert level_kind(target.chain.levels[0]) == "pcd"
+    assert level_kind(target.reference) == "mesh"
+    assert target.reference.count == read_object(knot["glb"]).chain.levels[0].count
 
 
 @pytest.mark.gl
@@ -168,16 +170,18 @@ def test_bench_prints_a_table_per_n_for_x3d(knot: dict[str, Path]) -> None:
 def test_a_frame_over_budget_is_reported_and_larger_grids_skipped(
     knot: dict[str, Path], renderer: GridRenderer
 ) -> None:
-    chain = read_chain(knot["glb"])
+    target = read_object(knot["glb"])
     settings = BenchSettings(instances=(4, 9), frames=1, warmup=0, budget_s=1e-9)
-    first, second = run_bench(chain, settings, renderer)
+    first, second = run_bench(target, settings, renderer)
     assert first.lod.timing.status == first.original.timing.status == "over budget"
     assert second.lod.timing.status == second.original.timing.status == "skipped"
     assert first.speedup is None and first.lod.timing.median_s is None
-    costs = {lv.name: lv.count * (POINT_COST if lv.kind == "pcd" else 1.0) for lv in chain.levels}
+    costs = {
+        lv.name: lv.count * (POINT_COST if lv.is_points else 1.0) for lv in target.chain.levels
+    }
     lod_cost = sum(n * costs[name] for name, n in second.lod.level_instances.items())
     assert lod_cost < second.original.submitted  # counted, not timed
-    run_bench(chain, BenchSettings(instances=(9,), frames=1, warmup=0), renderer)
+    run_bench(target, BenchSettings(instances=(9,), frames=1, warmup=0), renderer)
     image = renderer.read_image()
     sky = np.all(image == image[0, 0], axis=2)
     assert 0.01 < 1 - sky.mean() < 0.9  # the instances cover part of the frame

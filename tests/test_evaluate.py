@@ -14,26 +14,24 @@ import pytest
 import trimesh
 
 import lodconvert
-from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain, outward_sign
-from lodconvert.errors import InputError, LodConvertError
-from lodconvert.evaluate import (
-    SHEET_COLORS,
+from lodconvert.analysis.contact_sheet import SHEET_COLORS, contact_sheet
+from lodconvert.analysis.evaluate import (
     Protocol,
     ReferenceRenders,
-    SilhouetteRenderer,
-    contact_sheet,
     evaluate_chain,
     evaluate_object,
-    fibonacci_directions,
     geometric_errors,
     level_window,
     match_references,
-    point_pixel_size,
     sample_spacing,
     sample_surface,
     silhouette_scores,
 )
+from lodconvert.analysis.render import fibonacci_directions, point_pixel_size
+from lodconvert.analysis.silhouette import SilhouetteRenderer
+from lodconvert.bake import NumpyBackend
+from lodconvert.chain import ChainOptions, bake_chain, outward_sign
+from lodconvert.errors import InputError, LodConvertError
 from lodconvert.io import read_chains
 from lodconvert.model import LodChain, Node, PointCloud, Surface
 from lodconvert.plan import level_cost

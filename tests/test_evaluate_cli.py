@@ -11,8 +11,9 @@ import pytest
 import trimesh
 from PIL import Image
 
+from lodconvert.analysis.contact_sheet import SHEET_VIEWS
+from lodconvert.analysis.silhouette import SilhouetteRenderer
 from lodconvert.errors import LodConvertError
-from lodconvert.evaluate import SHEET_VIEWS, SilhouetteRenderer
 from lodconvert.plan import POINT_COST
 
 from .conftest import SAMPLE, require, stanford

@@ -105,7 +105,7 @@ def test_a_skipped_level_leaves_the_finer_one_on_to_the_next_cutoff() -> None:
 
 
 def _gl_renderer():
-    from lodconvert.evaluate import SilhouetteRenderer
+    from lodconvert.analysis.silhouette import SilhouetteRenderer
 
     try:
         return SilhouetteRenderer(1080)
@@ -128,7 +128,8 @@ def test_the_estimate_agrees_with_rendered_silhouettes() -> None:
     (16 views on a sphere, declared point sizes) fails, its F is within 0.1 of a rendered F
     above 0.9, and it takes the same decision in most cases (it is the stricter of the two: it
     keeps the worst of three axis views)."""
-    from lodconvert.evaluate import fibonacci_directions, silhouette_scores
+    from lodconvert.analysis.evaluate import silhouette_scores
+    from lodconvert.analysis.render import fibonacci_directions
 
     renderer = _gl_renderer()
     directions = fibonacci_directions(16)

@@ -8,17 +8,19 @@ import os
 import platform
 from typing import Any
 
-from ..bench import (
+from ..analysis.bench import (
     DEFAULT_BUDGET_S,
     DEFAULT_FRAMES,
     DEFAULT_WARMUP,
     GRID_SPACING,
     PAPER_INSTANCES,
-    BenchChain,
+    BenchObject,
     BenchRow,
     BenchSettings,
     GridRenderer,
-    read_chain,
+    level_kind,
+    level_triangles,
+    read_object,
     run_bench,
 )
 from ..cli import EXIT_OK, Console, parse_list
@@ -94,28 +96,30 @@ def run(args: argparse.Namespace, console: Console) -> int:
     )
     settings.check()
     console.progress(f"reading {args.input}")
-    chain = read_chain(args.input, args.object, args.reference)
+    target = read_object(args.input, args.object, args.reference)
     with GridRenderer() as renderer:
-        rows = run_bench(chain, settings, renderer, console.progress)
-        record = bench_record(args.input, chain, settings, rows, renderer.renderer_name)
+        rows = run_bench(target, settings, renderer, console.progress)
+        record = bench_record(args.input, target, settings, rows, renderer.renderer_name)
     console.clear()
     print(json.dumps(record, indent=2) if args.json else bench_text(record))
     return EXIT_OK
 
 
 def bench_record(
-    path: str, chain: BenchChain, settings: BenchSettings, rows: list[BenchRow], renderer: str
+    path: str, target: BenchObject, settings: BenchSettings, rows: list[BenchRow], renderer: str
 ) -> dict[str, Any]:
     """What a run measured, as the JSON that ``--json`` prints."""
-    assert chain.reference is not None
+    chain, reference = target.chain, target.reference
     return {
         "file": str(path),
         "object": chain.object_id,
-        "objects_in_file": chain.objects,
+        "objects_in_file": target.objects,
         "alpha": chain.alpha,
-        "cutoffs": chain.cutoffs,
-        "levels": [{"name": lv.name, "kind": lv.kind, "count": lv.count} for lv in chain.levels],
-        "reference": {"count": chain.reference.count, "triangles": chain.reference.triangles},
+        "cutoffs": list(chain.cutoffs),
+        "levels": [
+            {"name": lv.name, "kind": level_kind(lv), "count": lv.count} for lv in chain.levels
+        ],
+        "reference": {"count": reference.count, "triangles": level_triangles(reference)},
         "renderer": renderer,
         "machine": {"platform": platform.platform(), "cpus": os.cpu_count()},
         "settings": settings.record(),

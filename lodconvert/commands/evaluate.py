@@ -1,9 +1,10 @@
 """``lodconvert evaluate REF OUT``: how faithful each level of OUT is to the source mesh REF.
 
 OUT is read back as written (levels, point sizes and switching data from the file), paired with
-REF's objects (bounds must agree) and scored with :mod:`lodconvert.evaluate`: silhouette
-precision, recall and F on a fixed protocol and within each level's range, Chamfer and
-Hausdorff distance, and counts. Prints a table; ``--json`` and ``--contact-sheet`` write files.
+REF's objects (bounds must agree) and scored with :mod:`lodconvert.analysis.evaluate`:
+silhouette precision, recall and F on a fixed protocol and within each level's range, Chamfer
+and Hausdorff distance, and counts. Prints a table; ``--json`` and ``--contact-sheet``
+(:mod:`lodconvert.analysis.contact_sheet`) write files.
 """
 
 from __future__ import annotations
@@ -14,9 +15,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from ..cli import EXIT_OK, Console, parse_list
-from ..errors import UsageError
-from ..evaluate import (
+from ..analysis.contact_sheet import contact_sheet, legend, stack_images
+from ..analysis.evaluate import (
     DEFAULT_DISTANCES,
     DEFAULT_SAMPLES,
     DEFAULT_SIZE,
@@ -26,13 +26,11 @@ from ..evaluate import (
     ObjectReport,
     Protocol,
     ReferenceRenders,
-    SilhouetteRenderer,
-    contact_sheet,
     evaluate_object,
-    legend,
     match_references,
-    stack_images,
 )
+from ..analysis.silhouette import SilhouetteRenderer
+from ..cli import EXIT_OK, Console, parse_list
 from ..io import read_chains, read_scene
 from ..model import LodChain, Surface
 from ..ranges import REFERENCE_VIEW
@@ -43,7 +41,6 @@ DESCRIPTION = (
     "from: silhouette precision/recall/F over views on a sphere (the PCD paper's measure), "
     "Chamfer and Hausdorff distance, and counts."
 )
-MIN_SIZE = 16
 POINT_SIZES = (
     "declared sizes: point_size_px at design_distance in the 1080-px reference view, scaled "
     "by 1/distance and by the render's focal length over the reference view's, at least 1 px; "
@@ -101,24 +98,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def protocol_of(args: argparse.Namespace) -> Protocol:
     """The :class:`Protocol` asked for (raises :class:`UsageError` for impossible values)."""
-    distances = parse_list(args.distances, float, "--distances")
-    if any(not d > 0 for d in distances):
-        raise UsageError("--distances must be positive")
-    for flag, value, least in (
-        ("--views", args.views, 1),
-        ("--size", args.size, MIN_SIZE),
-        ("--range-size", args.range_size, MIN_SIZE),
-        ("--samples", args.samples, 1),
-    ):
-        if value < least:
-            raise UsageError(f"{flag} must be at least {least}, got {value}")
-    return Protocol(
+    protocol = Protocol(
         views=args.views,
         size=args.size,
-        distances=tuple(distances),
+        distances=parse_list(args.distances, float, "--distances"),
         samples=args.samples,
         range_size=args.range_size,
     )
+    protocol.check()
+    return protocol
 
 
 def run(args: argparse.Namespace, console: Console) -> int:

@@ -27,7 +27,7 @@ instance, with no cull distance.
 and drawn instanced, one instance buffer of LOD-centre positions per level; depth test on, no
 face culling, unlit vertex colours. Points get ``gl_PointSize = point_size · design_distance /
 r`` (``r`` the eye-to-point distance), clamped to [1, the GL maximum] — the size the files
-declare (see :func:`lodconvert.evaluate.point_pixel_size`). Both grids use the same program and
+declare (see :func:`~.render.point_pixel_size`). Both grids use the same program and
 rules; only the geometry differs. Draw calls submit at most :data:`CHUNK_VERTICES` vertices
 each, so a frame that runs past its time budget is stopped between two of them.
 
@@ -50,12 +50,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .errors import InputError, UsageError
-from .evaluate import look_at, perspective
-from .glcontext import create_context
-from .io import read_chains, suffix_of
-from .model import Level, LodChain
-from .ranges import REFERENCE_VIEW, ReferenceView
+from ..errors import InputError, UsageError
+from ..io import read_chains, read_scene
+from ..model import Level, LodChain
+from ..ranges import REFERENCE_VIEW, ReferenceView
+from .render import OffscreenRenderer, look_at, perspective
 
 if TYPE_CHECKING:
     import moderngl
@@ -115,142 +114,77 @@ void main() {
 """
 
 
-# --- the chain read back from a file ------------------------------------------------------------
+# --- the object read back from a file -----------------------------------------------------------
 
 
 @dataclass
-class BenchLevel:
-    """One level's geometry relative to the chain origin: ``positions`` (k, 3) float64, ``faces``
-    (m, 3) int64 for a mesh (None for points), ``colors`` (k, 4) uint8 or None; points are
-    ``point_size`` pixels wide at ``design_distance`` in the reference view (None: constant)."""
+class BenchObject:
+    """What a benchmark draws: an object's ``chain`` as :func:`~lodconvert.io.read_chains` read
+    it back (geometry relative to ``chain.origin``), the ``reference`` level the original grid
+    draws, and the number of ``objects`` in the file."""
 
-    name: str
-    positions: np.ndarray
-    faces: np.ndarray | None = None
-    colors: np.ndarray | None = None
-    point_size: float = 1.0
-    design_distance: float | None = None
-
-    @property
-    def kind(self) -> str:
-        """ "mesh" or "pcd"."""
-        return "pcd" if self.faces is None else "mesh"
-
-    @property
-    def count(self) -> int:
-        """Vertices (mesh) or points submitted when the level is drawn once."""
-        return len(self.positions)
-
-    @property
-    def triangles(self) -> int:
-        """Triangles of a mesh level (0 for points)."""
-        return 0 if self.faces is None else len(self.faces)
-
-
-@dataclass
-class BenchChain:
-    """An object's LOD chain as a file stores it, finest level first, and the mesh the original
-    grid draws. ``cutoffs`` are distances from ``center`` (relative to ``origin``, like the
-    geometry); one per level for a culled chain, else one fewer. ``objects`` is the number of
-    objects in the file."""
-
-    object_id: str
-    levels: list[BenchLevel]
-    cutoffs: list[float]
-    origin: np.ndarray
-    center: np.ndarray
-    alpha: float
+    chain: LodChain
+    reference: Level
     objects: int = 1
-    reference: BenchLevel | None = None
-
-    @property
-    def culled(self) -> bool:
-        """Whether the object vanishes beyond the last cutoff."""
-        return len(self.cutoffs) == len(self.levels)
 
 
-def read_chain(
+def read_object(
     path: str | Path, object_id: str | None = None, reference: str | Path | None = None
-) -> BenchChain:
-    """The chain of object ``object_id`` (default: the first) of a ``.glb``/``.gltf``/``.x3d``
-    file lodconvert wrote, with its ``reference``: the finest level when it is a mesh, else (or
-    when given) the mesh read from the ``reference`` file — its object of the same id, or its
-    only object — placed by the chain's origin.
+) -> BenchObject:
+    """Object ``object_id`` (default: the first) of a file lodconvert wrote, with its
+    ``reference``: the finest level when it is a mesh, else (or when given) the mesh read from
+    the ``reference`` file — its object of the same id, or its only object — placed by the
+    chain's origin, as a level named "original".
 
     Raises :class:`InputError` for an unreadable file, an unknown object or a missing reference.
     """
-    if suffix_of(path) not in (".glb", ".gltf", ".x3d"):
-        raise InputError("is not a .glb, .gltf or .x3d file lodconvert wrote", str(path))
-    chains = [_bench_chain(chain) for chain in read_chains(path)]
+    chains = read_chains(path)
     if not chains:
         raise InputError("holds no LOD object", str(path))
     ids = [chain.object_id for chain in chains]
     if object_id is not None and object_id not in ids:
         raise InputError(f"has no object {object_id!r} (objects: {', '.join(ids)})", str(path))
     chain = chains[ids.index(object_id) if object_id is not None else 0]
-    chain.objects = len(chains)
     if reference is not None:
-        chain.reference = _reference_mesh(reference, chain)
-    elif chain.levels[0].faces is not None:
-        chain.reference = chain.levels[0]
+        original = _reference_level(reference, chain)
+    elif not chain.levels[0].is_points:
+        original = chain.levels[0]
     else:
         raise InputError(
             "its finest level is a point cloud: give the original mesh with --reference", str(path)
         )
-    return chain
+    return BenchObject(chain, original, objects=len(chains))
 
 
-def _bench_level(level: Level) -> BenchLevel:
-    """The geometry and point size a :class:`Level` read back draws with."""
-    if not level.is_points:
-        assert level.mesh is not None
-        return BenchLevel(
-            name=level.name,
-            positions=level.mesh.vertices,
-            faces=level.mesh.faces,
-            colors=level.mesh.vertex_colors,
-            design_distance=level.design_distance,
-        )
-    assert level.points is not None
-    return BenchLevel(
-        name=level.name,
-        positions=level.points.positions,
-        colors=level.points.colors,
-        point_size=level.params.point_size if level.params is not None else 1.0,
-        design_distance=level.design_distance,
-    )
-
-
-def _bench_chain(chain: LodChain) -> BenchChain:
-    """A chain read back by :func:`~lodconvert.io.readback.read_chains`, as the bench draws it."""
-    return BenchChain(
-        object_id=chain.object_id,
-        levels=[_bench_level(level) for level in chain.levels],
-        cutoffs=list(chain.cutoffs),
-        origin=chain.origin,
-        center=chain.center,
-        alpha=chain.alpha,
-    )
-
-
-def _reference_mesh(path: str | Path, chain: BenchChain) -> BenchLevel:
+def _reference_level(path: str | Path, chain: LodChain) -> Level:
     """The original mesh for ``chain`` from a mesh file (world coordinates → chain origin)."""
-    from .io import read_scene
-
-    scene = read_scene(path)
-    nodes = list(scene.with_geometry())
+    nodes = list(read_scene(path).with_geometry())
     matches = [obj for obj in nodes if obj.id == chain.object_id]
     if not matches and len(nodes) == 1:
         matches = nodes
     if not matches:
         raise InputError(f"has {len(nodes)} objects and none is {chain.object_id!r}", str(path))
-    surface = matches[0].geometry
-    return BenchLevel(
-        name="original",
-        positions=surface.vertices - chain.origin,
-        faces=surface.faces,
-        colors=surface.vertex_colors,
-    )
+    mesh = matches[0].geometry
+    assert mesh is not None
+    return Level("original", "mesh", mesh=mesh.translated(-chain.origin))
+
+
+def level_kind(level: Level) -> str:
+    """How a level is drawn: "pcd" (points) or "mesh" (triangles, whatever its bake kind)."""
+    return "pcd" if level.is_points else "mesh"
+
+
+def level_triangles(level: Level) -> int:
+    """Triangles of a mesh level (0 for points)."""
+    return 0 if level.mesh is None else level.mesh.face_count
+
+
+def _level_arrays(level: Level) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """Positions (k, 3), faces (m, 3) or None for points, and RGBA colours (k, 4) or None."""
+    if level.mesh is not None:
+        return level.mesh.vertices, level.mesh.faces, level.mesh.vertex_colors
+    assert level.points is not None
+    return level.points.positions, None, level.points.colors
 
 
 # --- grid, camera, selection --------------------------------------------------------------------
@@ -318,7 +252,7 @@ class GridView:
 
 
 def grid_view(
-    chain: BenchChain,
+    chain: LodChain,
     count: int,
     spacing: float = GRID_SPACING,
     lift: float = 0.0,
@@ -348,7 +282,7 @@ class Drawable:
     """A level uploaded to a :class:`GridRenderer`: vertex array, primitive mode, the level,
     and its instance buffer (LOD-centre positions, 3 floats each)."""
 
-    level: BenchLevel
+    level: Level
     vao: moderngl.VertexArray
     mode: int
     instance_buffer: moderngl.Buffer
@@ -378,15 +312,13 @@ class Timing:
         return 1.0 / median if median else None
 
 
-class GridRenderer:
+class GridRenderer(OffscreenRenderer):
     """Instanced drawing of uploaded levels into a 1920×1080 RGBA + depth framebuffer on its
     own moderngl EGL context. Raises :class:`~lodconvert.errors.LodConvertError` (naming the
     packages to install) when no EGL OpenGL 3.3 context can be made."""
 
     def __init__(self) -> None:
-        self.ctx = create_context("render benchmark unavailable")
-        self.renderer_name = str(self.ctx.info.get("GL_RENDERER", "unknown"))
-        self.max_point_size = float(self.ctx.info.get("GL_POINT_SIZE_RANGE", (1.0, 255.0))[1])
+        super().__init__("render benchmark unavailable")
         self.ctx.enable(self.ctx.DEPTH_TEST | self.ctx.PROGRAM_POINT_SIZE)
         self.program = self.ctx.program(
             vertex_shader=VERTEX_SHADER, fragment_shader=FRAGMENT_SHADER
@@ -399,10 +331,10 @@ class GridRenderer:
         render_view = ReferenceView(height_px=HEIGHT, fov_y_deg=FOV_Y_DEG)
         self.view_scale = render_view.focal_px / REFERENCE_VIEW.focal_px
 
-    def upload(self, level: BenchLevel, center: np.ndarray, rotation: np.ndarray) -> Drawable:
+    def upload(self, level: Level, center: np.ndarray, rotation: np.ndarray) -> Drawable:
         """Upload ``level`` once: positions relative to ``center``, turned by ``rotation``."""
-        local = (np.asarray(level.positions, dtype=np.float64) - center) @ rotation.T
-        colors = level.colors
+        positions, faces, colors = _level_arrays(level)
+        local = (np.asarray(positions, dtype=np.float64) - center) @ rotation.T
         if colors is None:
             colors = np.full((level.count, 4), MESH_GREY, dtype=np.uint8)
             colors[:, 3] = 255
@@ -415,10 +347,10 @@ class GridRenderer:
             (instance_buffer, "3f/i", "in_offset"),
         ]
         ibo = None
-        if level.faces is not None:
-            ibo = self.ctx.buffer(np.asarray(level.faces, dtype=np.uint32).tobytes())
+        if faces is not None:
+            ibo = self.ctx.buffer(np.asarray(faces, dtype=np.uint32).tobytes())
         vao = self.ctx.vertex_array(self.program, content, index_buffer=ibo, index_element_size=4)
-        mode = self.ctx.POINTS if level.faces is None else self.ctx.TRIANGLES
+        mode = self.ctx.POINTS if faces is None else self.ctx.TRIANGLES
         return Drawable(level, vao, mode, instance_buffer)
 
     def place(self, drawable: Drawable, centers: np.ndarray) -> None:
@@ -434,10 +366,10 @@ class GridRenderer:
         """Draw ``instances`` of ``drawable`` in calls of at most :data:`CHUNK_VERTICES`
         vertices; False when the clock passed ``deadline`` before all were drawn."""
         level = drawable.level
-        if level.faces is None:
-            point_size, design = level.point_size * self.view_scale, level.design_distance or 0.0
-        else:
-            point_size, design = 1.0, 0.0
+        point_size, design = 1.0, 0.0
+        if level.is_points:
+            declared = level.params.point_size if level.params is not None else 1.0
+            point_size, design = declared * self.view_scale, level.design_distance or 0.0
         self.program["point_size"].value = point_size
         self.program["design_distance"].value = design
         chunk = max(1, CHUNK_VERTICES // max(level.count, 1))
@@ -498,16 +430,6 @@ class GridRenderer:
         """The last frame as RGB uint8 (height, width, 3), row 0 at the top."""
         data = self.fbo.read(components=3, alignment=1)
         return np.frombuffer(data, dtype=np.uint8).reshape(HEIGHT, WIDTH, 3)[::-1]
-
-    def release(self) -> None:
-        """Free the context and every GL object made on it."""
-        self.ctx.release()
-
-    def __enter__(self) -> GridRenderer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
 
 
 # --- the benchmark ------------------------------------------------------------------------------
@@ -608,26 +530,26 @@ def _grid_result(drawables: list[Drawable], groups: list[np.ndarray], timing: Ti
         drawn=sum(counts),
         level_instances={d.level.name: n for d, n in zip(drawables, counts, strict=True)},
         submitted=sum(n * d.level.count for d, n in zip(drawables, counts, strict=True)),
-        triangles=sum(n * d.level.triangles for d, n in zip(drawables, counts, strict=True)),
+        triangles=sum(n * level_triangles(d.level) for d, n in zip(drawables, counts, strict=True)),
         timing=timing,
     )
 
 
 def run_bench(
-    chain: BenchChain,
+    target: BenchObject,
     settings: BenchSettings,
     renderer: GridRenderer,
     progress: Message | None = None,
 ) -> list[BenchRow]:
-    """Time the LOD grid and the original grid of ``chain`` at every N of ``settings``."""
+    """Time the LOD grid and the original grid of ``target`` at every N of ``settings``."""
     settings.check()
-    assert chain.reference is not None, "read_chain sets the reference"
-    rotation = up_rotation(settings.up)
+    chain, rotation = target.chain, up_rotation(settings.up)
     center = chain.center
     lod = [renderer.upload(level, center, rotation) for level in chain.levels]
-    reference = renderer.upload(chain.reference, center, rotation)
+    reference = renderer.upload(target.reference, center, rotation)
     # LOD centres stand so high that the original's lowest point touches the ground
-    lift = -float(((chain.reference.positions - center) @ rotation.T)[:, 2].min(initial=0.0))
+    positions = _level_arrays(target.reference)[0]
+    lift = -float(((positions - center) @ rotation.T)[:, 2].min(initial=0.0))
     rows: list[BenchRow] = []
     over = {"lod": False, "original": False}
     for count in settings.instances:
