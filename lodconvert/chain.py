@@ -27,7 +27,7 @@ import numpy as np
 from .bake import Backend, bake_points
 from .errors import InputError, UsageError
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
-from .plan import POINT_COST, level_cost, may_pay, silhouette_estimate
+from .plan import POINT_COST, least_point_cost, level_cost, silhouette_estimate
 from .ranges import (
     DEFAULT_BETA,
     DEFAULT_GAMMA,
@@ -325,15 +325,12 @@ def bake_chain(
     dropped: dict[str, str] = {}
     if opts.keep_mesh:
         levels.append(Level(name=LEVEL_NAMES[0], kind="mesh", mesh=surface))
+    floor = least_point_cost(surface) if not opts.resolutions else 0.0
     for i in range(opts.pcd_levels):
         n = i + 1 if opts.keep_mesh else i
         name = LEVEL_NAMES[n]
         previous = levels[-1] if levels else None
-        if (
-            previous is not None
-            and not opts.resolutions
-            and not may_pay(surface, level_cost(previous))
-        ):
+        if previous is not None and level_cost(previous) <= floor:
             dropped[name] = "no point level could be both cheaper and faithful"
             continue
         if progress:

@@ -7,6 +7,8 @@ skipped; when none can, the conversion fails and no output file appears.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import json
 import platform
 import time
@@ -147,12 +149,13 @@ def convert(
     timings: dict[str, float] = {}
     records: list[dict[str, Any]] = []
     skipped: list[dict[str, str]] = []
-    with Outputs(inputs=[input_path]) as outputs:
+    with contextlib.ExitStack() as stack, Outputs(inputs=[input_path]) as outputs:
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
         start = time.perf_counter()
         scene = source.read_file(input_path, **(read_options or {}))
         timings["read"] = time.perf_counter() - start
+        stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(backend)
         info = OutputInfo(
             generator=f"lodconvert {__version__}",
@@ -189,6 +192,18 @@ def convert(
         if report_sink is not None:
             report_sink.write_bytes((json.dumps(report, indent=2) + "\n").encode())
     return report
+
+
+@contextlib.contextmanager
+def _input_kept_out_of_gc() -> Iterator[None]:
+    """Move what exists now (the input as read) out of the cyclic garbage collector's full
+    passes for the rest of the run: with tens of thousands of objects those passes re-scan it
+    again and again (a third of the run time at 10,000 objects) and free none of it."""
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()
 
 
 def _report(

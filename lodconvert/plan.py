@@ -64,10 +64,11 @@ def fewest_points(mesh: Mesh) -> float:
     return surface_area(mesh) / pitch**2 / 2.0
 
 
-def may_pay(mesh: Mesh, previous_cost: float) -> bool:
-    """Whether a point level of ``mesh`` could be both cheaper than ``previous_cost`` and
-    faithful; when not, baking one is skipped."""
-    return fewest_points(mesh) * POINT_COST < previous_cost
+def least_point_cost(mesh: Mesh) -> float:
+    """The draw cost below which no point level of ``mesh`` can look like it (see
+    :func:`fewest_points`): a level before that costs no more than this is never replaced by
+    points, and none is baked."""
+    return fewest_points(mesh) * POINT_COST
 
 
 @dataclass(frozen=True)

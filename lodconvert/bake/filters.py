@@ -13,7 +13,6 @@ from __future__ import annotations
 import itertools
 from typing import Literal
 
-import cv2
 import numpy as np
 
 from .grid import Grid, SlabHits
@@ -27,6 +26,8 @@ _NEIGHBOURS = ((0, -1), (0, 1), (-1, 0), (1, 0), (-1, -1), (-1, 1), (1, -1), (1,
 
 def _filled(mask: np.ndarray, kind: FilterName) -> np.ndarray:
     """Boolean image of the pixels the filter adds to ``mask`` (uint8 0/255)."""
+    import cv2  # OpenCV loads in ~0.2 s: only when a hole filter runs
+
     if kind == "median":
         grown = cv2.medianBlur(mask, 3) > 0
     else:

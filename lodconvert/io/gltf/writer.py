@@ -16,6 +16,8 @@ sRGB bytes that were written.
 from __future__ import annotations
 
 import base64
+import dataclasses
+import functools
 import io
 import json
 import math
@@ -396,22 +398,34 @@ class _Document:
         if blob:
             uri = DATA_URI + base64.b64encode(blob).decode("ascii") if data_uri else None
             self.gltf.buffers = [gl.Buffer(byteLength=len(blob), uri=uri)]
-        return _prune(gl.gltf_asdict(self.gltf)), blob
+        return _json_of(self.gltf), blob
 
 
-def _prune(value: Any) -> Any:
-    """Drop ``None`` and empty values from pygltflib's dict form, leaving ``extras`` and
-    ``extensions`` contents as they are (their ``null``, ``[]`` and ``{}`` mean something)."""
-    if isinstance(value, list):
-        return [_prune(v) for v in value]
-    if not isinstance(value, dict):
+def _json_of(value: Any) -> Any:
+    """pygltflib objects as JSON data, without ``None`` and empty values, leaving ``extras``
+    and ``extensions`` contents as they are (their ``null``, ``[]`` and ``{}`` mean something).
+    One pass, no copies (pygltflib's own ``gltf_asdict`` deep-copies every value)."""
+    if isinstance(value, list | tuple):
+        return [_json_of(v) for v in value]
+    if isinstance(value, dict):
+        items: Iterable[tuple[str, Any]] = value.items()
+    elif isinstance(value, gl.Attributes):
+        items = vars(value).items()
+    elif dataclasses.is_dataclass(value):
+        items = ((name, getattr(value, name)) for name in _field_names(type(value)))
+    else:
         return value
     out = {}
-    for key, item in value.items():
-        kept = item if key in ("extras", "extensions") else _prune(item)
+    for key, item in items:
+        kept = item if key in ("extras", "extensions") else _json_of(item)
         if kept is not None and not (isinstance(kept, list | dict) and not kept):
             out[key] = kept
     return out
+
+
+@functools.cache
+def _field_names(cls: type) -> tuple[str, ...]:
+    return tuple(field.name for field in dataclasses.fields(cls))
 
 
 def _document(chains: Iterable[LodChain], info: OutputInfo) -> _Document:

@@ -216,7 +216,8 @@ def _check_components(root: etree._Element, used: set[str], findings: Findings) 
 
 def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) -> None:
     """Stream the document, checking nodes as they close; ``Shape`` s are cleared once checked
-    so that memory stays small for large files."""
+    and each object's top-level ``Transform`` once it closes, so that memory stays small for
+    large files and many objects."""
     root: etree._Element | None = None
     used: set[str] = set()
     chains = 0
@@ -238,6 +239,8 @@ def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) ->
                 chains += 1
             if element.tag == "Shape":
                 element.clear()
+            elif element.tag == "Transform" and _top_level(element):
+                _forget(element)
     except etree.XMLSyntaxError as exc:
         findings.error("XML_SYNTAX", f"not well-formed XML: {exc.msg}")
         return
@@ -258,6 +261,20 @@ def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) ->
     _check_components(root, used, findings)
     if schema is not None:
         _check_schema(path, schema, findings)
+
+
+def _top_level(element: etree._Element) -> bool:
+    """Whether ``element`` is a child of the ``Scene``."""
+    parent = element.getparent()
+    return parent is not None and parent.tag == "Scene"
+
+
+def _forget(element: etree._Element) -> None:
+    """Free a checked top-level node and the checked siblings before it."""
+    element.clear(keep_tail=True)
+    parent = element.getparent()
+    while element.getprevious() is not None:
+        del parent[0]
 
 
 def _check_schema(path: Path, schema: etree.XMLSchema, findings: Findings) -> None:
