@@ -94,7 +94,9 @@ def iter_chains(
 ) -> Iterator[LodChain]:
     """Bake the scene's objects one at a time; objects with bad geometry are reported through
     ``warn``, recorded in ``skipped`` and left out. ``step`` hears how many are done."""
-    total = len(scene.nodes) if isinstance(scene.nodes, list) else None
+    total = scene.size if scene.size is not None else None
+    if total is None and isinstance(scene.nodes, list):
+        total = sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
     shared: dict[int, LodChain] = {}  # geometry placed by several nodes: baked once
     for i, obj in enumerate(scene.with_geometry(), start=1):
         try:

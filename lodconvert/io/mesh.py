@@ -21,6 +21,7 @@ import io
 import re
 import zlib
 from collections import Counter
+from collections.abc import Iterator
 from pathlib import Path
 from typing import NamedTuple
 
@@ -292,9 +293,8 @@ def _graph_instances(loaded: object) -> list[_Instance]:
     ]
 
 
-def _nodes(loaded: object, instances: list[_Instance], file_name: str, linear: bool) -> list[Node]:
-    """The nodes of ``instances``: geometry placed once is moved into world coordinates, a
-    geometry placed several times is shared and placed by each node's ``transform``."""
+def _kept(loaded: object, instances: list[_Instance]) -> list[_Instance]:
+    """``instances`` with only their parts that hold faces, and only those left with any."""
     import trimesh
 
     geometry = loaded.geometry  # type: ignore[attr-defined]
@@ -303,15 +303,23 @@ def _nodes(loaded: object, instances: list[_Instance], file_name: str, linear: b
         mesh = geometry.get(name)
         return isinstance(mesh, trimesh.Trimesh) and len(mesh.faces) > 0
 
-    kept = [
+    return [
         inst._replace(geometries=parts)
         for inst in instances
         if (parts := tuple(name for name in inst.geometries if has_faces(name)))
     ]
+
+
+def _nodes(loaded: object, kept: list[_Instance], file_name: str, linear: bool) -> Iterator[Node]:
+    """The nodes of ``kept``, one at a time: geometry placed once is moved into world
+    coordinates, a geometry placed several times is shared and placed by each node's
+    ``transform``. Each trimesh geometry is let go after its last use, so the input shrinks as
+    the nodes are consumed."""
+    geometry = loaded.geometry  # type: ignore[attr-defined]
     uses = Counter(inst.geometries for inst in kept)
+    left = Counter(g for inst in kept for g in inst.geometries)
     shared: dict[tuple[str, ...], Mesh] = {}
     taken: set[str] = set()
-    nodes = []
     for inst in kept:
         transform = np.array(inst.transform, dtype=np.float64)
         instanced = uses[inst.geometries] > 1
@@ -323,16 +331,17 @@ def _nodes(loaded: object, instances: list[_Instance], file_name: str, linear: b
             )
             if instanced:
                 shared[inst.geometries] = mesh
+        for name in inst.geometries:
+            left[name] -= 1
+            if not left[name]:
+                del geometry[name]
         name = inst.name if inst.name is not None and len(kept) > 1 else file_name
-        nodes.append(
-            Node(
-                id=object_id(name, taken),
-                geometry=mesh,
-                transform=transform if instanced else None,
-                attributes={"source_node": inst.name} if inst.name is not None else {},
-            )
+        yield Node(
+            id=object_id(name, taken),
+            geometry=mesh,
+            transform=transform if instanced else None,
+            attributes={"source_node": inst.name} if inst.name is not None else {},
         )
-    return nodes
 
 
 def read_mesh(path: Path, merge_groups: bool = False) -> Scene:
@@ -372,10 +381,11 @@ def read_mesh(path: Path, merge_groups: bool = False) -> Scene:
 
     instances = _obj_instances(loaded, labels) if suffix == ".obj" else _graph_instances(loaded)
     file_name = path.name.split(".")[0]
-    nodes = _nodes(loaded, instances, file_name, suffix in LINEAR_COLOR_SUFFIXES)
-    if not nodes:
+    kept = _kept(loaded, instances)
+    if not kept:
         raise InputError("has no faces (empty, or points only: nothing to bake)", str(path))
-    return Scene(source=str(path), nodes=nodes)
+    nodes = _nodes(loaded, kept, file_name, suffix in LINEAR_COLOR_SUFFIXES)
+    return Scene(source=str(path), nodes=nodes, size=len(kept))
 
 
 FORMAT = Format(name="mesh", suffixes=MESH_SUFFIXES, read=read_mesh, read_options=("merge_groups",))

@@ -56,12 +56,15 @@ class Node:
 @dataclass
 class Scene:
     """What a reader produced: its nodes (a list, or an iterator consumed once) and scene-wide
-    facts (source file, CRS, attributes)."""
+    facts (source file, CRS, attributes, size)."""
 
     source: str
     nodes: Iterable[Node] = field(default_factory=list)
     crs: str | None = None
     attributes: dict[str, Any] = field(default_factory=dict)
+    size: int | None = None
+    """How many nodes with geometry the scene holds, where the reader knows before yielding
+    them (for progress)."""
 
     def __iter__(self) -> Iterator[Node]:
         return iter(self.nodes)
