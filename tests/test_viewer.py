@@ -4,12 +4,14 @@ browsers is tested in tests/browser."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 import signal
 import subprocess
 import sys
 import urllib.request
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +20,15 @@ import pytest
 
 from lodconvert.errors import InputError, UsageError
 from lodconvert.io.gltf import read_lod_gltf
-from lodconvert.viewer import LIBRARIES, page_config, render_page, serve, write_page
+from lodconvert.viewer import (
+    LIBRARIES,
+    LIBRARY_MOUNT,
+    page_config,
+    page_path,
+    render_page,
+    serve,
+    write_page,
+)
 
 from .conftest import SAMPLE
 from .test_cli import assert_one_line_error, run
@@ -107,12 +117,12 @@ def test_config_keeps_transform_offsets(outputs: dict[str, Path], tmp_path: Path
 @pytest.mark.parametrize(
     ("name", "content", "message"),
     [
-        ("model.ply", "ply", "no viewer page for .ply"),
+        ("model.ply", "ply", "is not a file lodconvert writes"),
         ("missing.glb", None, "no such file"),
-        ("page.x3d", "<X3D><Scene/></X3D>", "holds no LOD chain"),
-        ("broken.x3d", "<X3D><Scene>", "not a well-formed X3D"),
+        ("page.x3d", "<X3D><Scene/></X3D>", "is not an X3D file written by lodconvert"),
+        ("broken.x3d", "<X3D><Scene>", "is not well-formed X3D"),
         ("broken.glb", "glTF", "truncated GLB"),
-        ("other.gltf", '{"asset": {"version": "2.0"}}', "not a glTF file lodconvert wrote"),
+        ("other.gltf", '{"asset": {"version": "2.0"}}', "not a glTF written by lodconvert"),
     ],
 )
 def test_config_refuses_files_it_cannot_show(
@@ -159,15 +169,30 @@ def _package(root: Path, package: str) -> Path:
 def test_page_uses_a_local_library_by_relative_url(
     outputs: dict[str, Path], tmp_path: Path
 ) -> None:
-    folder = _package(tmp_path, "three")
-    page = tmp_path / "pages" / "knot.html"
-    text = render_page(outputs["glb"], page, str(folder))
+    folder = _package(tmp_path / "pages", "three")
+    text = render_page(outputs["glb"], tmp_path / "pages" / "knot.html", str(folder))
     assert _import_map(text) == {
-        "three": "../node_modules/three/build/three.module.js",
-        "three/addons/": "../node_modules/three/examples/jsm/",
+        "three": "./node_modules/three/build/three.module.js",
+        "three/addons/": "./node_modules/three/examples/jsm/",
     }
     beside = render_page(outputs["glb"], tmp_path / "knot.html", str(folder))
-    assert _import_map(beside)["three"] == "./node_modules/three/build/three.module.js"
+    assert _import_map(beside)["three"] == "./pages/node_modules/three/build/three.module.js"
+
+
+def test_library_outside_the_page_folder_is_served_or_refused(
+    outputs: dict[str, Path], tmp_path: Path
+) -> None:
+    """A server of the page's folder cannot give a library outside it: only a page that
+    :func:`serve` serves with the library mounted may use one."""
+    folder = _package(tmp_path, "three")
+    page = tmp_path / "pages" / "knot.html"
+    with pytest.raises(UsageError, match=r"--viewer-lib .*: outside the page's folder"):
+        render_page(outputs["glb"], page, str(folder))
+    served = render_page(outputs["glb"], page, str(folder), served=True)
+    assert _import_map(served) == {
+        "three": f"{LIBRARY_MOUNT}/build/three.module.js",
+        "three/addons/": f"{LIBRARY_MOUNT}/examples/jsm/",
+    }
 
 
 def test_page_uses_a_library_url_as_given(outputs: dict[str, Path]) -> None:
@@ -211,10 +236,10 @@ def test_html_option_writes_the_page_beside_the_output(tmp_path: Path) -> None:
     out = tmp_path / "model.glb"
     result = run(SAMPLE, "-o", out, *FAST, "--html")
     assert result.returncode == 0, result.stderr
-    page = tmp_path / "model.html"
-    assert f"wrote {page}" in result.stderr.splitlines()[-1]
+    page = tmp_path / "model.glb.html"
+    assert result.stderr.splitlines()[-1].endswith(f" and {page}")
     assert _embedded(page.read_text(), "lodconvert-config")["asset"] == "./model.glb"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.glb", "model.html"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.glb", "model.glb.html"]
 
 
 def test_viewer_lib_needs_html(tmp_path: Path) -> None:
@@ -226,6 +251,24 @@ def test_bad_viewer_lib_fails_before_baking(tmp_path: Path) -> None:
     result = run(SAMPLE, "-o", tmp_path / "m.x3d", "--html", "--viewer-lib", str(tmp_path))
     assert_one_line_error(result, 2, "--viewer-lib", "dist/x_ite.min.mjs")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_viewer_lib_outside_the_page_folder_fails_before_writing(
+    outputs: dict[str, Path], tmp_path: Path
+) -> None:
+    """Without --serve, a library folder outside the page's folder is refused, in one line,
+    before anything is written: by the main command before baking, by view before the page."""
+    library = _package(tmp_path / "elsewhere", "x_ite")
+    out = tmp_path / "out"
+    out.mkdir()
+    result = run(SAMPLE, "-o", out / "m.x3d", *FAST, "--html", "--viewer-lib", library)
+    assert_one_line_error(result, 2, f"--viewer-lib {library}", "outside the page's folder")
+    assert list(out.iterdir()) == []
+    asset = out / "knot.x3d"
+    asset.write_bytes(outputs["x3d"].read_bytes())
+    result = run("view", asset, "--viewer-lib", library)
+    assert_one_line_error(result, 2, f"--viewer-lib {library}", "--serve")
+    assert list(out.iterdir()) == [asset]
 
 
 def test_view_command_writes_a_page(outputs: dict[str, Path], tmp_path: Path) -> None:
@@ -240,13 +283,34 @@ def test_view_command_on_bad_input(tmp_path: Path) -> None:
     truncated = tmp_path / "t.glb"
     truncated.write_bytes(b"glTF\x02\x00\x00\x00")
     assert_one_line_error(run("view", truncated), 1, str(truncated), "truncated GLB")
-    assert_one_line_error(run("view", tmp_path / "x.ply"), 1, "no viewer page for .ply")
-    assert not (tmp_path / "t.html").exists()
+    assert_one_line_error(run("view", tmp_path / "x.ply"), 1, "is not a file lodconvert writes")
+    assert list(tmp_path.iterdir()) == [truncated]
 
 
 def test_write_page_default_path(outputs: dict[str, Path]) -> None:
     page = write_page(outputs["gltf"])
-    assert page == outputs["gltf"].with_suffix(".html") and page.stat().st_size > 1000
+    assert page == outputs["gltf"].parent / "knot.gltf.html" == page_path(outputs["gltf"])
+    assert page.stat().st_size > 1000
+
+
+def test_views_of_two_formats_of_one_name_keep_both_pages(
+    outputs: dict[str, Path], tmp_path: Path
+) -> None:
+    """``lodconvert view a.x3d`` then ``lodconvert view a.glb``: two pages, each of its own."""
+    for suffix in ("x3d", "glb"):
+        asset = tmp_path / f"a.{suffix}"
+        asset.write_bytes(outputs[suffix].read_bytes())
+        result = run("view", asset)
+        assert result.returncode == 0, result.stderr
+    for suffix in ("x3d", "glb"):
+        config = _embedded((tmp_path / f"a.{suffix}.html").read_text(), "lodconvert-config")
+        assert config["asset"] == f"./a.{suffix}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "a.glb",
+        "a.glb.html",
+        "a.x3d",
+        "a.x3d.html",
+    ]
 
 
 # --- serving ------------------------------------------------------------------------------------
@@ -263,17 +327,50 @@ def test_serve_gives_files_with_module_and_model_types(outputs: dict[str, Path])
                 assert response.read() == (folder / name).read_bytes()
 
 
-def test_view_serve_prints_a_local_url_until_interrupted(outputs: dict[str, Path]) -> None:
-    command = [sys.executable, "-m", "lodconvert", "view", str(outputs["glb"]), "--serve"]
+@contextlib.contextmanager
+def view_served(*args: str | Path) -> Iterator[str]:
+    """Run ``lodconvert view ARGS --serve`` while the ``with`` block runs; yields the URL it
+    prints, then stops it with Ctrl-C (SIGINT) and checks that it reports the interruption."""
+    command = [sys.executable, "-m", "lodconvert", "view", *map(str, args), "--serve"]
     with subprocess.Popen(
         command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
     ) as proc:
+        assert proc.stdout is not None
+        url = proc.stdout.readline().strip()
         try:
-            url = proc.stdout.readline().strip()
-            assert url.startswith("http://127.0.0.1:") and url.endswith("/knot.html")
-            with urllib.request.urlopen(url) as response:
-                assert b"lodconvert-config" in response.read()
+            if not url:
+                pytest.fail(f"lodconvert view --serve printed no URL:\n{proc.communicate()[1]}")
+            yield url
         finally:
             proc.send_signal(signal.SIGINT)
-            _, err = proc.communicate(timeout=30)
-    assert proc.returncode == 130 and "interrupted" in err
+            _, err = proc.communicate()
+    assert proc.returncode == 130 and "interrupted" in err, err
+
+
+def test_view_serve_prints_a_local_url_until_interrupted(outputs: dict[str, Path]) -> None:
+    with view_served(outputs["glb"]) as url:
+        assert url.startswith("http://127.0.0.1:") and url.endswith("/knot.glb.html")
+        with urllib.request.urlopen(url) as response:
+            assert b"lodconvert-config" in response.read()
+
+
+def test_view_serve_serves_a_library_outside_the_page_folder(
+    outputs: dict[str, Path], tmp_path: Path
+) -> None:
+    """The page imports the library from the URL path that the server maps to its folder."""
+    library = _package(tmp_path / "elsewhere", "three")
+    (library / "build" / "three.module.js").write_text("export const REVISION = 'stub';\n")
+    asset = tmp_path / "out" / "knot.glb"
+    asset.parent.mkdir()
+    asset.write_bytes(outputs["glb"].read_bytes())
+    with view_served(asset, "--viewer-lib", library) as url:
+        base = url.rsplit("/", 1)[0]
+        with urllib.request.urlopen(url) as response:
+            imports = _import_map(response.read().decode())
+        assert imports["three"] == f"{LIBRARY_MOUNT}/build/three.module.js"
+        with urllib.request.urlopen(base + imports["three"]) as response:
+            assert response.headers["Content-Type"] == "text/javascript"
+            assert response.read() == (library / "build" / "three.module.js").read_bytes()
+        with urllib.request.urlopen(f"{base}/knot.glb") as response:  # the page's folder too
+            assert response.read() == asset.read_bytes()
+    assert sorted(p.name for p in asset.parent.iterdir()) == ["knot.glb", "knot.glb.html"]

@@ -7,13 +7,14 @@ import threading
 import urllib.parse
 
 from ..cli import EXIT_OK, Console
-from ..viewer import serve, write_page
+from ..viewer import library_mounts, serve, write_page
 
 DESCRIPTION = (
     "Write a self-contained HTML page beside an .x3d, .glb or .gltf written by lodconvert that "
     "shows it switching levels at its cutoffs, with a readout of each object's level and "
     "distance. The page loads its viewer library (X_ITE for X3D, three.js for glTF) from a CDN "
-    "unless --viewer-lib names another URL or a local copy of the npm package."
+    "unless --viewer-lib names another URL or a local copy of the npm package: one inside the "
+    "page's folder, or anywhere with --serve, which then serves it too."
 )
 
 
@@ -23,30 +24,35 @@ def add_viewer_lib_option(parser: argparse.ArgumentParser | argparse._ArgumentGr
         "--viewer-lib",
         metavar="URL|DIR",
         help="base URL or local folder of the viewer library's npm package "
-        "(x_ite for X3D, three for glTF; default: jsDelivr CDN)",
+        "(x_ite for X3D, three for glTF; default: jsDelivr CDN); a folder must lie inside the "
+        "page's folder, unless 'lodconvert view --serve' serves it",
     )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``lodconvert view``."""
     parser.add_argument("asset", metavar="OUT", help="an .x3d, .glb or .gltf lodconvert wrote")
-    parser.add_argument("-o", "--output", metavar="HTML", help="page to write (default OUT.html)")
+    parser.add_argument(
+        "-o", "--output", metavar="HTML", help="page to write (default: OUT.html, e.g. a.glb.html)"
+    )
     add_viewer_lib_option(parser)
     parser.add_argument(
         "--serve",
         action="store_true",
-        help="then serve the page's folder on 127.0.0.1 and print its URL (Ctrl-C stops)",
+        help="then serve the page's folder (and a --viewer-lib folder outside it) on 127.0.0.1 "
+        "and print the page's URL (Ctrl-C stops)",
     )
     parser.add_argument("--port", type=int, default=0, help="port for --serve (default: any)")
     parser.add_argument("-q", "--quiet", action="store_true", help="print errors only")
 
 
 def run(args: argparse.Namespace, console: Console) -> int:
-    """Write the page; with --serve, serve its folder until interrupted."""
-    page = write_page(args.asset, args.output, args.viewer_lib)
+    """Write the page; with --serve, serve its folder (and the library's) until interrupted."""
+    page = write_page(args.asset, args.output, args.viewer_lib, served=args.serve)
     console.info(f"wrote {page}")
     if args.serve:
-        with serve(page.parent, args.port) as base:
+        mounts = library_mounts(args.viewer_lib, page.parent)
+        with serve(page.parent, args.port, mounts) as base:
             print(f"{base}/{urllib.parse.quote(page.name)}", flush=True)
             threading.Event().wait()  # until Ctrl-C, which the command line reports
     return EXIT_OK

@@ -9,7 +9,9 @@ npm package is given. An on-screen readout shows each object's active level and 
 ``window.lodconvertViewer`` exposes the same state and ``setDistance(d)``.
 
 Browsers do not let a page opened from a file fetch its neighbours, so the page must be served:
-:func:`serve` (``lodconvert view OUT --serve``) serves a folder on 127.0.0.1.
+:func:`serve` (``lodconvert view OUT --serve``) serves a folder on 127.0.0.1. A local library
+folder must therefore lie inside the page's folder, or be served beside it under
+:data:`LIBRARY_MOUNT` (a page written with ``served=True``, see :func:`library_mounts`).
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import re
 import sys
 import threading
 import urllib.parse
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from http.server import SimpleHTTPRequestHandler, ThreadingHTTPServer
 from importlib import resources
@@ -31,7 +33,7 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 from ..errors import UsageError
-from ..io.atomic import atomic_output
+from ..sinks import Outputs
 from .config import page_config
 
 
@@ -71,9 +73,15 @@ MIME_TYPES = {
 }
 
 
+LIBRARY_MOUNT = "/_lodconvert/viewer-lib"
+"""URL path under which :func:`serve` serves a library folder outside the page's folder."""
+
+
 def page_path(asset: str | Path) -> Path:
-    """Where the page of ``asset`` goes by default: beside it, suffix ``.html``."""
-    return Path(asset).with_suffix(".html")
+    """Where the page of ``asset`` goes by default: beside it, ``.html`` added to its name
+    (``a.x3d`` → ``a.x3d.html``, so that the pages of ``a.x3d`` and ``a.glb`` differ)."""
+    asset = Path(asset)
+    return asset.with_name(f"{asset.name}.html")
 
 
 def _url(target: Path, start: Path) -> str:
@@ -83,9 +91,19 @@ def _url(target: Path, start: Path) -> str:
     return urllib.parse.quote(relative if relative.startswith("../") else f"./{relative}")
 
 
-def library_base(kind: str, library: str | None, page_dir: Path) -> str:
+def _outside(library: str | None, page_dir: Path) -> Path | None:
+    """``library`` as a folder when it is a local folder outside ``page_dir``: a server of
+    ``page_dir`` does not serve it, so the page cannot load it by a relative URL."""
+    if library is None or not Path(library).is_dir():
+        return None
+    return Path(library) if _url(Path(library), page_dir).startswith("../") else None
+
+
+def library_base(kind: str, library: str | None, page_dir: Path, served: bool = False) -> str:
     """Base URL of the viewer library for a page in ``page_dir``: the CDN by default, a URL as
-    given, or a local npm package folder as a URL relative to the page."""
+    given, or a local npm package folder: inside ``page_dir`` as a URL relative to the page,
+    outside it :data:`LIBRARY_MOUNT` when the page is ``served`` by :func:`serve` with
+    :func:`library_mounts`, and refused otherwise."""
     lib = LIBRARIES[kind]
     if library is None:
         return lib.cdn
@@ -97,15 +115,31 @@ def library_base(kind: str, library: str | None, page_dir: Path) -> str:
                 f"--viewer-lib {library}: no {missing[0]} there; give the folder of the "
                 f"{lib.package} npm package (e.g. node_modules/{lib.package})"
             )
-        return _url(folder, page_dir)
+        if _outside(library, page_dir) is None:
+            return _url(folder, page_dir)
+        if served:
+            return LIBRARY_MOUNT
+        raise UsageError(
+            f"--viewer-lib {library}: outside the page's folder {os.path.abspath(page_dir)}, "
+            "so the served page cannot load it; put (or link) it inside that folder, give a "
+            "URL, or serve both with 'lodconvert view OUT --serve --viewer-lib DIR'"
+        )
     if "://" in library or library.startswith("/"):
         return library.rstrip("/")
     raise UsageError(f"--viewer-lib {library}: not a folder, nor a URL")
 
 
+def library_mounts(library: str | None, page_dir: Path) -> dict[str, Path]:
+    """What :func:`serve` must serve beside ``page_dir`` for a page written with
+    ``served=True``: URL path → folder (the library folder, when outside ``page_dir``)."""
+    folder = _outside(library, page_dir)
+    return {} if folder is None else {LIBRARY_MOUNT: folder}
+
+
 def check_library(asset: str | Path, library: str | None, page: str | Path | None = None) -> None:
     """Raise :class:`~lodconvert.errors.UsageError` unless the page of ``asset`` (which need
-    not exist yet) can use ``library``; see :func:`library_base`."""
+    not exist yet), written to be opened from any server of its folder, can use ``library``;
+    see :func:`library_base`."""
     kind = FORMATS.get(Path(asset).suffix.lower())
     if kind is None:
         raise UsageError(f"no viewer page for {Path(asset).suffix or 'files without suffix'}")
@@ -121,12 +155,20 @@ def _template(name: str) -> str:
     return resources.files(__package__).joinpath(name).read_text(encoding="utf-8")
 
 
-def render_page(asset: Path, page: Path, library: str | None = None) -> str:
-    """The HTML of the page at ``page`` showing ``asset``."""
-    config = page_config(asset)
+def render_page(
+    asset: Path,
+    page: Path,
+    library: str | None = None,
+    served: bool = False,
+    source: Path | None = None,
+) -> str:
+    """The HTML of the page at ``page`` showing ``asset`` (``served``: see
+    :func:`library_base`); the configuration is read from ``source`` (default ``asset``: a
+    staged copy while the run has not committed it)."""
+    config = page_config(source or asset)
     config["asset"] = _url(asset, page.parent)
     kind = config["format"]
-    base = library_base(kind, library, page.parent)
+    base = library_base(kind, library, page.parent, served)
     imports = {name: f"{base}/{path}" for name, path in LIBRARIES[kind].imports}
     fields = {
         "title": html.escape(f"{asset.name} — lodconvert viewer"),
@@ -139,26 +181,44 @@ def render_page(asset: Path, page: Path, library: str | None = None) -> str:
 
 
 def write_page(
-    asset: str | Path, page: str | Path | None = None, library: str | None = None
+    asset: str | Path,
+    page: str | Path | None = None,
+    library: str | None = None,
+    served: bool = False,
 ) -> Path:
     """Write the viewer page of ``asset`` (atomically; default :func:`page_path`) and return
     its path. Raises :class:`~lodconvert.errors.InputError` for an asset lodconvert did not
-    write and :class:`~lodconvert.errors.UsageError` for a bad ``library``."""
+    write and :class:`~lodconvert.errors.UsageError` for a bad ``library`` (one outside the
+    page's folder unless ``served``, see :func:`library_base`), both before writing."""
     asset = Path(asset)
     page = Path(page) if page is not None else page_path(asset)
-    text = render_page(asset, page, library)
-    with atomic_output(page) as handle:
-        handle.write(text.encode("utf-8"))
+    text = render_page(asset, page, library, served)
+    with Outputs(inputs=[asset]) as outputs:
+        outputs.file(page).write_bytes(text.encode("utf-8"))
     return page
 
 
 class _Handler(SimpleHTTPRequestHandler):
-    """Static files with the right types for modules and assets, no caching, no log lines."""
+    """Static files with the right types for modules and assets, no caching, no log lines; the
+    URL paths in ``mounts`` (and below them) come from their folders instead."""
 
     extensions_map: ClassVar[dict[str, str]] = {
         **SimpleHTTPRequestHandler.extensions_map,
         **MIME_TYPES,
     }
+
+    def __init__(self, *args: Any, mounts: Mapping[str, Path], **kwargs: Any) -> None:
+        self.mounts = mounts
+        super().__init__(*args, **kwargs)
+
+    def translate_path(self, path: str) -> str:
+        """The file of URL path ``path``: in a mounted folder when under its URL path."""
+        bare = path.split("?", 1)[0].split("#", 1)[0]
+        for prefix, folder in self.mounts.items():
+            if bare == prefix or bare.startswith(f"{prefix}/"):
+                inside = super().translate_path(path[len(prefix) :] or "/")
+                return os.path.join(folder, os.path.relpath(inside, self.directory))
+        return super().translate_path(path)
 
     def end_headers(self) -> None:
         self.send_header("Cache-Control", "no-store")
@@ -180,10 +240,13 @@ class _Server(ThreadingHTTPServer):
 
 
 @contextlib.contextmanager
-def serve(root: str | Path, port: int = 0) -> Iterator[str]:
+def serve(
+    root: str | Path, port: int = 0, mounts: Mapping[str, Path] | None = None
+) -> Iterator[str]:
     """Serve the folder ``root`` on 127.0.0.1 (``port`` 0: any free port) from a background
-    thread while the ``with`` block runs; yields the base URL (no trailing slash)."""
-    handler = functools.partial(_Handler, directory=str(root))
+    thread while the ``with`` block runs, and each folder of ``mounts`` (URL path without
+    trailing slash → folder) under its URL path; yields the base URL (no trailing slash)."""
+    handler = functools.partial(_Handler, directory=str(root), mounts=dict(mounts or {}))
     server = _Server(("127.0.0.1", port), handler)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
@@ -197,7 +260,9 @@ def serve(root: str | Path, port: int = 0) -> Iterator[str]:
 
 __all__ = [
     "LIBRARIES",
-    "VIEWABLE",
+    "LIBRARY_MOUNT",
+    "check_library",
+    "library_mounts",
     "page_config",
     "page_path",
     "render_page",

@@ -5,23 +5,43 @@
 // levels and distances through update().
 
 const config = JSON.parse(document.getElementById("lodconvert-config").textContent);
-const first = config.objects[0];
 const readout = document.getElementById("readout");
 const slider = document.getElementById("distance");
 const status = document.getElementById("status");
 const MAX_LISTED = 8;
 
-// The slider spans half the diagonal to twice the last cutoff, logarithmically.
-const nearest = first.alpha / 2;
-const farthest = 2 * Math.max(first.alpha, ...first.cutoffs);
-const sliderDistance = (value) => nearest * (farthest / nearest) ** (value / 1000);
-const sliderValue = (distance) => (1000 * Math.log(distance / nearest)) / Math.log(farthest / nearest);
+const most = (values) => values.reduce((a, b) => Math.max(a, b), -Infinity);
+const least = (values) => values.reduce((a, b) => Math.min(a, b), Infinity);
+const centers = config.objects.map((o) => o.center);
+/** The viewer looks at the middle of the objects' centres from `distance` along +z. */
+const focus = [0, 1, 2].map((k) => {
+  const values = centers.map((c) => c[k]);
+  return (least(values) + most(values)) / 2;
+});
+const offsets = centers.map((c) => Math.hypot(...c.map((v, k) => v - focus[k])));
+
+// The slider spans half the smallest diagonal to twice the farthest reach of any object's
+// ranges (its last cutoff, or diagonal, plus its offset from the focus), logarithmically: at its
+// end every object is beyond its last cutoff.
+const nearest = least(config.objects.map((o) => o.alpha)) / 2;
+const farthest = 2 * most(config.objects.map((o, i) => most([o.alpha, ...o.cutoffs]) + offsets[i]));
+const span = Math.log(farthest / nearest);
+const sliderDistance = (value) => nearest * Math.exp((span * value) / 1000);
+const sliderValue = (distance) => (1000 * Math.log(distance / nearest)) / span;
+/** The first view: every object whole in view (for one object, at 1.25 diagonals). */
+const reach = most(config.objects.map((o, i) => o.alpha / 2 + offsets[i]));
+const overview = Math.min(farthest, 2.5 * reach);
+
+/** Index of the level `object` shows at `distance` from its centre (past the last: nothing). */
+const levelAt = (object, distance) => object.cutoffs.filter((c) => c <= distance).length;
 
 const state = {
   ready: false,
   error: null,
   loadMs: null,
   objects: config.objects.map((o) => ({ id: o.id, level: null, levelIndex: null, distance: null })),
+  distance: null, // of the viewer from the focus, once drawn there
+  settled: false, // no move under way: the levels and distances shown are final
   setDistance: null,
 };
 window.lodconvertViewer = state;
@@ -65,6 +85,19 @@ function fail(error) {
 /** Two animation frames: whatever was changed before has been drawn. */
 const nextFrame = () => new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(done)));
 
+let moves = 0;
+
+/** Move the viewer to `distance` from the focus; resolves once it is drawn there. */
+async function moveTo(backend, distance) {
+  const move = ++moves;
+  state.settled = false;
+  await backend.setDistance(distance);
+  if (move === moves) {
+    state.distance = distance;
+    state.settled = true;
+  }
+}
+
 async function start(backend) {
   if (location.protocol === "file:") {
     fail(`Browsers do not let a page opened from a file load ${config.asset}: ` +
@@ -75,11 +108,13 @@ async function start(backend) {
     const started = performance.now();
     await backend.load(document.getElementById("view"));
     state.setDistance = async (distance) => {
-      await backend.setDistance(distance);
       slider.value = String(sliderValue(distance));
+      await moveTo(backend, distance);
     };
-    slider.addEventListener("input", () => backend.setDistance(sliderDistance(Number(slider.value))));
-    await state.setDistance(1.25 * first.alpha); // the whole object in view, finest level
+    slider.addEventListener("input", () => {
+      moveTo(backend, sliderDistance(Number(slider.value))).catch(fail);
+    });
+    await state.setDistance(overview);
     state.loadMs = performance.now() - started;
     state.ready = true;
   } catch (error) {

@@ -3,9 +3,15 @@
 // levels from level_changed and the viewer position from a ProximitySensor. The library is
 // imported in load(), so that a wrong library URL is reported on the page.
 
+/**
+ * Frames that a move waits at most for every LOD to reach its level: with forceTransitions
+ * (as lodconvert writes them) X_ITE steps one level a frame, so a few frames suffice.
+ */
+const SETTLE_FRAMES = 120;
 const levels = config.objects.map(() => null);
 const distances = config.objects.map(() => null);
 let X3D, viewpoint;
+let target = 0;
 
 const vector = (values) => new X3D.SFVec3f(...values);
 
@@ -37,9 +43,9 @@ const backend = {
     viewpoint = scene.createNode("Viewpoint");
     viewpoint.description = "lodconvert viewer";
     viewpoint.fieldOfView = (config.view.fov_y_deg * Math.PI) / 180;
-    viewpoint.centerOfRotation = vector(first.center);
+    viewpoint.centerOfRotation = vector(focus);
     const sensor = scene.createNode("ProximitySensor");
-    sensor.center = vector(first.center);
+    sensor.center = vector(focus);
     sensor.size = vector([40 * farthest, 40 * farthest, 40 * farthest]);
     sensor.addFieldCallback("lodconvert", "position_changed", (p) => viewerMoved([p.x, p.y, p.z]));
     for (const node of [navigation, viewpoint, sensor]) scene.rootNodes.push(node);
@@ -53,10 +59,22 @@ const backend = {
       });
     });
   },
+  /** Resolves once every LOD shows its level at the new place, and the sensor reported it. */
   async setDistance(distance) {
-    viewpoint.position = vector([first.center[0], first.center[1], first.center[2] + distance]);
+    const move = ++target;
+    const position = [focus[0], focus[1], focus[2] + distance];
+    viewpoint.position = vector(position);
     viewpoint.set_bind = true;
-    await nextFrame();
+    const expected = config.objects.map((object) => {
+      const d = Math.hypot(...object.center.map((c, k) => position[k] - c));
+      return { level: levelAt(object, d), distance: d };
+    });
+    const arrived = () => expected.every((e, i) =>
+      levels[i] === e.level && Math.abs(distances[i] - e.distance) <= 1e-4 * e.distance);
+    for (let frame = 0; frame < SETTLE_FRAMES && move === target; frame++) {
+      await nextFrame();
+      if (arrived()) break;
+    }
   },
 };
 

@@ -20,11 +20,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
+import trimesh
 
 from lodconvert.chain import ChainOptions
 from lodconvert.pipeline import convert
-from lodconvert.viewer import LIBRARIES, serve, write_page
+from lodconvert.viewer import LIBRARIES, page_path, serve, write_page
 
 from ..conftest import ROOT, SAMPLE, require
 
@@ -33,6 +35,10 @@ DRIVER = HERE / "drive.mjs"
 CHROMIUM = Path(os.environ.get("LODCONVERT_CHROMIUM", "/usr/bin/chromium"))
 PACKAGES = ("playwright-core", "x_ite", "x3dom", "three", "@babylonjs/core", "@babylonjs/loaders")
 REQUIRE = "LODCONVERT_REQUIRE_BROWSER"
+SAFETY_S = 600
+"""Guard against a hung browser: a driver run with no result after this long fails. Far beyond
+a normal run (the full dragon takes under a minute on a loaded 2-core machine); no test has a
+time limit of its own, as a loaded machine is slower, not wrong."""
 MEASUREMENTS: list[tuple[str, str]] = []
 """(what, value) rows printed in the terminal summary."""
 
@@ -101,21 +107,19 @@ def console_text(out: dict[str, Any]) -> str:
 
 @pytest.fixture(scope="session")
 def drive(browser_tools: str, base_url: str) -> Drive:
-    """Run a scenario of drive.mjs; returns its output, or fails with its error and the
-    browser console."""
+    """Run a scenario of drive.mjs on the test site (or on the server at ``base``); returns
+    its output, or fails with its error and the browser console."""
 
-    def run(scenario: str, timeout_s: float = 60, **params: Any) -> dict[str, Any]:
-        params["timeout_ms"] = int(timeout_s * 1000)
+    def run(scenario: str, base: str | None = None, **params: Any) -> dict[str, Any]:
+        params["safety_ms"] = SAFETY_S * 1000
+        command = [browser_tools, str(DRIVER), scenario, base or base_url, json.dumps(params)]
         try:
+            # The driver ends itself after SAFETY_S; this only catches a driver that cannot.
             proc = subprocess.run(
-                [browser_tools, str(DRIVER), scenario, base_url, json.dumps(params)],
-                capture_output=True,
-                text=True,
-                timeout=timeout_s * 4 + 60,
-                check=False,
+                command, capture_output=True, text=True, timeout=SAFETY_S + 120, check=False
             )
         except subprocess.TimeoutExpired:
-            pytest.fail(f"{scenario}: the browser driver did not finish")
+            pytest.fail(f"{scenario}: the browser driver hung (no exit in {SAFETY_S + 120} s)")
         lines = proc.stdout.strip().splitlines()
         try:
             out = json.loads(lines[-1])
@@ -137,6 +141,11 @@ class Chain:
     report: dict[str, Any]
 
     @property
+    def page(self) -> str:
+        """Its viewer page in the site (the default name, beside it)."""
+        return page_path(self.name).name
+
+    @property
     def obj(self) -> dict[str, Any]:
         return self.report["objects"][0]
 
@@ -155,13 +164,12 @@ class Chain:
 
 
 def make_chain(site: Path, source: Path, name: str, **options: Any) -> Chain:
-    """Convert ``source`` into ``site/name`` (numpy backend) and write its viewer page
-    ``site/<stem>_<suffix>.html`` using the npm-installed library."""
+    """Convert ``source`` into ``site/name`` (numpy backend) and write its viewer page beside
+    it (default name) using the npm-installed library."""
     out = site / name
     report = convert(source, out, ChainOptions(**options), backend="numpy")
     kind = "x3d" if out.suffix == ".x3d" else "gltf"
-    library = site / "node_modules" / LIBRARIES[kind].package
-    write_page(out, site / f"{out.stem}_{out.suffix[1:]}.html", str(library))
+    write_page(out, library=str(site / "node_modules" / LIBRARIES[kind].package))
     return Chain(name, out.stat().st_size, report)
 
 
@@ -169,3 +177,18 @@ def make_chain(site: Path, source: Path, name: str, **options: Any) -> Chain:
 def knot(site: Path) -> dict[str, Chain]:
     """The bundled torus knot as .x3d and .glb with a cull distance (nothing beyond it)."""
     return {s: make_chain(site, SAMPLE, f"knot.{s}", cull=1.5) for s in ("x3d", "glb")}
+
+
+@pytest.fixture(scope="session")
+def pair(site: Path) -> dict[str, Chain]:
+    """Two objects as .x3d and .glb, culled: the torus knot at 1/4 scale (first, its ranges
+    reach 220) and at 4× scale 30 units beside it (ranges reaching 3,500)."""
+    knot = trimesh.load(SAMPLE, process=False, force="mesh")
+    scene = trimesh.Scene()
+    beside = np.eye(4)
+    beside[:3, 3] = (30.0, 0.0, 0.0)
+    for name, scale, transform in (("a_small", 0.25, np.eye(4)), ("b_large", 4.0, beside)):
+        scene.add_geometry(knot.copy().apply_scale(scale), node_name=name, transform=transform)
+    source = site / "pair_source.glb"
+    scene.export(source)
+    return {s: make_chain(site, source, f"pair.{s}", cull=1.5) for s in ("x3d", "glb")}
