@@ -98,3 +98,14 @@ def chain_options(args: argparse.Namespace) -> ChainOptions:
         if getattr(args, "level_kind", None)
         else None,
     )
+
+
+def add_viewer_lib_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
+    """``--viewer-lib``, for the page of ``--html`` and of ``lodconvert view``."""
+    parser.add_argument(
+        "--viewer-lib",
+        metavar="URL|DIR",
+        help="base URL or local folder of the viewer library's npm package "
+        "(x_ite for X3D, three for glTF; default: jsDelivr CDN); a folder must lie inside the "
+        "page's folder, unless 'lodconvert view --serve' serves it",
+    )

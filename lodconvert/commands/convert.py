@@ -9,11 +9,10 @@ from typing import Any
 from ..bake import BACKENDS
 from ..bake.filters import FILTERS
 from ..cli.console import Console
-from ..cli.options import EXIT_OK, add_range_options, chain_options
+from ..cli.options import EXIT_OK, add_range_options, add_viewer_lib_option, chain_options
 from ..errors import UsageError
 from ..sinks import FileSink, Outputs
 from . import COMMANDS
-from .view import add_viewer_lib_option
 
 DESCRIPTION = (
     "Bake a CityGML-style LOD chain (LOD4 mesh, coarser point-cloud levels where they pay) for "
@@ -82,15 +81,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace, console: Console) -> int:
     """Convert, print what was made, return the exit code."""
     from ..pipeline import convert
-    from ..viewer import check_library, page_path, render_page
 
     options = chain_options(args)
     if args.viewer_lib and not args.html:
         raise UsageError("--viewer-lib is for the page that --html writes")
     if args.html:
+        from ..viewer import check_library
+
         check_library(args.output, args.viewer_lib)  # before baking, not after
 
     def stage_page(outputs: Outputs, sink: FileSink, report: dict[str, Any]) -> None:
+        from ..viewer import page_path, render_page
+
         page = page_path(args.output)
         text = render_page(sink.path, page, args.viewer_lib, source=sink.staged.temp)
         outputs.file(page).write_bytes(text.encode("utf-8"))

@@ -7,6 +7,7 @@ import threading
 import urllib.parse
 
 from ..cli import EXIT_OK, Console
+from ..cli.options import add_viewer_lib_option
 from ..viewer import library_mounts, serve, write_page
 
 DESCRIPTION = (
@@ -16,17 +17,6 @@ DESCRIPTION = (
     "unless --viewer-lib names another URL or a local copy of the npm package: one inside the "
     "page's folder, or anywhere with --serve, which then serves it too."
 )
-
-
-def add_viewer_lib_option(parser: argparse.ArgumentParser | argparse._ArgumentGroup) -> None:
-    """``--viewer-lib``, shared with the main command's ``--html``."""
-    parser.add_argument(
-        "--viewer-lib",
-        metavar="URL|DIR",
-        help="base URL or local folder of the viewer library's npm package "
-        "(x_ite for X3D, three for glTF; default: jsDelivr CDN); a folder must lie inside the "
-        "page's folder, unless 'lodconvert view --serve' serves it",
-    )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
