@@ -17,7 +17,8 @@ from PIL import Image, ImageDraw
 from lodconvert.bake import NumpyBackend
 from lodconvert.bake.grid import Grid
 from lodconvert.chain import ChainOptions, bake_chain
-from lodconvert.pipeline import read_scene
+from lodconvert.io import read_scene
+from lodconvert.model import Mesh, Surface
 
 ROOT = Path(__file__).resolve().parents[1]
 PANEL = 360
@@ -63,11 +64,11 @@ def render_points(cloud, rotation, lo: np.ndarray, pitch: float, size_world: flo
 
 
 def main() -> None:
-    obj = read_scene(ROOT / "samples" / "torus_knot.ply").objects[0]
+    obj = next(read_scene(ROOT / "samples" / "torus_knot.ply").with_geometry())
     chain = bake_chain(obj, ChainOptions(), NumpyBackend())
     rotation = view_rotation()
     mesh = chain.levels[0].mesh
-    rotated = type(mesh)(mesh.vertices @ rotation.T, mesh.faces, mesh.vertex_colors)
+    rotated = Mesh.of(Surface(mesh.vertices @ rotation.T, mesh.faces, mesh.vertex_colors))
     extent = np.ptp(rotated.vertices, axis=0)[:2].max() * 1.05
     pitch = extent / PANEL
     lo = rotated.vertices.min(axis=0) - (extent - np.ptp(rotated.vertices, axis=0)) / 2

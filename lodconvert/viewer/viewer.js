@@ -20,11 +20,15 @@ const focus = [0, 1, 2].map((k) => {
 });
 const offsets = centers.map((c) => Math.hypot(...c.map((v, k) => v - focus[k])));
 
-// The slider spans half the smallest diagonal to twice the farthest reach of any object's
-// ranges (its last cutoff, or diagonal, plus its offset from the focus), logarithmically: at its
-// end every object is beyond its last cutoff.
+// The slider spans half the smallest diagonal to twice the farthest reach of any object
+// (its last cutoff, or where its diagonal spans SMALLEST_PX of the reference view if that is
+// farther — an object that keeps its mesh at every distance has no cutoff —, plus its offset
+// from the focus), logarithmically: at its end every object is beyond its last cutoff.
+const SMALLEST_PX = 16;
+const focal = config.view.height_px / 2 / Math.tan((config.view.fov_y_deg * Math.PI) / 360);
+const reachOf = (o) => most([(o.alpha * focal) / SMALLEST_PX, ...o.cutoffs]);
 const nearest = least(config.objects.map((o) => o.alpha)) / 2;
-const farthest = 2 * most(config.objects.map((o, i) => most([o.alpha, ...o.cutoffs]) + offsets[i]));
+const farthest = 2 * most(config.objects.map((o, i) => reachOf(o) + offsets[i]));
 const span = Math.log(farthest / nearest);
 const sliderDistance = (value) => nearest * Math.exp((span * value) / 1000);
 const sliderValue = (distance) => (1000 * Math.log(distance / nearest)) / span;

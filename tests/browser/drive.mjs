@@ -168,7 +168,8 @@ const scenarios = {
 
   /**
    * lodconvert's viewer page params.page: per stop move the viewer, by setDistance(distance) or
-   * by pressing `key` on the distance slider, and read every object's state once drawn there.
+   * by pressing `key` on the distance slider, and read every object's state once drawn there
+   * (with `shot`, the page is saved there as a PNG first).
    */
   async viewer(page) {
     step = `loading the viewer page ${params.page}`;
@@ -188,6 +189,10 @@ const scenarios = {
         await page.locator("#distance").press(stop.key);
         const settled = () => window.lodconvertViewer.settled;
         await waitFor(page, `moving after ${stop.key} on the slider`, settled);
+      }
+      if (stop.shot) {
+        step = `saving a screenshot at ${stop.distance}`;
+        await page.screenshot({ path: stop.shot });
       }
       const panel = (shown) => { document.getElementById("panel").style.visibility = shown; };
       await evaluate(page, "hiding the panel", panel, "hidden");

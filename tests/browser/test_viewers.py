@@ -6,12 +6,15 @@ measurements", as measurements only: no test has a time limit)."""
 
 from __future__ import annotations
 
+import itertools
 import math
+import os
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
 from lodconvert.io import OutputInfo
 from lodconvert.io.x3d import write_x3d
@@ -248,3 +251,50 @@ def test_x_ite_draws_the_texture_of_a_textured_mesh(site: Path, drive: Drive) ->
     assert seen["level"] == 0, message
     assert 0.5 * side_px**2 <= seen["foreground"] <= 2 * side_px**2, message
     assert not _errors(out), message
+
+
+def low_poly_scenes(folder: Path) -> dict[str, Path]:
+    """GLB inputs a user would try first: a box, a lone triangle and a 10×10 district of box
+    buildings 8–20 m tall on 25 m lots."""
+    scenes = {
+        "box": trimesh.Scene([trimesh.creation.box((10.0, 10.0, 20.0))]),
+        "triangle": trimesh.Scene(
+            [trimesh.Trimesh([[0, 0, 0], [4, 0, 0], [0, 3, 0]], [[0, 1, 2]])]
+        ),
+        "district": trimesh.Scene(),
+    }
+    for i, j in itertools.product(range(10), range(10)):
+        height = 8.0 + 12.0 * ((3 * i + 7 * j) % 10) / 9
+        house = trimesh.creation.box((12.0, 16.0, height))
+        house.apply_translation((25.0 * i, 25.0 * j, height / 2))
+        scenes["district"].add_geometry(house, node_name=f"b{i}_{j}")
+    paths = {}
+    for name, scene in scenes.items():
+        paths[name] = folder / f"{name}_source.glb"
+        scene.export(paths[name])
+    return paths
+
+
+@pytest.mark.parametrize("suffix", ["x3d", "glb"])
+def test_low_poly_objects_keep_their_mesh_near_and_far(
+    site: Path, drive: Drive, suffix: str
+) -> None:
+    """A box, a triangle and a box district keep their mesh as their only level: near and far
+    (beyond every object's last slot, 45 diagonals away) the page shows LOD4 and draws the
+    objects; no point sprites. ``LODCONVERT_SHOTS=DIR`` keeps the screenshots there."""
+    shots = os.environ.get("LODCONVERT_SHOTS")
+    for name, source in low_poly_scenes(site).items():
+        chain = make_chain(site, source, f"{name}.{suffix}")
+        objects = chain.report["objects"]
+        assert all([lv["kind"] for lv in o["levels"]] == ["mesh"] for o in objects), objects
+        alpha = max(o["alpha"] for o in objects)
+        stops = [{"distance": d} for d in (1.5 * alpha, 45.0 * alpha)]
+        for stop, where in zip(stops, ("near", "far"), strict=True):
+            if shots:
+                stop["shot"] = str(Path(shots).resolve() / f"{name}_{suffix}_{where}.png")
+        out = drive("viewer", page=chain.page, stops=stops)
+        for seen in out["result"]["stops"]:
+            message = f"{name} at {seen['distance']:.4g}: {seen}\n{console_text(out)}"
+            assert {o["level"] for o in seen["objects"]} == {"LOD4"}, message
+            assert seen["foreground"] > 0, message
+        assert not _errors(out), console_text(out)
