@@ -54,6 +54,11 @@ def test_the_input_is_never_an_output(tmp_path: Path) -> None:
     for output in (copy, link):
         assert_one_line_error(run("view", copy, "-o", output), 1, "input of this run")
     assert copy.read_bytes() == data
+    glb = tmp_path / "knot.glb"
+    run(SAMPLE, "-o", glb, *FAST)
+    before = glb.read_bytes()
+    assert_one_line_error(run(glb, "-o", glb, *FAST), 1, "input of this run")
+    assert glb.read_bytes() == before
     report = tmp_path / "r.json"
     result = run(SAMPLE, "-o", tmp_path / "k.glb", "--report", SAMPLE, *FAST)
     assert_one_line_error(result, 1, "input of this run")
