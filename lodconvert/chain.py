@@ -26,6 +26,7 @@ import numpy as np
 
 from .bake import Backend, bake_points
 from .errors import InputError, UsageError
+from .limits import DEFAULT_LIMITS, Limits
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
 from .plan import POINT_COST, least_point_cost, level_cost, silhouette_estimate
 from .ranges import (
@@ -305,8 +306,10 @@ def bake_chain(
     backend: Backend,
     progress: Progress | None = None,
     warn: Progress | None = None,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> LodChain:
-    """Bake ``obj`` into a chain (levels relative to its bounding-box centre)."""
+    """Bake ``obj`` into a chain (levels relative to its bounding-box centre), within
+    ``limits`` (grid cells per level, working memory)."""
     opts.check()
     _check_geometry(obj)
     world_bounds = obj.geometry.bounds

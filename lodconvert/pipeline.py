@@ -24,6 +24,7 @@ from .bake import Backend, get_backend
 from .chain import ChainOptions, bake_chain
 from .errors import InputError
 from .io import OutputInfo, input_format, output_format
+from .limits import DEFAULT_LIMITS, Limits
 from .model import LodChain, Scene
 from .sinks import FileSink, Outputs
 from .validate import check_written
@@ -91,6 +92,7 @@ def iter_chains(
     warn: Message = _quiet,
     skipped: list[dict[str, str]] | None = None,
     step: Step = _no_step,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> Iterator[LodChain]:
     """Bake the scene's objects one at a time; objects with bad geometry are reported through
     ``warn``, recorded in ``skipped`` and left out. ``step`` hears how many are done."""
@@ -104,7 +106,9 @@ def iter_chains(
                 base = shared[id(obj.geometry)]
                 chain = replace(base, object_id=obj.id, metadata=dict(obj.attributes))
             else:
-                chain = bake_chain(obj, options, backend, progress=progress, warn=warn)
+                chain = bake_chain(
+                    obj, options, backend, progress=progress, warn=warn, limits=limits
+                )
             if obj.transform is not None:
                 shared.setdefault(id(obj.geometry), chain)
                 chain = replace(chain, transform=np.asarray(obj.transform, dtype=np.float64))
@@ -131,6 +135,7 @@ def convert(
     read_options: dict[str, Any] | None = None,
     write_options: dict[str, Any] | None = None,
     also: Callable[[Outputs, FileSink, dict[str, Any]], None] | None = None,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> dict[str, Any]:
     """Convert ``input_path`` into ``output_path`` and return the report (a JSON-able dict).
 
@@ -155,7 +160,7 @@ def convert(
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
         start = time.perf_counter()
-        scene = source.read_file(input_path, **(read_options or {}))
+        scene = source.read_file(input_path, limits=limits, **(read_options or {}))
         timings["read"] = time.perf_counter() - start
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(backend)
@@ -173,7 +178,7 @@ def convert(
                 yield chain
 
         start = time.perf_counter()
-        chains = recorded(iter_chains(scene, options, baker, progress, warn, skipped, step))
+        chains = recorded(iter_chains(scene, options, baker, progress, warn, skipped, step, limits))
         target.write_chains(chains, sink, info, **(write_options or {}))
         timings["bake_and_write"] = time.perf_counter() - start
         if not records:

@@ -11,6 +11,7 @@ from ..bake.filters import FILTERS
 from ..cli.console import Console
 from ..cli.options import EXIT_OK, add_range_options, add_viewer_lib_option, chain_options
 from ..errors import UsageError
+from ..limits import DEFAULT_LIMITS
 from ..sinks import FileSink, Outputs
 from . import COMMANDS
 
@@ -34,6 +35,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("input", help="OBJ, PLY, STL, OFF, GLB or glTF file (optionally .gz)")
     parser.add_argument("-o", "--output", required=True, help="output .x3d, .glb or .gltf")
     parser.add_argument("--version", action="version", version=f"lodconvert {__version__}")
+    parser.add_argument(
+        "--limit",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="raise (or lower) a limit, e.g. decompressed_bytes=8G (see the README's table)",
+    )
     read = parser.add_argument_group("reading")
     read.add_argument(
         "--merge-groups",
@@ -83,6 +91,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from ..pipeline import convert
 
     options = chain_options(args)
+    limits = DEFAULT_LIMITS.with_text(args.limit)
     if args.viewer_lib and not args.html:
         raise UsageError("--viewer-lib is for the page that --html writes")
     if args.html:
@@ -109,6 +118,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         report_path=args.report,
         read_options={"merge_groups": args.merge_groups or None},
         also=stage_page if args.html else None,
+        limits=limits,
     )
     objects = report["objects"]
     if len(objects) <= OBJECT_LINES or args.verbose:

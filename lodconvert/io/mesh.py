@@ -28,6 +28,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import InputError
+from ..limits import DEFAULT_LIMITS, Limits
 from ..model import Mesh, Node, Scene, Surface
 from . import Format, suffix_of
 from .gltf import srgb_rgba
@@ -344,7 +345,7 @@ def _nodes(loaded: object, kept: list[_Instance], file_name: str, linear: bool) 
         )
 
 
-def read_mesh(path: Path, merge_groups: bool = False) -> Scene:
+def read_mesh(path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_LIMITS) -> Scene:
     """Read a mesh file into a Scene; raise :class:`InputError` with a one-line reason.
 
     ``merge_groups``: read an OBJ file's objects / groups as one node (other formats keep their
@@ -388,4 +389,6 @@ def read_mesh(path: Path, merge_groups: bool = False) -> Scene:
     return Scene(source=str(path), nodes=nodes, size=len(kept))
 
 
-FORMAT = Format(name="mesh", suffixes=MESH_SUFFIXES, read=read_mesh, read_options=("merge_groups",))
+FORMAT = Format(
+    name="mesh", suffixes=MESH_SUFFIXES, read=read_mesh, read_options=("merge_groups", "limits")
+)
