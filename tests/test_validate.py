@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import codecs
 import concurrent.futures
+import dataclasses
 import json
 import re
 import struct
@@ -23,7 +24,7 @@ from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.cli import main
 from lodconvert.errors import LodConvertError
-from lodconvert.io import OutputInfo, gltf
+from lodconvert.io import OutputInfo, gltf, streamed
 from lodconvert.io.gltf.check import MAX_JSON_DEPTH, check_gltf
 from lodconvert.io.x3d import write_x3d
 from lodconvert.io.x3d.check import check_x3d
@@ -700,7 +701,8 @@ def test_converter_refuses_an_invalid_output(
         real(chains, handle, info)
         handle.truncate(handle.tell() - 8)
 
-    monkeypatch.setattr(gltf, "write_glb", truncating)
+    writer = streamed({".glb": truncating})
+    monkeypatch.setattr(gltf, "FORMAT", dataclasses.replace(gltf.FORMAT, write=writer))
     result = run(SAMPLE, "-o", out, "--resolution", "24,12,6", "--quiet")
     assert_one_line_error(result, 1, str(out), "output fails validation", "GLB_LENGTH")
     assert out.read_bytes() == b"previous output"

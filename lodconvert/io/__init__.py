@@ -22,7 +22,7 @@ import importlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 from ..errors import InputError, UsageError
 from ..model import LodChain, Scene
@@ -68,6 +68,31 @@ class Format:
         """``write`` with the options this format takes."""
         assert self.write is not None
         self.write(chains, sink, info, **_taken(options, self.write_options))
+
+
+StreamWriter = Callable[[Iterable[LodChain], BinaryIO, OutputInfo], None]
+
+
+def streamed(writers: dict[str, StreamWriter]) -> Callable[..., None]:
+    """A ``write`` for formats written as one stream: the writer for the sink's suffix, into
+    the sink's file."""
+
+    def write(chains: Iterable[LodChain], sink: Any, info: OutputInfo) -> None:
+        with sink.open() as handle:
+            writers[sink.path.suffix.lower()](chains, handle, info)
+
+    return write
+
+
+def imported_on_call(module: str, name: str) -> Callable[..., Any]:
+    """``module.name``, imported when first called (checks import the validation vocabulary,
+    which imports the registry)."""
+
+    def call(*args: Any, **kwargs: Any) -> Any:
+        return getattr(importlib.import_module(module), name)(*args, **kwargs)
+
+    call.__doc__ = f"{module}.{name}, imported on the first call."
+    return call
 
 
 def _taken(options: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:

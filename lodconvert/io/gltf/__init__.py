@@ -4,13 +4,7 @@ registry entry each for ``.glb`` and ``.gltf``."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from pathlib import Path
-from typing import Any
-
-from ...model import LodChain
-from ...sinks import FileSink
-from .. import Format, OutputInfo
+from .. import Format, imported_on_call, streamed
 from .reader import GltfLevel, GltfObject, read_back, read_lod_gltf
 from .writer import (
     GLB_BIN,
@@ -24,27 +18,12 @@ from .writer import (
     write_gltf,
 )
 
-
-def write(chains: Iterable[LodChain], sink: FileSink, info: OutputInfo) -> None:
-    """Write ``chains`` into ``sink``: GLB or ``.gltf`` with an embedded buffer, by suffix."""
-    stream = write_gltf if sink.path.suffix.lower() == ".gltf" else write_glb
-    with sink.open() as handle:
-        stream(chains, handle, info)
-
-
-def check(path: Path, findings: Any, schema: Any = None) -> None:
-    """Structural checks of a glTF file lodconvert wrote (GLB framing, accessors, MSFT_lod)."""
-    from .check import check_gltf
-
-    check_gltf(path, findings, schema)
-
-
 FORMAT = Format(
     name="gltf",
     suffixes=(".glb", ".gltf"),
-    write=write,
+    write=streamed({".glb": write_glb, ".gltf": write_gltf}),
     read_back=read_back,
-    check=check,
+    check=imported_on_call("lodconvert.io.gltf.check", "check_gltf"),
 )
 
 __all__ = [

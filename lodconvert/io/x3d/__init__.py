@@ -3,36 +3,16 @@ structural checks (:mod:`.check`), declared as one registry entry."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-from pathlib import Path
-from typing import Any
-
-from ...model import LodChain
-from ...sinks import FileSink
-from .. import Format, OutputInfo
+from .. import Format, imported_on_call, streamed
 from .reader import X3DLevel, read_back, read_x3d_points, x3d_read_errors
 from .writer import METADATA_SET, point_properties, vertex_colors, write_x3d
-
-
-def write(chains: Iterable[LodChain], sink: FileSink, info: OutputInfo) -> None:
-    """Write ``chains`` into ``sink`` as one X3D document (see :mod:`.writer`)."""
-    with sink.open() as handle:
-        write_x3d(chains, handle, info)
-
-
-def check(path: Path, findings: Any, schema: Any = None) -> None:
-    """Structural checks of an X3D file lodconvert wrote (and the official XSD when given)."""
-    from .check import check_x3d
-
-    check_x3d(path, findings, schema)
-
 
 FORMAT = Format(
     name="x3d",
     suffixes=(".x3d",),
-    write=write,
+    write=streamed({".x3d": write_x3d}),
     read_back=read_back,
-    check=check,
+    check=imported_on_call("lodconvert.io.x3d.check", "check_x3d"),
 )
 
 __all__ = [
