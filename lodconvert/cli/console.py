@@ -79,7 +79,7 @@ class Console:
     def _line(self, now: float) -> str:
         seconds = now - self._stage_start
         total = f"/{self._total:,}" if self._total else ""
-        rate = f", {self._done / seconds:,.0f}/s" if seconds > 0 else ""
+        rate = f", {self._done / seconds:,.0f}/s" if seconds > 0 and self._done > 1 else ""
         return f"{self._stage}: {self._done:,}{total} ({seconds:.1f} s{rate})"
 
     def warn(self, message: str) -> None:
