@@ -24,6 +24,7 @@ from .bake import Backend, get_backend
 from .chain import ChainOptions, bake_chain
 from .errors import InputError
 from .io import OutputInfo, input_format, output_format
+from .io.geometry_checks import InputTally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import LodChain, Scene
 from .sinks import FileSink, Outputs
@@ -181,6 +182,10 @@ def convert(
         chains = recorded(iter_chains(scene, options, baker, progress, warn, skipped, step, limits))
         target.write_chains(chains, sink, info, **(write_options or {}))
         timings["bake_and_write"] = time.perf_counter() - start
+        tally = tally_of(scene)
+        for entry in tally.skipped if tally is not None else ():
+            warn(f"{scene.source}: object {entry['reason']} — skipped")
+            skipped.append(entry)
         if not records:
             reason = (
                 skipped[0]["reason"]
@@ -193,7 +198,7 @@ def convert(
         check_written(sink.staged.temp, output_path)
         timings["validate"] = time.perf_counter() - start
         step("checking", 1, 1)
-        report = _report(input_path, output_path, baker, options, records, skipped, timings)
+        report = _report(input_path, output_path, baker, options, records, skipped, timings, tally)
         if also is not None:
             also(outputs, sink, report)
         if report_sink is not None:
@@ -221,9 +226,13 @@ def _report(
     records: list[dict[str, Any]],
     skipped: list[dict[str, str]],
     timings: dict[str, float],
+    tally: InputTally | None = None,
 ) -> dict[str, Any]:
-    """What ``--report`` records of a run."""
+    """What ``--report`` records of a run; ``tally``: what the reader's checks dropped."""
     reduced = [r for r in records if r["dropped"]]
+    by_object = tally.dropped_by_object if tally is not None else {}
+    for record in records:
+        record["dropped_faces"] = by_object.get(record["id"], 0)
     return {
         "lodconvert": __version__,
         "input": str(input_path),
@@ -237,6 +246,7 @@ def _report(
         "totals": {
             "objects": len(records),
             "fewer_levels": len(reduced),
+            "dropped_faces": tally.dropped_faces if tally is not None else 0,
             "points": int(
                 sum(lv["count"] for r in records for lv in r["levels"] if lv["kind"] == "pcd")
             ),

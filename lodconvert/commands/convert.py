@@ -134,9 +134,11 @@ def run(args: argparse.Namespace, console: Console) -> int:
             "level was both cheaper and faithful there, so the finer one stays on (see README)"
         )
     skipped = len(report["skipped"])
+    dropped = report["totals"]["dropped_faces"]
     console.summary(
         f"wrote {args.output} ({report['totals']['objects']:,} object(s)"
         + (f", {skipped:,} skipped" if skipped else "")
+        + (f", {dropped:,} face(s) without area dropped" if dropped else "")
         + f", {report['backend']} backend, {sum(report['timings'].values()):.2f} s)"
         + (f" and {report['page']}" if "page" in report else "")
     )

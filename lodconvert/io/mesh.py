@@ -11,7 +11,10 @@ bytes a :class:`Surface` holds: glTF's linear ``baseColorFactor`` and ``COLOR_0`
 OBJ, PLY and OFF colours and all textures are sRGB already.
 
 A file whose content is not of its suffix's format is an :class:`InputError` saying so
-(``cannot be read as STL: ...``), before trimesh gets to guess at it.
+(``cannot be read as STL: ...``), before trimesh gets to guess at it. So is a ``.gz`` that
+inflates past ``limits.decompressed_bytes`` (inflation stops there), and a PLY or OFF file whose
+header declares more elements than its data holds or than the limits allow (checked before
+anything is allocated for them). What trimesh read then passes :mod:`.geometry_checks`.
 """
 
 from __future__ import annotations
@@ -31,6 +34,13 @@ from ..errors import InputError
 from ..limits import DEFAULT_LIMITS, Limits
 from ..model import Mesh, Node, Scene, Surface
 from . import Format, suffix_of
+from .geometry_checks import (
+    InputTally,
+    attach_tally,
+    check_extent,
+    checked_vertices,
+    kept_faces,
+)
 from .gltf import srgb_rgba
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
@@ -41,6 +51,20 @@ _EYE = np.eye(4)
 _OBJ_DATA = re.compile(rb"^[ \t]*[vf][ \t]", re.MULTILINE)
 _OFF_HEADER = re.compile(rb"\A\s*(?:#[^\n]*\n\s*)*[A-Za-z0-9]*OFF\b")
 _OBJ_OBJECT = re.compile(r"^[og](?=[ \t]|$)", re.MULTILINE)
+_CHUNK = 1 << 20
+"""Bytes inflated at a time from a ``.gz`` input."""
+_HEAD = 4096
+"""Bytes at the start of a file that :func:`_looks_like` looks at."""
+_HEADED = (".ply", ".off", ".glb", ".gltf")
+"""Formats known by their first :data:`_HEAD` bytes: a ``.gz`` of another kind is refused
+after its first chunk, not inflated whole."""
+_PLY_SIZES = {
+    **dict.fromkeys(("char", "uchar", "int8", "uint8"), 1),
+    **dict.fromkeys(("short", "ushort", "int16", "uint16"), 2),
+    **dict.fromkeys(("int", "uint", "int32", "uint32", "float", "float32"), 4),
+    **dict.fromkeys(("double", "float64"), 8),
+}
+"""Bytes of each PLY property type."""
 
 
 def object_id(name: str, taken: set[str]) -> str:
@@ -101,16 +125,21 @@ def _set_vertex_colors(surface: Surface, colors: np.ndarray | None) -> None:
 
 
 def surface_from_trimesh(
-    mesh: object, transform: np.ndarray, linear_colors: bool = False
+    mesh: object,
+    transform: np.ndarray,
+    linear_colors: bool = False,
+    faces: np.ndarray | None = None,
 ) -> Surface:
     """Convert a ``trimesh.Trimesh`` placed by ``transform`` into a Surface in that frame.
 
     ``linear_colors``: the mesh's colour values are linear (as glTF's) and become sRGB bytes.
+    ``faces``: the faces to keep (default: all of the mesh's).
     """
     vertices = np.asarray(mesh.vertices, dtype=np.float64)  # type: ignore[attr-defined]
     if not np.allclose(transform, _EYE):
         vertices = vertices @ transform[:3, :3].T + transform[:3, 3]
-    faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)  # type: ignore[attr-defined]
+    if faces is None:
+        faces = np.asarray(mesh.faces, dtype=np.int64).reshape(-1, 3)  # type: ignore[attr-defined]
     surface = Surface(vertices=vertices, faces=faces)
     visual = mesh.visual  # type: ignore[attr-defined]
     kind = getattr(visual, "kind", None)
@@ -136,23 +165,43 @@ def surface_from_trimesh(
 # --- reading and recognising the file -------------------------------------------------------------
 
 
-def _file_bytes(path: Path, suffix: str) -> bytes:
-    """The file's content, decompressed when it ends in ``.gz``."""
+def _file_bytes(path: Path, suffix: str, limit: int) -> bytes:
+    """The file's content, decompressed when it ends in ``.gz``: streamed, and stopped with
+    :class:`InputError` once it inflates past ``limit`` bytes."""
     try:
-        data = path.read_bytes()
+        if not path.name.lower().endswith(".gz"):
+            return path.read_bytes()
+        out = io.BytesIO()
+        with gzip.open(path, "rb") as stream:
+            while chunk := stream.read(_CHUNK):
+                if not out.tell() and suffix in _HEADED and len(chunk) >= _HEAD:
+                    _refuse_other_format(chunk, suffix, path)
+                if out.tell() + len(chunk) > limit:
+                    raise InputError(
+                        f"inflates past the limit of {limit:,} bytes (decompressed_bytes; "
+                        "raise it with --limit decompressed_bytes=N)",
+                        str(path),
+                    )
+                out.write(chunk)
     except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", str(path)) from None
-    if not path.name.lower().endswith(".gz"):
-        return data
-    try:
-        data = gzip.decompress(data)
-    except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+        if isinstance(exc, gzip.BadGzipFile) or not exc.strerror:
+            raise InputError(f"is not a valid gzip file ({exc})", str(path)) from None
+        raise InputError(f"cannot read: {exc.strerror}", str(path)) from None
+    except (EOFError, zlib.error) as exc:
         raise InputError(
             f"is truncated or not a valid {suffix[1:].upper()} file ({exc})", str(path)
         ) from None
-    if not data:
+    if not out.tell():
         raise InputError("is empty once decompressed", str(path))
-    return data
+    return out.getvalue()
+
+
+def _refuse_other_format(data: bytes, suffix: str, path: Path) -> None:
+    """:class:`InputError` when ``data`` (the file's content, or its first :data:`_HEAD` bytes
+    for a format of :data:`_HEADED`) cannot be of ``suffix``'s format."""
+    problem = _format_problem(data, suffix)
+    if problem:
+        raise InputError(f"cannot be read as {suffix[1:].upper()}: {problem}", str(path))
 
 
 def _is_binary_stl(data: bytes) -> bool:
@@ -162,7 +211,7 @@ def _is_binary_stl(data: bytes) -> bool:
 
 def _looks_like(data: bytes) -> str | None:
     """The format the start of ``data`` suggests (``PLY``, ``GLB``, ...), or None."""
-    head = data[:4096]
+    head = data[:_HEAD]
     stripped = head.removeprefix(b"\xef\xbb\xbf").lstrip()
     if head.startswith(b"glTF"):
         return "GLB"
@@ -186,7 +235,7 @@ def _format_problem(data: bytes, suffix: str) -> str | None:
     if looks == fmt:
         return None
     if fmt == "OBJ":
-        if b"\0" in data[:4096]:
+        if b"\0" in data[:_HEAD]:
             problem = "binary data, not OBJ text"
         elif _OBJ_DATA.search(data):
             return None
@@ -202,6 +251,57 @@ def _format_problem(data: bytes, suffix: str) -> str | None:
             "OFF": "no 'OFF' header line",
         }[fmt]
     return f"{problem}; it looks like {looks}" if looks else problem
+
+
+def _truncated(declared: dict[str, int], holds: str, source: str) -> InputError:
+    """The error for a file whose header declares more than its data holds."""
+    counts = " and ".join(f"{count:,} {name}" for name, count in declared.items())
+    return InputError(f"is truncated: its header declares {counts} elements, {holds}", source)
+
+
+def _check_ply_counts(data: bytes, tally: InputTally) -> None:
+    """Compare a PLY header's element counts with what its data can hold (a line per element
+    in ASCII, the fixed bytes of each element in binary) and with the limits, before trimesh
+    allocates anything for them. A header too damaged to read is left to trimesh."""
+    end = data.find(b"end_header")
+    start = data.find(b"\n", end) + 1
+    if end < 0 or not start:
+        return
+    binary = re.search(rb"^format[ \t]+binary", data[:end], re.MULTILINE) is not None
+    counts: dict[str, int] = {}
+    row_bytes: dict[str, int] = {}
+    element = ""
+    for words in (line.split() for line in data[:end].decode("latin-1").splitlines()):
+        if words[:1] == ["element"] and len(words) == 3 and re.fullmatch("[0-9]+", words[2]):
+            element = words[1]
+            counts[element], row_bytes[element] = int(words[2]), 0
+        elif words[:1] == ["property"] and element and len(words) >= 3:
+            size_of = words[2] if words[1] == "list" else words[1]
+            row_bytes[element] += _PLY_SIZES.get(size_of, 1)
+    needed = sum(counts[e] * row_bytes[e] for e in counts)
+    if binary and needed > len(data) - start:
+        holds = f"at least {needed:,} bytes, but its data has {len(data) - start:,}"
+        raise _truncated(counts, holds, tally.source)
+    lines = data.count(b"\n", start) + 1
+    if not binary and sum(counts.values()) > lines:
+        raise _truncated(counts, f"a line each, but its data has {lines:,}", tally.source)
+    tally.count(counts.get("vertex", 0), counts.get("face", 0), declared=True)
+
+
+def _check_off_counts(data: bytes, tally: InputTally) -> None:
+    """Compare an OFF header's vertex and face counts with its data's lines and with the
+    limits (see :func:`_check_ply_counts`)."""
+    header = _OFF_HEADER.match(data)
+    assert header is not None
+    rest = (line.split() for line in data[header.end() : header.end() + _HEAD].splitlines())
+    words = next((w for w in rest if w and not w[0].startswith(b"#")), [])
+    if len(words) < 2 or not (words[0].isdigit() and words[1].isdigit()):
+        return
+    counts = {"vertex": int(words[0]), "face": int(words[1])}
+    lines = data.count(b"\n", header.end()) + 1
+    if sum(counts.values()) > lines:
+        raise _truncated(counts, f"a line each, but its data has {lines:,}", tally.source)
+    tally.count(counts["vertex"], counts["face"], declared=True)
 
 
 def _text(data: bytes) -> str:
@@ -294,28 +394,73 @@ def _graph_instances(loaded: object) -> list[_Instance]:
     ]
 
 
-def _kept(loaded: object, instances: list[_Instance]) -> list[_Instance]:
-    """``instances`` with only their parts that hold faces, and only those left with any."""
+class _Checked(NamedTuple):
+    """The geometries of a file after :mod:`.geometry_checks`: the faces kept of each (by
+    trimesh geometry name) and how many were dropped."""
+
+    faces: dict[str, np.ndarray]
+    dropped: dict[str, int]
+
+
+def _checked_geometry(loaded: object, tally: InputTally) -> _Checked:
+    """Check every triangle geometry of ``loaded`` (counts against the limits, vertices, face
+    indices) and keep its faces with area; the dropped ones are counted in ``tally``."""
     import trimesh
 
+    checked = _Checked({}, {})
+    for name, mesh in loaded.geometry.items():  # type: ignore[attr-defined]
+        if not isinstance(mesh, trimesh.Trimesh):
+            continue
+        tally.count(len(mesh.vertices), len(mesh.faces))
+        vertices = checked_vertices(mesh.vertices, tally.source)
+        checked.faces[name], checked.dropped[name] = kept_faces(vertices, mesh.faces, tally.source)
+        tally.dropped_faces += checked.dropped[name]
+    return checked
+
+
+def _world_bounds(loaded: object, inst: _Instance) -> np.ndarray:
+    """(2, 3) bounds of an instance's parts as placed in the world."""
     geometry = loaded.geometry  # type: ignore[attr-defined]
-
-    def has_faces(name: str) -> bool:
-        mesh = geometry.get(name)
-        return isinstance(mesh, trimesh.Trimesh) and len(mesh.faces) > 0
-
-    return [
-        inst._replace(geometries=parts)
-        for inst in instances
-        if (parts := tuple(name for name in inst.geometries if has_faces(name)))
-    ]
+    boxes = np.stack([geometry[g].bounds for g in inst.geometries])
+    low, high = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+    corners = np.array(np.meshgrid(*zip(low, high, strict=True))).reshape(3, -1).T
+    transform = np.asarray(inst.transform, dtype=np.float64)
+    placed = corners @ transform[:3, :3].T + transform[:3, 3]
+    return np.stack([placed.min(axis=0), placed.max(axis=0)])
 
 
-def _nodes(loaded: object, kept: list[_Instance], file_name: str, linear: bool) -> Iterator[Node]:
+def _kept(
+    loaded: object, instances: list[_Instance], checked: _Checked, tally: InputTally
+) -> list[_Instance]:
+    """``instances`` with only their parts that hold faces, and only those left with any; an
+    instance whose faces were all dropped is recorded as skipped in ``tally``, and one too
+    large or too small for the outputs is an :class:`InputError`."""
+    kept = []
+    for inst in instances:
+        parts = tuple(name for name in inst.geometries if len(checked.faces.get(name, ())))
+        dropped = sum(checked.dropped.get(name, 0) for name in inst.geometries)
+        if parts:
+            inst = inst._replace(geometries=parts)
+            where = tally.source if len(instances) == 1 else f"{tally.source}: {inst.name}"
+            check_extent(_world_bounds(loaded, inst), where)
+            kept.append(inst)
+        elif dropped:
+            tally.skip(inst.name or Path(tally.source).name, dropped)
+    return kept
+
+
+def _nodes(
+    loaded: object,
+    kept: list[_Instance],
+    file_name: str,
+    linear: bool,
+    checked: _Checked,
+    tally: InputTally,
+) -> Iterator[Node]:
     """The nodes of ``kept``, one at a time: geometry placed once is moved into world
     coordinates, a geometry placed several times is shared and placed by each node's
     ``transform``. Each trimesh geometry is let go after its last use, so the input shrinks as
-    the nodes are consumed."""
+    the nodes are consumed. Faces dropped from each are counted in ``tally`` by node id."""
     geometry = loaded.geometry  # type: ignore[attr-defined]
     uses = Counter(inst.geometries for inst in kept)
     left = Counter(g for inst in kept for g in inst.geometries)
@@ -328,7 +473,10 @@ def _nodes(loaded: object, kept: list[_Instance], file_name: str, linear: bool) 
         if mesh is None:
             placement = _EYE if instanced else transform
             mesh = Mesh(
-                [surface_from_trimesh(geometry[g], placement, linear) for g in inst.geometries]
+                [
+                    surface_from_trimesh(geometry[g], placement, linear, checked.faces[g])
+                    for g in inst.geometries
+                ]
             )
             if instanced:
                 shared[inst.geometries] = mesh
@@ -336,9 +484,14 @@ def _nodes(loaded: object, kept: list[_Instance], file_name: str, linear: bool) 
             left[name] -= 1
             if not left[name]:
                 del geometry[name]
+                del checked.faces[name]
         name = inst.name if inst.name is not None and len(kept) > 1 else file_name
+        node_id = object_id(name, taken)
+        dropped = sum(checked.dropped.get(g, 0) for g in inst.geometries)
+        if dropped:
+            tally.dropped_by_object[node_id] = dropped
         yield Node(
-            id=object_id(name, taken),
+            id=node_id,
             geometry=mesh,
             transform=transform if instanced else None,
             attributes={"source_node": inst.name} if inst.name is not None else {},
@@ -349,7 +502,9 @@ def read_mesh(path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_L
     """Read a mesh file into a Scene; raise :class:`InputError` with a one-line reason.
 
     ``merge_groups``: read an OBJ file's objects / groups as one node (other formats keep their
-    scene-graph nodes).
+    scene-graph nodes). ``limits``: the decompressed size, vertices and faces the file may
+    hold. The scene carries an :class:`~.geometry_checks.InputTally` of the faces dropped (no
+    area) and the objects skipped (none left).
     """
     path = Path(path)
     suffix = suffix_of(path)
@@ -359,11 +514,14 @@ def read_mesh(path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_L
         raise InputError("is a directory, not a mesh file", str(path))
     if path.stat().st_size == 0:
         raise InputError("is empty", str(path))
-    data = _file_bytes(path, suffix)
+    data = _file_bytes(path, suffix, limits.decompressed_bytes)
     fmt = suffix[1:].upper()
-    problem = _format_problem(data, suffix)
-    if problem:
-        raise InputError(f"cannot be read as {fmt}: {problem}", str(path))
+    _refuse_other_format(data, suffix, path)
+    tally = InputTally(str(path), limits)
+    if suffix == ".ply":
+        _check_ply_counts(data, tally)
+    elif suffix == ".off":
+        _check_off_counts(data, tally)
     labels = None
     options: dict[str, object] = {}
     if suffix in (".obj", ".off") or (suffix == ".stl" and not _is_binary_stl(data)):
@@ -382,11 +540,14 @@ def read_mesh(path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_L
 
     instances = _obj_instances(loaded, labels) if suffix == ".obj" else _graph_instances(loaded)
     file_name = path.name.split(".")[0]
-    kept = _kept(loaded, instances)
+    checked = _checked_geometry(loaded, tally)
+    kept = _kept(loaded, instances, checked, tally)
+    if not kept and tally.dropped_faces:
+        raise tally.nothing_left()
     if not kept:
         raise InputError("has no faces (empty, or points only: nothing to bake)", str(path))
-    nodes = _nodes(loaded, kept, file_name, suffix in LINEAR_COLOR_SUFFIXES)
-    return Scene(source=str(path), nodes=nodes, size=len(kept))
+    nodes = _nodes(loaded, kept, file_name, suffix in LINEAR_COLOR_SUFFIXES, checked, tally)
+    return attach_tally(Scene(source=str(path), nodes=nodes, size=len(kept)), tally)
 
 
 FORMAT = Format(

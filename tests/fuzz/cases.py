@@ -1,0 +1,214 @@
+"""The hostile inputs that the regression tests (``tests/test_hostile_input.py``) run and
+``docs/hostile_input.md`` lists (``benchmarks/robustness.py``): each a file, the options of
+the run, the exit code and words of the one-line message expected."""
+
+from __future__ import annotations
+
+import gzip
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
+
+
+def _ply(vertices: str, faces: str, face_count: int | None = None) -> bytes:
+    """An ASCII PLY of ``vertices`` and ``faces`` lines (header counts from them, or
+    ``face_count`` faces declared)."""
+    nv, nf = len(vertices.splitlines()), len(faces.splitlines())
+    header = (
+        "ply\nformat ascii 1.0\n"
+        f"element vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n"
+        f"element face {nf if face_count is None else face_count}\n"
+        "property list uchar int vertex_indices\nend_header\n"
+    )
+    return (header + vertices + faces).encode()
+
+
+def zeros_gz(inflated: int, head: bytes = b"") -> bytes:
+    """A ``.gz`` of ``head`` followed by zero bytes, ``inflated`` bytes in all (MiB of zeros
+    are one gzip member, repeated: never held inflated)."""
+    mib = gzip.compress(bytes(1 << 20), mtime=0)
+    whole, rest = divmod(inflated - len(head), 1 << 20)
+    tail = gzip.compress(bytes(rest), mtime=0) if rest else b""
+    return gzip.compress(head, mtime=0) + mib * whole + tail
+
+
+def _binary_ply_head(vertices: int) -> bytes:
+    """A binary PLY header declaring ``vertices`` float vertices and no faces."""
+    return (
+        "ply\nformat binary_little_endian 1.0\n"
+        f"element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n"
+        "element face 0\nproperty list uchar int vertex_indices\nend_header\n"
+    ).encode()
+
+
+def grid_obj(side: int) -> bytes:
+    """An OBJ of a ``side`` × ``side`` vertex grid, two triangles per cell."""
+    lines = [f"v {i % side} {i // side} 0" for i in range(side * side)]
+    for y in range(side - 1):
+        for x in range(side - 1):
+            a = y * side + x + 1
+            lines += [f"f {a} {a + 1} {a + side}", f"f {a + 1} {a + side + 1} {a + side}"]
+    return ("\n".join(lines) + "\n").encode()
+
+
+@dataclass(frozen=True)
+class Case:
+    """One hostile input: what it is, its file name and content, the run's extra options,
+    the expected exit code and words of the message (exit 0: words of the summary)."""
+
+    what: str
+    name: str
+    content: Callable[[], bytes]
+    args: tuple[str, ...] = ()
+    code: int = 1
+    words: tuple[str, ...] = ()
+
+    def write(self, folder: Path) -> Path:
+        """The case's input file in ``folder``."""
+        path = folder / self.name
+        path.write_bytes(self.content())
+        return path
+
+
+CASES = (
+    Case(
+        "one triangle repeated 10,000 times (80 KB OBJ)",
+        "repeated.obj",
+        lambda: (TRIANGLE + "f 1 2 3\n" * 10_000).encode(),
+        code=0,
+        words=("wrote",),
+    ),
+    Case(
+        "OBJ face index past the last vertex",
+        "past.obj",
+        lambda: (TRIANGLE + "f 1 2 9\n").encode(),
+        words=("out of bounds",),
+    ),
+    Case(
+        "OBJ negative (relative) index before the first vertex",
+        "negative.obj",
+        lambda: (TRIANGLE + "f -1 -2 -5\n").encode(),
+        words=("out of bounds",),
+    ),
+    Case(
+        "PLY face index past the last vertex",
+        "past.ply",
+        lambda: _ply("0 0 0\n1 0 0\n0 1 0\n", "3 0 1 7\n"),
+        words=("do not exist", "index 7"),
+    ),
+    Case(
+        "PLY negative face index",
+        "negative.ply",
+        lambda: _ply("0 0 0\n1 0 0\n0 1 0\n", "3 0 1 -1\n"),
+        words=("do not exist", "index -1"),
+    ),
+    Case(
+        "only faces without area (collinear corners, a repeated index)",
+        "flat.obj",
+        lambda: b"v 0 0 0\nv 1 1 1\nv 2 2 2\nf 1 2 3\nf 1 1 2\n",
+        words=("no face with area", "2 faces"),
+    ),
+    Case(
+        "a good object and one whose faces all lack area",
+        "two.obj",
+        lambda: (TRIANGLE + "o good\nf 1 2 3\no bad\nf 1 1 2\nf 2 2 3\n").encode(),
+        code=0,
+        words=("bad", "skipped", "2 faces have no area"),
+    ),
+    Case(
+        "2-D OBJ vertices",
+        "flat2d.obj",
+        lambda: b"v 0 0\nv 1 0\nv 0 1\nf 1 2 3\n",
+        words=("2-D vertices",),
+    ),
+    Case(
+        "NaN coordinate",
+        "nan.obj",
+        lambda: b"v 0 0 0\nv 1 nan 0\nv 0 1 0\nf 1 2 3\n",
+        words=("NaN or infinite",),
+    ),
+    Case(
+        "infinite coordinate (PLY)",
+        "inf.ply",
+        lambda: _ply("0 0 0\n1 inf 0\n0 1 0\n", "3 0 1 2\n"),
+        words=("NaN or infinite",),
+    ),
+    Case(
+        "coordinates of 1e20",
+        "big.obj",
+        lambda: b"v 0 0 0\nv 1e20 0 0\nv 0 1e20 0\nf 1 2 3\n",
+        words=("1e+20", "at most 1e+15"),
+    ),
+    Case(
+        "coordinates of 1e308",
+        "huge.obj",
+        lambda: b"v 0 0 0\nv 1e308 0 0\nv 0 1e308 0\nf 1 2 3\n",
+        words=("1e+308", "at most 1e+15"),
+    ),
+    Case(
+        "an object 1e-4 across at 1e12 from the origin",
+        "far.obj",
+        lambda: b"v 1e12 0 0\nv 1e12 1e-4 0\nv 1e12 0 1e-4\nf 1 2 3\n",
+        words=("spans only", "significant digits"),
+    ),
+    Case(
+        "an object 1e-12 across",
+        "speck.obj",
+        lambda: b"v 0 0 0\nv 1e-12 0 0\nv 0 1e-12 0\nf 1 2 3\n",
+        words=("spans only 1e-12",),
+    ),
+    Case(
+        "a 1 MB .ply.gz of zeros (inflates to 1 GB)",
+        "zeros.ply.gz",
+        lambda: zeros_gz(1 << 30),
+        words=("cannot be read as PLY", "no 'ply' header"),
+    ),
+    Case(
+        "a PLY header and 1 GB of zeros in a 1 MB .gz, over --limit decompressed_bytes=64M",
+        "bomb.ply.gz",
+        lambda: zeros_gz(1 << 30, _binary_ply_head(10**8)),
+        args=("--limit", "decompressed_bytes=64M"),
+        words=("inflates past the limit of 67,108,864 bytes", "decompressed_bytes="),
+    ),
+    Case(
+        "a truncated .gz",
+        "cut.obj.gz",
+        lambda: gzip.compress(grid_obj(20), mtime=0)[:300],
+        words=("truncated",),
+    ),
+    Case(
+        "ASCII PLY declaring 10^9 faces and holding one",
+        "truncated.ply",
+        lambda: _ply("0 0 0\n1 0 0\n0 1 0\n", "3 0 1 2\n", face_count=10**9),
+        words=("truncated", "1,000,000,000 face"),
+    ),
+    Case(
+        "binary PLY declaring 10^8 vertices and holding one",
+        "truncated_binary.ply",
+        lambda: _binary_ply_head(10**8) + bytes(12),
+        words=("truncated", "100,000,000 vertex"),
+    ),
+    Case(
+        "OFF declaring 10^9 faces and holding one",
+        "truncated.off",
+        lambda: b"OFF\n3 1000000000 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        words=("truncated", "1,000,000,000 face"),
+    ),
+    Case(
+        "10,000 vertices, over --limit vertices=1000",
+        "grid.obj",
+        lambda: grid_obj(100),
+        args=("--limit", "vertices=1000"),
+        words=("10,000 vertices", "limit of 1,000", "--limit vertices="),
+    ),
+    Case(
+        "a PLY declaring 10,000 faces, over --limit faces=1000",
+        "faces.ply",
+        lambda: _ply("0 0 0\n1 0 0\n0 1 0\n", "3 0 1 2\n" * 10_000),
+        args=("--limit", "faces=1000"),
+        words=("declares 10,000 faces", "--limit faces="),
+    ),
+)
+"""Every hostile case, in the order the docs list them."""
