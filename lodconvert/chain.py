@@ -17,6 +17,7 @@ A level of kind ``qem`` is the source mesh decimated by quadric edge collapse
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Callable
@@ -24,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .bake import Backend, bake_points
+from .bake import Backend, Grid, bake_points
 from .errors import InputError, UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
@@ -32,8 +33,10 @@ from .plan import POINT_COST, least_point_cost, level_cost, silhouette_estimate
 from .ranges import (
     DEFAULT_BETA,
     DEFAULT_GAMMA,
+    MAX_SPAN,
     REFERENCE_VIEW,
     ReferenceView,
+    check_cutoffs,
     check_range_parameters,
     cutoff,
     default_xs,
@@ -102,6 +105,10 @@ class ChainOptions:
         check_range_parameters(self.beta, self.gamma, xs)
         if self.cull is not None and not (math.isfinite(self.cull) and self.cull > xs[-1]):
             raise UsageError(f"must be greater than the last exponent ({xs[-1]:g})", "cull")
+        if self.cull is not None:
+            check_cutoffs(
+                self.beta, self.gamma, [0.0, *xs, self.cull], ["xs"] * (len(xs) + 1) + ["cull"]
+            )
         n = self.pcd_levels
         for name, values in (
             ("resolutions", self.resolutions),
@@ -185,14 +192,23 @@ def inset_points(cloud: PointCloud, surface: Mesh, depth: float) -> PointCloud:
     return replace(cloud, positions=cloud.positions + depth * inward)
 
 
-def _check_geometry(obj: Node) -> None:
+def check_geometry(obj: Node) -> None:
+    """Raise :class:`InputError` (naming the object) unless ``obj`` has faces and finite
+    vertices spanning more than nothing and at most :data:`~.ranges.MAX_SPAN`."""
     surface = obj.geometry
     if len(surface.faces) == 0:
         raise InputError("has no faces (a point cloud or empty mesh cannot be baked)", obj.id)
     if not np.isfinite(surface.vertices).all():
         raise InputError("has NaN or infinite vertex coordinates", obj.id)
-    if not (surface.bounds[1] - surface.bounds[0]).max() > 0:
+    span = float((surface.bounds[1] - surface.bounds[0]).max())
+    if not span > 0:
         raise InputError("has zero extent (all vertices coincide)", obj.id)
+    if not span <= MAX_SPAN:
+        raise InputError(
+            f"spans {span:.3g}, more than the {MAX_SPAN:g} that float32 coordinates (X3D, glTF) "
+            "can hold around its centre",
+            obj.id,
+        )
 
 
 def _params_for(
@@ -204,7 +220,12 @@ def _params_for(
     if opts.slices and resolution is None:
         t1 = opts.slices[index]
     elif opts.slices:
-        t1 = max(1, round(opts.slices[index] * resolution / opts.resolutions[index]))
+        asked = (
+            opts.resolutions[index]
+            if opts.resolutions
+            else default_resolution(longest, distance, opts)
+        )
+        t1 = max(1, round(opts.slices[index] * resolution / asked))
     else:
         t1 = t3
     size = (
@@ -215,6 +236,42 @@ def _params_for(
     return BakeParams(
         resolution=int(t3), slices=int(t1), point_size=float(size), filter=opts.filter
     )
+
+
+def _within_grid_limit(
+    params: BakeParams,
+    bounds: np.ndarray,
+    index: int,
+    distance: float,
+    opts: ChainOptions,
+    limits: Limits,
+    where: str,
+    warn: Progress | None,
+) -> BakeParams:
+    """``params``, at a lower resolution where their grid would have more cells than
+    ``limits.grid_cells``; an explicit resolution over the limit is a :class:`UsageError`."""
+    longest = float(np.ptp(bounds, axis=0).max())
+    asked = params.resolution
+    cells = Grid.for_bounds(bounds, params.resolution, params.slices).size
+    if cells <= limits.grid_cells:
+        return params
+    if opts.resolutions:
+        raise UsageError(
+            f"{asked} gives {where} a grid of {cells:,} cells, more than the grid_cells limit "
+            f"({limits.grid_cells:,}; --limit grid_cells=N raises it)",
+            "resolutions",
+        )
+    while cells > limits.grid_cells and params.resolution > 1:
+        t3 = params.resolution
+        t3 = max(1, min(t3 - 1, math.floor(t3 * (limits.grid_cells / cells) ** (1 / 3))))
+        params = _params_for(index, longest, distance, opts, resolution=t3)
+        cells = Grid.for_bounds(bounds, params.resolution, params.slices).size
+    if warn:
+        warn(
+            f"{where} baked at resolution {params.resolution} instead of {asked}: its grid "
+            f"would have more cells than the grid_cells limit ({limits.grid_cells:,})"
+        )
+    return params
 
 
 def _decimated(
@@ -256,6 +313,7 @@ def _point_level(
     backend: Backend,
     object_id: str,
     warn: Progress | None,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> Level | str:
     """Point level ``index`` (``qem`` when asked) designed for ``distance``, or why it is left
     out: it cannot be made cheaper than ``previous``, or (default resolutions only, and where a
@@ -263,14 +321,23 @@ def _point_level(
     :data:`~.plan.MIN_SILHOUETTE` of the source's."""
     longest = float(np.ptp(bounds, axis=0).max())
     budget = math.inf if previous is None else level_cost(previous)
-    params = _params_for(index, longest, distance, opts)
+    params = _within_grid_limit(
+        _params_for(index, longest, distance, opts),
+        bounds,
+        index,
+        distance,
+        opts,
+        limits,
+        f"{object_id}: {name}",
+        warn,
+    )
     start = time.perf_counter()
-    cloud, grid = bake_points(surface, params, backend, bounds)
+    cloud, grid = bake_points(surface, params, backend, bounds, limits.memory_bytes)
     while len(cloud) * POINT_COST >= budget and params.resolution > 1:
         shrink = math.sqrt((budget / POINT_COST - 1) / max(len(cloud), 1)) * 0.95
         smaller = max(1, min(params.resolution - 1, math.floor(params.resolution * shrink)))
         params = _params_for(index, longest, distance, opts, resolution=smaller)
-        cloud, grid = bake_points(surface, params, backend, bounds)
+        cloud, grid = bake_points(surface, params, backend, bounds, limits.memory_bytes)
     if len(cloud) * POINT_COST >= budget or len(cloud) == 0:
         return f"no point level is cheaper than {previous.name if previous else 'nothing'}"
     if warn and opts.resolutions and params.resolution != opts.resolutions[index]:
@@ -311,7 +378,7 @@ def bake_chain(
     """Bake ``obj`` into a chain (levels relative to its bounding-box centre), within
     ``limits`` (grid cells per level, working memory)."""
     opts.check()
-    _check_geometry(obj)
+    check_geometry(obj)
     world_bounds = obj.geometry.bounds
     origin = (world_bounds[0] + world_bounds[1]) / 2.0
     surface = obj.geometry.translated(-origin)
@@ -321,6 +388,10 @@ def bake_chain(
     cuts = [cutoff(alpha, opts.beta, opts.gamma, x) for x in xs]
     # Distance each level first shows at; a baked finest level is designed for x = 0.
     design = [cutoff(alpha, opts.beta, opts.gamma, 0.0), *cuts]
+    if not (design[0] > 0 and all(b > a for a, b in itertools.pairwise(design))):
+        raise InputError(
+            f"is too small (diagonal {alpha:.3g}) for switching distances that increase", obj.id
+        )
 
     levels: list[Level] = []
     kept_cuts: list[float] = []
@@ -339,7 +410,7 @@ def bake_chain(
         if progress:
             progress(f"{obj.id}: baking {name}")
         level = _point_level(
-            surface, bounds, name, i, design[n], previous, opts, backend, obj.id, warn
+            surface, bounds, name, i, design[n], previous, opts, backend, obj.id, warn, limits
         )
         if isinstance(level, str):
             dropped[name] = level

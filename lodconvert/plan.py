@@ -90,7 +90,7 @@ def _source_masks(mesh: Mesh, pixel: float) -> tuple[Grid, list[np.ndarray]]:
     bounds = mesh.bounds
     resolution = max(1, math.ceil(float(np.ptp(bounds, axis=0).max()) / pixel - 1e-9))
     grid = Grid.for_bounds(bounds, resolution, 1)
-    hits = NumpyBackend().rasterize(mesh, grid)
+    hits = list(NumpyBackend().rasterize(mesh, grid))
     masks = []
     for axis in range(3):
         mask = np.zeros(grid.image_shape(axis), dtype=bool)

@@ -19,6 +19,17 @@ from .errors import UsageError
 DEFAULT_BETA = 3.0
 DEFAULT_GAMMA = 10.0
 DEFAULT_XS = (0.33, 0.66, 1.0)
+MAX_SPAN = 1e38
+"""Largest side of an object's bounding box that is baked: float32 coordinates (X3D, glTF) end
+at 3.4e38, and levels are written relative to the box centre."""
+MAX_ALPHA = MAX_SPAN * math.sqrt(3.0)
+"""Largest bounding-box diagonal α of an object that is baked."""
+MIN_SCALE = 1e-290
+"""Least Y/α = β·γˣ: projected sizes α·focal/Y (resolutions, point sizes, screen coverages) stay
+finite above it."""
+CUTOFF_GAP = 1e-12
+"""Least relative growth of γˣ from one exponent to the next: far above float64 rounding, so
+cutoffs stay strictly increasing after the multiplication by α·β."""
 
 
 @dataclass(frozen=True)
@@ -61,11 +72,52 @@ def check_range_parameters(beta: float, gamma: float, xs: Sequence[float]) -> No
         raise UsageError(
             f"exponents must be strictly increasing, got {', '.join(f'{x:g}' for x in xs)}", "xs"
         )
+    check_cutoffs(beta, gamma, [0.0, *xs])
+
+
+def check_cutoffs(
+    beta: float, gamma: float, xs: Sequence[float], fields: Sequence[str] = ()
+) -> None:
+    """Raise :class:`UsageError` unless the cutoffs Y = α·β·γˣ at the exponents ``xs`` (0 and
+    increasing) are at least :data:`MIN_SCALE` · α, finite and strictly increasing for every α
+    up to :data:`MAX_ALPHA`: γˣ must grow by more than rounding can undo from one exponent to
+    the next, and the largest must stay finite at α = :data:`MAX_ALPHA`. ``fields`` names the
+    option each exponent comes from (``xs`` where not given)."""
+    if not MIN_SCALE <= beta < math.inf or not math.isfinite(MAX_ALPHA * beta):
+        raise UsageError(
+            f"must keep switching distances Y = α·β·γˣ between {MIN_SCALE:g}·α and the largest "
+            f"float for objects up to {MAX_SPAN:g} across, got {beta:g}",
+            "beta",
+        )
+    growth = [_power(gamma, x) for x in xs]
+    for i, (x, g) in enumerate(zip(xs, growth, strict=True)):
+        if not math.isfinite(MAX_ALPHA * beta * g):
+            field = "gamma" if x <= 1 else fields[i] if i < len(fields) else "xs"
+            raise UsageError(
+                f"{gamma if field == 'gamma' else x:g} makes Y = α·β·γˣ overflow at x = {x:g} "
+                f"(β {beta:g}, γ {gamma:g}) for objects up to {MAX_SPAN:g} across",
+                field,
+            )
+        if i and not g > growth[i - 1] * (1 + CUTOFF_GAP):
+            apart = _power(DEFAULT_GAMMA, x) > _power(DEFAULT_GAMMA, xs[i - 1]) * (1 + CUTOFF_GAP)
+            raise UsageError(
+                f"{'(γ) ' + repr(gamma) if apart else repr(x)} gives switching distances too "
+                f"close to tell apart in floating point at x = {xs[i - 1]!r} and {x!r}",
+                "gamma" if apart else fields[i] if i < len(fields) else "xs",
+            )
+
+
+def _power(gamma: float, x: float) -> float:
+    """γˣ, ``inf`` where it overflows."""
+    try:
+        return float(gamma**x)
+    except OverflowError:
+        return math.inf
 
 
 def cutoff(alpha: float, beta: float, gamma: float, x: float) -> float:
-    """One switching distance Y = α·β·γˣ."""
-    return float(alpha * beta * gamma**x)
+    """One switching distance Y = α·β·γˣ (``inf`` where it overflows)."""
+    return float(alpha * beta * _power(gamma, x))
 
 
 def cutoffs(
@@ -77,7 +129,7 @@ def cutoffs(
     """Switching distances Y = α·β·γˣ for each exponent x, nearest first.
 
     >>> [round(y, 3) for y in cutoffs(1.0, 3.0, 10.0, [0.33, 0.66, 1.0])]
-    [6.414, 13.714, 30.0]
+    [6.414, 13.713, 30.0]
     """
     check_range_parameters(beta, gamma, xs)
     if not math.isfinite(alpha) or alpha <= 0:

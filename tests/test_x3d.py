@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from lxml import etree
 from PIL import Image
 
@@ -23,6 +25,7 @@ from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.errors import InputError, UsageError
 from lodconvert.io import OutputInfo, output_format, own_format, read_scene, x3d
 from lodconvert.io.numbers import (
+    MAX_DECIMALS,
     decimals_for,
     format_exact,
     format_fixed,
@@ -617,3 +620,61 @@ def test_float_ints_colour_and_exact_formatting() -> None:
     assert format_unit_bytes(np.array([0, 128, 255], np.uint8)) == "0 0.502 1"
     origin = [500000.123456789, 5400000.987654321, -0.1]
     assert [float(t) for t in format_exact(origin).split()] == origin
+
+
+FINITE = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(FINITE, min_size=1, max_size=8))
+def test_format_floats_round_trips_every_finite_float(values: list[float]) -> None:
+    """Parsed back, every number is within half a unit of the last decimal written (plus the
+    float64 rounding of scaling, 2⁻⁵¹ of the value), over the whole float64 range."""
+    decimals = geometry_decimals(values)
+    tokens = format_floats(values).split(" ")
+    assert len(tokens) == len(values)
+    for token, value in zip(tokens, values, strict=True):
+        assert re.fullmatch(r"-?\d+(\.\d*[1-9])?", token), token
+        error = abs(float(token) - value)
+        assert error <= 0.5 * 10.0**-decimals + 2.0**-51 * abs(value) + 5e-324, (token, value)
+
+
+@settings(max_examples=200, deadline=None)
+@given(FINITE, st.integers(0, MAX_DECIMALS))
+def test_format_fixed_round_trips_at_any_decimals(value: float, decimals: int) -> None:
+    token = format_fixed([value], decimals)
+    error = abs(float(token) - value)
+    assert error <= 0.5 * 10.0**-decimals + 2.0**-51 * abs(value) + 5e-324, token
+
+
+def test_coordinates_beyond_int64_are_written_exactly() -> None:
+    assert format_floats([1e20, -2e20, 0.5]) == "100000000000000000000 -200000000000000000000 0"
+    assert format_fixed([-1.5e300], 0) == str(int(-1.5e300))
+    with pytest.raises(ValueError, match="decimals"):
+        format_fixed([1.0], MAX_DECIMALS + 1)
+
+
+@pytest.mark.parametrize(
+    ("text", "word"),
+    [
+        ('<MetadataSet name="lodconvert"/>', "no lodconvert LOD"),
+        (
+            "<X3D><Scene><Transform><LOD><Group DEF='a'><Shape><IndexedTriangleSet index='0 1 9'>"
+            "<Coordinate point='0 0 0 1 0 0 0 1 0'/></IndexedTriangleSet></Shape></Group></LOD>"
+            "</Transform></Scene></X3D>",
+            "index",
+        ),
+        (
+            "<X3D><Scene><Group DEF='a'><Shape><PointSet><Coordinate point='0 0 nan'/>"
+            "</PointSet></Shape></Group></Scene></X3D>",
+            "NaN",
+        ),
+    ],
+)
+def test_malformed_x3d_read_back_is_one_input_error(tmp_path: Path, text: str, word: str) -> None:
+    path = tmp_path / "bad.x3d"
+    path.write_text(text)
+    with pytest.raises(InputError) as caught:
+        (x3d.read_back if "Metadata" in text else read_x3d_points)(path)
+    message = str(caught.value)
+    assert message.startswith(str(path)) and word in message and "\n" not in message

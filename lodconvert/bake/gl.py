@@ -323,8 +323,10 @@ class GLBackend:
             self._ctx.release()
             self._ctx = None
 
-    def rasterize(self, surface: Mesh, grid: Grid) -> list[SlabHits]:
-        """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z)."""
+    def rasterize(self, surface: Mesh, grid: Grid, memory_bytes: int = 0) -> list[SlabHits]:
+        """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z). The GPU keeps one
+        hit per (slab, pixel) as it draws, so host memory follows the hits whatever
+        ``memory_bytes`` allows."""
         if self._ctx is None:
             raise LodConvertError("GL backend used after release()")
         plans = [

@@ -41,6 +41,14 @@ class Grid:
         slabs = tuple(max(1, math.ceil(e / slab - 1e-9)) for e in extent)
         return cls(lo=lo, pitch=pitch, slab=slab, cells=cells, slabs=slabs)  # type: ignore[arg-type]
 
+    @property
+    def size(self) -> int:
+        """Cells as the slab images hold them: slabs × pixels, the most over the three view
+        axes (T3 × T3 × T1 for a cube)."""
+        return max(
+            self.slabs[a] * self.cells[(a + 1) % 3] * self.cells[(a + 2) % 3] for a in range(3)
+        )
+
     @staticmethod
     def plane_axes(axis: int) -> tuple[int, int]:
         """The (u, v) axes of the image plane seen along ``axis``."""
@@ -79,6 +87,22 @@ class Grid:
         offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
         around = np.clip(idx[:, None, :] + offsets[None], 0, n - 1).reshape(-1, 3)
         return np.sort((around[:, 0] * n[1] + around[:, 1]) * n[2] + around[:, 2])
+
+
+def distinct_triangles(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The first and the last index of each group of identical triangles in ``tri`` (n, 3, 3)
+    (bit for bit the same corners in the same order), in order of first index: a face repeated
+    many times is rasterised once."""
+    if len(tri) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    rows = np.ascontiguousarray(tri, dtype=np.float64).reshape(len(tri), -1)
+    _, first, group = np.unique(
+        rows.view(f"V{rows.shape[1] * 8}").ravel(), return_index=True, return_inverse=True
+    )
+    last = np.zeros(len(first), dtype=np.int64)
+    np.maximum.at(last, group.ravel(), np.arange(len(tri)))
+    order = np.argsort(first)
+    return first[order].astype(np.int64), last[order]
 
 
 @dataclass

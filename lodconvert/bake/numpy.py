@@ -7,17 +7,25 @@ is what the GL backend's depth test keeps, so both backends yield the same cells
 
 The per-face tables (projected bounds, barycentric and depth planes in world coordinates) do
 not depend on the level, so they are computed once per surface and shared by all its levels.
+
+Memory follows the hits, not the faces: candidate (face, pixel) pairs are tested a chunk at a
+time (a quarter of the working-memory budget), and each chunk is folded into the nearest hits
+found so far, so that overlapping faces cost time, not memory.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 
+from ..limits import DEFAULT_LIMITS
 from ..model import Mesh
-from .grid import Grid, SlabHits
+from .grid import Grid, SlabHits, distinct_triangles
 
-# Candidate (face, pixel) pairs tested at once; bounds peak memory (~150 bytes per candidate).
-CHUNK = 1 << 21
+CANDIDATE_BYTES = 160
+"""Working memory per candidate (face, pixel) pair tested at once."""
+MIN_CHUNK = 1 << 16
 EPS = 1e-9
 
 
@@ -30,20 +38,23 @@ class NumpyBackend:
     def release(self) -> None:
         """Nothing to free (the GL backend frees its context here)."""
 
-    def rasterize(self, surface: Mesh, grid: Grid) -> list[SlabHits]:
-        """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z)."""
-        hits: list[SlabHits] = []
+    def rasterize(
+        self, surface: Mesh, grid: Grid, memory_bytes: int = DEFAULT_LIMITS.memory_bytes
+    ) -> Iterator[SlabHits]:
+        """Covered pixels of all 6 view directions (+x, -x, +y, -y, +z, -z), one at a time,
+        testing at most ``memory_bytes`` worth of candidates at once."""
         for axis in range(3):
             table = surface.derived(f"numpy-axis-{axis}", lambda a=axis: face_table(surface, a))
-            hits.extend(rasterize_axis(table, grid, axis))
-        return hits
+            yield from rasterize_axis(table, grid, axis, memory_bytes)
 
 
 def face_table(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
-    """Per face not degenerate in projection along ``axis``: projected bounds and the planes of
-    two barycentric coordinates and of the depth, as ``(a, b, c)`` of ``a·u + b·v + c``, all
-    relative to ``centre``."""
-    tri = surface.triangles
+    """Per distinct face not degenerate in projection along ``axis``: projected bounds and the
+    planes of two barycentric coordinates and of the depth, as ``(a, b, c)`` of ``a·u + b·v +
+    c``, all relative to ``centre``. Identical faces share a row: ``face`` is the first of them
+    (the one nearest hits from the low side keep), ``face_last`` the last (from the high side)."""
+    first, last = distinct_triangles(surface.triangles)
+    tri = surface.triangles[first]
     u, v = Grid.plane_axes(axis)
     # Planes are set up relative to the bounding-box centre, so that coordinates far from the
     # origin (georeferenced data) keep their precision.
@@ -63,7 +74,8 @@ def face_table(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
     plane[:, 2] += w[:, 2]
     return {
         "centre": centre,
-        "face": idx,
+        "face": first[idx],
+        "face_last": last[idx],
         "umin": pu[idx].min(axis=1),
         "umax": pu[idx].max(axis=1),
         "vmin": pv[idx].min(axis=1),
@@ -105,8 +117,33 @@ def _candidates(
     return rows, iu, iv, pl[:, 0] * x + pl[:, 1] * y + pl[:, 2] + centre[axis]
 
 
-def rasterize_axis(table: dict[str, np.ndarray], grid: Grid, axis: int) -> list[SlabHits]:
-    """Nearest hit per (slab, pixel) seen from both sides of ``axis``: two :class:`SlabHits`."""
+def _extremes(
+    low: tuple[np.ndarray, ...], high: tuple[np.ndarray, ...]
+) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    """Per key, the (key, depth, face) with the least (depth, face) among ``low`` and the one
+    with the greatest among ``high``, both ordered by key."""
+    picked = []
+    for (key, depth, face), last in ((low, False), (high, True)):
+        order = np.lexsort((face, depth, key))
+        sorted_keys = key[order]
+        change = sorted_keys[1:] != sorted_keys[:-1]
+        ends = np.r_[change, True] if last else np.r_[True, change]
+        pick = order[ends] if len(key) else order
+        picked.append((key[pick], depth[pick], face[pick]))
+    return picked[0], picked[1]
+
+
+def rasterize_axis(
+    table: dict[str, np.ndarray],
+    grid: Grid,
+    axis: int,
+    memory_bytes: int = DEFAULT_LIMITS.memory_bytes,
+) -> list[SlabHits]:
+    """Nearest hit per (slab, pixel) seen from both sides of ``axis``: two :class:`SlabHits`.
+
+    Candidates are tested in chunks of a quarter of ``memory_bytes``; each chunk's hits are
+    folded into the nearest so far (ties go to the lower face from the low side, the higher
+    from the high side, whatever the chunking)."""
     u, v = grid.plane_axes(axis)
     rows_n, cols_n = grid.image_shape(axis)
     centre = table["centre"]
@@ -116,44 +153,40 @@ def rasterize_axis(table: dict[str, np.ndarray], grid: Grid, axis: int) -> list[
     live = np.flatnonzero(count)
     count = count[live]
     cum = np.cumsum(count)
-    parts: list[tuple[np.ndarray, ...]] = []
+    chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
+    empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float64), table["face"][:0])
+    low = high = empty
     start = 0
     while start < len(live):
         base = cum[start - 1] if start else 0
-        stop = max(start + 1, int(np.searchsorted(cum, base + CHUNK, side="right")))
+        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
         c = count[start:stop]
         rows = np.repeat(live[start:stop], c)
         offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
         width = nu[rows]
-        parts.append(
-            _candidates(
-                table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis
-            )
+        rows, iu, iv, depth = _candidates(
+            table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis
+        )
+        key = (grid.slab_of(axis, depth) * rows_n + iv) * cols_n + iu
+        low, high = _extremes(
+            tuple(
+                np.concatenate(p) for p in zip(low, (key, depth, table["face"][rows]), strict=True)
+            ),
+            tuple(
+                np.concatenate(p)
+                for p in zip(high, (key, depth, table["face_last"][rows]), strict=True)
+            ),
         )
         start = stop
-    if parts:
-        rows, iu, iv, depth = (np.concatenate(p) for p in zip(*parts, strict=True))
-    else:
-        rows = iu = iv = np.zeros(0, dtype=np.int64)
-        depth = np.zeros(0, dtype=np.float64)
-    face = table["face"][rows]
-    slab = grid.slab_of(axis, depth)
-    key = (slab * rows_n + iv) * cols_n + iu
-    # Sort by key, then depth, then face (deterministic ties): the first of a key group is the
-    # nearest hit from the low side, the last the nearest from the high side.
-    order = np.lexsort((face, depth, key))
-    key = key[order]
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]]) if len(key) else key
-    ends = np.r_[starts[1:], len(key)] - 1 if len(key) else key
     return [
         SlabHits(
             axis=axis,
             sign=sign,
-            slab=slab[pick],
-            iu=iu[pick],
-            iv=iv[pick],
-            depth=depth[pick],
-            face=face[pick],
+            slab=key // (rows_n * cols_n),
+            iu=key % cols_n,
+            iv=(key // cols_n) % rows_n,
+            depth=depth,
+            face=face,
         )
-        for sign, pick in ((1, order[starts]), (-1, order[ends]))
+        for sign, (key, depth, face) in ((1, low), (-1, high))
     ]

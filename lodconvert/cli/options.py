@@ -4,6 +4,7 @@ and the mapping from the library's option fields to the flags that set them."""
 from __future__ import annotations
 
 import argparse
+import math
 from typing import NoReturn
 
 from ..chain import MAX_LEVELS, ChainOptions
@@ -74,7 +75,7 @@ def _ints(text: str | None, flag: str) -> tuple[int, ...] | None:
     if not text:
         return None
     values = parse_list(text, float, flag)
-    if any(v != int(v) for v in values):
+    if any(not math.isfinite(v) or v != int(v) for v in values):
         raise UsageError(f"{flag} expects whole numbers, got {text!r}")
     return tuple(int(v) for v in values)
 

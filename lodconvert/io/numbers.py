@@ -18,6 +18,12 @@ import numpy as np
 
 GEOMETRY_DIGITS = 7
 """Significant digits kept on an array's largest magnitude: float32-level precision."""
+MAX_DECIMALS = 308
+"""Most decimals printed (10^308 is the largest power of ten a float64 holds); magnitudes below
+1e-302 print with fewer than :data:`GEOMETRY_DIGITS` significant digits."""
+_FAST_LIMIT = 2.0**62
+"""Scaled magnitudes below this are formatted with int64 digit arithmetic, larger ones exactly
+with Python's decimal conversion."""
 
 _POW10 = 10 ** np.arange(19, dtype=np.int64)
 _SPACE, _MINUS, _DOT, _ZERO = (ord(c) for c in " -.0")
@@ -25,14 +31,15 @@ _UNIT_BYTES = np.array([f"{i / 255:.4f}".rstrip("0").rstrip(".") for i in range(
 
 
 def decimals_for(max_abs: float, significant: int = GEOMETRY_DIGITS) -> int:
-    """Decimals that give ``max_abs`` ``significant`` significant digits (never negative).
+    """Decimals that give ``max_abs`` ``significant`` significant digits (never negative, at
+    most :data:`MAX_DECIMALS`).
 
     >>> decimals_for(0.0781), decimals_for(123.4), decimals_for(5e9)
     (8, 4, 0)
     """
     if not (math.isfinite(max_abs) and max_abs > 0):
         return 0
-    return max(0, significant - 1 - math.floor(math.log10(max_abs)))
+    return min(MAX_DECIMALS, max(0, significant - 1 - math.floor(math.log10(max_abs))))
 
 
 def geometry_decimals(
@@ -92,25 +99,45 @@ def format_ints(values: np.ndarray | Iterable[int]) -> str:
 
 
 def format_fixed(values: np.ndarray | Iterable[float], decimals: int) -> str:
-    """Finite floats rounded to ``decimals`` places, trailing zeros and ``-0`` dropped,
-    separated by single spaces (any shape, flattened in C order).
+    """Finite floats rounded to ``decimals`` places (0 to :data:`MAX_DECIMALS`), trailing zeros
+    and ``-0`` dropped, separated by single spaces (any shape, flattened in C order). Every
+    finite float64 is written, within half a unit in the last place (plus float64 rounding of
+    the scaling, 2⁻⁵² of the value): digits beyond int64 come from Python's exact conversion.
 
     >>> format_fixed([0.5, -2.0, 1e-9, -0.000049, 1234.56789], 4)
     '0.5 -2 0 0 1234.5679'
+    >>> format_fixed([1e20, -2.5e30], 0)
+    '100000000000000000000 -2499999999999999908974073741312'
     """
-    if not 0 <= decimals <= 15:
-        raise ValueError(f"decimals must be between 0 and 15, got {decimals}")
+    if not 0 <= decimals <= MAX_DECIMALS:
+        raise ValueError(f"decimals must be between 0 and {MAX_DECIMALS}, got {decimals}")
     flat = np.asarray(values, dtype=np.float64).ravel()
     if not np.isfinite(flat).all():
         raise ValueError("cannot format NaN or infinite values")
-    scaled = np.rint(flat * float(_POW10[decimals])).astype(np.int64)
+    with np.errstate(over="ignore"):  # overflows go the exact way below
+        scaled = np.rint(flat * 10.0**decimals)
+    if len(flat) and float(np.abs(scaled).max()) >= _FAST_LIMIT:
+        return " ".join(_exact_fixed(float(v), decimals) for v in flat)
+    scaled = scaled.astype(np.int64)
     magnitude = np.abs(scaled)
-    whole, fraction = np.divmod(magnitude, _POW10[decimals])
+    if decimals < len(_POW10):
+        whole, fraction = np.divmod(magnitude, _POW10[decimals])
+    else:  # below 2^62 < 10^19: no whole part
+        whole, fraction = np.zeros_like(magnitude), magnitude
     trailing = np.zeros(len(flat), dtype=np.int64)
-    for place in range(1, decimals + 1):
+    for place in range(1, min(decimals, len(_POW10) - 1) + 1):
         trailing += (fraction % _POW10[place]) == 0
     fraction_digits = np.where(fraction == 0, 0, decimals - trailing)
     return _join(scaled < 0, whole, fraction // _POW10[trailing], fraction_digits)
+
+
+def _exact_fixed(value: float, decimals: int) -> str:
+    """``value`` rounded to ``decimals`` places from its exact binary value, trailing zeros and
+    ``-0`` dropped."""
+    text = f"{value:.{decimals}f}"
+    if "." in text:
+        text = text.rstrip("0").rstrip(".")
+    return "0" if text == "-0" else text
 
 
 def format_floats(values: np.ndarray | Iterable[float], significant: int = GEOMETRY_DIGITS) -> str:

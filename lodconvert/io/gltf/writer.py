@@ -29,6 +29,7 @@ import numpy as np
 import pygltflib as gl
 from PIL import Image as PILImage
 
+from ...errors import LodConvertError
 from ...model import Level, LodChain, PointCloud, Surface
 from ...ranges import ReferenceView, screen_coverage
 from .. import OutputInfo
@@ -49,6 +50,17 @@ _COMPONENTS = {
 }
 _DTYPES = {code: dtype for dtype, code in _COMPONENTS.items()}
 _WIDTHS = {gl.SCALAR: 1, gl.VEC2: 2, gl.VEC3: 3, gl.VEC4: 4}
+
+
+def float32_positions(positions: np.ndarray) -> np.ndarray:
+    """``positions`` as float32, or :class:`LodConvertError` where a coordinate is beyond the
+    float32 range (it would be written as infinity)."""
+    largest = float(np.abs(positions).max(initial=0.0))
+    if not largest <= np.finfo(np.float32).max:
+        raise LodConvertError(
+            f"a level coordinate of magnitude {largest:.3g} is beyond the float32 range of glTF"
+        )
+    return positions.astype(np.float32)
 
 
 def _srgb_table() -> np.ndarray:
@@ -279,7 +291,7 @@ class _Document:
 
     def _mesh_primitive(self, surface: Surface) -> gl.Primitive:
         attributes = gl.Attributes(
-            POSITION=self._accessor(surface.vertices.astype(np.float32), bounds=True),
+            POSITION=self._accessor(float32_positions(surface.vertices), bounds=True),
             NORMAL=self._accessor(vertex_normals(surface)),
         )
         if surface.vertex_colors is not None:
@@ -329,7 +341,7 @@ class _Document:
 
     def _point_primitive(self, points: PointCloud) -> gl.Primitive:
         attributes = gl.Attributes(
-            POSITION=self._accessor(points.positions.astype(np.float32), bounds=True),
+            POSITION=self._accessor(float32_positions(points.positions), bounds=True),
             NORMAL=self._accessor(unit_normals(points.normals)),
             COLOR_0=self._colors(points.colors),
         )

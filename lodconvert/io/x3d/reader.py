@@ -61,15 +61,21 @@ def _read_shape(shape: etree._Element, translation: np.ndarray) -> X3DLevel | No
     coordinate = node.find("Coordinate")
     points = coordinate.get("point") if coordinate is not None else None
     coords = _numbers(points, 3, np.float64, "point")
+    if not np.isfinite(coords).all():
+        raise ValueError("point has NaN or infinite coordinates")
     colors = None
     for tag, width in (("Color", 3), ("ColorRGBA", 4)):
         color = node.find(tag)
         if color is not None:
             values = _numbers(color.get("color"), width, np.float64, "color")
+            if len(values) != len(coords) or not np.isfinite(values).all():
+                raise ValueError(f"{tag} has {len(values)} finite colours for {len(coords)} points")
             rgba = np.full((len(values), 4), 255, dtype=np.uint8)
             rgba[:, :width] = np.clip(np.rint(values * 255.0), 0, 255).astype(np.uint8)
             colors = rgba
     index = _numbers(node.get("index"), 3, np.int64, "index") if geometry != "PointSet" else None
+    if index is not None and len(index) and not (index.min() >= 0 and index.max() < len(coords)):
+        raise ValueError(f"index refers to vertices beyond the {len(coords)} points")
     return X3DLevel(geometry, coords, translation, colors, index)
 
 
@@ -217,7 +223,11 @@ def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
             transforms.pop()
         elif tag == "Shape":
             element.clear()
-        elif tag == "MetadataSet" and element.get("name") == METADATA_SET:
+        elif (
+            tag == "MetadataSet"
+            and element.get("name") == METADATA_SET
+            and element.getparent() is not None  # not the document itself
+        ):
             parent = element.getparent()
             lod = objects[-1]["element"] if objects else None
             if parent.tag == "Transform" and transforms:
