@@ -138,3 +138,27 @@ def test_georeferenced_coordinates_bake_like_centred_ones(torus: Node) -> None:
     # the same hits up to rounding; a near-tie for a cell's representative may flip
     assert np.mean(error < 1e-6) > 0.99
     assert error.max() < grid.pitch
+
+
+@pytest.mark.parametrize("kind", ["median", "gaussian"])
+def test_hole_filters_match_opencv(kind: str) -> None:
+    """The filters evaluate OpenCV's 3×3 median and Gaussian blurs on the pixels next to covered
+    ones only; on random masks they add exactly the pixels OpenCV's blurs would."""
+    cv2 = pytest.importorskip("cv2")
+    from lodconvert.bake.filters import _filled
+
+    rng = np.random.default_rng(7)
+    for density in (0.1, 0.5, 0.8):
+        mask = np.zeros((66, 82), dtype=np.uint8)  # one-pixel padding ring stays empty
+        mask[1:-1, 1:-1] = (rng.random((64, 80)) < density) * 255
+        y, x = np.nonzero(mask)
+        if kind == "median":
+            grown = cv2.medianBlur(mask, 3) > 0
+        else:
+            grown = cv2.GaussianBlur(mask.astype(np.float32) / 255.0, (3, 3), 0) >= 0.5
+        grown &= mask == 0
+        grown[[0, -1], :] = False
+        grown[:, [0, -1]] = False
+        ey, ex = np.nonzero(grown)
+        fy, fx = _filled(mask, kind, y, x)
+        assert (fy.tolist(), fx.tolist()) == (ey.tolist(), ex.tolist())
