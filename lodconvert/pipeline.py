@@ -1,4 +1,5 @@
-"""The conversion session: read → bake each object → stream chains into the writer → rename.
+"""The conversion session: read → bake each object → stream chains into the writer → check →
+commit every output together.
 
 Readers are free of processing and writers of baking; this module joins them, times each step
 and collects what the ``--report`` file records. One object that cannot be baked is reported and
@@ -21,7 +22,7 @@ import numpy as np
 
 from . import __version__
 from .bake import Backend, get_backend
-from .chain import ChainOptions, bake_chain
+from .chain import ChainOptions, bake_chain, check_geometry
 from .errors import InputError
 from .io import OutputInfo, input_format, output_format
 from .io.geometry_checks import InputTally, tally_of
@@ -262,6 +263,7 @@ def object_ranges(scene: Scene, options: ChainOptions) -> list[dict[str, Any]]:
     options.check()
     rows = []
     for obj in scene.with_geometry():
+        check_geometry(obj)
         bounds = obj.geometry.bounds
         alpha = float(np.linalg.norm(bounds[1] - bounds[0]))
         xs = list(options.exponents) + ([options.cull] if options.cull is not None else [])
@@ -272,7 +274,7 @@ def object_ranges(scene: Scene, options: ChainOptions) -> list[dict[str, Any]]:
                 "beta": options.beta,
                 "gamma": options.gamma,
                 "xs": xs,
-                "cutoffs": cutoffs(alpha, options.beta, options.gamma, xs) if alpha > 0 else [],
+                "cutoffs": cutoffs(alpha, options.beta, options.gamma, xs),
             }
         )
     return rows
