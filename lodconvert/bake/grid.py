@@ -80,27 +80,29 @@ class Grid:
         """World centres (k, 3) of the cells with the given keys."""
         return self.lo + (self.cell_index(keys).astype(np.float64) + 0.5) * self.pitch
 
-    def neighbourhood_keys(self, keys: np.ndarray) -> np.ndarray:
-        """Sorted keys of the given cells and their 26 neighbours (clamped into the grid)."""
-        idx = self.cell_index(keys)
-        n = np.asarray(self.cells, dtype=np.int64)
-        offsets = np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        around = np.clip(idx[:, None, :] + offsets[None], 0, n - 1).reshape(-1, 3)
-        return np.sort((around[:, 0] * n[1] + around[:, 1]) * n[2] + around[:, 2])
-
 
 def distinct_triangles(tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The first and the last index of each group of identical triangles in ``tri`` (n, 3, 3)
     (bit for bit the same corners in the same order), in order of first index: a face repeated
-    many times is rasterised once."""
-    if len(tri) == 0:
+    many times is rasterised once. Rows are hashed first; only a mesh with equal hashes (a
+    repeated face, or a rare collision) pays for the exact grouping."""
+    n = len(tri)
+    if n == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    rows = np.ascontiguousarray(tri, dtype=np.float64).reshape(len(tri), -1)
+    rows = np.ascontiguousarray(tri, dtype=np.float64).reshape(n, -1)
+    words = rows.view(np.uint64)
+    digest = words[:, 0].copy()
+    for k in range(1, words.shape[1]):  # FNV-style mixing, wrapping in uint64
+        digest = (digest * np.uint64(0x100000001B3)) ^ words[:, k]
+    ordered = np.sort(digest)
+    if not (ordered[1:] == ordered[:-1]).any():
+        every = np.arange(n, dtype=np.int64)
+        return every, every.copy()
     _, first, group = np.unique(
         rows.view(f"V{rows.shape[1] * 8}").ravel(), return_index=True, return_inverse=True
     )
     last = np.zeros(len(first), dtype=np.int64)
-    np.maximum.at(last, group.ravel(), np.arange(len(tri)))
+    np.maximum.at(last, group.ravel(), np.arange(n))
     order = np.argsort(first)
     return first[order].astype(np.int64), last[order]
 

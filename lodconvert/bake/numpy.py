@@ -53,7 +53,7 @@ def face_table(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
     planes of two barycentric coordinates and of the depth, as ``(a, b, c)`` of ``a·u + b·v +
     c``, all relative to ``centre``. Identical faces share a row: ``face`` is the first of them
     (the one nearest hits from the low side keep), ``face_last`` the last (from the high side)."""
-    first, last = distinct_triangles(surface.triangles)
+    first, last = surface.derived("distinct", lambda: distinct_triangles(surface.triangles))
     tri = surface.triangles[first]
     u, v = Grid.plane_axes(axis)
     # Planes are set up relative to the bounding-box centre, so that coordinates far from the

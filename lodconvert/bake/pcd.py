@@ -75,7 +75,7 @@ def occupied_hits(
 def _edge_table(surface: Mesh) -> dict[str, np.ndarray]:
     """Per distinct non-degenerate face (the first of identical ones): centroid, and start,
     vector and length of its longest edge."""
-    first, _ = distinct_triangles(surface.triangles)
+    first, _ = surface.derived("distinct", lambda: distinct_triangles(surface.triangles))
     tri = surface.triangles[first]
     edges = tri[:, [1, 2, 0]] - tri
     area2 = np.linalg.norm(np.cross(edges[:, 0], -edges[:, 2]), axis=1)
@@ -118,18 +118,25 @@ def surface_samples(
 
 def _near_any(grid: Grid, occupied: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Whether the cell of each point or one of its 26 neighbours is among the sorted keys
-    ``occupied``."""
+    ``occupied``. Each distinct cell of the points is looked up once."""
     if len(occupied) == 0:
         return np.zeros(len(points), dtype=bool)
-    idx = grid.cell_index(grid.cell_keys(points))
+    keys = grid.cell_keys(points)
+    order = np.argsort(keys, kind="stable")
+    ordered = keys[order]
+    starts = np.r_[True, ordered[1:] != ordered[:-1]]
+    cells = ordered[starts]
+    idx = grid.cell_index(cells)
     n = np.asarray(grid.cells, dtype=np.int64)
-    near = np.zeros(len(points), dtype=bool)
+    near = np.zeros(len(cells), dtype=bool)
     for offset in np.stack(np.meshgrid(*[np.arange(-1, 2)] * 3, indexing="ij"), -1).reshape(-1, 3):
         around = np.clip(idx + offset, 0, n - 1)
-        keys = (around[:, 0] * n[1] + around[:, 1]) * n[2] + around[:, 2]
-        at = np.minimum(np.searchsorted(occupied, keys), len(occupied) - 1)
-        near |= occupied[at] == keys
-    return near
+        around_keys = (around[:, 0] * n[1] + around[:, 1]) * n[2] + around[:, 2]
+        at = np.minimum(np.searchsorted(occupied, around_keys), len(occupied) - 1)
+        near |= occupied[at] == around_keys
+    out = np.empty(len(points), dtype=bool)
+    out[order] = near[np.cumsum(starts) - 1]
+    return out
 
 
 class NearestPerCell:
