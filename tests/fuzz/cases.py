@@ -210,5 +210,26 @@ CASES = (
         args=("--limit", "faces=1000"),
         words=("declares 10,000 faces", "--limit faces="),
     ),
+    *(
+        Case(
+            f"option {' '.join(args)}",
+            "ok.obj",
+            lambda: (TRIANGLE + "f 1 2 3\n").encode(),
+            args=args,
+            code=2,
+            words=(args[0],),
+        )
+        for args in (
+            ("--resolution", "inf,inf,inf"),
+            ("--resolution", "nan,nan,nan"),
+            ("--resolution", "1e400,1e400,1e400"),
+            ("--x", "1e300,2e300,3e300"),
+            ("--cull", "1e300"),
+            ("--beta", "1e-320"),
+            ("--beta", "1e308"),
+            ("--plot-radius", "1e308"),
+            ("--limit", "memory_bytes=-1"),
+        )
+    ),
 )
 """Every hostile case, in the order the docs list them."""

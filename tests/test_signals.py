@@ -1,0 +1,39 @@
+"""Interrupted runs: SIGTERM and Ctrl-C (SIGINT) while a conversion is under way end it with
+exit 143 / 130 and one line, and leave no output and no staged file behind."""
+
+from __future__ import annotations
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import trimesh
+
+
+@pytest.mark.parametrize(
+    ("sig", "code", "word"),
+    [(signal.SIGTERM, 143, "terminated"), (signal.SIGINT, 130, "interrupted")],
+)
+def test_an_interrupted_run_leaves_nothing(
+    tmp_path: Path, sig: signal.Signals, code: int, word: str
+) -> None:
+    source = tmp_path / "sphere.ply"
+    trimesh.creation.icosphere(subdivisions=5).export(source)
+    out = tmp_path / "out" / "sphere.glb"
+    out.parent.mkdir()
+    command = [sys.executable, "-m", "lodconvert", str(source), "-o", str(out)]
+    # a slow bake, so that the signal arrives while the run is under way
+    command += ["--resolution", "1024,512,256", "--no-mesh", "--levels", "3"]
+    with subprocess.Popen(command, stderr=subprocess.PIPE, text=True) as run:
+        while not any(out.parent.iterdir()):  # the staged output: the run has started
+            assert run.poll() is None, run.stderr.read() if run.stderr else ""
+            time.sleep(0.01)  # poll the state, not a time limit
+        run.send_signal(sig)
+        stderr = run.stderr.read() if run.stderr else ""
+        assert run.wait() == code, stderr
+    lines = stderr.strip().splitlines()
+    assert lines[-1] == f"lodconvert: {word}" and "Traceback" not in stderr, stderr
+    assert list(out.parent.iterdir()) == []
