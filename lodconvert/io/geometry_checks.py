@@ -26,12 +26,12 @@ from ..model import Scene
 from .numbers import GEOMETRY_DIGITS
 
 MAX_MAGNITUDE = 1e15
-"""Largest coordinate magnitude read: float64 still spaces values 1/8 apart there, float32
-(glTF buffers, relative to an object's centre) and the fixed-point X3D numbers hold any object
-within it."""
+"""Largest coordinate magnitude read: float64 still spaces values 1/8 apart there, so origins
+and placements keep sub-metre precision in any unit, and float32 (glTF buffers, relative to an
+object's centre) holds any object within it."""
 MIN_EXTENT = 1e-8
-"""Smallest object (longest side of its bounds): the X3D numbers keep
-``GEOMETRY_DIGITS`` significant digits on it with at most 15 decimals."""
+"""Smallest object (longest side of its bounds): below it, ``GEOMETRY_DIGITS`` significant
+digits need more decimals than any viewer parses reliably."""
 MIN_RELATIVE_EXTENT = float(np.finfo(np.float64).eps) * 10.0**GEOMETRY_DIGITS
 """Smallest object relative to its largest coordinate magnitude: below it, float64 holds fewer
 than ``GEOMETRY_DIGITS`` significant digits across the object, the precision the outputs keep."""
