@@ -34,6 +34,7 @@ sys.path.insert(0, str(ROOT))
 
 from tables import markdown_table  # noqa: E402
 
+from lodconvert.limits import DEFAULT_LIMITS  # noqa: E402
 from tests.fuzz.cases import CASES, grid_obj  # noqa: E402
 from tests.fuzz.harness import fuzz  # noqa: E402
 from tests.fuzz.worker import CliRun, Worker, run_cli  # noqa: E402
@@ -117,11 +118,41 @@ def limit_rows(scale: int, folder: Path) -> list[list[str]]:
     return rows
 
 
+def baker_rows(folder: Path) -> list[list[str]]:
+    """Time and peak memory at the baker's limits: a 2,562-vertex sphere baked as one point
+    level of 512³ cells with ``grid_cells`` exactly at that and one below (refused: the
+    resolution was given), and one triangle repeated 100,000 times baked as points at 512 with
+    the default ``memory_bytes`` and with 64 MiB (chunks: time, not memory)."""
+    import trimesh
+
+    sphere = folder / "sphere.ply"
+    trimesh.creation.icosphere(subdivisions=4).export(sphere)
+    repeated = folder / "repeated.obj"
+    repeated.write_bytes(b"v 0 0 0\nv 1 0 0\nv 0 1 0\n" + b"f 1 2 3\n" * 100_000)
+    points = ("--no-mesh", "--levels", "2", "--resolution", "512,256")
+    cells = 512**3
+    rows = []
+    for name, path, value in (
+        ("grid_cells", sphere, cells),
+        ("grid_cells", sphere, cells - 1),
+        ("memory_bytes", repeated, DEFAULT_LIMITS.memory_bytes),
+        ("memory_bytes", repeated, 64 << 20),
+    ):
+        args = ("-o", folder / "out.glb", "-q", *points, "--limit", f"{name}={value}")
+        run = run_cli(path, *args)
+        message = run.stderr.strip().splitlines()[-1:] or [""]
+        verdict = "converted" if run.code == 0 else f"exit {run.code}: `{message[0]}`"
+        rows.append(
+            [name, path.name, f"{value:,}", verdict, f"{run.seconds:.2f}", _mib(run.peak_bytes)]
+        )
+    return rows
+
+
 def hostile_rows(folder: Path) -> list[list[str]]:
     """Each hostile case through the CLI in a child: the docs table's rows."""
     rows = []
-    for case in CASES:
-        work = folder / case.name.replace(".", "_")
+    for number, case in enumerate(CASES):
+        work = folder / f"{number:02d}_{case.name.replace('.', '_')}"
         work.mkdir()
         src = case.write(work)
         run = run_cli(src, "-o", work / "out.x3d", *case.args)
@@ -156,7 +187,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         hostile = hostile_rows(folder)
-        limits = limit_rows(args.scale, folder)
+        limits = limit_rows(args.scale, folder) + baker_rows(folder)
         fuzzed, fuzz_summary = fuzz_rows(args.fuzz_seconds)
     command = "python benchmarks/robustness.py " + " ".join(sys.argv[1:])
     header = [
@@ -189,8 +220,11 @@ def main() -> None:
             "reader, plain and `.gz`; byte, token and structure mutations of small generated "
             "seeds (`tests/fuzz`), each case read in one long-lived child process.",
             markdown_table(["suffix", "cases", "cases/s"], fuzzed, 1),
-            "## Limits\n\nA grid mesh converted with the limit set exactly at the file's count "
-            "(converts) and one below (refused); scaled down with `--limit`.",
+            "## Limits\n\nReader limits: a grid mesh converted with the limit set exactly at the "
+            "file's count (converts) and one below (refused); scaled down with `--limit`. "
+            "Baker limits: see `baker_rows` (a grid of 512³ cells exactly at `grid_cells` and "
+            "one below; 100,000 repeated triangles baked at 512 with the default `memory_bytes` "
+            "and with 64 MiB).",
             markdown_table(
                 ["limit", "file", "--limit value", "result", "s", "peak MiB"], limits, 4
             ),

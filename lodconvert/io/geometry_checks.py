@@ -120,7 +120,7 @@ def check_magnitude(largest: float, where: str) -> None:
     if not largest <= MAX_MAGNITUDE:
         raise InputError(
             f"has coordinates up to {largest:.3g} in magnitude; lodconvert writes at most "
-            f"{MAX_MAGNITUDE:.0e} (float32 and fixed-point outputs cannot hold more): "
+            f"{MAX_MAGNITUDE:.0e} (float32 outputs and float64 origins lose precision beyond it): "
             "scale the model down",
             where,
         )
