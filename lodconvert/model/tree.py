@@ -36,6 +36,10 @@ class Node:
     origin: np.ndarray | None = None
     transform: np.ndarray | None = None
     children: list[Node] = field(default_factory=list)
+    lods: dict[str, Mesh] = field(default_factory=dict)
+    """The source's own levels of detail, by their label as the source names them (CityGML
+    ``"lod2"``, CityJSON ``"2.2"``…), each in the node's frame; ``geometry`` is the finest of
+    them (what a reader without LoDs sets alone)."""
 
     def __post_init__(self) -> None:
         if isinstance(self.geometry, Surface):
