@@ -42,6 +42,7 @@ from .ranges import (
     default_xs,
     projected_px,
 )
+from .sourcelods import SLOTS, prism, source_levels
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
@@ -379,6 +380,9 @@ def bake_chain(
     ``limits`` (grid cells per level, working memory)."""
     opts.check()
     check_geometry(obj)
+    sources = source_levels(obj.lods)
+    if opts.keep_mesh and opts.levels == len(SLOTS) and any(k in SLOTS for k in sources):
+        return _source_chain(obj, sources, opts, backend, progress, warn, limits)
     world_bounds = obj.geometry.bounds
     origin = (world_bounds[0] + world_bounds[1]) / 2.0
     surface = obj.geometry.translated(-origin)
@@ -420,6 +424,81 @@ def bake_chain(
             kept_cuts.append(cuts[n - 1])
             kept_xs.append(xs[n - 1])
 
+    culled = opts.cull is not None
+    if culled:
+        kept_cuts.append(cutoff(alpha, opts.beta, opts.gamma, opts.cull))
+        kept_xs.append(opts.cull)
+    return LodChain(
+        object_id=obj.id,
+        levels=levels,
+        cutoffs=kept_cuts,
+        origin=origin,
+        center=np.zeros(3),
+        alpha=alpha,
+        beta=opts.beta,
+        gamma=opts.gamma,
+        xs=kept_xs,
+        culled=culled,
+        dropped=dropped,
+        metadata=dict(obj.attributes),
+    )
+
+
+def _source_chain(
+    obj: Node,
+    sources: dict[int, tuple[str, Mesh]],
+    opts: ChainOptions,
+    backend: Backend,
+    progress: Progress | None,
+    warn: Progress | None,
+    limits: Limits,
+) -> LodChain:
+    """The CityGML-style chain of a city object with its own LoDs (:mod:`.sourcelods`): its
+    finest source LoD covers every slot up to its own; each coarser slot is the source's LoD
+    there, else (LOD1) a prism from its footprint, else (LOD3, LOD2) baked points where they
+    pay; a slot with none of these leaves the finer level on."""
+    finest_slot = max(k for k in sources if k in SLOTS)
+    finest = sources[finest_slot][1]
+    world_bounds = finest.bounds
+    origin = (world_bounds[0] + world_bounds[1]) / 2.0
+    bounds = world_bounds - origin
+    alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
+    xs = list(opts.exponents)
+    cuts = [cutoff(alpha, opts.beta, opts.gamma, x) for x in xs]
+    surface = finest.translated(-origin)
+    levels = [Level(name=f"LOD{finest_slot}", kind="source", mesh=surface)]
+    kept_cuts: list[float] = []
+    kept_xs: list[float] = []
+    dropped: dict[str, str] = {}
+    floor = least_point_cost(surface) if not opts.resolutions else 0.0
+    for slot in range(finest_slot - 1, 0, -1):
+        index = SLOTS.index(slot) - 1  # LOD3 → 0 … LOD1 → 2: its cutoff and exponent
+        name = f"LOD{slot}"
+        level: Level | str
+        if slot in sources:
+            level = Level(name=name, kind="source", mesh=sources[slot][1].translated(-origin))
+        elif slot == 1:
+            shape = prism(obj.lods, finest, obj.attributes)
+            level = (
+                Level(name=name, kind="prism", mesh=shape.translated(-origin))
+                if shape is not None
+                else "no footprint with area to extrude"
+            )
+        elif level_cost(levels[-1]) <= floor:
+            level = "no point level could be both cheaper and faithful"
+        else:
+            if progress:
+                progress(f"{obj.id}: baking {name}")
+            level = _point_level(
+                surface, bounds, name, index, cuts[index], levels[-1], opts, backend, obj.id,
+                warn, limits,
+            )  # fmt: skip
+        if isinstance(level, str):
+            dropped[name] = level
+            continue
+        levels.append(level)
+        kept_cuts.append(cuts[index])
+        kept_xs.append(xs[index])
     culled = opts.cull is not None
     if culled:
         kept_cuts.append(cutoff(alpha, opts.beta, opts.gamma, opts.cull))

@@ -23,10 +23,11 @@ class BakeParams:
     filter: Literal["median", "gaussian", "none"] = "median"
 
 
-MESH_KINDS = ("mesh", "qem")
-"""Level kinds drawn as triangles: the source mesh, and the source decimated by quadric edge
-collapse. ``pcd`` levels are baked point clouds. Kinds are data: readers of our own files and
-later planners (source LoDs, prisms) may add others, drawn as triangles when ``mesh`` is set."""
+MESH_KINDS = ("mesh", "qem", "source", "prism")
+"""Level kinds drawn as triangles: the source mesh, the source decimated by quadric edge
+collapse, a city object's own LoD geometry, and the prism derived from its footprint. ``pcd``
+levels are baked point clouds. Kinds are data: a level is drawn as triangles when ``mesh`` is
+set, whatever its kind."""
 
 
 @dataclass
