@@ -69,7 +69,8 @@ class ChainOptions:
     point_sizes: tuple[float, ...] | None = None
     filter: str = "median"
     beta: float = DEFAULT_BETA
-    gamma: float = DEFAULT_GAMMA
+    gamma: float | None = None
+    """γ; ``None``: 10 for a mesh's objects, each city object's plot radius (:mod:`.plots`)."""
     xs: tuple[float, ...] | None = None
     cull: float | None = None
     spacing_px: float = DEFAULT_SPACING_PX
@@ -103,12 +104,13 @@ class ChainOptions:
             raise UsageError(
                 f"needs {self.levels - 1} exponents for {self.levels} levels, got {len(xs)}", "xs"
             )
-        check_range_parameters(self.beta, self.gamma, xs)
+        gamma = DEFAULT_GAMMA if self.gamma is None else self.gamma
+        check_range_parameters(self.beta, gamma, xs)
         if self.cull is not None and not (math.isfinite(self.cull) and self.cull > xs[-1]):
             raise UsageError(f"must be greater than the last exponent ({xs[-1]:g})", "cull")
         if self.cull is not None:
             check_cutoffs(
-                self.beta, self.gamma, [0.0, *xs, self.cull], ["xs"] * (len(xs) + 1) + ["cull"]
+                self.beta, gamma, [0.0, *xs, self.cull], ["xs"] * (len(xs) + 1) + ["cull"]
             )
         n = self.pcd_levels
         for name, values in (
@@ -380,6 +382,8 @@ def bake_chain(
     ``limits`` (grid cells per level, working memory)."""
     opts.check()
     check_geometry(obj)
+    if opts.gamma is None:
+        opts = replace(opts, gamma=DEFAULT_GAMMA)
     sources = source_levels(obj.lods)
     if opts.keep_mesh and opts.levels == len(SLOTS) and any(k in SLOTS for k in sources):
         return _source_chain(obj, sources, opts, backend, progress, warn, limits)

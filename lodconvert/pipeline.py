@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import itertools
 import json
 import platform
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
@@ -27,7 +28,9 @@ from .errors import InputError
 from .io import OutputInfo, input_format, output_format
 from .io.geometry_checks import InputTally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
-from .model import LodChain, Scene
+from .model import LodChain, Node, Scene
+from .plots import plot_radii
+from .ranges import DEFAULT_GAMMA
 from .sinks import FileSink, Outputs
 from .validate import check_written
 
@@ -102,15 +105,15 @@ def iter_chains(
     if total is None and isinstance(scene.nodes, list):
         total = sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
     shared: dict[int, LodChain] = {}  # geometry placed by several nodes: baked once
-    for i, obj in enumerate(scene.with_geometry(), start=1):
+    nodes, radii = _with_plot_radii(scene, options)
+    for i, obj in enumerate(nodes, start=1):
         try:
             if obj.transform is not None and id(obj.geometry) in shared:
                 base = shared[id(obj.geometry)]
                 chain = replace(base, object_id=obj.id, metadata=dict(obj.attributes))
             else:
-                chain = bake_chain(
-                    obj, options, backend, progress=progress, warn=warn, limits=limits
-                )
+                opts = replace(options, gamma=radii[id(obj)]) if id(obj) in radii else options
+                chain = bake_chain(obj, opts, backend, progress=progress, warn=warn, limits=limits)
             if obj.transform is not None:
                 shared.setdefault(id(obj.geometry), chain)
                 chain = replace(chain, transform=np.asarray(obj.transform, dtype=np.float64))
@@ -123,6 +126,25 @@ def iter_chains(
         finally:
             step("converting", i, total)
         yield chain
+
+
+def _with_plot_radii(
+    scene: Scene, options: ChainOptions
+) -> tuple[Iterable[Node], dict[int, float]]:
+    """The scene's nodes with geometry and, unless ``options`` set γ, the plot radius of each
+    city object (a node with its own LoDs) from its neighbours' spacing (:mod:`.plots`); a
+    city's nodes are gathered for that, a mesh file's stay streamed."""
+    nodes = scene.with_geometry()
+    if options.gamma is not None:
+        return nodes, {}
+    first = next(nodes, None)
+    if first is None:
+        return [], {}
+    if not first.lods:
+        return itertools.chain([first], nodes), {}
+    gathered = [first, *nodes]
+    city = [node for node in gathered if node.lods]
+    return gathered, plot_radii(city)
 
 
 def convert(
@@ -262,19 +284,21 @@ def object_ranges(scene: Scene, options: ChainOptions) -> list[dict[str, Any]]:
 
     options.check()
     rows = []
-    for obj in scene.with_geometry():
+    nodes, radii = _with_plot_radii(scene, options)
+    for obj in nodes:
         check_geometry(obj)
         bounds = obj.geometry.bounds
         alpha = float(np.linalg.norm(bounds[1] - bounds[0]))
+        gamma = radii.get(id(obj), options.gamma if options.gamma is not None else DEFAULT_GAMMA)
         xs = list(options.exponents) + ([options.cull] if options.cull is not None else [])
         rows.append(
             {
                 "id": obj.id,
                 "alpha": alpha,
                 "beta": options.beta,
-                "gamma": options.gamma,
+                "gamma": gamma,
                 "xs": xs,
-                "cutoffs": cutoffs(alpha, options.beta, options.gamma, xs),
+                "cutoffs": cutoffs(alpha, options.beta, gamma, xs),
             }
         )
     return rows

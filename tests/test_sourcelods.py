@@ -80,3 +80,21 @@ def test_no_footprint_means_no_prism() -> None:
     assert prism({"lod2": wall}, wall, {}) is None
     chain = bake_chain(Node("w", wall, lods={"lod2": wall}), ChainOptions(), NumpyBackend())
     assert [lv.name for lv in chain.levels] == ["LOD2"] and "LOD1" in chain.dropped
+
+
+def test_plot_radii_come_from_the_neighbours_spacing() -> None:
+    from lodconvert.model import Scene
+    from lodconvert.pipeline import object_ranges
+    from lodconvert.plots import MAX_RADIUS, plot_radii
+
+    houses = [block(8, 8, 6, x, 0.0) for x in (0.0, 20.0, 50.0)]
+    far = block(8, 8, 6, 5000.0, 0.0)
+    nodes = [Node(f"b{i}", m, "Building", lods={"lod2": m}) for i, m in enumerate([*houses, far])]
+    radii = plot_radii(nodes)
+    assert [radii[id(n)] for n in nodes] == [10.0, 10.0, 15.0, MAX_RADIUS]
+    rows = object_ranges(Scene("city", nodes), ChainOptions())
+    assert [row["gamma"] for row in rows] == [10.0, 10.0, 15.0, MAX_RADIUS]
+    fixed = object_ranges(Scene("city", nodes), ChainOptions(gamma=20.0))
+    assert {row["gamma"] for row in fixed} == {20.0}
+    mesh = object_ranges(Scene("mesh", [Node("m", block(8, 8, 6))]), ChainOptions())
+    assert mesh[0]["gamma"] == 10.0  # objects of a mesh file keep the default

@@ -59,9 +59,9 @@ def add_range_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--plot-radius",
         type=float,
-        default=DEFAULT_GAMMA,
         metavar="GAMMA",
-        help=f"γ, must be > 1 (default {DEFAULT_GAMMA:g}; see README)",
+        help=f"γ, must be > 1 (default: {DEFAULT_GAMMA:g} for a mesh's objects; for city objects "
+        "half the distance to the nearest neighbour, 2–100 m; see README)",
     )
     group.add_argument(
         "--x", metavar="X1,X2,..", help="exponents, one per switch (default 0.33,0.66,1.0)"
