@@ -14,7 +14,7 @@ import itertools
 import json
 import platform
 import time
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
@@ -32,6 +32,7 @@ from .model import LodChain, Node, Scene
 from .plots import plot_radii
 from .ranges import DEFAULT_GAMMA
 from .sinks import FileSink, Outputs
+from .sourcelods import source_levels
 from .validate import check_written
 
 Message = Callable[[str], None]
@@ -128,6 +129,30 @@ def iter_chains(
         yield chain
 
 
+def merged(scenes: Sequence[Scene]) -> Scene:
+    """One scene of several inputs. City objects (nodes with their own LoDs) of the same id
+    are one object whose LoDs are merged: the first keeps its attributes and children, takes
+    the LoD labels it lacks from the later ones, and its geometry is its finest LoD. Other
+    objects all stay, in input order (the writers keep their names apart). The first declared
+    CRS is the scene's; a scene of one input is returned as it is."""
+    if len(scenes) == 1:
+        return scenes[0]
+    nodes: list[Node] = []
+    cities: dict[str, Node] = {}
+    for scene in scenes:
+        for node in scene.nodes:
+            first = cities.setdefault(node.id, node) if node.lods else node
+            if first is node:
+                nodes.append(node)
+                continue
+            for label, mesh in node.lods.items():
+                first.lods.setdefault(label, mesh)
+            levels = source_levels(first.lods)
+            first.geometry = levels[max(levels)][1] if levels else first.geometry
+    crs = next((scene.crs for scene in scenes if scene.crs), None)
+    return Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+
+
 def _with_plot_radii(
     scene: Scene, options: ChainOptions
 ) -> tuple[Iterable[Node], dict[int, float]]:
@@ -148,7 +173,7 @@ def _with_plot_radii(
 
 
 def convert(
-    input_path: str | Path,
+    input_path: str | Path | Sequence[str | Path],
     output_path: str | Path,
     options: ChainOptions | None = None,
     backend: str = "auto",
@@ -176,21 +201,27 @@ def convert(
     options = options or ChainOptions()
     options.check()
     target = output_format(output_path)
-    source = input_format(input_path)
+    inputs = [input_path] if isinstance(input_path, str | Path) else list(input_path)
+    sources = [input_format(path) for path in inputs]
     timings: dict[str, float] = {}
     records: list[dict[str, Any]] = []
     skipped: list[dict[str, str]] = []
-    with contextlib.ExitStack() as stack, Outputs(inputs=[input_path]) as outputs:
+    with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
         start = time.perf_counter()
-        scene = source.read_file(input_path, limits=limits, **(read_options or {}))
+        scene = merged(
+            [
+                source.read_file(path, limits=limits, **(read_options or {}))
+                for source, path in zip(sources, inputs, strict=True)
+            ]
+        )
         timings["read"] = time.perf_counter() - start
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(backend)
         info = OutputInfo(
             generator=f"lodconvert {__version__}",
-            source=Path(input_path).name,
+            source=" + ".join(Path(path).name for path in inputs),
             crs=scene.crs,
             view=options.view,
             options=options_record(options),
@@ -215,13 +246,14 @@ def convert(
                 if len(skipped) == 1
                 else f"none of its {len(skipped)} objects could be converted"
             )
-            raise InputError(reason, str(input_path))
+            raise InputError(reason, " + ".join(str(path) for path in inputs))
         step("checking", 0, 1)
         start = time.perf_counter()
         check_written(sink.staged.temp, output_path)
         timings["validate"] = time.perf_counter() - start
         step("checking", 1, 1)
-        report = _report(input_path, output_path, baker, options, records, skipped, timings, tally)
+        named = " + ".join(str(path) for path in inputs)
+        report = _report(named, output_path, baker, options, records, skipped, timings, tally)
         if also is not None:
             also(outputs, sink, report)
         if report_sink is not None:

@@ -98,3 +98,27 @@ def test_plot_radii_come_from_the_neighbours_spacing() -> None:
     assert {row["gamma"] for row in fixed} == {20.0}
     mesh = object_ranges(Scene("mesh", [Node("m", block(8, 8, 6))]), ChainOptions())
     assert mesh[0]["gamma"] == 10.0  # objects of a mesh file keep the default
+
+
+def test_inputs_merge_the_lods_of_one_city_object() -> None:
+    from lodconvert.model import Scene
+    from lodconvert.pipeline import merged
+
+    lod1, lod2, lod3 = block(10, 10, 8), block(10, 10, 9), block(10, 10, 10)
+    scenes = [
+        Scene("a.gml", [Node("house", lod1, "Building", {"name": "a"}, lods={"lod1": lod1})]),
+        Scene("b.gml", [Node("house", lod3, "Building", {"name": "b"}, lods={"lod3": lod3})]),
+        Scene("c.gml", [Node("house", lod2, "Building", lods={"lod2": lod2}), Node("m", lod1)]),
+        Scene("d.ply", [Node("m", lod2)]),
+    ]
+    scene = merged(scenes)
+    house, *meshes = list(scene.nodes)
+    assert sorted(house.lods) == ["lod1", "lod2", "lod3"]
+    assert house.geometry is lod3 and house.attributes == {"name": "a"}
+    assert [n.id for n in meshes] == ["m", "m"]  # meshes are never merged: both stay
+    chain = bake_chain(house, ChainOptions(), NumpyBackend())
+    assert [(lv.name, lv.kind) for lv in chain.levels] == [
+        ("LOD3", "source"),
+        ("LOD2", "source"),
+        ("LOD1", "source"),
+    ]

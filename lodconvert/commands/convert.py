@@ -32,7 +32,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the main command."""
     from .. import __version__
 
-    parser.add_argument("input", help="OBJ, PLY, STL, OFF, GLB or glTF file (optionally .gz)")
+    parser.add_argument(
+        "input",
+        nargs="+",
+        help="OBJ, PLY, STL, OFF, GLB or glTF file (optionally .gz), or city models; several "
+        "inputs are one scene, objects of the same id one object with all their LoDs",
+    )
     parser.add_argument("-o", "--output", required=True, help="output .x3d, .glb or .gltf")
     parser.add_argument("--version", action="version", version=f"lodconvert {__version__}")
     parser.add_argument(
