@@ -26,7 +26,7 @@ from .bake import Backend, get_backend
 from .chain import ChainOptions, bake_chain, check_geometry
 from .errors import InputError
 from .io import OutputInfo, input_format, output_format
-from .io.geometry_checks import InputTally, tally_of
+from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import LodChain, Node, Scene
 from .plots import plot_radii
@@ -99,9 +99,11 @@ def iter_chains(
     skipped: list[dict[str, str]] | None = None,
     step: Step = _no_step,
     limits: Limits = DEFAULT_LIMITS,
+    strict: bool = False,
 ) -> Iterator[LodChain]:
     """Bake the scene's objects one at a time; objects with bad geometry are reported through
-    ``warn``, recorded in ``skipped`` and left out. ``step`` hears how many are done."""
+    ``warn`` (unless ``strict``: the caller fails), recorded in ``skipped`` and left out.
+    ``step`` hears how many are done."""
     total = scene.size if scene.size is not None else None
     if total is None and isinstance(scene.nodes, list):
         total = sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
@@ -119,7 +121,7 @@ def iter_chains(
                 shared.setdefault(id(obj.geometry), chain)
                 chain = replace(chain, transform=np.asarray(obj.transform, dtype=np.float64))
         except InputError as exc:
-            if total != 1:  # with one object, the run's error says it
+            if total != 1 and not strict:  # with one object, the run's error says it
                 warn(f"{scene.source}: object {exc} — skipped")
             if skipped is not None:
                 skipped.append({"id": obj.id, "reason": str(exc)})
@@ -150,7 +152,16 @@ def merged(scenes: Sequence[Scene]) -> Scene:
             levels = source_levels(first.lods)
             first.geometry = levels[max(levels)][1] if levels else first.geometry
     crs = next((scene.crs for scene in scenes if scene.crs), None)
-    return Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+    whole = Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+    tallies = [tally for scene in scenes if (tally := tally_of(scene)) is not None]
+    if tallies:  # complete: every input's nodes have been read
+        tally = InputTally(whole.source, tallies[0].limits)
+        for part in tallies:
+            tally.dropped_faces += part.dropped_faces
+            tally.dropped_by_object.update(part.dropped_by_object)
+            tally.skipped += part.skipped
+        attach_tally(whole, tally)
+    return whole
 
 
 def _with_plot_radii(
@@ -185,8 +196,11 @@ def convert(
     write_options: dict[str, Any] | None = None,
     also: Callable[[Outputs, FileSink, dict[str, Any]], None] | None = None,
     limits: Limits = DEFAULT_LIMITS,
+    strict: bool = False,
 ) -> dict[str, Any]:
-    """Convert ``input_path`` into ``output_path`` and return the report (a JSON-able dict).
+    """Convert ``input_path`` (or several inputs: one scene, see :func:`merged`) into
+    ``output_path`` and return the report (a JSON-able dict); with ``strict``, an object
+    skipped as broken fails the run.
 
     Every output of the run is staged and committed together (:mod:`~lodconvert.sinks`): the
     model file, after it passes its format's structural checks; the report at
@@ -233,13 +247,22 @@ def convert(
                 yield chain
 
         start = time.perf_counter()
-        chains = recorded(iter_chains(scene, options, baker, progress, warn, skipped, step, limits))
+        chains = recorded(
+            iter_chains(scene, options, baker, progress, warn, skipped, step, limits, strict)
+        )
         target.write_chains(chains, sink, info, **(write_options or {}))
         timings["bake_and_write"] = time.perf_counter() - start
         tally = tally_of(scene)
         for entry in tally.skipped if tally is not None else ():
-            warn(f"{scene.source}: object {entry['reason']} — skipped")
+            if not strict:
+                warn(f"{scene.source}: object {entry['reason']} — skipped")
             skipped.append(entry)
+        if strict and skipped:
+            more = f" (and {len(skipped) - 1} more)" if len(skipped) > 1 else ""
+            raise InputError(
+                f"object {skipped[0]['reason']}{more} (--strict: a broken object fails the run)",
+                " + ".join(str(path) for path in inputs),
+            )
         if not records:
             reason = (
                 skipped[0]["reason"]

@@ -110,3 +110,15 @@ def test_fuzz_found_a_non_ascii_digit_in_a_ply_count(tmp_path: Path) -> None:
     )
     assert_one_line_error(run(src, "-o", tmp_path / "o.x3d"), 1, "count.ply", "PLY")
     assert_nothing_left(tmp_path, {src})
+
+
+def test_strict_turns_a_skipped_object_into_a_failure(tmp_path: Path) -> None:
+    source = tmp_path / "two.obj"
+    source.write_text(TRIANGLE + "o good\nf 1 2 3\no bad\nf 1 1 2\n")
+    out = tmp_path / "out.glb"
+    result = run(source, "-o", out)
+    assert result.returncode == 0 and "1 skipped" in result.stderr.splitlines()[-1]
+    out.unlink()
+    result = run(source, "-o", out, "--strict")
+    assert_one_line_error(result, 1, "two.obj", "object bad: ", "--strict")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["two.obj"]

@@ -9,7 +9,13 @@ from typing import Any
 from ..bake import BACKENDS
 from ..bake.filters import FILTERS
 from ..cli.console import Console
-from ..cli.options import EXIT_OK, add_range_options, add_viewer_lib_option, chain_options
+from ..cli.options import (
+    EXIT_OK,
+    add_range_options,
+    add_viewer_lib_option,
+    chain_options,
+    parse_list,
+)
 from ..errors import UsageError
 from ..limits import DEFAULT_LIMITS
 from ..sinks import FileSink, Outputs
@@ -52,6 +58,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--merge-groups",
         action="store_true",
         help="read an OBJ file's objects and groups as one object",
+    )
+    read.add_argument(
+        "--types",
+        metavar="TYPE,..",
+        help="city models: convert only these object types (e.g. Building,Bridge)",
+    )
+    read.add_argument(
+        "--strict",
+        action="store_true",
+        help="fail (exit 1, nothing written) when any object is skipped as broken",
     )
     bake = parser.add_argument_group("baking (one value per point level, finest first)")
     bake.add_argument("--resolution", metavar="T3,..", help="grid cells along the longest side")
@@ -121,7 +137,11 @@ def run(args: argparse.Namespace, console: Console) -> int:
         step=console.step,
         warn=console.warn,
         report_path=args.report,
-        read_options={"merge_groups": args.merge_groups or None},
+        read_options={
+            "merge_groups": args.merge_groups or None,
+            "types": frozenset(parse_list(args.types, str, "--types")) if args.types else None,
+        },
+        strict=args.strict,
         also=stage_page if args.html else None,
         limits=limits,
     )
