@@ -28,7 +28,12 @@ from ..errors import InputError, UsageError
 from ..model import LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
 
-FORMAT_MODULES = ("lodconvert.io.mesh", "lodconvert.io.x3d", "lodconvert.io.gltf")
+FORMAT_MODULES = (
+    "lodconvert.io.cityjson",
+    "lodconvert.io.mesh",
+    "lodconvert.io.x3d",
+    "lodconvert.io.gltf",
+)
 """Modules that declare a ``FORMAT`` (or ``FORMATS``), in lookup order."""
 
 
