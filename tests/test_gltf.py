@@ -484,3 +484,13 @@ def test_foreign_glb_is_rejected(tmp_path):
     trimesh.creation.box().export(path)
     with pytest.raises(InputError, match="not a glTF written by lodconvert"):
         read_lod_gltf(path)
+
+
+def test_object_attributes_are_on_its_root_node(tmp_path, sphere_chain):
+    """A city object's attributes (id, type, measured height…) travel with its root node, where
+    a GIS user finds the object by name."""
+    attributes = {"id": "DEB_LOD2_1", "type": "Building", "measuredHeight": 31.7}
+    chain = replace(sphere_chain, object_id="DEB_LOD2_1", metadata=attributes)
+    doc, _ = _load(_write(tmp_path, [chain]))
+    (root,) = [doc["nodes"][i] for i in doc["scenes"][0]["nodes"]]
+    assert root["name"] == "DEB_LOD2_1" and root["extras"]["attributes"] == attributes

@@ -380,6 +380,8 @@ class _Document:
             root = gl.Node(name=chain.object_id, translation=[float(v) for v in placed[:3, 3]])
         else:
             root = gl.Node(name=chain.object_id, matrix=[float(v) for v in placed.T.ravel()])
+        if chain.metadata:  # the object's attributes, where a GIS user looks for them
+            root.extras = {"attributes": _plain(chain.metadata)}
         root_index = self._append(nodes, root)
         self.gltf.scenes[0].nodes.append(root_index)
         finest = self._level_node(chain, chain.levels[0])
