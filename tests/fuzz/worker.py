@@ -162,17 +162,21 @@ class CliRun:
     seconds: float
 
 
+PEAK_FILE = "LODCONVERT_PEAK_FILE"
+"""Environment variable naming the file a ``--cli`` child writes its peak memory to."""
+
+
 def run_cli(*args: str | Path, budget: int = MEMORY_BUDGET, timeout: float = 600) -> CliRun:
     """Run ``lodconvert ARGS`` in a child under ``budget`` bytes of address space; its peak
     RSS is that child's alone (``wait4``). A run past ``timeout`` seconds is killed."""
     start = time.perf_counter()
-    with tempfile.TemporaryFile() as err:
+    with tempfile.TemporaryFile() as err, tempfile.NamedTemporaryFile("r") as peak:
         process = subprocess.Popen(
             [sys.executable, "-m", "tests.fuzz.worker", str(budget), "--cli", *map(str, args)],
             stdout=subprocess.DEVNULL,
             stderr=err,
             cwd=ROOT,
-            env=child_env(),
+            env={**child_env(), PEAK_FILE: peak.name},
         )
         timer = threading.Timer(timeout, process.kill)
         timer.start()
@@ -181,7 +185,20 @@ def run_cli(*args: str | Path, budget: int = MEMORY_BUDGET, timeout: float = 600
         process.returncode = os.waitstatus_to_exitcode(status)
         err.seek(0)
         text = err.read().decode()
-    return CliRun(process.returncode, text, usage.ru_maxrss * 1024, time.perf_counter() - start)
+        # The child's own high-water mark; wait4's ru_maxrss also counts the parent's memory
+        # copied into the child before it exec'd python (large when pytest has grown).
+        reported = peak.read().strip()
+    peak_bytes = int(reported) if reported else usage.ru_maxrss * 1024
+    return CliRun(process.returncode, text, peak_bytes, time.perf_counter() - start)
+
+
+def _own_peak_bytes() -> int:
+    """This process's peak resident memory since it exec'd (``VmHWM``), in bytes."""
+    with open("/proc/self/status") as status:
+        for line in status:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    return 0
 
 
 if __name__ == "__main__":
@@ -189,5 +206,10 @@ if __name__ == "__main__":
         _limit_memory(int(sys.argv[1]))
         from lodconvert.cli import main
 
-        sys.exit(main(sys.argv[3:]))
+        try:
+            code = main(sys.argv[3:])
+        finally:
+            if os.environ.get(PEAK_FILE):
+                Path(os.environ[PEAK_FILE]).write_text(str(_own_peak_bytes()))
+        sys.exit(code)
     _serve(int(sys.argv[1]))
