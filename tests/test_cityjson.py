@@ -18,10 +18,10 @@ from scipy.spatial import cKDTree
 
 from lodconvert.errors import InputError
 from lodconvert.io import read_chains, read_scene
-from lodconvert.io.cityjson import GROUND_COLOR, ROOF_COLOR, WALL_COLOR
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.model import Node
 from lodconvert.pipeline import convert
+from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.validate import validate_file
 
 from .conftest import SHARED
@@ -90,10 +90,10 @@ def test_multi_lod_buildings_have_every_lod_and_semantic_colours() -> None:
         assert node.attributes["id"] == node.id and node.attributes["type"] == "Building"
         assert "identificatie" in node.attributes
         colours = {tuple(p.base_color) for p in node.geometry.parts}
-        assert colours == {tuple(ROOF_COLOR), tuple(WALL_COLOR), tuple(GROUND_COLOR)}
+        assert colours == {tuple(DEFAULT_CLASS_COLORS[c]) for c in ("roof", "wall", "ground")}
         # coarser LoDs have no semantics: one part in the default colour
         assert len(node.lods["1.2"].parts) == 1
-    assert len({tuple(c) for c in (ROOF_COLOR, WALL_COLOR, GROUND_COLOR)}) == 3
+    assert len({tuple(DEFAULT_CLASS_COLORS[c]) for c in ("roof", "wall", "ground")}) == 3
 
 
 def test_delft_reads_every_object_with_its_crs() -> None:
@@ -353,3 +353,18 @@ def test_geographic_crs_is_refused(tmp_path: Path) -> None:
     )
     with pytest.raises(InputError, match=r"geographic CRS .*not supported yet"):
         read_scene(write_json(tmp_path / "g.json", document))
+
+
+def test_colors_option_changes_the_class_colours() -> None:
+    from lodconvert.errors import UsageError
+    from lodconvert.semantics import DEFAULT_PALETTE
+
+    red = DEFAULT_PALETTE.with_text("roof=#ff0000")
+    scene = read_scene(multi_lod(), colors=red)
+    node = next(iter(scene.nodes))
+    colours = {tuple(part.material_color) for part in node.geometry.parts}
+    assert (255, 0, 0, 255) in colours
+    assert tuple(DEFAULT_PALETTE.classes["roof"]) not in colours
+    for bad in ("roof=red", "chimney=#000000"):
+        with pytest.raises(UsageError):
+            DEFAULT_PALETTE.with_text(bad)

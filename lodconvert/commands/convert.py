@@ -18,6 +18,7 @@ from ..cli.options import (
 )
 from ..errors import UsageError
 from ..limits import DEFAULT_LIMITS
+from ..semantics import DEFAULT_PALETTE
 from ..sinks import FileSink, Outputs
 from . import COMMANDS
 
@@ -63,6 +64,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--types",
         metavar="TYPE,..",
         help="city models: convert only these object types (e.g. Building,Bridge)",
+    )
+    read.add_argument(
+        "--colors",
+        metavar="CLASS=#RRGGBB,..",
+        help="city models: colours of the surface classes roof, wall, ground, other "
+        "(source materials win; defaults in the README)",
     )
     read.add_argument(
         "--strict",
@@ -140,6 +147,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         read_options={
             "merge_groups": args.merge_groups or None,
             "types": frozenset(parse_list(args.types, str, "--types")) if args.types else None,
+            "colors": DEFAULT_PALETTE.with_text(args.colors) if args.colors else None,
         },
         strict=args.strict,
         also=stage_page if args.html else None,

@@ -14,12 +14,12 @@ Geometry: Solid, MultiSolid, CompositeSolid, MultiSurface and CompositeSurface, 
 holes triangulated by :func:`lodconvert.polygons.triangulate` (points and lines are ignored).
 Every LoD of an object is one :class:`Mesh` in ``node.lods`` under the ``lod`` string (``"1.2"``);
 ``node.geometry`` is the highest of them (in numeric order of the label). A mesh has one part
-per semantic class — roof, wall, ground, other (:data:`SEMANTIC_COLORS`) — and material: the
+per semantic class — roof, wall, ground, other (:mod:`lodconvert.semantics`) — and material: the
 ``diffuseColor`` (and ``transparency``) of ``appearance.materials`` in the first theme each
 geometry lists wins over the class colour. CityJSON materials follow X3D's, whose colours are
 taken as sRGB as X3D browsers draw them, so they become the part's sRGB base colour unchanged.
-Surfaces of no semantic class take their object type's colour where :data:`TYPE_COLORS` has
-one. Textures are not read.
+Surfaces of no semantic class take their object type's colour where
+:data:`lodconvert.semantics.TYPE_COLORS` has one. Textures are not read.
 
 Vertices: the integer ``vertices`` are scaled and translated by ``transform`` into float64
 coordinates of the file's CRS, kept as they are (no origin is taken off: the pipeline stores
@@ -60,6 +60,7 @@ from ..errors import InputError
 from ..limits import DEFAULT_LIMITS, Limits
 from ..model import Mesh, Node, Scene, Surface
 from ..polygons import DegenerateRing, triangulate
+from ..semantics import DEFAULT_PALETTE, Palette
 from . import Format
 from .geometry_checks import (
     InputTally,
@@ -69,28 +70,6 @@ from .geometry_checks import (
     kept_faces,
 )
 
-ROOF_COLOR = np.array([178, 90, 74, 255], dtype=np.uint8)
-"""sRGB colour of RoofSurface parts: a muted red."""
-WALL_COLOR = np.array([224, 216, 200, 255], dtype=np.uint8)
-"""sRGB colour of WallSurface parts: a light warm grey."""
-GROUND_COLOR = np.array([84, 84, 84, 255], dtype=np.uint8)
-"""sRGB colour of GroundSurface parts: a dark grey."""
-OTHER_COLOR = np.array([200, 200, 200, 255], dtype=np.uint8)
-"""sRGB colour of every other surface: a light grey."""
-SEMANTIC_COLORS = {
-    "RoofSurface": ROOF_COLOR,
-    "WallSurface": WALL_COLOR,
-    "GroundSurface": GROUND_COLOR,
-}
-"""Default colour by semantic surface type; other types get :data:`OTHER_COLOR`."""
-TYPE_COLORS = {
-    "PlantCover": np.array([120, 160, 90, 255], dtype=np.uint8),
-    "SolitaryVegetationObject": np.array([90, 140, 70, 255], dtype=np.uint8),
-    "WaterBody": np.array([100, 150, 200, 255], dtype=np.uint8),
-    "Road": np.array([110, 110, 115, 255], dtype=np.uint8),
-    "LandUse": np.array([215, 205, 170, 255], dtype=np.uint8),
-}
-"""Colour of surfaces without a semantic class, by CityObject type (others: OTHER_COLOR)."""
 _CLASSES = ("RoofSurface", "WallSurface", "GroundSurface", None)
 """Semantic classes in part order (None: any other surface)."""
 _SURFACE_DEPTH = {
@@ -119,6 +98,8 @@ class _Context:
     """Template index → its (lod, Mesh), read once, or None when it holds no face."""
     counted: set[int] = field(default_factory=set)
     """Ids of the meshes already counted against the limits (shared ones count once)."""
+    palette: Palette = DEFAULT_PALETTE
+    """Colours of the semantic classes."""
 
 
 # --- reading the file -----------------------------------------------------------------------------
@@ -209,7 +190,9 @@ def _vertices(values: Any, transform: Any, where: str) -> np.ndarray:
     return checked_vertices(v.reshape(-1, 3) if v.size == 0 else v, where)
 
 
-def _context(data: dict[str, Any], tally: InputTally, crs: str | None) -> _Context:
+def _context(
+    data: dict[str, Any], tally: InputTally, crs: str | None, palette: Palette
+) -> _Context:
     """The context of a CityJSON document: vertices, materials, templates."""
     where = tally.source
     tally.count(len(data.get("vertices") or ()), 0, declared=True)
@@ -222,6 +205,7 @@ def _context(data: dict[str, Any], tally: InputTally, crs: str | None) -> _Conte
         materials=list(appearance.get("materials") or []),
         templates=list(templates.get("templates") or []),
         template_vertices=_vertices(templates.get("vertices-templates"), None, where),
+        palette=palette,
     )
 
 
@@ -260,7 +244,7 @@ def _material_values(geometry: dict[str, Any], depth: int, count: int) -> list[A
 
 
 def _classes(geometry: dict[str, Any], depth: int, count: int) -> list[str | None]:
-    """Each surface's semantic class (a key of :data:`SEMANTIC_COLORS`, or None)."""
+    """Each surface's semantic class (one of :data:`_CLASSES`, None for any other)."""
     semantics = geometry.get("semantics")
     if not isinstance(semantics, dict):
         return [None] * count
@@ -268,7 +252,7 @@ def _classes(geometry: dict[str, Any], depth: int, count: int) -> list[str | Non
     classes: list[str | None] = []
     for value in _values(semantics.get("values"), depth, count):
         kind = kinds[value] if isinstance(value, int) and 0 <= value < len(kinds) else None
-        classes.append(kind if kind in SEMANTIC_COLORS else None)
+        classes.append(kind if kind in _CLASSES else None)
     return classes
 
 
@@ -340,9 +324,7 @@ def _color(kind: str | None, material: Any, ctx: _Context, object_type: str) -> 
             alpha = 1.0 - float(entry.get("transparency", 0.0))
             rgba = np.clip(np.nan_to_num(np.array([*diffuse, alpha], dtype=np.float64)), 0, 1)
             return np.rint(rgba * 255).astype(np.uint8)
-    if kind is None:
-        return TYPE_COLORS.get(object_type, OTHER_COLOR)
-    return SEMANTIC_COLORS[kind]
+    return ctx.palette.of(kind, object_type)
 
 
 def _mesh(
@@ -588,12 +570,14 @@ def _types(types: Iterable[str] | None) -> frozenset[str] | None:
     return frozenset(types) if types is not None else None
 
 
-def _read_document(path: Path, limits: Limits, types: frozenset[str] | None) -> Scene:
+def _read_document(
+    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette
+) -> Scene:
     """A ``.json`` CityJSON file: every node built before the scene is returned."""
     data = _document(path, limits)
     tally = InputTally(str(path), limits)
     crs = _scene_crs(data.get("metadata"), str(path))
-    ctx = _context(data, tally, crs)
+    ctx = _context(data, tally, crs, palette)
     nodes = list(_object_nodes(data.get("CityObjects") or {}, ctx, types))
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
     if not size and not tally.skipped:
@@ -629,6 +613,7 @@ def _feature_nodes(
                     template_vertices=ctx.template_vertices,
                     shared=ctx.shared,
                     counted=ctx.counted,
+                    palette=ctx.palette,
                 )
             except InputError as exc:
                 tally.skipped.append({"id": where, "reason": str(exc)})
@@ -637,7 +622,9 @@ def _feature_nodes(
             yield from _object_nodes(feature.get("CityObjects") or {}, local, types)
 
 
-def _read_sequence(path: Path, limits: Limits, types: frozenset[str] | None) -> Scene:
+def _read_sequence(
+    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette
+) -> Scene:
     """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
     try:
         handle = _open_text(path)
@@ -648,7 +635,7 @@ def _read_sequence(path: Path, limits: Limits, types: frozenset[str] | None) -> 
         header = _cityjson(_parsed(first, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
         crs = _scene_crs(header.get("metadata"), str(path))
-        ctx = _context(header, tally, crs)
+        ctx = _context(header, tally, crs, palette)
     except InputError:
         handle.close()
         raise
@@ -658,11 +645,15 @@ def _read_sequence(path: Path, limits: Limits, types: frozenset[str] | None) -> 
 
 
 def read_cityjson(
-    path: Path, limits: Limits = DEFAULT_LIMITS, types: Iterable[str] | None = None
+    path: Path,
+    limits: Limits = DEFAULT_LIMITS,
+    types: Iterable[str] | None = None,
+    colors: Palette = DEFAULT_PALETTE,
 ) -> Scene:
     """Read a CityJSON (``.json``) or CityJSONSeq (``.jsonl``) file, ``.gz`` or not, into a
     Scene (see the module docstring); :class:`InputError` with a one-line reason when it
-    cannot be. ``types``: keep only CityObjects of these types (and their descendants).
+    cannot be. ``types``: keep only CityObjects of these types (and their descendants);
+    ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`).
     The scene carries an :class:`~.geometry_checks.InputTally` of dropped faces and skipped
     objects."""
     path = Path(path)
@@ -672,12 +663,12 @@ def read_cityjson(
         raise InputError("is empty", str(path))
     name = path.name.lower().removesuffix(".gz")
     read = _read_sequence if name.endswith(".jsonl") else _read_document
-    return read(path, limits, _types(types))
+    return read(path, limits, _types(types), colors)
 
 
 FORMAT = Format(
     name="cityjson",
     suffixes=(".json", ".jsonl"),
     read=read_cityjson,
-    read_options=("limits", "types"),
+    read_options=("limits", "types", "colors"),
 )
