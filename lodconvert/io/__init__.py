@@ -33,6 +33,7 @@ FORMAT_MODULES = (
     "lodconvert.io.mesh",
     "lodconvert.io.x3d",
     "lodconvert.io.gltf",
+    "lodconvert.io.citygml",
 )
 """Modules that declare a ``FORMAT`` (or ``FORMATS``), in lookup order."""
 

@@ -1,0 +1,407 @@
+"""CityGML reader: the real samples in ../shared/data/citygml (1.0, 2.0, 3.0; projected and
+geographic), end to end into X3D and glTF, and hostile documents."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import re
+import struct
+import subprocess
+import sys
+import time
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lxml import etree
+
+from lodconvert.io import read_chains, read_scene
+from lodconvert.limits import Limits
+from lodconvert.model import Mesh, Node
+from lodconvert.pipeline import convert
+from lodconvert.semantics import DEFAULT_CLASS_COLORS
+
+from .conftest import SHARED
+from .test_cli import assert_one_line_error, run
+
+CITYGML = SHARED / "data" / "citygml"
+ROOF_COLOR, WALL_COLOR, GROUND_COLOR, OTHER_COLOR = (
+    DEFAULT_CLASS_COLORS[c] for c in ("roof", "wall", "ground", "other")
+)
+SIG3D = "sig3d_house_lod0-4/Building_LOD{}-EPSG25832.gml"
+SAMPLES = {
+    "tum_munich_lod2_v2.zip": 290,
+    "potsdam_lod1_v1.gml": 97,
+    "kit_testcases_lod2_100bldg_v3.gml": 100,
+    "plateau_53394517_bldg_lod012_v2.gml": 1,
+    "plateau_53394517_bldg_lod012_v3.gml": 1,
+    **{SIG3D.format(lod): 1 for lod in range(5)},
+}
+"""Each sample and its count of top-level buildings (../shared/data/README.md)."""
+PLATEAU = ("plateau_53394517_bldg_lod012_v2.gml", "plateau_53394517_bldg_lod012_v3.gml")
+
+
+def sample(name: str) -> Path:
+    """Path of a CityGML sample in ../shared/data/citygml, or skip the test."""
+    path = CITYGML / name
+    if not path.exists():
+        pytest.skip(f"{path} is absent (shared test data not checked out)")
+    return path
+
+
+def nodes_of(path: Path, **options: object) -> list[Node]:
+    return list(read_scene(path, **options).nodes)
+
+
+def colors(mesh: Mesh) -> set[tuple[int, ...]]:
+    return {tuple(int(c) for c in part.material_color) for part in mesh.parts}
+
+
+def as_tuple(color: np.ndarray) -> tuple[int, ...]:
+    return tuple(int(c) for c in color)
+
+
+# --- the samples ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(SAMPLES))
+def test_every_sample_reads_with_its_building_count(name: str) -> None:
+    nodes = nodes_of(sample(name))
+    assert sum(node.type == "Building" for node in nodes) == SAMPLES[name]
+    for node in nodes:
+        assert node.geometry is not None and len(node.geometry.faces) > 0
+        assert node.attributes["type"] == node.type and node.attributes["id"]
+        assert any(node.geometry is mesh for mesh in node.lods.values())
+
+
+def test_projected_samples_keep_their_crs_and_coordinates() -> None:
+    scene = read_scene(sample(SIG3D.format(2)))
+    (node,) = scene.nodes
+    assert scene.crs == node.crs == "EPSG:25832"
+    assert scene.attributes["vertical_crs"] == "EPSG:5783"
+    bounds = node.geometry.bounds
+    assert np.all(bounds[0] >= [458868, 5438343, 112]) and np.all(
+        bounds[1] <= [458892, 5438362, 117]
+    )
+    assert read_scene(sample("tum_munich_lod2_v2.zip")).crs == "EPSG:31468"
+
+
+def test_lod2_house_has_roof_wall_and_ground_parts() -> None:
+    (node,) = nodes_of(sample(SIG3D.format(2)))
+    assert list(node.lods) == ["lod2"]
+    found = colors(node.geometry)
+    assert {as_tuple(ROOF_COLOR), as_tuple(WALL_COLOR), as_tuple(GROUND_COLOR)} <= found
+    # the lod2Solid refers to the thematic surfaces' polygons: each is read once
+    assert len(node.geometry.faces) == 16
+
+
+def test_lod0_lod3_and_lod4_houses_carry_their_lods() -> None:
+    (lod0,) = nodes_of(sample(SIG3D.format(0)))
+    assert list(lod0.lods) == ["lod0"]
+    assert colors(lod0.geometry) == {as_tuple(ROOF_COLOR), as_tuple(GROUND_COLOR)}
+    (lod3,) = nodes_of(sample(SIG3D.format(3)))
+    assert "lod3" in lod3.lods and lod3.geometry is lod3.lods["lod3"]
+    assert as_tuple(OTHER_COLOR) in colors(lod3.geometry)  # windows and the door
+    (lod4,) = nodes_of(sample(SIG3D.format(4)))
+    assert "lod4" in lod4.lods
+    # rooms and furniture (hundreds of polygons) are interior: not read
+    assert len(lod4.geometry.faces) < 200
+
+
+def test_plateau_is_projected_to_a_metric_local_frame_and_both_versions_agree() -> None:
+    meshes = []
+    for name in PLATEAU:
+        scene = read_scene(sample(name))
+        (node,) = scene.nodes
+        frame = scene.attributes["local_frame"]
+        assert scene.crs == frame["proj"] == node.crs and "+proj=tmerc" in scene.crs
+        assert frame["source_crs"] == "EPSG:6697"
+        assert sorted(node.lods) == ["lod0", "lod1", "lod2"] and node.geometry is node.lods["lod2"]
+        extent = np.ptp(node.geometry.vertices, axis=0)
+        assert 31.0 <= extent[2] <= 33.0  # measuredHeight 31.7 m
+        assert 10.0 < extent[0] < 200.0 and 10.0 < extent[1] < 200.0
+        assert np.all(np.abs(node.geometry.bounds[:, :2]) < 200.0)  # centred on the data
+        assert node.attributes["measuredHeight"] == pytest.approx(31.7)
+        meshes.append(node.geometry)
+    assert np.array_equal(meshes[0].faces, meshes[1].faces)
+    assert np.abs(meshes[0].vertices - meshes[1].vertices).max() <= 1e-3
+
+
+def test_attributes_are_read() -> None:
+    (house,) = nodes_of(sample(SIG3D.format(1)))
+    attributes = house.attributes
+    assert attributes["id"] == "GML_7b1a5a6f-ddad-4c3d-a507-3eb9ee0a8e68"
+    assert attributes["name"] == "Example Building LOD1"
+    assert attributes["yearOfConstruction"] == 1985 and attributes["measuredHeight"] == 5.0
+    assert attributes["address"].startswith("Hermann-von-Helmholtz-Platz 1, 76344")
+    tum = nodes_of(sample("tum_munich_lod2_v2.zip"))[0].attributes
+    assert tum["generic"]["HoeheDach"] == pytest.approx(53.8)
+    assert tum["generic"]["Gemeindeschluessel"] == "09162000"
+    assert tum["storeysAboveGround"] == 5 and tum["function"] == "1001"
+    plateau = nodes_of(sample(PLATEAU[1]))[0].attributes
+    assert plateau["generic"]["建物ID"] == "13104-bldg-53"
+    json.dumps([attributes, tum, plateau])
+
+
+def test_types_option_filters_objects() -> None:
+    path = sample(SIG3D.format(2))
+    assert len(nodes_of(path, types=frozenset({"Building"}))) == 1
+    with pytest.raises(Exception, match="no city objects of type Road"):
+        read_scene(path, types=frozenset({"Road"}))
+
+
+# --- end to end -----------------------------------------------------------------------------------
+
+
+def _max_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Largest distance from a point of ``a`` to the nearest point of ``b`` and back."""
+    d = np.linalg.norm(a[:, None, :] - b[None, :, :], axis=2)
+    return float(max(d.min(axis=1).max(), d.min(axis=0).max()))
+
+
+def written_attributes(path: Path) -> dict[str, dict]:
+    """The attributes each object carries in an output: X3D ``MetadataString attributes``
+    (JSON in an MFString) beside its ``object_id``; glTF root-node ``extras.attributes``."""
+    if path.suffix == ".x3d":
+        found = {}
+        for entries in etree.parse(str(path)).iter("MetadataSet"):
+            values = {e.get("name"): e.get("value") for e in entries if e.tag == "MetadataString"}
+            if "attributes" in values:
+                object_id, text = (
+                    re.sub(r"\\(.)", r"\1", values[k][1:-1]) for k in ("object_id", "attributes")
+                )
+                found[object_id] = json.loads(text)
+        return found
+    data = path.read_bytes()
+    document = json.loads(data[20 : 20 + struct.unpack("<I", data[12:16])[0]])
+    nodes = document["nodes"]
+    return {
+        n["name"]: n["extras"]["attributes"] for n in nodes if "attributes" in n.get("extras", {})
+    }
+
+
+@pytest.mark.parametrize("name", ["tum_munich_lod2_v2.zip", "kit_testcases_lod2_100bldg_v3.gml"])
+@pytest.mark.parametrize("suffix", [".x3d", ".glb"])
+def test_districts_convert_one_object_per_building(
+    name: str, suffix: str, tmp_path: Path, schema: etree.XMLSchema
+) -> None:
+    path = sample(name)
+    out = tmp_path / f"city{suffix}"
+    report = convert(path, out, backend="numpy")
+    source = {node.id: node for node in nodes_of(path)}
+    assert report["totals"]["objects"] == len(source) == SAMPLES[name]
+    if suffix == ".x3d":
+        schema.assertValid(etree.parse(str(out)))
+    else:
+        assert run("validate", out).returncode == 0
+    chains = read_chains(out)
+    assert sorted(c.object_id for c in chains) == sorted(source)
+    attributes = written_attributes(out)
+    worst = 0.0
+    for chain in chains:
+        node = source[chain.object_id]
+        assert attributes[chain.object_id] == json.loads(json.dumps(node.attributes))
+        finest = chain.levels[0].mesh
+        worst = max(worst, _max_distance(finest.vertices + chain.origin, node.geometry.vertices))
+    assert worst <= 1e-3
+
+
+# --- hostile and broken documents -----------------------------------------------------------------
+
+HEAD = (
+    '<CityModel xmlns="http://www.opengis.net/citygml/2.0" xmlns:gml="http://www.opengis.net/gml" '
+    'xmlns:bldg="http://www.opengis.net/citygml/building/2.0" '
+    'xmlns:xlink="http://www.w3.org/1999/xlink">'
+)
+
+
+def building(gml_id: str, rings: list[str], extra: str = "") -> str:
+    """A 2.0 building whose lod2MultiSurface holds one polygon per posList in ``rings``."""
+    members = "".join(
+        f'<gml:surfaceMember><gml:Polygon gml:id="{gml_id}_{i}"><gml:exterior><gml:LinearRing>'
+        f"<gml:posList>{ring}</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon>"
+        "</gml:surfaceMember>"
+        for i, ring in enumerate(rings)
+    )
+    return (
+        f'<cityObjectMember><bldg:Building gml:id="{gml_id}"><bldg:lod2MultiSurface>'
+        f"<gml:MultiSurface>{members}{extra}</gml:MultiSurface></bldg:lod2MultiSurface>"
+        "</bldg:Building></cityObjectMember>"
+    )
+
+
+def box(x: float = 0.0, size: float = 10.0) -> list[str]:
+    """The six faces of a cube at ``x`` as posLists (outward counter-clockwise)."""
+    corners = np.array(np.meshgrid([0, 1], [0, 1], [0, 1], indexing="ij")).reshape(3, -1).T
+    corners = corners * size + [x, 0, 0]
+    quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
+    return [" ".join(f"{v:g}" for i in q[::-1] + q[-1:] for v in corners[i]) for q in quads]
+
+
+def document(*objects: str, prolog: str = "") -> str:
+    return f'<?xml version="1.0" encoding="UTF-8"?>{prolog}{HEAD}{"".join(objects)}</CityModel>'
+
+
+@pytest.fixture
+def out_dir(tmp_path: Path) -> Path:
+    folder = tmp_path / "out"
+    folder.mkdir()
+    return folder
+
+
+def refused(path: Path, out_dir: Path, *words: str) -> None:
+    """The command line refuses ``path`` with one line holding ``words``, writing nothing."""
+    result = run(path, "-o", out_dir / "city.x3d", "-q")
+    assert_one_line_error(result, 1, *words)
+    assert list(out_dir.iterdir()) == []
+
+
+def test_doctype_with_an_external_entity_is_refused_unread(tmp_path: Path, out_dir: Path) -> None:
+    secret = tmp_path / "secret.txt"
+    secret.write_text("TOP-SECRET-42")
+    prolog = f'<!DOCTYPE CityModel [<!ENTITY leak SYSTEM "file://{secret}">]>'
+    text = document(building("B&leak;", box()), prolog=prolog)
+    path = tmp_path / "xxe.gml"
+    path.write_text(text.replace("<bldg:Building", "<gml:name>&leak;</gml:name><bldg:Building"))
+    result = run(path, "-o", out_dir / "city.x3d", "-q")
+    assert_one_line_error(result, 1, "DOCTYPE", "security")
+    assert "TOP-SECRET" not in result.stderr + result.stdout
+    assert list(out_dir.iterdir()) == []
+
+
+def test_billion_laughs_is_refused_fast(tmp_path: Path, out_dir: Path) -> None:
+    entities = '<!ENTITY a0 "ha">' + "".join(
+        f'<!ENTITY a{i} "{f"&a{i - 1};" * 10}">' for i in range(1, 10)
+    )
+    path = tmp_path / "laughs.gml"
+    path.write_text(document("<gml:name>&a9;</gml:name>", prolog=f"<!DOCTYPE x [{entities}]>"))
+    start = time.perf_counter()
+    refused(path, out_dir, "DOCTYPE")
+    assert time.perf_counter() - start < 5.0
+
+
+def test_zip_with_a_parent_path_is_refused(tmp_path: Path, out_dir: Path) -> None:
+    path = tmp_path / "evil.zip"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("../evil.gml", document(building("B1", box())))
+    refused(path, out_dir, "unsafe member name", "../evil.gml")
+    assert not (tmp_path.parent / "evil.gml").exists()
+
+
+def test_zip_member_over_the_inflation_limit_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "big.zip"
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("city.gml", document(building("B1", box())) + " " * 100_000)
+    with pytest.raises(Exception, match="inflates past the limit of 10,000"):
+        read_scene(path, limits=Limits(decompressed_bytes=10_000))
+
+
+def test_gz_and_zip_read_like_the_plain_file(tmp_path: Path) -> None:
+    text = document(building("B1", box()), building("B2", box(20.0)))
+    plain = tmp_path / "city.gml"
+    plain.write_text(text)
+    packed = tmp_path / "city.gml.gz"
+    packed.write_bytes(gzip.compress(text.encode()))
+    zipped = tmp_path / "city.zip"
+    with zipfile.ZipFile(zipped, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr("folder/city.gml", text)
+    expected = [n.geometry.vertices for n in nodes_of(plain)]
+    for path in (packed, zipped):
+        got = [n.geometry.vertices for n in nodes_of(path)]
+        assert all(np.array_equal(a, b) for a, b in zip(expected, got, strict=True))
+
+
+def test_xml_that_is_not_citygml_is_refused_naming_its_root(tmp_path: Path, out_dir: Path) -> None:
+    path = tmp_path / "notes.xml"
+    path.write_text('<?xml version="1.0"?><notes xmlns="urn:example"><note>hi</note></notes>')
+    refused(path, out_dir, "is not CityGML", "<notes>", "urn:example")
+    broken = tmp_path / "broken.gml"
+    broken.write_text(document(building("B1", box()))[:-20])
+    refused(broken, out_dir, "not well-formed XML")
+
+
+def test_document_without_city_objects_is_refused(tmp_path: Path, out_dir: Path) -> None:
+    path = tmp_path / "empty.gml"
+    path.write_text(document())
+    refused(path, out_dir, "has no city objects")
+
+
+def test_degenerate_ring_object_is_reported_and_the_rest_convert(
+    tmp_path: Path, out_dir: Path
+) -> None:
+    line = "0 0 0 5 5 5 0 0 0"  # a ring of 2 points
+    path = tmp_path / "city.gml"
+    path.write_text(document(building("good", box()), building("flat", [line])))
+    result = run(path, "-o", out_dir / "city.x3d", "--report", out_dir / "r.json")
+    assert result.returncode == 0, result.stderr
+    assert "flat" in result.stderr and "skipped" in result.stderr
+    report = json.loads((out_dir / "r.json").read_text())
+    assert [o["id"] for o in report["objects"]] == ["good"]
+    assert [s["id"] for s in report["skipped"]] == ["flat"]
+    alone = tmp_path / "alone.gml"
+    alone.write_text(document(building("flat", [line])))
+    (out_dir / "city.x3d").unlink()
+    (out_dir / "r.json").unlink()
+    refused(alone, out_dir, "flat", "no area")
+
+
+def test_depth_and_text_limits_are_one_line_errors(tmp_path: Path) -> None:
+    path = tmp_path / "city.gml"
+    path.write_text(document(building("B1", box())))
+    with pytest.raises(Exception, match="deeper than the limit of 5"):
+        read_scene(path, limits=Limits(xml_depth=5))
+    with pytest.raises(Exception, match="over the limit of 20"):
+        read_scene(path, limits=Limits(xml_text_bytes=20))
+
+
+def test_orientable_surface_flips_and_links_resolve_within_the_object(tmp_path: Path) -> None:
+    faces = box()
+    flipped = (
+        '<gml:surfaceMember><gml:OrientableSurface orientation="-"><gml:baseSurface>'
+        f'<gml:Polygon gml:id="P"><gml:exterior><gml:LinearRing><gml:posList>{faces[0]}'
+        "</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:baseSurface>"
+        "</gml:OrientableSurface></gml:surfaceMember>"
+    )
+    linked = '<gml:surfaceMember xlink:href="#B_1"/><gml:surfaceMember xlink:href="#elsewhere"/>'
+    path = tmp_path / "city.gml"
+    path.write_text(document(building("B", faces[1:], flipped + linked)))
+    scene = read_scene(path)
+    (node,) = scene.nodes
+    mesh = node.geometry
+    assert len(mesh.faces) == 12  # six quads; the linked polygon is read once
+    normals = np.cross(*(mesh.triangles[:, 1:] - mesh.triangles[:, :1]).transpose(1, 0, 2))
+    centre = mesh.vertices.mean(axis=0)
+    outward = np.einsum("ij,ij->i", normals, mesh.triangles.mean(axis=1) - centre)
+    assert (outward > 0).sum() == 10 and (outward < 0).sum() == 2  # the reversed bottom
+    assert scene.attributes["citygml"]["unresolved_links"] == {"B": 1}
+
+
+def test_memory_does_not_grow_with_the_file(tmp_path: Path) -> None:
+    """Peak memory reading 2,000 buildings of 50 kB is close to reading 200: each object's
+    elements are freed once it is converted."""
+    blob = "<gml:description>" + "x" * 50_000 + "</gml:description><bldg:lod2"
+
+    def peak_mb(count: int) -> float:
+        path = tmp_path / f"city{count}.gml"
+        with path.open("w") as handle:
+            handle.write(f'<?xml version="1.0"?>{HEAD}')
+            for i in range(count):
+                handle.write(building(f"B{i}", box()[:1]).replace("<bldg:lod2", blob, 1))
+            handle.write("</CityModel>")
+        code = (
+            "import resource,sys; from lodconvert.io import read_scene; "
+            "n=sum(1 for _ in read_scene(sys.argv[1]).nodes); "
+            "print(n, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
+        )
+        done = subprocess.run(
+            [sys.executable, "-c", code, str(path)], capture_output=True, text=True, check=True
+        )
+        n, peak_kb = done.stdout.split()
+        assert int(n) == count
+        return int(peak_kb) / 1024
+
+    small, large = peak_mb(200), peak_mb(2000)
+    assert (tmp_path / "city2000.gml").stat().st_size > 100e6
+    assert large - small < 10, (small, large)
