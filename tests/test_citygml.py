@@ -22,6 +22,7 @@ from lodconvert.limits import Limits
 from lodconvert.model import Mesh, Node
 from lodconvert.pipeline import convert
 from lodconvert.semantics import DEFAULT_CLASS_COLORS
+from lodconvert.validate import errors_of, validate_file
 
 from .conftest import SHARED
 from .test_cli import assert_one_line_error, run
@@ -405,3 +406,23 @@ def test_memory_does_not_grow_with_the_file(tmp_path: Path) -> None:
     small, large = peak_mb(200), peak_mb(2000)
     assert (tmp_path / "city2000.gml").stat().st_size > 100e6
     assert large - small < 10, (small, large)
+
+
+@pytest.mark.parametrize("suffix", [".x3d", ".glb"])
+def test_the_five_sig3d_files_are_one_building_with_four_levels(
+    tmp_path: Path, suffix: str
+) -> None:
+    """``lodconvert Building_LOD0.gml … Building_LOD4.gml -o house.x3d``: one building whose
+    levels are its own LoD4, LoD3, LoD2 and LoD1 geometry in their slots (LoD0 fills none)."""
+    inputs = [sample(SIG3D.format(lod)) for lod in range(5)]
+    out = tmp_path / f"house{suffix}"
+    report = convert(inputs, out)
+    (obj,) = report["objects"]
+    assert [(lv["name"], lv["kind"]) for lv in obj["levels"]] == [
+        ("LOD4", "source"),
+        ("LOD3", "source"),
+        ("LOD2", "source"),
+        ("LOD1", "source"),
+    ]
+    assert obj["xs"] == [0.33, 0.66, 1.0] and obj["dropped"] == {}
+    assert errors_of(validate_file(out)) == []
