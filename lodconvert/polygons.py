@@ -34,13 +34,21 @@ def _open_ring(ring: np.ndarray) -> np.ndarray:
 
 def newell_normal(ring: np.ndarray) -> np.ndarray:
     """The (unnormalised) Newell normal of a ring: twice its vector area."""
-    nxt = np.roll(ring, -1, axis=0)
+    nxt = np.concatenate([ring[1:], ring[:1]])
+    a, b = ring - nxt, ring + nxt
     return np.array(
         [
-            np.sum((ring[:, 1] - nxt[:, 1]) * (ring[:, 2] + nxt[:, 2])),
-            np.sum((ring[:, 2] - nxt[:, 2]) * (ring[:, 0] + nxt[:, 0])),
-            np.sum((ring[:, 0] - nxt[:, 0]) * (ring[:, 1] + nxt[:, 1])),
+            np.dot(a[:, 1], b[:, 2]),
+            np.dot(a[:, 2], b[:, 0]),
+            np.dot(a[:, 0], b[:, 1]),
         ]
+    )
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The cross product of two 3-vectors (``np.cross`` costs more for one pair)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
     )
 
 
@@ -48,9 +56,9 @@ def _plane_axes(normal: np.ndarray) -> np.ndarray:
     """Two orthonormal axes (2, 3) spanning the plane of unit ``normal``, right-handed with it,
     so that a counter-clockwise ring seen from the normal stays counter-clockwise."""
     helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
-    u = np.cross(normal, helper)
+    u = _cross(normal, helper)
     u /= np.linalg.norm(u)
-    return np.stack([u, np.cross(normal, u)])
+    return np.stack([u, _cross(normal, u)])
 
 
 def triangulate(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -61,13 +69,15 @@ def triangulate(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     import mapbox_earcut
 
     exterior = _open_ring(rings[0])
-    if len(np.unique(exterior, axis=0)) < 3:
+    if len(exterior) < 3:
         raise DegenerateRing(f"a ring of {len(exterior)} distinct point(s); a polygon needs 3")
     normal = newell_normal(exterior)
     extent = float(np.ptp(exterior, axis=0).max())
     length = float(np.linalg.norm(normal))
     if not length > 2 * AREA_EPSILON * extent * extent:
         raise DegenerateRing("a ring without area (its points lie on a line)")
+    if len(exterior) == 3 and len(rings) == 1:
+        return exterior, np.array([[0, 1, 2]], dtype=np.int64)
     normal /= length
     holes = []
     for ring in rings[1:]:
@@ -75,12 +85,11 @@ def triangulate(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         if len(hole) >= 3 and np.linalg.norm(newell_normal(hole)) > 0:
             holes.append(hole)
     points = np.concatenate([exterior, *holes]) if holes else exterior
-    axes = _plane_axes(normal)
-    flat = (points - points.mean(axis=0)) @ axes.T
+    flat = (points - points[0]) @ _plane_axes(normal).T
     ends = np.cumsum([len(exterior), *(len(h) for h in holes)]).astype(np.uint32)
     index = mapbox_earcut.triangulate_float64(flat, ends).astype(np.int64).reshape(-1, 3)
     if len(index):
-        tri = points[index]
-        facing = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) @ normal
-        index[facing < 0] = index[facing < 0][:, ::-1]
+        a, b, c = flat[index[:, 0]], flat[index[:, 1]], flat[index[:, 2]]
+        turn = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+        index[turn < 0] = index[turn < 0][:, ::-1]  # face along the exterior ring's normal
     return points, index
