@@ -428,24 +428,7 @@ def bake_chain(
             kept_cuts.append(cuts[n - 1])
             kept_xs.append(xs[n - 1])
 
-    culled = opts.cull is not None
-    if culled:
-        kept_cuts.append(cutoff(alpha, opts.beta, opts.gamma, opts.cull))
-        kept_xs.append(opts.cull)
-    return LodChain(
-        object_id=obj.id,
-        levels=levels,
-        cutoffs=kept_cuts,
-        origin=origin,
-        center=np.zeros(3),
-        alpha=alpha,
-        beta=opts.beta,
-        gamma=opts.gamma,
-        xs=kept_xs,
-        culled=culled,
-        dropped=dropped,
-        metadata=dict(obj.attributes),
-    )
+    return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped)
 
 
 def _source_chain(
@@ -503,20 +486,35 @@ def _source_chain(
         levels.append(level)
         kept_cuts.append(cuts[index])
         kept_xs.append(xs[index])
+    return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped)
+
+
+def _finished(
+    obj: Node,
+    opts: ChainOptions,
+    levels: list[Level],
+    cuts: list[float],
+    xs: list[float],
+    origin: np.ndarray,
+    alpha: float,
+    dropped: dict[str, str],
+) -> LodChain:
+    """The chain of ``obj`` from its kept levels and their switch-in cutoffs and exponents,
+    with the cull cutoff added when asked."""
     culled = opts.cull is not None
     if culled:
-        kept_cuts.append(cutoff(alpha, opts.beta, opts.gamma, opts.cull))
-        kept_xs.append(opts.cull)
+        cuts = [*cuts, cutoff(alpha, opts.beta, opts.gamma, opts.cull)]
+        xs = [*xs, opts.cull]
     return LodChain(
         object_id=obj.id,
         levels=levels,
-        cutoffs=kept_cuts,
+        cutoffs=cuts,
         origin=origin,
         center=np.zeros(3),
         alpha=alpha,
         beta=opts.beta,
         gamma=opts.gamma,
-        xs=kept_xs,
+        xs=xs,
         culled=culled,
         dropped=dropped,
         metadata=dict(obj.attributes),
