@@ -426,3 +426,14 @@ def test_the_five_sig3d_files_are_one_building_with_four_levels(
     ]
     assert obj["xs"] == [0.33, 0.66, 1.0] and obj["dropped"] == {}
     assert errors_of(validate_file(out)) == []
+
+
+def test_fuzz_found_a_zip_whose_member_header_is_broken(tmp_path: Path) -> None:
+    """A zip whose central directory is sound but whose member's local header is not (found
+    by the fuzzer: zipfile raised BadZipFile on opening the member)."""
+    from .fuzz.seeds import seeds_for
+
+    (seed,) = seeds_for(".zip")
+    broken = tmp_path / "broken.zip"
+    broken.write_bytes(b"Q" + seed[1:])  # "PK\\x03\\x04" → "QK\\x03\\x04"
+    assert_one_line_error(run(broken, "-o", tmp_path / "out.x3d"), 1, "broken.zip", "zip")

@@ -282,15 +282,17 @@ def _open(path: Path, limits: Limits) -> IO[bytes] | _Capped:
     to, capped at ``limits.decompressed_bytes`` (never written to disk)."""
     source = str(path)
     name = path.name.lower()
+    if name.endswith(".zip.gz"):
+        raise InputError("is a .zip inside a .gz: give the .zip itself", source)
     if name.endswith(".gz"):
         return _Capped(gzip.open(path, "rb"), limits.decompressed_bytes, source)
     if name.endswith(".zip"):
         try:
             archive = zipfile.ZipFile(path)
-        except (zipfile.BadZipFile, OSError) as exc:
+            member = _zip_member(archive, limits, source)
+            return _Capped(archive.open(member), limits.decompressed_bytes, source)
+        except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
             raise InputError(f"is not a valid zip file ({exc})", source) from None
-        member = _zip_member(archive, limits, source)
-        return _Capped(archive.open(member), limits.decompressed_bytes, source)
     return path.open("rb")
 
 

@@ -1,5 +1,6 @@
 """Small valid files of every input suffix, generated here (no files checked in): a box as
-OBJ, ASCII and binary PLY, ASCII and binary STL, OFF, GLB and glTF (buffer embedded)."""
+OBJ, ASCII and binary PLY, ASCII and binary STL, OFF, GLB and glTF (buffer embedded); a house
+as CityJSON, CityJSONSeq, CityGML and CityGML in a zip."""
 
 from __future__ import annotations
 
@@ -42,7 +43,90 @@ def generated() -> dict[str, tuple[bytes, ...]]:
         ".off": (mesh.export(file_type="off").encode(),),
         ".glb": (scene.export(file_type="glb"),),
         ".gltf": (json.dumps(json.loads(gltf["model.gltf"])).encode(),),
+        ".json": (_cityjson()[0],),
+        ".jsonl": (_cityjson()[1],),
+        ".gml": (_citygml(),),
+        ".xml": (_citygml(),),
+        ".zip": (_zipped("city.gml", _citygml()),),
     }
+
+
+def _cityjson() -> tuple[bytes, bytes]:
+    """A CityJSON 2.0 house (a solid with roof/wall/ground semantics, a material) and the
+    same as CityJSONSeq (header line, one feature line)."""
+    boundaries = [[[[0, 3, 2, 1]], [[4, 5, 6, 7]], [[0, 1, 5, 4]], [[1, 2, 6, 5]]]]
+    geometry = {
+        "type": "Solid",
+        "lod": "2.2",
+        "boundaries": boundaries,
+        "semantics": {
+            "surfaces": [
+                {"type": "GroundSurface"},
+                {"type": "RoofSurface"},
+                {"type": "WallSurface"},
+            ],
+            "values": [[0, 1, 2, 2]],
+        },
+        "material": {"m": {"values": [[0, 0, 0, 0]]}},
+    }
+    vertices = [[0, 0, 0], [1000, 0, 0], [1000, 1000, 0], [0, 1000, 0]]
+    vertices += [[x, y, 800] for x, y, _ in vertices]
+    header = {
+        "type": "CityJSON",
+        "version": "2.0",
+        "transform": {"scale": [0.01, 0.01, 0.01], "translate": [85000.0, 447000.0, 0.0]},
+        "metadata": {"referenceSystem": "https://www.opengis.net/def/crs/EPSG/0/7415"},
+        "appearance": {"materials": [{"name": "m", "diffuseColor": [0.8, 0.4, 0.3]}]},
+    }
+    house = {"type": "Building", "attributes": {"measuredHeight": 8.0}, "geometry": [geometry]}
+    document = {**header, "CityObjects": {"house": house}, "vertices": vertices}
+    feature = {
+        "type": "CityJSONFeature",
+        "id": "house",
+        "CityObjects": {"house": house},
+        "vertices": vertices,
+    }
+    sequence = json.dumps({**header, "CityObjects": {}, "vertices": []}) + "\n"
+    return json.dumps(document).encode(), (sequence + json.dumps(feature) + "\n").encode()
+
+
+def _citygml() -> bytes:
+    """A CityGML 2.0 building: a roof and a wall surface with a posList each."""
+    ring = "0 0 0 10 0 0 10 10 0 0 10 0 0 0 0"
+    wall = "0 0 0 10 0 0 10 0 5 0 0 5 0 0 0"
+
+    def surface(kind: str, pos: str) -> str:
+        return (
+            f"<bldg:boundedBy><bldg:{kind}><bldg:lod2MultiSurface><gml:MultiSurface>"
+            "<gml:surfaceMember><gml:Polygon><gml:exterior><gml:LinearRing>"
+            f"<gml:posList srsDimension='3'>{pos}</gml:posList>"
+            "</gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>"
+            f"</gml:MultiSurface></bldg:lod2MultiSurface></bldg:{kind}></bldg:boundedBy>"
+        )
+
+    return (
+        "<?xml version='1.0' encoding='UTF-8'?>"
+        "<core:CityModel xmlns:core='http://www.opengis.net/citygml/2.0' "
+        "xmlns:bldg='http://www.opengis.net/citygml/building/2.0' "
+        "xmlns:gml='http://www.opengis.net/gml'>"
+        "<gml:boundedBy><gml:Envelope srsName='EPSG:25832'/></gml:boundedBy>"
+        "<core:cityObjectMember><bldg:Building gml:id='b1'>"
+        "<bldg:measuredHeight uom='m'>5</bldg:measuredHeight>"
+        + surface("RoofSurface", ring.replace(" 0 ", " 5 ").replace(" 0", " 5"))
+        + surface("WallSurface", wall)
+        + "</bldg:Building></core:cityObjectMember></core:CityModel>"
+    ).encode()
+
+
+def _zipped(name: str, data: bytes) -> bytes:
+    """A zip holding ``data`` as ``name``."""
+    import io
+    import zipfile
+
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.writestr(zipfile.ZipInfo(name, (2020, 1, 1, 0, 0, 0)), data)
+    return buffer.getvalue()
 
 
 def reader_suffixes() -> list[str]:

@@ -32,7 +32,10 @@ def worker() -> Iterator[Worker]:
 @pytest.mark.parametrize("suffix", reader_suffixes())
 def test_seeds_are_read(tmp_path: Path, suffix: str) -> None:
     for i, seed in enumerate(seeds_for(suffix)):
-        for name, data in ((f"s{i}{suffix}", seed), (f"s{i}{suffix}.gz", gzipped(seed))):
+        variants = [(f"s{i}{suffix}", seed)]
+        if suffix != ".zip":  # a zip is compressed already: .zip.gz is refused by name
+            variants.append((f"s{i}{suffix}.gz", gzipped(seed)))
+        for name, data in variants:
             (tmp_path / name).write_bytes(data)
             assert list(read_scene(tmp_path / name).with_geometry()), name
 
