@@ -254,7 +254,7 @@ def convert(
         timings["bake_and_write"] = time.perf_counter() - start
         tally = tally_of(scene)
         for entry in tally.skipped if tally is not None else ():
-            if not strict:
+            if records and not strict:  # with nothing converted, the run's error says it
                 warn(f"{scene.source}: object {entry['reason']} — skipped")
             skipped.append(entry)
         if strict and skipped:

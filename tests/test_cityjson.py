@@ -25,6 +25,7 @@ from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.validate import validate_file
 
 from .conftest import SHARED
+from .test_cli import assert_one_line_error, run
 
 CITYJSON = SHARED / "data" / "cityjson"
 
@@ -368,3 +369,17 @@ def test_colors_option_changes_the_class_colours() -> None:
     for bad in ("roof=red", "chimney=#000000"):
         with pytest.raises(UsageError):
             DEFAULT_PALETTE.with_text(bad)
+
+
+def test_fuzz_found_a_float_vertex_index_too_large_for_an_integer(tmp_path: Path) -> None:
+    """A boundary index of 1e308 (found by the fuzzer: OverflowError) is a malformed object,
+    reported and skipped like any other."""
+    from .fuzz.seeds import seeds_for
+
+    (seed,) = seeds_for(".json")
+    data = json.loads(seed)
+    data["CityObjects"]["house"]["geometry"][0]["boundaries"][0][0][0][0] = 1e308
+    path = write_json(tmp_path / "big_index.city.json", data)
+    assert [n.id for n in read_scene(path).walk()] == []  # the only object is skipped
+    result = run(path, "-o", tmp_path / "out.glb")
+    assert_one_line_error(result, 1, "big_index.city.json", "house")

@@ -505,7 +505,7 @@ def _typed(text: str, kind: type) -> Any:
     """``text`` as ``kind`` (int, float or str); as text when it is not one."""
     try:
         return kind(text) if kind is not int else int(float(text))
-    except ValueError:
+    except (ValueError, OverflowError):
         return text
 
 

@@ -340,7 +340,7 @@ def _mesh(
         try:
             surfaces = _surfaces(geometry.get("boundaries"), depth)
             rings = [[np.asarray(r, dtype=np.int64).ravel() for r in s] for s in surfaces]
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise InputError(
                 f"has malformed {geometry['type']} boundaries ({exc})", where
             ) from None
