@@ -164,6 +164,14 @@ def merged(scenes: Sequence[Scene]) -> Scene:
     return whole
 
 
+def _is_city(scene: Scene) -> bool:
+    """Whether ``scene`` holds city objects (nodes with their own LoDs); looks at the first
+    node only, so a lazy scene is not consumed."""
+    nodes = scene.nodes
+    first = nodes[0] if isinstance(nodes, list) and nodes else None
+    return first is not None and bool(first.lods)
+
+
 def _with_plot_radii(
     scene: Scene, options: ChainOptions
 ) -> tuple[Iterable[Node], dict[int, float]]:
@@ -231,6 +239,11 @@ def convert(
             ]
         )
         timings["read"] = time.perf_counter() - start
+        if scene.crs is None and _is_city(scene):
+            warn(
+                f"{scene.source}: declares no CRS; its coordinates are written as they are "
+                "(--crs EPSG:… names it)"
+            )
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(backend)
         info = OutputInfo(

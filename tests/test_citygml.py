@@ -437,3 +437,10 @@ def test_fuzz_found_a_zip_whose_member_header_is_broken(tmp_path: Path) -> None:
     broken = tmp_path / "broken.zip"
     broken.write_bytes(b"Q" + seed[1:])  # "PK\\x03\\x04" → "QK\\x03\\x04"
     assert_one_line_error(run(broken, "-o", tmp_path / "out.x3d"), 1, "broken.zip", "zip")
+
+
+def test_crs_option_replaces_the_declared_crs() -> None:
+    """The KIT test cases declare EPSG:3068 for local coordinates; --crs says what they are."""
+    path = sample("kit_testcases_lod2_100bldg_v3.gml")
+    assert read_scene(path).crs == "EPSG:3068"
+    assert read_scene(path, crs="EPSG:25832").crs == "EPSG:25832"

@@ -383,3 +383,17 @@ def test_fuzz_found_a_float_vertex_index_too_large_for_an_integer(tmp_path: Path
     assert [n.id for n in read_scene(path).walk()] == []  # the only object is skipped
     result = run(path, "-o", tmp_path / "out.glb")
     assert_one_line_error(result, 1, "big_index.city.json", "house")
+
+
+def test_no_declared_crs_is_a_warning_and_crs_names_it(tmp_path: Path) -> None:
+    out = tmp_path / "city.glb"
+    result = run(multi_lod(), "-o", out)
+    assert result.returncode == 0
+    assert "declares no CRS" in result.stderr and "--crs" in result.stderr
+    result = run(multi_lod(), "-o", out, "--crs", "EPSG:7415")
+    assert result.returncode == 0 and "declares no CRS" not in result.stderr
+    data = out.read_bytes()
+    length = int.from_bytes(data[12:16], "little")
+    assert json.loads(data[20 : 20 + length])["asset"]["extras"]["lodconvert"]["crs"] == (
+        "EPSG:7415"
+    )

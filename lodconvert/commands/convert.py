@@ -72,6 +72,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(source materials win; defaults in the README)",
     )
     read.add_argument(
+        "--crs",
+        metavar="EPSG:CODE",
+        help="city models: the CRS of the coordinates, replacing what the file declares",
+    )
+    read.add_argument(
         "--strict",
         action="store_true",
         help="fail (exit 1, nothing written) when any object is skipped as broken",
@@ -148,6 +153,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
             "merge_groups": args.merge_groups or None,
             "types": frozenset(parse_list(args.types, str, "--types")) if args.types else None,
             "colors": DEFAULT_PALETTE.with_text(args.colors) if args.colors else None,
+            "crs": args.crs,
         },
         strict=args.strict,
         also=stage_page if args.html else None,

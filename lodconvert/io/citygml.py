@@ -794,9 +794,11 @@ def read_citygml(
     limits: Limits = DEFAULT_LIMITS,
     types: frozenset[str] | None = None,
     colors: Palette = DEFAULT_PALETTE,
+    crs: str | None = None,
 ) -> Scene:
     """Read a CityGML file (``.gml``/``.xml``, or a ``.gz``/``.zip`` of one) into a Scene whose
-    nodes are streamed; raise :class:`InputError` with a one-line reason.
+    nodes are streamed; raise :class:`InputError` with a one-line reason. ``crs`` (an EPSG
+    name or URN) replaces whatever CRS the document declares.
 
     ``types``: read only top-level city objects of these types (local names: ``Building``,
     ``Road``…); None reads every type. The document is parsed up to its first city object
@@ -814,6 +816,8 @@ def read_citygml(
         raise InputError("is empty", source)
     tally = InputTally(source, limits)
     document = _Document(path, limits, types, tally, colors)
+    if crs is not None:
+        document.crs = _Crs.of(crs)
     nodes = document.nodes()
     first = next(nodes, None)
     if first is None and len(tally.skipped) == 1:
@@ -824,16 +828,16 @@ def read_citygml(
     if first is None:
         wanted = f" of type {', '.join(sorted(types))}" if types else ""
         raise InputError(f"has no city objects{wanted} with surface geometry", source)
-    crs = document.crs or _Crs()
+    declared = document.crs or _Crs()
     attributes: dict[str, Any] = {"citygml_version": document.version, "citygml": document.stats}
-    if crs.vertical:
-        attributes["vertical_crs"] = crs.vertical
-    if crs.frame is not None:
-        attributes["local_frame"] = crs.frame.record()
+    if declared.vertical:
+        attributes["vertical_crs"] = declared.vertical
+    if declared.frame is not None:
+        attributes["local_frame"] = declared.frame.record()
     scene = Scene(
         source=source,
         nodes=chain([first], nodes),
-        crs=crs.scene_crs,
+        crs=declared.scene_crs,
         attributes=attributes,
     )
     return attach_tally(scene, tally)
@@ -843,5 +847,5 @@ FORMAT = Format(
     name="citygml",
     suffixes=(".gml", ".xml", ".zip"),
     read=read_citygml,
-    read_options=("limits", "types", "colors"),
+    read_options=("limits", "types", "colors", "crs"),
 )

@@ -151,6 +151,11 @@ def _cityjson(data: Any, kind: str, where: str) -> dict[str, Any]:
     return data
 
 
+def _declared(metadata: Any, crs: str | None) -> Any:
+    """The metadata whose reference system is read: ``crs`` given by the user wins."""
+    return {"referenceSystem": crs} if crs is not None else metadata
+
+
 def _scene_crs(metadata: Any, where: str) -> str | None:
     """``metadata.referenceSystem`` as ``EPSG:<code>`` (other forms as given), or None;
     :class:`InputError` for a geographic CRS."""
@@ -571,12 +576,12 @@ def _types(types: Iterable[str] | None) -> frozenset[str] | None:
 
 
 def _read_document(
-    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette
+    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
 ) -> Scene:
     """A ``.json`` CityJSON file: every node built before the scene is returned."""
     data = _document(path, limits)
     tally = InputTally(str(path), limits)
-    crs = _scene_crs(data.get("metadata"), str(path))
+    crs = _scene_crs(_declared(data.get("metadata"), crs), str(path))
     ctx = _context(data, tally, crs, palette)
     nodes = list(_object_nodes(data.get("CityObjects") or {}, ctx, types))
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
@@ -623,7 +628,7 @@ def _feature_nodes(
 
 
 def _read_sequence(
-    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette
+    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
 ) -> Scene:
     """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
     try:
@@ -634,7 +639,7 @@ def _read_sequence(
     try:
         header = _cityjson(_parsed(first, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
-        crs = _scene_crs(header.get("metadata"), str(path))
+        crs = _scene_crs(_declared(header.get("metadata"), crs), str(path))
         ctx = _context(header, tally, crs, palette)
     except InputError:
         handle.close()
@@ -649,11 +654,13 @@ def read_cityjson(
     limits: Limits = DEFAULT_LIMITS,
     types: Iterable[str] | None = None,
     colors: Palette = DEFAULT_PALETTE,
+    crs: str | None = None,
 ) -> Scene:
     """Read a CityJSON (``.json``) or CityJSONSeq (``.jsonl``) file, ``.gz`` or not, into a
     Scene (see the module docstring); :class:`InputError` with a one-line reason when it
     cannot be. ``types``: keep only CityObjects of these types (and their descendants);
-    ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`).
+    ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`); ``crs``
+    replaces the CRS the file declares.
     The scene carries an :class:`~.geometry_checks.InputTally` of dropped faces and skipped
     objects."""
     path = Path(path)
@@ -663,12 +670,12 @@ def read_cityjson(
         raise InputError("is empty", str(path))
     name = path.name.lower().removesuffix(".gz")
     read = _read_sequence if name.endswith(".jsonl") else _read_document
-    return read(path, limits, _types(types), colors)
+    return read(path, limits, _types(types), colors, crs)
 
 
 FORMAT = Format(
     name="cityjson",
     suffixes=(".json", ".jsonl"),
     read=read_cityjson,
-    read_options=("limits", "types", "colors"),
+    read_options=("limits", "types", "colors", "crs"),
 )
