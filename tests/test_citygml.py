@@ -204,6 +204,9 @@ def test_districts_convert_one_object_per_building(
     for chain in chains:
         node = source[chain.object_id]
         assert attributes[chain.object_id] == json.loads(json.dumps(node.attributes))
+        for level in chain.levels:  # what the buffers and coordinate lists hold: small
+            written = level.mesh.vertices if level.mesh is not None else level.points.positions
+            assert np.abs(written).max() < 1e5, (chain.object_id, level.name)
         finest = chain.levels[0].mesh
         worst = max(worst, _max_distance(finest.vertices + chain.origin, node.geometry.vertices))
     assert worst <= 1e-3

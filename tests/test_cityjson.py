@@ -168,6 +168,9 @@ def test_converts_one_object_per_node_with_ids_attributes_and_millimetres(
         assert _gltf_names(out) == list(nodes)
     worst = 0.0
     for chain in read_chains(out):
+        for level in chain.levels:  # what the buffers and coordinate lists hold: small
+            local = level.mesh.vertices if level.mesh is not None else level.points.positions
+            assert np.abs(local).max() < 1e5, (chain.object_id, level.name)
         written = chain.levels[0].mesh.vertices + chain.origin
         source_vertices = nodes[chain.object_id].geometry.vertices
         worst = max(
