@@ -298,3 +298,35 @@ def test_low_poly_objects_keep_their_mesh_near_and_far(
             assert {o["level"] for o in seen["objects"]} == {"LOD4"}, message
             assert seen["foreground"] > 0, message
         assert not _errors(out), console_text(out)
+
+
+def test_x_ite_shows_a_district_and_a_building_switches_at_its_cutoffs(
+    site: Path, drive: Drive
+) -> None:
+    """TUM Munich (290 CityGML LoD2 buildings) in X_ITE: the district is drawn, and its first
+    building shows its LoD2 nearer than its cutoff and its LOD1 prism beyond."""
+    from lodconvert.io import read_chains
+
+    from ..conftest import SHARED
+
+    source = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
+    if not source.exists():
+        pytest.skip(f"{source} is absent (shared test data not checked out)")
+    chain = make_chain(site, source, "tum.x3d")
+    assert [lv["kind"] for lv in chain.obj["levels"]] == ["source", "prism"]
+    (written,) = [
+        c for c in read_chains(site / chain.name, geometry=False) if c.object_id == chain.obj["id"]
+    ]
+    stops = chain.stops()
+    out = drive(
+        "x_ite",
+        file=chain.name,
+        lod=written.metadata["x3d"]["lod"],
+        center=chain.obj["origin"],
+        stops=stops,
+    )
+    seen = out["result"]["stops"]
+    message = f"{seen}\n{console_text(out)}"
+    assert [s["level"] for s in seen] == [s["level"] for s in stops], message
+    assert all(s["foreground"] >= MIN_VISIBLE for s in seen), message
+    assert not _errors(out), message
