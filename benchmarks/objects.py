@@ -55,6 +55,7 @@ import tarfile
 import tempfile
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -64,7 +65,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 import pygltflib  # noqa: E402
-from tables import markdown_table  # noqa: E402
+from tables import markdown_table, write_results  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -600,21 +601,51 @@ def source_state(pythonpath: Path | None, commit: str | None) -> str:
     return f"working tree at {head}{' + uncommitted changes in lodconvert/' if dirty else ''}"
 
 
-def results_text(
-    rows: list[Row],
-    bases: dict[str, Row],
-    scenes: dict[int, dict[str, Any]],
+def add_source_options(parser: argparse.ArgumentParser) -> None:
+    """The mutually exclusive ``--commit REV`` and ``--pythonpath DIR`` options (where the
+    measured lodconvert comes from; see :func:`lodconvert_source`)."""
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument(
+        "--commit",
+        metavar="REV",
+        help="measure lodconvert/ as committed at REV (a `git archive` snapshot) instead of "
+        "the working tree, which other people may be editing",
+    )
+    source.add_argument(
+        "--pythonpath",
+        type=Path,
+        metavar="DIR",
+        help="import lodconvert from DIR/lodconvert instead of the working tree",
+    )
+
+
+@contextlib.contextmanager
+def lodconvert_source(args: argparse.Namespace) -> Iterator[None]:
+    """Within: with ``--commit``, ``args.commit`` is the short hash and ``args.pythonpath`` a
+    snapshot of its lodconvert/ (removed on leaving); exits unless the children would import
+    lodconvert from ``package_dir(args.pythonpath)``."""
+    with tempfile.TemporaryDirectory(prefix="lodconvert-src-") as src:
+        if args.commit:
+            args.commit = snapshot(args.commit, Path(src))
+            args.pythonpath = Path(src)
+        if imported_from(args.pythonpath) != package_dir(args.pythonpath):
+            raise SystemExit(f"lodconvert is not imported from {package_dir(args.pythonpath)}")
+        yield
+
+
+def preamble(
+    title: str,
     args: argparse.Namespace,
     command: str,
     load: tuple[float, float],
     elapsed: float,
     digests: tuple[str, str],
-) -> str:
-    """The results markdown."""
+) -> list[str]:
+    """The title, date, machine, software and command lines of a results file."""
     pinned = "pinned to CPU 0 with `taskset -c 0`" if pin_prefix() else "not pinned (no taskset)"
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    lines = [
-        "# Many-object conversion benchmark",
+    return [
+        f"# {title}",
         "",
         f"- Date: {datetime.datetime.now().astimezone().isoformat(timespec='seconds')}",
         f"- Machine: {cpu_model()}, {os.cpu_count()} CPUs ({cores} usable), "
@@ -628,6 +659,38 @@ def results_text(
             else f"{digests[0]} at the start, {digests[1]} at the end (edited during the run)"
         ),
         f"- Command: `{command}` ({elapsed:.0f} s)",
+    ]
+
+
+def run_facts(
+    script: str,
+    argv: list[str],
+    started: float,
+    load_start: float,
+    digest_start: str,
+    pythonpath: Path | None,
+) -> tuple[str, tuple[float, float], float, tuple[str, str]]:
+    """At the end of a benchmark: its command line, load averages (start, end), elapsed seconds
+    and package digests (start, end), for :func:`preamble`."""
+    command = "python " + shlex.join([os.path.relpath(script, ROOT), *argv])
+    load = (load_start, os.getloadavg()[0])
+    digests = (digest_start, tree_digest(package_dir(pythonpath)))
+    return command, load, time.perf_counter() - started, digests
+
+
+def results_text(
+    rows: list[Row],
+    bases: dict[str, Row],
+    scenes: dict[int, dict[str, Any]],
+    args: argparse.Namespace,
+    command: str,
+    load: tuple[float, float],
+    elapsed: float,
+    digests: tuple[str, str],
+) -> str:
+    """The results markdown."""
+    lines = [
+        *preamble("Many-object conversion benchmark", args, command, load, elapsed, digests),
         f"- Scenes: a town of N buildings, seed {args.seed}: boxes, stepped and hipped blocks and"
         " gabled houses (some with chimneys and annexes), 12–40 triangles each, on"
         f" {LOT:g} m lots in blocks of {BLOCK}×{BLOCK} lots with {STREET:g} m streets, centred"
@@ -713,14 +776,11 @@ def benchmark(args: argparse.Namespace, argv: list[str]) -> int:
                     bases[fmt] = row
                 else:
                     rows.append(row)
-    command = "python " + shlex.join([os.path.relpath(__file__, ROOT), *argv])
-    load = (load_start, os.getloadavg()[0])
-    digests = (digest_start, tree_digest(package_dir(args.pythonpath)))
-    elapsed = time.perf_counter() - started
+    command, load, elapsed, digests = run_facts(
+        __file__, argv, started, load_start, digest_start, args.pythonpath
+    )
     text = results_text(rows, bases, scenes, args, command, load, elapsed, digests)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text, encoding="utf-8")
-    print(text)
+    write_results(args.out, text)
     for row in rows:
         speed, memory = verdict(row, bases.get(row.fmt), args.max_seconds)
         meets = speed.startswith("met") and memory.startswith("met")
@@ -835,28 +895,11 @@ def main(argv: list[str] | None = None) -> int:
         default="cpu",
         help="cProfile clock: process CPU time (default; robust on a shared core) or wall",
     )
-    source = parser.add_mutually_exclusive_group()
-    source.add_argument(
-        "--commit",
-        metavar="REV",
-        help="measure lodconvert/ as committed at REV (a `git archive` snapshot) instead of "
-        "the working tree, which other people may be editing",
-    )
-    source.add_argument(
-        "--pythonpath",
-        type=Path,
-        metavar="DIR",
-        help="import lodconvert from DIR/lodconvert instead of the working tree",
-    )
+    add_source_options(parser)
     args = parser.parse_args(argv)
     if args.baseline in args.counts:
         parser.error("--baseline must differ from the counts")
-    with tempfile.TemporaryDirectory(prefix="lodconvert-src-") as src:
-        if args.commit:
-            args.commit = snapshot(args.commit, Path(src))
-            args.pythonpath = Path(src)
-        if imported_from(args.pythonpath) != package_dir(args.pythonpath):
-            raise SystemExit(f"lodconvert is not imported from {package_dir(args.pythonpath)}")
+    with lodconvert_source(args):
         return profile(args) if args.profile else benchmark(args, argv)
 
 
