@@ -122,7 +122,8 @@ def suffix_of(path: str | Path) -> str:
     return suffixes[-1] if suffixes else ""
 
 
-def _find(path: str | Path, role: str, suffix: str) -> Format | None:
+def _find(role: str, suffix: str) -> Format | None:
+    """The first format that offers ``role`` (read, write, read_back, check) for ``suffix``."""
     for entry in formats():
         if suffix in entry.suffixes and getattr(entry, role) is not None:
             return entry
@@ -136,7 +137,7 @@ def _known(role: str) -> str:
 def input_format(path: str | Path) -> Format:
     """The format that reads ``path``, or :class:`InputError` naming the known suffixes."""
     suffix = suffix_of(path)
-    entry = _find(path, "read", suffix)
+    entry = _find("read", suffix)
     if entry is None:
         raise InputError(
             f"unknown input format {suffix or '(no suffix)'!r}; known: {_known('read')}",
@@ -148,7 +149,7 @@ def input_format(path: str | Path) -> Format:
 def output_format(path: str | Path) -> Format:
     """The format that writes ``path``, or :class:`UsageError` naming the known suffixes."""
     suffix = Path(path).suffix.lower()
-    entry = _find(path, "write", suffix)
+    entry = _find("write", suffix)
     if entry is None:
         raise UsageError(
             f"{path}: unknown output format {suffix or '(no suffix)'!r}; known: {_known('write')}"
@@ -160,7 +161,7 @@ def own_format(path: str | Path, role: str = "read_back") -> Format:
     """The format that reads back (``role='read_back'``) or checks (``'check'``) files
     lodconvert wrote, like ``path``; :class:`InputError` for other suffixes."""
     suffix = Path(path).suffix.lower()
-    entry = _find(path, role, suffix)
+    entry = _find(role, suffix)
     if entry is None:
         raise InputError(
             f"is not a file lodconvert writes ({_known(role)})",
