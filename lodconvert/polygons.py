@@ -71,7 +71,7 @@ def triangulate(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     exterior = _open_ring(rings[0])
     if len(exterior) < 3:
         raise DegenerateRing(f"a ring of {len(exterior)} distinct point(s); a polygon needs 3")
-    normal = newell_normal(exterior)
+    normal = newell_normal(exterior - exterior[0])
     extent = float(np.ptp(exterior, axis=0).max())
     length = float(np.linalg.norm(normal))
     if not length > 2 * AREA_EPSILON * extent * extent:
@@ -93,3 +93,106 @@ def triangulate(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         turn = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
         index[turn < 0] = index[turn < 0][:, ::-1]  # face along the exterior ring's normal
     return points, index
+
+
+def triangulate_many(
+    polygons: Sequence[Sequence[np.ndarray]],
+) -> list[tuple[np.ndarray, np.ndarray] | None]:
+    """:func:`triangulate` of each polygon, ``None`` where it is degenerate. Polygons without
+    holes (nearly all of a city model's) are opened, measured and tested together; a convex
+    one is fanned from its first point, the others are ear-clipped one at a time."""
+    results: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(polygons)
+    simple = [i for i, rings in enumerate(polygons) if len(rings) == 1]
+    for i in sorted(set(range(len(polygons))) - set(simple)):
+        results[i] = _triangulated_or_none(polygons[i])
+    if not simple:
+        return results
+    points, lengths = _opened_rings([polygons[i][0] for i in simple])
+    starts = np.cumsum(lengths) - lengths
+    usable = lengths >= 3
+    normals = np.zeros((len(simple), 3))
+    extents = np.zeros(len(simple))
+    if usable.any():
+        nxt = np.arange(1, len(points) + 1)
+        nxt[starts[lengths > 0] + lengths[lengths > 0] - 1] = starts[lengths > 0]
+        first = np.minimum(starts, len(points) - 1)  # a ring opened to nothing repeats none
+        local = points - np.repeat(points[first], lengths, axis=0)
+        a, b = local - local[nxt], local + local[nxt]
+        terms = np.column_stack([a[:, 1] * b[:, 2], a[:, 2] * b[:, 0], a[:, 0] * b[:, 1]])
+        at = starts[usable]
+        normals[usable] = np.add.reduceat(terms, at)
+        spans = np.maximum.reduceat(points, at) - np.minimum.reduceat(points, at)
+        extents[usable] = spans.max(axis=1)
+    area = np.linalg.norm(normals, axis=1)
+    usable &= area > 2 * AREA_EPSILON * extents * extents
+    convex, corner = _convex_corners(points, lengths, starts, normals, area, extents, usable)
+    for j, i in enumerate(simple):
+        if not usable[j]:
+            continue
+        ring = slice(starts[j], starts[j] + lengths[j])
+        if lengths[j] == 3:
+            results[i] = (points[ring], np.array([[0, 1, 2]], dtype=np.int64))
+        elif convex[j]:
+            results[i] = (points[ring], _fan(np.flatnonzero(corner[ring])))
+        else:
+            results[i] = _triangulated_or_none([points[ring]])
+    return results
+
+
+def _triangulated_or_none(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    try:
+        return triangulate(rings)
+    except DegenerateRing:
+        return None
+
+
+def _opened_rings(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """All ``rings`` opened as :func:`_open_ring` opens one, concatenated, and their lengths."""
+    raw = [np.asarray(ring, dtype=np.float64).reshape(-1, 3) for ring in rings]
+    lengths = np.array([len(ring) for ring in raw], dtype=np.int64)
+    points = np.concatenate(raw) if raw else np.zeros((0, 3))
+    owner = np.repeat(np.arange(len(raw)), lengths)
+    starts = np.cumsum(lengths) - lengths
+    keep = np.ones(len(points), dtype=bool)
+    longer = lengths > 1
+    last = starts[longer] + lengths[longer] - 1
+    closing = np.all(points[last] == points[starts[longer]], axis=1)
+    keep[last[closing]] = False
+    keep[1:] &= ~(np.all(points[1:] == points[:-1], axis=1) & (owner[1:] == owner[:-1]))
+    return points[keep], np.bincount(owner[keep], minlength=len(raw)).astype(np.int64)
+
+
+def _convex_corners(
+    points: np.ndarray,
+    lengths: np.ndarray,
+    starts: np.ndarray,
+    normals: np.ndarray,
+    area: np.ndarray,
+    extents: np.ndarray,
+    usable: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per ring, whether it is convex seen from its Newell normal (it turns left by a clear
+    margin or goes straight on at every point), and per point whether it is a corner (turns
+    left). A fan over a convex ring's corners is a valid triangulation; the points in between
+    lie on its edges, as the ear clipper would leave them."""
+    owner = np.repeat(np.arange(len(lengths)), lengths)
+    unit = normals / np.where(area > 0, area, 1.0)[:, None]
+    ends = starts[lengths > 0] + lengths[lengths > 0] - 1
+    prev = np.arange(-1, len(points) - 1)
+    prev[starts[lengths > 0]] = ends
+    nxt = np.arange(1, len(points) + 1)
+    nxt[ends] = starts[lengths > 0]
+    incoming, outgoing = points - points[prev], points[nxt] - points
+    turn = np.einsum("ij,ij->i", np.cross(incoming, outgoing), unit[owner])
+    margin = 1e-9 * extents[owner] ** 2
+    corner = turn > margin
+    straight = (np.abs(turn) <= margin) & (np.einsum("ij,ij->i", incoming, outgoing) > 0)
+    bent = np.bincount(owner[~(corner | straight)], minlength=len(lengths)) > 0
+    corners = np.bincount(owner[corner], minlength=len(lengths))
+    return usable & ~bent & (corners >= 3), corner
+
+
+def _fan(corners: np.ndarray) -> np.ndarray:
+    """Triangles (c0, cj, cj+1) over a convex ring's ``corners`` (indices into the ring)."""
+    corners = corners.astype(np.int64)
+    return np.column_stack([np.full(len(corners) - 2, corners[0]), corners[1:-1], corners[2:]])

@@ -45,7 +45,7 @@ from lxml import etree
 from ..errors import InputError
 from ..limits import DEFAULT_LIMITS, Limits
 from ..model import Mesh, Node, Scene, Surface
-from ..polygons import DegenerateRing, triangulate
+from ..polygons import triangulate_many
 from ..semantics import DEFAULT_PALETTE, Palette
 from . import Format
 from .geometry_checks import InputTally, attach_tally, check_extent, checked_vertices, kept_faces
@@ -449,6 +449,7 @@ def _triangulated(
     groups: dict[str, dict[str, list[tuple[np.ndarray, np.ndarray]]]] = {}
     seen: set[Any] = set()
     degenerate = 0
+    kept: list[_Polygon] = []
     for p in ordered:
         if not p.rings:
             degenerate += 1
@@ -457,11 +458,12 @@ def _triangulated(
         if keys & seen:
             continue
         seen |= keys
-        try:
-            vertices, faces = triangulate(p.rings)
-        except DegenerateRing:
+        kept.append(p)
+    for p, triangles in zip(kept, triangulate_many([p.rings for p in kept]), strict=True):
+        if triangles is None:
             degenerate += 1
             continue
+        vertices, faces = triangles
         pieces_of = groups.setdefault(p.lod, {}).setdefault(p.semantic, [])
         pieces_of.append((vertices, faces[:, ::-1] if p.flip else faces))
     return groups, degenerate
