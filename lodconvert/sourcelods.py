@@ -47,9 +47,15 @@ def source_levels(lods: dict[str, Mesh]) -> dict[int, tuple[str, Mesh]]:
     return {slot: (label, mesh) for slot, (_, label, mesh) in best.items()}
 
 
+CLOSED_TOLERANCE = 1e-3
+"""Downward-facing triangles covering this much less ground than the upward-facing ones still
+make the footprint."""
+
+
 def _outline(mesh: Mesh) -> object:
     """The footprint of ``mesh`` seen from above: the union of its triangles projected on the
-    ground plane (a shapely geometry)."""
+    ground plane (a shapely geometry). A closed surface's downward-facing triangles cover as
+    much of the ground as its upward-facing ones, so when they do, only they are joined."""
     import shapely
 
     tri = mesh.triangles[:, :, :2]
@@ -57,7 +63,11 @@ def _outline(mesh: Mesh) -> object:
         tri[:, 1, 1] - tri[:, 0, 1]
     ) * (tri[:, 2, 0] - tri[:, 0, 0])
     extent = float(np.ptp(tri.reshape(-1, 2), axis=0).max()) or 1.0
-    flat = tri[np.abs(twice) > 1e-9 * extent * extent]
+    seen = np.abs(twice) > 1e-9 * extent * extent
+    down = seen & (twice < 0)
+    if -twice[down].sum() >= (1 - CLOSED_TOLERANCE) * twice[seen & ~down].sum():
+        seen = down
+    flat = tri[seen]
     if len(flat) == 0:
         return shapely.Polygon()
     polygons = shapely.polygons(np.concatenate([flat, flat[:, :1]], axis=1))
