@@ -12,9 +12,10 @@ import contextlib
 import gc
 import itertools
 import json
+import math
 import platform
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ from .plots import plot_radii
 from .ranges import DEFAULT_GAMMA
 from .sinks import FileSink, Outputs
 from .sourcelods import source_levels
+from .spool import NodeSpool
 from .validate import check_written
 
 Message = Callable[[str], None]
@@ -108,14 +110,13 @@ def iter_chains(
     if total is None and isinstance(scene.nodes, list):
         total = sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
     shared: dict[int, LodChain] = {}  # geometry placed by several nodes: baked once
-    nodes, radii = _with_plot_radii(scene, options)
-    for i, obj in enumerate(nodes, start=1):
+    for i, (obj, radius) in enumerate(_with_plot_radii(scene, options), start=1):
         try:
             if obj.transform is not None and id(obj.geometry) in shared:
                 base = shared[id(obj.geometry)]
                 chain = replace(base, object_id=obj.id, metadata=dict(obj.attributes))
             else:
-                opts = replace(options, gamma=radii[id(obj)]) if id(obj) in radii else options
+                opts = replace(options, gamma=radius) if radius is not None else options
                 chain = bake_chain(obj, opts, backend, progress=progress, warn=warn, limits=limits)
             if obj.transform is not None:
                 shared.setdefault(id(obj.geometry), chain)
@@ -172,23 +173,37 @@ def _is_city(scene: Scene) -> bool:
     return first is not None and bool(first.lods)
 
 
-def _with_plot_radii(
-    scene: Scene, options: ChainOptions
-) -> tuple[Iterable[Node], dict[int, float]]:
-    """The scene's nodes with geometry and, unless ``options`` set γ, the plot radius of each
-    city object (a node with its own LoDs) from its neighbours' spacing (:mod:`.plots`); a
-    city's nodes are gathered for that, a mesh file's stay streamed."""
+def _with_plot_radii(scene: Scene, options: ChainOptions) -> Iterator[tuple[Node, float | None]]:
+    """The scene's nodes with geometry, each with the plot radius to use as its γ: unless
+    ``options`` set γ, a city object's (a node with its own LoDs) comes from its neighbours'
+    spacing (:mod:`.plots`), so a city is read through first, its nodes parked on disk
+    (:class:`~.spool.NodeSpool`); a mesh file's nodes stay streamed (radius ``None``)."""
     nodes = scene.with_geometry()
-    if options.gamma is not None:
-        return nodes, {}
-    first = next(nodes, None)
-    if first is None:
-        return [], {}
-    if not first.lods:
-        return itertools.chain([first], nodes), {}
-    gathered = [first, *nodes]
-    city = [node for node in gathered if node.lods]
-    return gathered, plot_radii(city)
+    first = next(nodes, None) if options.gamma is None else None
+    if first is None or not first.lods:
+        for node in itertools.chain([first] if first is not None else [], nodes):
+            yield node, None
+        return
+    with NodeSpool() as spool:
+        centres = []
+        for node in itertools.chain([first], nodes):
+            spool.add(node)
+            centres.append(_ground_centre(node) if node.lods else (math.nan, math.nan))
+        placed = np.array(centres, dtype=np.float64).reshape(-1, 2)
+        city = ~np.isnan(placed[:, 0])
+        radii = np.full(len(placed), math.nan)
+        radii[city] = plot_radii(placed[city])
+        for node, radius in zip(spool, radii.tolist(), strict=True):
+            yield node, None if math.isnan(radius) else radius
+
+
+def _ground_centre(node: Node) -> tuple[float, float]:
+    """Where ``node``'s bounding-box centre is, seen from above, in scene coordinates."""
+    centre = np.append(node.geometry.bounds.mean(axis=0), 1.0)
+    if node.transform is not None:
+        centre = np.asarray(node.transform, dtype=np.float64) @ centre
+    x, y = node.offset[:2] + centre[:2]
+    return float(x), float(y)
 
 
 def convert(
@@ -352,12 +367,12 @@ def object_ranges(scene: Scene, options: ChainOptions) -> list[dict[str, Any]]:
 
     options.check()
     rows = []
-    nodes, radii = _with_plot_radii(scene, options)
-    for obj in nodes:
+    for obj, radius in _with_plot_radii(scene, options):
         check_geometry(obj)
         bounds = obj.geometry.bounds
         alpha = float(np.linalg.norm(bounds[1] - bounds[0]))
-        gamma = radii.get(id(obj), options.gamma if options.gamma is not None else DEFAULT_GAMMA)
+        default = options.gamma if options.gamma is not None else DEFAULT_GAMMA
+        gamma = radius if radius is not None else default
         xs = list(options.exponents) + ([options.cull] if options.cull is not None else [])
         rows.append(
             {

@@ -10,25 +10,20 @@ neighbour gets :data:`LONE_RADIUS`.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import numpy as np
-
-from .model import Node
 
 MIN_RADIUS = 2.0
 MAX_RADIUS = 100.0
 LONE_RADIUS = 10.0
 
 
-def plot_radii(nodes: Sequence[Node]) -> dict[int, float]:
-    """``id(node)`` → plot radius of every node with geometry, from its neighbours' spacing."""
-    placed = [node for node in nodes if node.geometry is not None]
-    if len(placed) < 2:
-        return {id(node): LONE_RADIUS for node in placed}
+def plot_radii(centres: np.ndarray) -> np.ndarray:
+    """The plot radius of each object whose centre (seen from above, (n, 2) metres) is in
+    ``centres``, from its nearest neighbour's distance."""
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
+    if len(centres) < 2:
+        return np.full(len(centres), LONE_RADIUS)
     from scipy.spatial import cKDTree
 
-    centres = np.array([node.geometry.bounds.mean(axis=0)[:2] for node in placed])
     distance, _ = cKDTree(centres).query(centres, k=2)
-    radius = np.clip(distance[:, 1] / 2.0, MIN_RADIUS, MAX_RADIUS)
-    return {id(node): float(r) for node, r in zip(placed, radius, strict=True)}
+    return np.clip(distance[:, 1] / 2.0, MIN_RADIUS, MAX_RADIUS)

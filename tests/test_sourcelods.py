@@ -85,13 +85,11 @@ def test_no_footprint_means_no_prism() -> None:
 def test_plot_radii_come_from_the_neighbours_spacing() -> None:
     from lodconvert.model import Scene
     from lodconvert.pipeline import object_ranges
-    from lodconvert.plots import MAX_RADIUS, plot_radii
+    from lodconvert.plots import MAX_RADIUS
 
     houses = [block(8, 8, 6, x, 0.0) for x in (0.0, 20.0, 50.0)]
     far = block(8, 8, 6, 5000.0, 0.0)
     nodes = [Node(f"b{i}", m, "Building", lods={"lod2": m}) for i, m in enumerate([*houses, far])]
-    radii = plot_radii(nodes)
-    assert [radii[id(n)] for n in nodes] == [10.0, 10.0, 15.0, MAX_RADIUS]
     rows = object_ranges(Scene("city", nodes), ChainOptions())
     assert [row["gamma"] for row in rows] == [10.0, 10.0, 15.0, MAX_RADIUS]
     fixed = object_ranges(Scene("city", nodes), ChainOptions(gamma=20.0))

@@ -1,0 +1,58 @@
+"""Nodes parked on disk while a city is read through once.
+
+A city object's switching distances depend on its neighbours (its plot radius,
+:mod:`.plots`), so every object must have been read before the first is baked. Holding them all
+would make memory grow with the city; a :class:`NodeSpool` instead writes each node (without its
+children, which are spooled in their own turn) to an anonymous temporary file as it is read and
+keeps only its position there, then gives the nodes back in the same order. Nodes placed by a
+transform stay in memory: they share their geometry with other nodes, which a file would not.
+"""
+
+from __future__ import annotations
+
+import pickle
+import tempfile
+from collections.abc import Iterator
+from dataclasses import replace
+from typing import IO
+
+from .model import Node
+
+
+class NodeSpool:
+    """Nodes written to a temporary file in the order they are added and read back in it;
+    the file is gone when the spool is closed (or its ``with`` block left, or the process
+    ends)."""
+
+    def __init__(self) -> None:
+        # the spool owns the file: closed by close() or leaving its ``with`` block
+        self._file: IO[bytes] = tempfile.TemporaryFile(prefix="lodconvert-spool-")  # noqa: SIM115
+        self._entries: list[Node | None] = []
+
+    def add(self, node: Node) -> None:
+        """Park ``node`` (kept in memory when it is placed by a transform)."""
+        if node.transform is not None:
+            self._entries.append(node)
+            return
+        pickle.dump(replace(node, children=[]), self._file, protocol=pickle.HIGHEST_PROTOCOL)
+        self._entries.append(None)
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def __iter__(self) -> Iterator[Node]:
+        """The nodes in the order they were added (once: each is read back as it is taken)."""
+        self._file.flush()
+        self._file.seek(0)
+        for entry in self._entries:
+            yield entry if entry is not None else pickle.load(self._file)
+
+    def close(self) -> None:
+        """Delete the file."""
+        self._file.close()
+
+    def __enter__(self) -> NodeSpool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
