@@ -370,6 +370,27 @@ def _point_level(
     return level
 
 
+def point_level_at(
+    surface: Mesh,
+    name: str,
+    distance: float,
+    opts: ChainOptions,
+    backend: Backend,
+    where: str,
+    warn: Progress | None = None,
+    limits: Limits = DEFAULT_LIMITS,
+) -> Level | None:
+    """A point level of ``surface`` (in its own frame) designed for ``distance`` with the
+    default resolution and point size for that distance (``opts``' per-level values do not
+    apply), or None when it holds no point."""
+    own = replace(opts, resolutions=None, slices=None, point_sizes=None, level_kinds=None)
+    bounds = surface.bounds
+    level = _point_level(
+        surface, bounds, name, 0, distance, None, own, backend, where, warn, limits
+    )
+    return level if isinstance(level, Level) else None
+
+
 def bake_chain(
     obj: Node,
     opts: ChainOptions,

@@ -12,11 +12,10 @@ import contextlib
 import gc
 import itertools
 import json
-import math
 import platform
 import time
-from collections.abc import Callable, Iterator, Sequence
-from dataclasses import asdict, replace
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,10 +25,11 @@ from . import __version__
 from .bake import Backend, get_backend
 from .chain import ChainOptions, bake_chain, check_geometry
 from .errors import InputError
+from .hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
 from .io import OutputInfo, input_format, output_format
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
-from .model import LodChain, Node, Scene
+from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
 from .ranges import DEFAULT_GAMMA
 from .sinks import FileSink, Outputs
@@ -56,6 +56,26 @@ def options_record(options: ChainOptions) -> dict[str, Any]:
     record["view"] = {"height_px": options.view.height_px, "fov_y_deg": options.view.fov_y_deg}
     record["xs"] = list(options.exponents)
     return {k: list(v) if isinstance(v, tuple) else v for k, v in record.items()}
+
+
+def cell_record(cell: CellChain) -> dict[str, Any]:
+    """What the report says of one LOD parent."""
+    return {
+        "id": cell.cell_id,
+        "tier": cell.tier,
+        "size": cell.size,
+        "members": [m.cell_id if isinstance(m, CellChain) else m.object_id for m in cell.members],
+        "cutoffs": list(cell.cutoffs),
+        "alpha": cell.alpha,
+        "gamma": cell.gamma,
+        "far": {"kind": cell.far.kind, "count": cell.far.count},
+        **{key: value for key, value in cell.facts.items() if key != "members"},
+    }
+
+
+def _add_counts(total: dict[str, int], more: dict[str, int]) -> None:
+    for key, value in more.items():
+        total[key] = total.get(key, 0) + value
 
 
 def chain_record(chain: LodChain) -> dict[str, Any]:
@@ -102,34 +122,97 @@ def iter_chains(
     step: Step = _no_step,
     limits: Limits = DEFAULT_LIMITS,
     strict: bool = False,
-) -> Iterator[LodChain]:
+    hlod: HlodOptions | None = None,
+) -> Iterator[LodChain | CellChain]:
     """Bake the scene's objects one at a time; objects with bad geometry are reported through
     ``warn`` (unless ``strict``: the caller fails), recorded in ``skipped`` and left out.
-    ``step`` hears how many are done."""
+    ``step`` hears how many are done. With ``hlod``, the objects come grouped in LOD parents
+    (:mod:`.hlod`): one :class:`CellChain` per cell of the coarsest tier, in grid order."""
     total = scene.size if scene.size is not None else None
     if total is None and isinstance(scene.nodes, list):
         total = sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
-    shared: dict[int, LodChain] = {}  # geometry placed by several nodes: baked once
-    for i, (obj, radius) in enumerate(_with_plot_radii(scene, options), start=1):
+    bake = _ObjectBaker(scene.source, options, backend, progress, warn, skipped, limits, strict)
+    bake.step, bake.total = step, total
+    if hlod is not None:
+        yield from _cell_chains(scene, options, hlod, bake)
+        return
+    for obj, radius in _with_plot_radii(scene, options):
+        chain = bake(obj, radius)
+        if chain is not None:
+            yield chain
+
+
+@dataclass
+class _ObjectBaker:
+    """Bakes one object at a time: geometry placed by several nodes once, objects with bad
+    geometry reported and left out (``None``)."""
+
+    source: str
+    options: ChainOptions
+    backend: Backend
+    progress: Message
+    warn: Message
+    skipped: list[dict[str, str]] | None
+    limits: Limits
+    strict: bool
+    step: Step = _no_step
+    total: int | None = None
+    done: int = 0
+    shared: dict[int, LodChain] = field(default_factory=dict)
+
+    def __call__(self, obj: Node, radius: float | None) -> LodChain | None:
+        """The chain of ``obj`` (γ = ``radius`` where given), or None when it is skipped."""
         try:
-            if obj.transform is not None and id(obj.geometry) in shared:
-                base = shared[id(obj.geometry)]
+            if obj.transform is not None and id(obj.geometry) in self.shared:
+                base = self.shared[id(obj.geometry)]
                 chain = replace(base, object_id=obj.id, metadata=dict(obj.attributes))
             else:
-                opts = replace(options, gamma=radius) if radius is not None else options
-                chain = bake_chain(obj, opts, backend, progress=progress, warn=warn, limits=limits)
+                opts = replace(self.options, gamma=radius) if radius is not None else self.options
+                chain = bake_chain(
+                    obj, opts, self.backend, progress=self.progress, warn=self.warn,
+                    limits=self.limits,
+                )  # fmt: skip
             if obj.transform is not None:
-                shared.setdefault(id(obj.geometry), chain)
+                self.shared.setdefault(id(obj.geometry), chain)
                 chain = replace(chain, transform=np.asarray(obj.transform, dtype=np.float64))
         except InputError as exc:
-            if total != 1 and not strict:  # with one object, the run's error says it
-                warn(f"{scene.source}: object {exc} — skipped")
-            if skipped is not None:
-                skipped.append({"id": obj.id, "reason": str(exc)})
-            continue
+            if self.total != 1 and not self.strict:  # with one object, the run's error says it
+                self.warn(f"{self.source}: object {exc} — skipped")
+            if self.skipped is not None:
+                self.skipped.append({"id": obj.id, "reason": str(exc)})
+            return None
         finally:
-            step("converting", i, total)
-        yield chain
+            self.done += 1
+            self.step("converting", self.done, self.total)
+        return chain
+
+
+def _cell_chains(
+    scene: Scene, options: ChainOptions, hlod: HlodOptions, bake: _ObjectBaker
+) -> Iterator[CellChain]:
+    """The scene's objects baked and grouped into LOD parents, one coarsest cell at a time
+    (the objects wait on disk meanwhile, so memory is bounded by a cell)."""
+    hlod.check()
+    with NodeSpool() as spool:
+        centres, radii = _spooled(scene.with_geometry(), options, spool)
+        sizes = hlod.sizes or (auto_size(centres),)
+
+        def baked(plan: CellPlan) -> CellChain | None:
+            if plan.tier == 1:
+                found = (bake(spool.get(i), radii[i]) for i in plan.objects)
+            else:
+                found = (baked(cell) for cell in plan.cells)
+            members: list[LodChain | CellChain] = [m for m in found if m is not None]
+            if not members:
+                return None
+            return bake_cell(
+                plan, members, options, hlod.kind, bake.backend, bake.warn, bake.limits
+            )
+
+        for plan in plan_cells(centres, sizes):
+            cell = baked(plan)
+            if cell is not None:
+                yield cell
 
 
 def merged(scenes: Sequence[Scene]) -> Scene:
@@ -185,16 +268,29 @@ def _with_plot_radii(scene: Scene, options: ChainOptions) -> Iterator[tuple[Node
             yield node, None
         return
     with NodeSpool() as spool:
-        centres = []
-        for node in itertools.chain([first], nodes):
-            spool.add(node)
-            centres.append(_ground_centre(node) if node.lods else (math.nan, math.nan))
-        placed = np.array(centres, dtype=np.float64).reshape(-1, 2)
-        city = ~np.isnan(placed[:, 0])
-        radii = np.full(len(placed), math.nan)
-        radii[city] = plot_radii(placed[city])
-        for node, radius in zip(spool, radii.tolist(), strict=True):
-            yield node, None if math.isnan(radius) else radius
+        _, radii = _spooled(itertools.chain([first], nodes), options, spool)
+        yield from zip(spool, radii, strict=True)
+
+
+def _spooled(
+    nodes: Iterable[Node], options: ChainOptions, spool: NodeSpool
+) -> tuple[np.ndarray, list[float | None]]:
+    """Park ``nodes`` in ``spool``; their ground centres ((n, 2), scene coordinates) and the
+    plot radius of each city object (``None`` for others, and for all where ``options`` set
+    γ)."""
+    centres: list[tuple[float, float]] = []
+    city: list[bool] = []
+    for node in nodes:
+        spool.add(node)
+        centres.append(_ground_centre(node))
+        city.append(bool(node.lods))
+    placed = np.array(centres, dtype=np.float64).reshape(-1, 2)
+    radii: list[float | None] = [None] * len(placed)
+    chosen = np.flatnonzero(city)
+    if options.gamma is None and len(chosen):
+        for i, radius in zip(chosen, plot_radii(placed[chosen]).tolist(), strict=True):
+            radii[i] = radius
+    return placed, radii
 
 
 def _ground_centre(node: Node) -> tuple[float, float]:
@@ -220,6 +316,7 @@ def convert(
     also: Callable[[Outputs, FileSink, dict[str, Any]], None] | None = None,
     limits: Limits = DEFAULT_LIMITS,
     strict: bool = False,
+    hlod: HlodOptions | None = None,
 ) -> dict[str, Any]:
     """Convert ``input_path`` (or several inputs: one scene, see :func:`merged`) into
     ``output_path`` and return the report (a JSON-able dict); with ``strict``, an object
@@ -237,12 +334,16 @@ def convert(
     """
     options = options or ChainOptions()
     options.check()
+    if hlod is not None:
+        hlod.check()
     target = output_format(output_path)
     inputs = [input_path] if isinstance(input_path, str | Path) else list(input_path)
     sources = [input_format(path) for path in inputs]
     timings: dict[str, float] = {}
     records: list[dict[str, Any]] = []
     skipped: list[dict[str, str]] = []
+    cells: list[dict[str, Any]] = []
+    draw: dict[str, dict[str, int]] = {"without": {}, "with": {}}
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
@@ -269,14 +370,19 @@ def convert(
             options=options_record(options),
         )
 
-        def recorded(chains: Iterator[LodChain]) -> Iterator[LodChain]:
-            for chain in chains:
-                records.append(chain_record(chain))
-                yield chain
+        def recorded(items: Iterator[LodChain | CellChain]) -> Iterator[LodChain | CellChain]:
+            for item in items:
+                objects = item.objects() if isinstance(item, CellChain) else [item]
+                records.extend(chain_record(chain) for chain in objects)
+                if isinstance(item, CellChain):
+                    cells.extend(cell_record(cell) for cell in item.cells())
+                    _add_counts(draw["without"], draw_counts(objects))
+                    _add_counts(draw["with"], draw_counts([item]))
+                yield item
 
         start = time.perf_counter()
         chains = recorded(
-            iter_chains(scene, options, baker, progress, warn, skipped, step, limits, strict)
+            iter_chains(scene, options, baker, progress, warn, skipped, step, limits, strict, hlod)
         )
         target.write_chains(chains, sink, info, **(write_options or {}))
         timings["bake_and_write"] = time.perf_counter() - start
@@ -305,6 +411,8 @@ def convert(
         step("checking", 1, 1)
         named = " + ".join(str(path) for path in inputs)
         report = _report(named, output_path, baker, options, records, skipped, timings, tally)
+        if hlod is not None:
+            report["hlod"] = {"kind": hlod.kind, "cells": cells, "draw": draw}
         if also is not None:
             also(outputs, sink, report)
         if report_sink is not None:

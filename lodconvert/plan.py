@@ -85,9 +85,12 @@ class SilhouetteEstimate:
         return self.precision >= MIN_SILHOUETTE and self.recall >= MIN_SILHOUETTE
 
 
-def _source_masks(mesh: Mesh, pixel: float) -> tuple[Grid, list[np.ndarray]]:
-    """The source's silhouettes along x, y and z on a grid of pitch ``pixel``."""
-    bounds = mesh.bounds
+def _source_masks(
+    mesh: Mesh, pixel: float, bounds: np.ndarray | None = None
+) -> tuple[Grid, list[np.ndarray]]:
+    """The source's silhouettes along x, y and z on a grid of pitch ``pixel`` over ``bounds``
+    (the mesh's own by default)."""
+    bounds = mesh.bounds if bounds is None else bounds
     resolution = max(1, math.ceil(float(np.ptp(bounds, axis=0).max()) / pixel - 1e-9))
     grid = Grid.for_bounds(bounds, resolution, 1)
     hits = list(NumpyBackend().rasterize(mesh, grid))
@@ -145,6 +148,28 @@ def silhouette_estimate(
         tp = int(np.count_nonzero(drawn & padded))
         fp = int(np.count_nonzero(drawn & ~padded))
         fn = int(np.count_nonzero(~drawn & padded))
+        precision = min(precision, tp / (tp + fp) if tp + fp else 0.0)
+        recall = min(recall, tp / (tp + fn) if tp + fn else 1.0)
+    return SilhouetteEstimate(precision=precision, recall=recall)
+
+
+def mesh_silhouette_estimate(
+    mesh: Mesh, other: Mesh, distance: float, view: ReferenceView = REFERENCE_VIEW
+) -> SilhouetteEstimate:
+    """Silhouette precision and recall of mesh ``other`` against ``mesh`` seen from
+    ``distance`` in ``view`` (both in the same frame): the worst over the axis views, both
+    rasterised on one grid as :func:`silhouette_estimate` rasterises the source."""
+    pixel = distance / view.focal_px
+    both = np.stack([mesh.bounds, other.bounds])
+    bounds = np.stack([both[:, 0].min(axis=0), both[:, 1].max(axis=0)])
+    _, source = _source_masks(mesh, pixel, bounds)
+    _, drawn = _source_masks(other, pixel, bounds)
+    precision = recall = 1.0
+    for want, got in zip(source, drawn, strict=True):
+        if not want.any() and not got.any():
+            continue
+        tp = int(np.count_nonzero(want & got))
+        fp, fn = int(np.count_nonzero(got & ~want)), int(np.count_nonzero(want & ~got))
         precision = min(precision, tp / (tp + fp) if tp + fp else 0.0)
         recall = min(recall, tp / (tp + fn) if tp + fn else 1.0)
     return SilhouetteEstimate(precision=precision, recall=recall)

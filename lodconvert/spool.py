@@ -4,7 +4,8 @@ A city object's switching distances depend on its neighbours (its plot radius,
 :mod:`.plots`), so every object must have been read before the first is baked. Holding them all
 would make memory grow with the city; a :class:`NodeSpool` instead writes each node (without its
 children, which are spooled in their own turn) to an anonymous temporary file as it is read and
-keeps only its position there, then gives the nodes back in the same order. Nodes placed by a
+keeps only its position there, then gives the nodes back in the same order (or any node by its
+index, for grouping them into cells: :mod:`.hlod`). Nodes placed by a
 transform stay in memory: they share their geometry with other nodes, which a file would not.
 """
 
@@ -27,25 +28,31 @@ class NodeSpool:
     def __init__(self) -> None:
         # the spool owns the file: closed by close() or leaving its ``with`` block
         self._file: IO[bytes] = tempfile.TemporaryFile(prefix="lodconvert-spool-")  # noqa: SIM115
-        self._entries: list[Node | None] = []
+        self._entries: list[Node | int] = []
 
     def add(self, node: Node) -> None:
         """Park ``node`` (kept in memory when it is placed by a transform)."""
         if node.transform is not None:
             self._entries.append(node)
             return
+        self._entries.append(self._file.tell())
         pickle.dump(replace(node, children=[]), self._file, protocol=pickle.HIGHEST_PROTOCOL)
-        self._entries.append(None)
+
+    def get(self, index: int) -> Node:
+        """Node ``index`` (in the order added), read back from the file."""
+        entry = self._entries[index]
+        if isinstance(entry, Node):
+            return entry
+        self._file.seek(entry)
+        return pickle.load(self._file)
 
     def __len__(self) -> int:
         return len(self._entries)
 
     def __iter__(self) -> Iterator[Node]:
-        """The nodes in the order they were added (once: each is read back as it is taken)."""
-        self._file.flush()
-        self._file.seek(0)
-        for entry in self._entries:
-            yield entry if entry is not None else pickle.load(self._file)
+        """The nodes in the order they were added, each read back as it is taken."""
+        for index in range(len(self._entries)):
+            yield self.get(index)
 
     def close(self) -> None:
         """Delete the file."""

@@ -1,6 +1,6 @@
 """The data model, free of file formats: Scene → Node (tree) → geometry parts; LodChain → Level."""
 
-from .chain import MESH_KINDS, BakeParams, Level, LodChain
+from .chain import MESH_KINDS, BakeParams, CellChain, Level, LodChain
 from .geometry import GREY, WHITE, Mesh, PointCloud, Surface
 from .tree import Node, Scene
 
@@ -9,6 +9,7 @@ __all__ = [
     "MESH_KINDS",
     "WHITE",
     "BakeParams",
+    "CellChain",
     "Level",
     "LodChain",
     "Mesh",

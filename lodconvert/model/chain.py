@@ -23,9 +23,10 @@ class BakeParams:
     filter: Literal["median", "gaussian", "none"] = "median"
 
 
-MESH_KINDS = ("mesh", "qem", "source", "prism")
+MESH_KINDS = ("mesh", "qem", "source", "prism", "merged")
 """Level kinds drawn as triangles: the source mesh, the source decimated by quadric edge
-collapse, a city object's own LoD geometry, and the prism derived from its footprint. ``pcd``
+collapse, a city object's own LoD geometry, the prism derived from its footprint, and a LOD
+parent's merge of its members' coarsest levels (:mod:`lodconvert.hlod`). ``pcd``
 levels are baked point clouds. Kinds are data: a level is drawn as triangles when ``mesh`` is
 set, whatever its kind."""
 
@@ -100,3 +101,48 @@ class LodChain:
     ``transform · (origin + local)``; ``None`` is the identity. Instances of one geometry share
     one ``levels`` list, which writers store once."""
     """Levels the planner left out (name → why): the finer level stays on in their place."""
+
+
+@dataclass
+class CellChain:
+    """A LOD parent (HLOD): the chains of one grid cell's objects (or of finer cells) shown
+    near, and one ``far`` level standing for all of them beyond ``cutoffs[0]``.
+
+    ``far`` is relative to ``origin``; ``center`` (relative to ``origin`` as well) is the
+    centre of the members' bounding box, from which the cutoffs are measured. With culling,
+    ``cutoffs[1]`` is where the cell disappears. ``tier`` is 1 for cells of objects, 2 for cells
+    of tier-1 cells and so on; ``size`` the cell's side in metres and ``key`` its column and
+    row on the tier's grid. ``facts`` holds what the planner measured (silhouette F of the far
+    level against the members at its switch-in distance, the kind chosen and why).
+    """
+
+    cell_id: str
+    tier: int
+    size: float
+    key: tuple[int, int]
+    members: list[LodChain | CellChain]
+    far: Level
+    cutoffs: list[float]
+    origin: np.ndarray
+    center: np.ndarray
+    alpha: float
+    beta: float
+    gamma: float
+    xs: list[float]
+    culled: bool = False
+    facts: dict[str, Any] = field(default_factory=dict)
+
+    def objects(self) -> list[LodChain]:
+        """The object chains of this cell and of its finer cells, in order."""
+        found: list[LodChain] = []
+        for member in self.members:
+            found.extend(member.objects() if isinstance(member, CellChain) else [member])
+        return found
+
+    def cells(self) -> list[CellChain]:
+        """This cell and its finer cells, coarsest first."""
+        found = [self]
+        for member in self.members:
+            if isinstance(member, CellChain):
+                found.extend(member.cells())
+        return found

@@ -1,0 +1,325 @@
+"""LOD parents (HLOD): a city's objects grouped into grid cells, each cell seen from afar as one
+level that stands for all its objects (Lee, Kim & Kim's "LOD parent"; 3D Tiles' REPLACE
+refinement).
+
+**Cells.** Objects go to the square cell of a grid anchored at the scene's coordinate origin
+that holds their ground centre; with several sizes (``--hlod 250,1000``) each coarser cell
+holds the finer cells whose centres fall in it. ``auto`` picks one size from the objects'
+density: the side of a square holding :data:`AUTO_OBJECTS` objects on average (over the
+objects' ground bounding rectangle), rounded to the nearest of :data:`AUTO_SIZES` in
+proportion.
+
+**Switching.** A cell shows its members (with their own chains) near and its ``far`` level
+beyond ``Y_cell``, from its members' bounding-box centre. ``Y_cell`` follows the ranges'
+formula with α = the cell's diagonal, β as for its objects, γ = half the cell's side (its plot
+radius) and x = :data:`CELL_EXPONENT`, raised where needed by the **seam rule**: the far level
+never shows while a member would still show a level finer than its coarsest. A viewer ``d``
+from the cell centre is at least ``d - |c_m - c|`` from member ``m``'s centre, so
+``Y_cell ≥ max_m (Y_m + |c_m - c|)``, where ``Y_m`` is where ``m`` reaches its coarsest level
+(an object's last cutoff before it, 0 with one level; a finer cell's ``Y_cell``). With culling,
+a cell disappears at the formula's distance for the cull exponent, and never before its far
+level has shown.
+
+**Far level kinds.** ``points``: one point cloud baked from all the members' finest geometry
+together, designed for ``Y_cell`` as any point level is (:mod:`.chain`): no mesh merging, one
+draw call, and it reduces what decimation cannot (a block is hundreds of separate parts).
+``mesh``: the members' coarsest mesh levels merged into one mesh with vertex colours (one
+draw call as well). ``auto`` bakes both and keeps the cheaper (points at
+:data:`~.plan.POINT_COST`) of those whose silhouette F against the members' finest geometry at
+``Y_cell`` (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when neither
+is, the one with the higher F.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .bake import Backend
+from .chain import ChainOptions, point_level_at
+from .errors import UsageError
+from .limits import DEFAULT_LIMITS, Limits
+from .model import CellChain, Level, LodChain, Mesh, Surface
+from .plan import level_cost, mesh_silhouette_estimate, silhouette_estimate
+from .ranges import cutoff
+
+KINDS = ("auto", "points", "mesh")
+AUTO_OBJECTS = 64
+"""Objects an ``auto`` cell holds on average."""
+AUTO_SIZES = (25.0, 50.0, 100.0, 250.0, 500.0, 1000.0, 2000.0, 5000.0)
+"""Cell sides (metres) that ``auto`` rounds to."""
+CELL_EXPONENT = 0.0
+"""x of a cell's switch to its far level: Y = α·β, where a chain's finest baked level is
+designed (:mod:`.chain`)."""
+MIN_CELL_F = 0.95
+"""Least silhouette F of a far level against its members where it switches in."""
+SEAM_MARGIN = 1e-9
+"""Relative margin that keeps a far level's switch strictly beyond its members'."""
+
+Member = LodChain | CellChain
+Warn = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class HlodOptions:
+    """Cell sides per tier in metres, finest first (``None``: one tier, ``auto``), and the far
+    level kind."""
+
+    sizes: tuple[float, ...] | None = None
+    kind: str = "auto"
+
+    def check(self) -> None:
+        """Raise :class:`UsageError` for sizes that are not positive and increasing, or an
+        unknown kind."""
+        sizes = self.sizes or ()
+        if any(not (math.isfinite(s) and s > 0) for s in sizes):
+            raise UsageError("cell sizes must be positive numbers of metres", "hlod")
+        if any(b <= a for a, b in itertools.pairwise(sizes)):
+            raise UsageError("cell sizes must increase tier by tier (e.g. 250,1000)", "hlod")
+        if self.kind not in KINDS:
+            raise UsageError(f"must be one of {', '.join(KINDS)}, got {self.kind!r}", "hlod_kind")
+
+
+def parse_sizes(text: str) -> tuple[float, ...] | None:
+    """``--hlod`` text: ``auto`` (None) or comma-separated sizes in metres; raises
+    :class:`UsageError`."""
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        sizes = tuple(float(part) for part in text.split(","))
+    except ValueError:
+        raise UsageError(
+            f"must be 'auto' or sizes in metres like 250,1000, got {text!r}", "hlod"
+        ) from None
+    HlodOptions(sizes).check()
+    return sizes
+
+
+def auto_size(centres: np.ndarray) -> float:
+    """The ``auto`` cell side for objects at ``centres`` ((n, 2) metres)."""
+    if len(centres) < 2:
+        return AUTO_SIZES[0]
+    span = np.ptp(centres, axis=0)
+    area = float(max(span[0], 1.0) * max(span[1], 1.0))
+    wanted = math.sqrt(AUTO_OBJECTS * area / len(centres))
+    return min(AUTO_SIZES, key=lambda size: abs(math.log(size / wanted)))
+
+
+@dataclass
+class CellPlan:
+    """One cell before baking: its tier, side, grid key and members (object indices for
+    tier 1, finer cells above)."""
+
+    tier: int
+    size: float
+    key: tuple[int, int]
+    objects: list[int]
+    cells: list[CellPlan]
+
+    @property
+    def cell_id(self) -> str:
+        """``cell{tier}_{column}_{row}`` (negative numbers with ``m``)."""
+        col, row = (str(k).replace("-", "m") for k in self.key)
+        return f"cell{self.tier}_{col}_{row}"
+
+    def object_indices(self) -> list[int]:
+        """The objects of this cell and its finer cells."""
+        if self.tier == 1:
+            return list(self.objects)
+        return [i for cell in self.cells for i in cell.object_indices()]
+
+
+def plan_cells(centres: np.ndarray, sizes: Sequence[float]) -> list[CellPlan]:
+    """The coarsest tier's cells (each holding its finer cells), in grid order (row, column),
+    for objects at ``centres`` ((n, 2), scene metres)."""
+    groups: dict[tuple[int, int], list[int]] = {}
+    for i, (x, y) in enumerate(np.asarray(centres, dtype=np.float64).reshape(-1, 2)):
+        groups.setdefault(_key(x, y, sizes[0]), []).append(i)
+    cells = [CellPlan(1, sizes[0], key, members, []) for key, members in _ordered(groups)]
+    for tier, size in enumerate(sizes[1:], start=2):
+        parents: dict[tuple[int, int], list[CellPlan]] = {}
+        for cell in cells:
+            x, y = ((k + 0.5) * cell.size for k in cell.key)
+            parents.setdefault(_key(x, y, size), []).append(cell)
+        cells = [CellPlan(tier, size, key, [], members) for key, members in _ordered(parents)]
+    return cells
+
+
+def _key(x: float, y: float, size: float) -> tuple[int, int]:
+    return math.floor(x / size), math.floor(y / size)
+
+
+def _ordered(groups: dict[tuple[int, int], list]) -> list[tuple[tuple[int, int], list]]:
+    return sorted(groups.items(), key=lambda item: (item[0][1], item[0][0]))
+
+
+def bake_cell(
+    plan: CellPlan,
+    members: list[Member],
+    options: ChainOptions,
+    kind: str,
+    backend: Backend,
+    warn: Warn | None = None,
+    limits: Limits = DEFAULT_LIMITS,
+) -> CellChain:
+    """The LOD parent of ``plan`` over its baked ``members`` (object chains or finer cells)."""
+    objects = [c for m in members for c in (m.objects() if isinstance(m, CellChain) else [m])]
+    finest = _merged([_finest_mesh(chain) for chain in objects])
+    world = finest.bounds
+    origin = (world[0] + world[1]) / 2.0
+    alpha = float(np.linalg.norm(world[1] - world[0]))
+    gamma = max(plan.size / 2.0, 1.0 + 1e-6)
+    seam = max(_coarsest_from(m) + float(np.linalg.norm(_centre(m) - origin)) for m in members)
+    switch = max(cutoff(alpha, options.beta, gamma, CELL_EXPONENT), seam * (1 + SEAM_MARGIN))
+    source = finest.translated(-origin)
+    candidates: dict[str, tuple[Level, float]] = {}
+    if kind in ("points", "auto"):
+        level = point_level_at(source, "FAR", switch, options, backend, plan.cell_id, warn, limits)
+        if level is not None:
+            candidates["points"] = (level, _silhouette_f(source, level, switch, options))
+    if kind in ("mesh", "auto") or not candidates:
+        coarse = _merged([_coarsest_mesh(chain) for chain in objects]).translated(-origin)
+        level = Level(name="FAR", kind="merged", mesh=_one_part(coarse))
+        candidates["mesh"] = (level, _silhouette_f(source, level, switch, options))
+    chosen, why = _choice(candidates, kind)
+    cutoffs = [switch]
+    if options.cull is not None:
+        cutoffs.append(max(cutoff(alpha, options.beta, gamma, options.cull), switch * 1.01))
+    facts = {
+        "kind": chosen,
+        "why": why,
+        "silhouette_f": {name: round(f, 4) for name, (_, f) in candidates.items()},
+        "counts": {name: level.count for name, (level, _) in candidates.items()},
+        "members": len(members),
+        "objects": len(objects),
+        "seam": seam,
+    }
+    return CellChain(
+        cell_id=plan.cell_id,
+        tier=plan.tier,
+        size=plan.size,
+        key=plan.key,
+        members=members,
+        far=candidates[chosen][0],
+        cutoffs=cutoffs,
+        origin=origin,
+        center=np.zeros(3),
+        alpha=alpha,
+        beta=options.beta,
+        gamma=gamma,
+        xs=[CELL_EXPONENT, *([options.cull] if options.cull is not None else [])],
+        culled=options.cull is not None,
+        facts=facts,
+    )
+
+
+def _choice(candidates: dict[str, tuple[Level, float]], kind: str) -> tuple[str, str]:
+    """The far level kind to keep and why."""
+    if kind != "auto" or len(candidates) == 1:
+        name = kind if kind in candidates else next(iter(candidates))
+        return name, "asked" if name == kind else "no point level could be baked"
+    faithful = [name for name, (_, f) in candidates.items() if f >= MIN_CELL_F]
+    if faithful:
+        name = min(faithful, key=lambda n: (level_cost(candidates[n][0]), n))
+        return name, f"cheapest with silhouette F ≥ {MIN_CELL_F}"
+    name = max(candidates, key=lambda n: (candidates[n][1], n))
+    return name, f"none reaches silhouette F {MIN_CELL_F}: the most faithful"
+
+
+def _silhouette_f(source: Mesh, level: Level, distance: float, options: ChainOptions) -> float:
+    """Silhouette F of ``level`` against ``source`` seen from ``distance``."""
+    if level.points is not None:
+        size = level.params.point_size if level.params is not None else 1.0
+        estimate = silhouette_estimate(source, level.points, size, distance, options.view)
+    else:
+        assert level.mesh is not None
+        estimate = mesh_silhouette_estimate(source, level.mesh, distance, options.view)
+    p, r = estimate.precision, estimate.recall
+    return 2 * p * r / (p + r) if p + r > 0 else 0.0
+
+
+def _placed(chain: LodChain, mesh: Mesh) -> Mesh:
+    """``mesh`` (a level of ``chain``) in scene coordinates."""
+    if chain.transform is None:
+        return mesh.translated(chain.origin)
+    matrix = np.asarray(chain.transform, dtype=np.float64)
+    parts = []
+    for part in mesh.parts:
+        local = part.vertices + chain.origin
+        parts.append(replace(part, vertices=local @ matrix[:3, :3].T + matrix[:3, 3]))
+    return Mesh(parts)
+
+
+def _finest_mesh(chain: LodChain) -> Mesh:
+    """The finest mesh level of ``chain`` in scene coordinates."""
+    level = next(lv for lv in chain.levels if lv.mesh is not None)
+    assert level.mesh is not None
+    return _placed(chain, level.mesh)
+
+
+def _coarsest_mesh(chain: LodChain) -> Mesh:
+    """The coarsest mesh level of ``chain`` in scene coordinates."""
+    level = next(lv for lv in reversed(chain.levels) if lv.mesh is not None)
+    assert level.mesh is not None
+    return _placed(chain, level.mesh)
+
+
+def _merged(meshes: Sequence[Mesh]) -> Mesh:
+    return Mesh([part for mesh in meshes for part in mesh.parts])
+
+
+def _one_part(mesh: Mesh) -> Mesh:
+    """``mesh`` as one part (one draw call): parts' colours become vertex colours; textures
+    are left out (their material colour stands in)."""
+    colors = mesh.vertex_colors
+    if colors is None:
+        colors = np.concatenate(
+            [np.repeat(p.material_color[None], len(p.vertices), axis=0) for p in mesh.parts]
+        )
+    return Mesh([Surface(mesh.vertices, mesh.faces, vertex_colors=colors)])
+
+
+def _centre(member: Member) -> np.ndarray:
+    """A member's switching centre in scene coordinates."""
+    centre = np.asarray(member.origin, dtype=np.float64) + member.center
+    if isinstance(member, LodChain) and member.transform is not None:
+        matrix = np.asarray(member.transform, dtype=np.float64)
+        centre = matrix[:3, :3] @ centre + matrix[:3, 3]
+    return centre
+
+
+def _coarsest_from(member: Member) -> float:
+    """Distance from a member's centre beyond which it shows its coarsest level."""
+    if isinstance(member, CellChain):
+        return member.cutoffs[0]
+    shown = len(member.levels)
+    return member.cutoffs[shown - 2] if shown >= 2 else 0.0
+
+
+def draw_counts(items: Sequence[Member]) -> dict[str, int]:
+    """Shapes written, and draw calls and vertices + points drawn when every item is seen
+    from beyond all its cutoffs (culling aside): the far view of a city."""
+    shapes = calls = drawn = 0
+    for item in items:
+        for cell in item.cells() if isinstance(item, CellChain) else []:
+            shapes += _parts(cell.far)
+        for chain in item.objects() if isinstance(item, CellChain) else [item]:
+            shapes += sum(_parts(level) for level in chain.levels)
+        far = item.far if isinstance(item, CellChain) else item.levels[-1]
+        calls += _parts(far)
+        drawn += far.count
+    return {"shapes": shapes, "far_draw_calls": calls, "far_vertices_and_points": drawn}
+
+
+def _parts(level: Level) -> int:
+    return len(level.mesh.parts) if level.mesh is not None else 1
+
+
+def walk_cells(cells: Sequence[CellChain]) -> Iterator[CellChain]:
+    """Every cell of ``cells`` and their finer cells, coarsest first."""
+    for cell in cells:
+        yield from cell.cells()

@@ -1,0 +1,127 @@
+"""LOD parents (HLOD): cells group a city's buildings, a cell's far level never shows while one
+of its buildings would still show a finer level than its coarsest, and the far view draws one
+call per cell instead of one per building."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lodconvert.bake import get_backend
+from lodconvert.chain import ChainOptions
+from lodconvert.errors import UsageError
+from lodconvert.hlod import (
+    AUTO_SIZES,
+    MIN_CELL_F,
+    HlodOptions,
+    auto_size,
+    draw_counts,
+    parse_sizes,
+    plan_cells,
+)
+from lodconvert.io import read_scene
+from lodconvert.model import CellChain, LodChain, Node, Scene
+from lodconvert.pipeline import iter_chains
+from tests.test_citygml import sample
+from tests.test_sourcelods import block
+
+TUM = "tum_munich_lod2_v2.zip"
+
+
+def _centre(member: LodChain | CellChain) -> np.ndarray:
+    return np.asarray(member.origin) + member.center
+
+
+def _coarsest_from(member: LodChain | CellChain) -> float:
+    if isinstance(member, CellChain):
+        return member.cutoffs[0]
+    return member.cutoffs[len(member.levels) - 2] if len(member.levels) > 1 else 0.0
+
+
+def assert_seamless(cell: CellChain) -> None:
+    """No member shows a finer level than its coarsest once the cell's far level is on."""
+    for member in cell.members:
+        reach = _coarsest_from(member) + float(np.linalg.norm(_centre(member) - _centre(cell)))
+        assert cell.cutoffs[0] >= reach, (cell.cell_id, member)
+        if isinstance(member, CellChain):
+            assert_seamless(member)
+
+
+@pytest.fixture(scope="module")
+def tum_cells() -> list[CellChain]:
+    scene = read_scene(sample(TUM))
+    hlod = HlodOptions((250.0, 1000.0), "auto")
+    return list(iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod))
+
+
+def test_every_building_is_in_one_cell_and_cells_nest(tum_cells: list[CellChain]) -> None:
+    ids = [chain.object_id for cell in tum_cells for chain in cell.objects()]
+    assert len(ids) == len(set(ids)) == 290
+    for top in tum_cells:
+        assert top.tier == 2 and top.size == 1000.0
+        for cell in top.members:
+            assert isinstance(cell, CellChain) and cell.tier == 1 and cell.size == 250.0
+            # a 250 m cell lies in its 1000 m cell
+            assert [k // 4 for k in cell.key] == list(top.key)
+
+
+def test_a_cells_far_level_never_shows_while_a_building_is_finer(
+    tum_cells: list[CellChain],
+) -> None:
+    for cell in tum_cells:
+        assert_seamless(cell)
+
+
+def test_the_far_view_draws_one_call_per_cell(tum_cells: list[CellChain]) -> None:
+    objects = [chain for cell in tum_cells for chain in cell.objects()]
+    without, with_cells = draw_counts(objects), draw_counts(tum_cells)
+    assert without["far_draw_calls"] == 290
+    assert with_cells["far_draw_calls"] == len(tum_cells)
+    # each cell's far level is one part; the buildings' own shapes are all still written
+    assert with_cells["shapes"] == without["shapes"] + sum(len(c.cells()) for c in tum_cells)
+
+
+def test_auto_keeps_the_cheaper_faithful_far_level(tum_cells: list[CellChain]) -> None:
+    for top in tum_cells:
+        for cell in top.cells():
+            f = cell.facts["silhouette_f"]
+            chosen = cell.facts["kind"]
+            assert cell.far.kind == ("pcd" if chosen == "points" else "merged")
+            faithful = [kind for kind, value in f.items() if value >= MIN_CELL_F]
+            if faithful:
+                assert chosen in faithful
+            else:
+                assert f[chosen] == max(f.values())
+
+
+@pytest.mark.parametrize("kind", ["points", "mesh"])
+def test_a_district_of_one_building_is_a_cell_of_one(kind: str) -> None:
+    house = block(10, 8, 6)
+    scene = Scene("one", [Node("house", house, "Building", lods={"lod2": house})])
+    (cell,) = iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=HlodOptions(None, kind))
+    assert [c.object_id for c in cell.objects()] == ["house"]
+    assert cell.far.kind == ("pcd" if kind == "points" else "merged")
+    assert_seamless(cell)
+    if kind == "mesh":  # one draw call: the merge is a single part
+        assert cell.far.mesh is not None and len(cell.far.mesh.parts) == 1
+
+
+def test_cell_sizes_plan_and_auto() -> None:
+    centres = np.array([[10.0, 10.0], [260.0, 10.0], [990.0, 990.0], [1010.0, 10.0]])
+    cells = plan_cells(centres, (250.0, 1000.0))
+    assert sorted(i for c in cells for i in c.object_indices()) == [0, 1, 2, 3]
+    assert {c.key for c in cells} == {(0, 0), (1, 0)}
+    # 64 buildings on a 400 m square: one cell of about that size
+    grid = np.stack(np.meshgrid(np.arange(8) * 50.0, np.arange(8) * 50.0), -1).reshape(-1, 2)
+    assert auto_size(grid) == 250.0 and 250.0 in AUTO_SIZES
+
+
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [("0", "positive"), ("-250", "positive"), ("250,250", "increase"), ("1000,250", "increase"),
+     ("big", "auto")],
+)  # fmt: skip
+def test_bad_cell_sizes_are_usage_errors(text: str, words: str) -> None:
+    with pytest.raises(UsageError, match=words):
+        parse_sizes(text)
+    assert parse_sizes("auto") is None and parse_sizes("250,1000") == (250.0, 1000.0)
