@@ -69,7 +69,7 @@ def test_x3d_and_gltf_configs_describe_the_same_chain(outputs: dict[str, Path]) 
     assert (x3d["format"], glb["format"]) == ("x3d", "gltf")
     assert glb["objects"] == gltf["objects"]
     (a,), (b,) = x3d["objects"], glb["objects"]
-    for key in ("id", "cutoffs", "culled", "levels", "alpha"):
+    for key in ("id", "attributes", "cutoffs", "culled", "levels", "alpha"):
         assert a[key] == b[key], key
     np.testing.assert_allclose(a["center"], b["center"])
     assert a["lod"] == "torus_knot_LOD" and a["culled"] and a["levels"][-1] == "LOD1"

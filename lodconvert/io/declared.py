@@ -4,11 +4,15 @@ Both writers record, beside the geometry, each chain's switching data (``cutoffs
 ``beta``, ``gamma``, ``xs``, ``culled``, ``center``) and each level's facts (``name``, ``kind``
 and, for point levels, ``resolution``, ``slices``, ``point_size_px``, ``filter``, ``spacing``,
 ``design_distance``): glTF in ``extras.lodconvert``, X3D in ``MetadataSet name='lodconvert'``.
+They also keep each object's ``attributes`` (``chain.metadata`` as converted: a city object's
+id, type, name, address, generic attributes…): glTF as ``extras.attributes`` of the object's
+root node, X3D as JSON text in the chain's ``MetadataString name='attributes'``.
 The format modules read those facts; these functions build the chain from them.
 """
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
@@ -60,10 +64,28 @@ def level_from_facts(
     )
 
 
+def _attributes(declared: Any, where: str) -> dict[str, Any]:
+    """The object's attributes as a file declares them: a JSON object, or its JSON text (X3D
+    keeps them in a ``MetadataString``); none declared is ``{}``. :class:`InputError` naming
+    ``where`` when they are not an object."""
+    if declared is None:
+        return {}
+    if isinstance(declared, str):
+        try:
+            declared = json.loads(declared)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"attributes are not JSON ({exc})", where) from None
+    if not isinstance(declared, dict):
+        raise InputError(f"attributes are a {type(declared).__name__}, not an object", where)
+    return declared
+
+
 def chain_from_facts(
     object_id: str, facts: dict[str, Any], levels: list[Level], origin: np.ndarray, where: str
 ) -> LodChain:
-    """A :class:`LodChain` from the chain facts a file declares."""
+    """A :class:`LodChain` from the chain facts a file declares, its ``metadata`` the object's
+    declared ``attributes``."""
+    metadata = _attributes(facts.get("attributes"), where)
     try:
         return LodChain(
             object_id=object_id,
@@ -76,6 +98,7 @@ def chain_from_facts(
             gamma=float(facts["gamma"]),
             xs=[float(x) for x in facts["xs"]],
             culled=bool(facts.get("culled", False)),
+            metadata=metadata,
             transform=(
                 np.asarray(facts["transform"], dtype=np.float64).reshape(4, 4)
                 if facts.get("transform") is not None

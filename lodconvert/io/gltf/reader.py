@@ -50,7 +50,8 @@ class GltfLevel:
 @dataclass
 class GltfObject:
     """One object (root node): id, float64 origin, levels finest first, coverage thresholds,
-    the finest node's ``extras.lodconvert``, its node index and its ``MSFT_lod`` ids."""
+    the finest node's ``extras.lodconvert``, its node index, its ``MSFT_lod`` ids and the root
+    node's ``extras.attributes`` as stored (``None`` without any)."""
 
     object_id: str
     origin: np.ndarray
@@ -59,6 +60,7 @@ class GltfObject:
     extras: dict[str, Any]
     node: int
     ids: list[int]
+    attributes: Any = None
 
 
 def read_lod_gltf(path: str | Path, geometry: bool = True) -> list[GltfObject]:
@@ -224,14 +226,16 @@ def _read_object(
         extras=facts,
         node=finest_index,
         ids=list(ids),
+        attributes=root.get("extras", {}).get("attributes"),
     )
 
 
 def read_back(path: Path, geometry: bool = True) -> list[LodChain]:
     """The chains of a ``.glb``/``.gltf`` lodconvert wrote, with the facts of
     ``extras.lodconvert`` and (unless ``geometry`` is false) the level geometry, relative to
-    each chain's origin. The finest level's node index and the ``MSFT_lod`` ids are kept in
-    ``chain.metadata["gltf"]``."""
+    each chain's origin. ``chain.metadata`` holds the object's attributes (its root node's
+    ``extras.attributes``) and, under ``"gltf"`` (in place of an attribute of that name), the
+    finest level's node index and the ``MSFT_lod`` ids."""
     chains = []
     for obj in read_lod_gltf(path, geometry):
         where = f"{path}: object {obj.object_id!r}"
@@ -239,7 +243,8 @@ def read_back(path: Path, geometry: bool = True) -> list[LodChain]:
             level_from_facts(lv.extras, lv.positions, lv.faces, lv.colors, where)
             for lv in obj.levels
         ]
-        chain = chain_from_facts(obj.object_id, obj.extras, levels, obj.origin, where)
+        facts = {**obj.extras, "attributes": obj.attributes}
+        chain = chain_from_facts(obj.object_id, facts, levels, obj.origin, where)
         chain.metadata["gltf"] = {"node": obj.node, "ids": obj.ids}
         chains.append(chain)
     return chains

@@ -242,7 +242,9 @@ def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
 def read_back(path: Path, geometry: bool = True) -> list[LodChain]:
     """The chains of an ``.x3d`` lodconvert wrote, with the facts of its lodconvert
     ``MetadataSet`` s and (unless ``geometry`` is false) the level geometry, relative to each
-    chain's origin. The ``LOD`` node's DEF is kept in ``chain.metadata["x3d"]``."""
+    chain's origin. ``chain.metadata`` holds the object's attributes (the JSON of its
+    ``MetadataString name='attributes'``) and, under ``"x3d"`` (in place of an attribute of
+    that name), the ``LOD`` node's DEF."""
     with x3d_read_errors(path, "metadata"):
         objects = _x3d_facts(path)
     if not objects:
