@@ -1,12 +1,13 @@
 // glTF part: three.js draws each MSFT_lod chain as a THREE.LOD whose levels switch at the chain's
-// cutoffs (extras.lodconvert), points sized as lodconvert sizes them and lit like the mesh. The
-// library is imported in load(), so that a wrong library URL is reported on the page.
+// cutoffs (extras.lodconvert), points sized as lodconvert sizes them and lit like the mesh; a
+// ray through the clicked pixel picks the nearest level shown, and so its object. The library
+// is imported in load(), so that a wrong library URL is reported on the page.
 
 const halfFov = (config.view.fov_y_deg * Math.PI) / 360;
 const referenceFocal = config.view.height_px / (2 * Math.tan(halfFov));
 const lods = [];
 const pointScale = { value: 1 }; // half the drawing buffer's height, set by resize()
-let THREE, renderer, scene, camera, controls, origin;
+let THREE, renderer, scene, camera, controls, origin, raycaster;
 
 /**
  * The material of a point level's `material` (which GLTFLoader made unlit): lit like the mesh
@@ -38,6 +39,32 @@ function pointsMaterial(material, size) {
   return lit;
 }
 
+/**
+ * Let rays hit the points of `points` within their drawn radius: they are drawn
+ * size.px·size.distance / referenceFocal world units wide (see pointsMaterial), at every
+ * distance.
+ */
+function pickLikeDrawn(points, size) {
+  const radius = (size.px * size.distance) / referenceFocal / 2;
+  points.raycast = (ray, hits) => {
+    ray.params.Points.threshold = radius;
+    THREE.Points.prototype.raycast.call(points, ray, hits);
+  };
+}
+
+/** Whether `object` is drawn: it and all its ancestors are visible (LODs hide levels). */
+function drawn(object) {
+  for (let node = object; node; node = node.parent) if (!node.visible) return false;
+  return true;
+}
+
+/** The CSS pixel position of `event` as normalised device coordinates of the canvas. */
+function deviceCoordinates(event) {
+  const rect = renderer.domElement.getBoundingClientRect();
+  const x = ((event.clientX - rect.left) / rect.width) * 2 - 1;
+  return new THREE.Vector2(x, 1 - ((event.clientY - rect.top) / rect.height) * 2);
+}
+
 function render() {
   renderer.render(scene, camera); // also picks each LOD's level
   lods.forEach((lod, i) => update(i, lod.getCurrentLevel(), camera.position.distanceTo(lod.position)));
@@ -58,7 +85,10 @@ async function buildLod(gltf, object) {
     const level = await gltf.parser.getDependency("node", index);
     level.position.set(...object.local_center).negate(); // geometry is relative to the origin
     level.traverse((part) => {
-      if (part.isPoints && object.points[k]) part.material = pointsMaterial(part.material, object.points[k]);
+      if (part.isPoints && object.points[k]) {
+        part.material = pointsMaterial(part.material, object.points[k]);
+        pickLikeDrawn(part, object.points[k]);
+      }
     });
     lod.addLevel(level, k === 0 ? 0 : object.cutoffs[k - 1]);
   }
@@ -89,6 +119,7 @@ const backend = {
       scene.add(lod);
       lods.push(lod);
     }
+    raycaster = new THREE.Raycaster();
     controls = new OrbitControls(camera, renderer.domElement);
     controls.addEventListener("change", render);
     window.addEventListener("resize", () => resize(host));
@@ -101,6 +132,27 @@ const backend = {
     controls.update();
     render();
     await nextFrame();
+  },
+  /** Index of the object of the nearest drawn level under the pointer of `event`, or null. */
+  pick(event) {
+    raycaster.setFromCamera(deviceCoordinates(event), camera);
+    const hit = raycaster.intersectObjects(lods, true).find((h) => drawn(h.object));
+    let node = hit?.object;
+    while (node && !node.isLOD) node = node.parent;
+    return node ? lods.indexOf(node) : null;
+  },
+  /**
+   * Where the world point `point` shows on the page (CSS pixels); null where the camera does not
+   * see it (behind it, or beyond its far plane).
+   */
+  screenPoint(point) {
+    const ndc = new THREE.Vector3(...point).sub(origin).project(camera);
+    if (Math.abs(ndc.z) > 1) return null;
+    const rect = renderer.domElement.getBoundingClientRect();
+    return {
+      x: rect.left + ((ndc.x + 1) / 2) * rect.width,
+      y: rect.top + ((1 - ndc.y) / 2) * rect.height,
+    };
   },
 };
 

@@ -1,14 +1,19 @@
 // lodconvert viewer page, common part: the configuration written by lodconvert, the readout of
-// each object's active level and distance, the distance slider, and window.lodconvertViewer
-// (state for tests and curious users, and setDistance). The format part after it (gltf.js or
-// x3d.js) defines a backend { load(host), setDistance(d) } and calls start(backend); it reports
-// levels and distances through update().
+// each object's active level and distance, the distance slider, the panel that shows the id and
+// attributes of a clicked object, and window.lodconvertViewer (state for tests and curious
+// users, setDistance and screenPoint). The format part after it (gltf.js or x3d.js) defines a
+// backend { load(host), setDistance(d), pick(event), screenPoint(point) } and calls
+// start(backend); it reports levels and distances through update().
 
 const config = JSON.parse(document.getElementById("lodconvert-config").textContent);
 const readout = document.getElementById("readout");
 const slider = document.getElementById("distance");
 const status = document.getElementById("status");
+const inspect = document.getElementById("inspect");
 const MAX_LISTED = 8;
+/** How far (CSS pixels) the pointer may move between press and release of a click: farther, it
+ * is a drag of the view, which selects nothing. */
+const CLICK_SLOP_PX = 4;
 
 const most = (values) => values.reduce((a, b) => Math.max(a, b), -Infinity);
 const least = (values) => values.reduce((a, b) => Math.min(a, b), Infinity);
@@ -46,7 +51,10 @@ const state = {
   objects: config.objects.map((o) => ({ id: o.id, level: null, levelIndex: null, distance: null })),
   distance: null, // of the viewer from the focus, once drawn there
   settled: false, // no move under way: the levels and distances shown are final
+  selected: null, // id of the object whose attributes the panel shows
+  clicks: 0, // clicks on the view handled (each selects an object or nothing)
   setDistance: null,
+  screenPoint: null, // [x, y, z] in world coordinates → {x, y} in CSS pixels, or null
 };
 window.lodconvertViewer = state;
 
@@ -80,6 +88,62 @@ function update(index, levelIndex, distance) {
   }
 }
 
+const isRecord = (value) => value !== null && typeof value === "object" && !Array.isArray(value);
+
+/** A row of `body` headed by `name` (its cell `text`, or the whole row without text). */
+function addRow(body, name, text = null) {
+  const row = body.insertRow();
+  const header = document.createElement("th");
+  header.textContent = name;
+  header.scope = text === null ? "rowgroup" : "row";
+  header.colSpan = text === null ? 2 : 1;
+  row.append(header);
+  if (text !== null) row.insertCell().textContent = text;
+}
+
+/**
+ * Add `attributes` to `table`: a body with a row per plain attribute (strings as they are,
+ * other values as JSON), then a body per nested object, headed by its (dotted) `name`.
+ */
+function addAttributes(table, attributes, name = null) {
+  const body = table.createTBody();
+  if (name !== null) addRow(body, name);
+  const entries = Object.entries(attributes);
+  for (const [key, value] of entries.filter(([, v]) => !isRecord(v))) {
+    addRow(body, key, typeof value === "string" ? value : JSON.stringify(value));
+  }
+  for (const [key, value] of entries.filter(([, v]) => isRecord(v))) {
+    addAttributes(table, value, name === null ? key : `${name}.${key}`);
+  }
+}
+
+/** Show the id and attributes of object `index` in the panel; null empties and hides it. */
+function select(index) {
+  const object = index === null ? null : config.objects[index];
+  state.selected = object?.id ?? null;
+  inspect.hidden = object === null;
+  inspect.replaceChildren();
+  if (object === null) return;
+  const heading = document.createElement("h2");
+  heading.textContent = object.id;
+  const table = document.createElement("table");
+  const { id, ...others } = object.attributes; // the id is the heading already
+  addAttributes(table, id === object.id ? others : object.attributes);
+  inspect.append(heading, table);
+}
+
+/** Clicks on the view select the object under the pointer (or nothing); drags do not. */
+function watchClicks(backend, view) {
+  let pressed = null;
+  view.addEventListener("pointerdown", (event) => { pressed = [event.clientX, event.clientY]; });
+  view.addEventListener("click", (event) => {
+    if (pressed === null) return;
+    if (Math.hypot(event.clientX - pressed[0], event.clientY - pressed[1]) > CLICK_SLOP_PX) return;
+    select(backend.pick(event));
+    state.clicks += 1;
+  });
+}
+
 function fail(error) {
   state.error = String(error?.message ?? error);
   status.textContent = state.error;
@@ -110,7 +174,10 @@ async function start(backend) {
   }
   try {
     const started = performance.now();
-    await backend.load(document.getElementById("view"));
+    const view = document.getElementById("view");
+    await backend.load(view);
+    watchClicks(backend, view);
+    state.screenPoint = (point) => backend.screenPoint(point);
     state.setDistance = async (distance) => {
       slider.value = String(sliderValue(distance));
       await moveTo(backend, distance);

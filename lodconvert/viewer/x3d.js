@@ -1,7 +1,11 @@
 // X3D part: X_ITE loads the file and switches its LOD nodes itself (at the ranges lodconvert
 // wrote, points sized by PointProperties); the page adds a viewpoint it can move, and reads the
-// levels from level_changed and the viewer position from a ProximitySensor. The library is
-// imported in load(), so that a wrong library URL is reported on the page.
+// levels from level_changed and the viewer position and orientation from a ProximitySensor.
+// A click is picked by X_ITE itself, with the browser methods its pointing-device sensors use
+// (getPointerFromEvent, touch(x, y), then getHit(): the Shape drawn at that pixel; they are not
+// part of its typed API), and the page maps the Shape to the object whose LOD holds it; objects
+// that USE another's LOD (instances) share its Shapes, and a click on one selects the first.
+// The library is imported in load(), so that a wrong library URL is reported on the page.
 
 /**
  * Frames that a move waits at most for every LOD to reach its level: with forceTransitions
@@ -10,7 +14,9 @@
 const SETTLE_FRAMES = 120;
 const levels = config.objects.map(() => null);
 const distances = config.objects.map(() => null);
-let X3D, viewpoint;
+const objectOfShape = new Map(); // Shape (X_ITE's node, not its SFNode) → first object's index
+let X3D, browser, canvas, viewpoint;
+const eye = { position: focus, orientation: null }; // the viewer's, from the sensor
 let target = 0;
 
 const vector = (values) => new X3D.SFVec3f(...values);
@@ -19,7 +25,20 @@ function report(index) {
   update(index, levels[index], distances[index]);
 }
 
+/** Record in objectOfShape that the Shapes under `node` are drawn by object `index`. */
+function collectShapes(node, index) {
+  if (node.getNodeTypeName() === "Shape") {
+    if (!objectOfShape.has(node.getValue())) objectOfShape.set(node.getValue(), index);
+    return;
+  }
+  const grouping = node.getFieldDefinitions().some((field) => field.name === "children");
+  for (const child of grouping ? node.children : []) {
+    if (child) collectShapes(child, index);
+  }
+}
+
 function viewerMoved(position) {
+  eye.position = position;
   config.objects.forEach((object, i) => {
     distances[i] = Math.hypot(...object.center.map((c, k) => position[k] - c));
     report(i);
@@ -29,11 +48,11 @@ function viewerMoved(position) {
 const backend = {
   async load(host) {
     ({ default: X3D } = await import("x_ite"));
-    const canvas = document.createElement("x3d-canvas");
+    canvas = document.createElement("x3d-canvas");
     canvas.setAttribute("splashScreen", "false");
     canvas.setAttribute("notifications", "false");
     host.appendChild(canvas);
-    const browser = X3D.getBrowser(canvas);
+    browser = X3D.getBrowser(canvas);
     await browser.loadURL(new X3D.MFString(config.asset));
     const scene = browser.currentScene;
     scene.addComponent(browser.getComponent("EnvironmentalSensor", 1)); // ProximitySensor
@@ -47,11 +66,14 @@ const backend = {
     const sensor = scene.createNode("ProximitySensor");
     sensor.center = vector(focus);
     sensor.size = vector([40 * farthest, 40 * farthest, 40 * farthest]);
+    eye.orientation = new X3D.SFRotation();
     sensor.addFieldCallback("lodconvert", "position_changed", (p) => viewerMoved([p.x, p.y, p.z]));
+    sensor.addFieldCallback("lodconvert", "orientation_changed", (r) => { eye.orientation = r; });
     for (const node of [navigation, viewpoint, sensor]) scene.rootNodes.push(node);
     navigation.set_bind = true;
     config.objects.forEach((object, i) => {
       const lod = scene.getNamedNode(object.lod);
+      collectShapes(lod, i);
       levels[i] = lod.level_changed;
       lod.addFieldCallback("lodconvert", "level_changed", (level) => {
         levels[i] = level;
@@ -75,6 +97,27 @@ const backend = {
       await nextFrame();
       if (arrived()) break;
     }
+  },
+  /** Index of the object drawing the Shape under the pointer of `event`, or null. */
+  pick(event) {
+    const { x, y } = browser.getPointerFromEvent(event);
+    if (!browser.touch(x, y)) return null;
+    return objectOfShape.get(browser.getHit().shapeNode) ?? null;
+  },
+  /**
+   * Where the world point `point` shows on the page (CSS pixels); null behind the viewer. As
+   * X3D specifies, the field of view spans the shorter side of the canvas.
+   */
+  screenPoint(point) {
+    const relative = vector(point.map((v, k) => v - eye.position[k]));
+    const seen = eye.orientation.inverse().multVec(relative); // the viewer looks along -z
+    if (seen.z >= 0) return null;
+    const rect = canvas.getBoundingClientRect();
+    const focal = Math.min(rect.width, rect.height) / 2 / Math.tan(viewpoint.fieldOfView / 2);
+    return {
+      x: rect.left + rect.width / 2 + (focal * seen.x) / -seen.z,
+      y: rect.top + rect.height / 2 - (focal * seen.y) / -seen.z,
+    };
   },
 };
 

@@ -1,0 +1,99 @@
+"""Clicking an object on the viewer page shows its id and attributes, clicking empty space
+clears them: the TUM Munich district (CityGML LoD2) as X3D in X_ITE and as glTF in three.js,
+clicked by inspect.mjs in headless Chromium where the page itself says a roof shows."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lxml import etree
+
+from lodconvert.io import read_chains
+
+from ..conftest import SHARED
+from . import conftest
+from .conftest import Chain, Drive, console_text, make_chain
+from .test_viewers import _errors
+
+pytestmark = pytest.mark.browser
+
+SOURCE = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
+NAMESPACES = {
+    "gml": "http://www.opengis.net/gml",
+    "bldg": "http://www.opengis.net/citygml/building/2.0",
+}
+SKY = [0.02, 0.98]
+"""Where empty space is clicked: near the bottom-left corner of the view. The page first shows
+every object within the sphere of radius ``reach`` around its focus from 2.5 ``reach`` away, so
+no object shows beyond asin(1 / 2.5) = 23.6° off the axis; the corner of a 4:3 view at 45° is
+34.6° off it."""
+
+
+@pytest.fixture
+def inspect(drive: Drive, monkeypatch: pytest.MonkeyPatch) -> Drive:
+    """The browser fixture ``drive`` running inspect.mjs instead of drive.mjs (same command
+    line, output and failures)."""
+    monkeypatch.setattr(conftest, "DRIVER", conftest.HERE / "inspect.mjs")
+    return drive
+
+
+@pytest.fixture(scope="module")
+def district(site: Path) -> dict[str, Chain]:
+    """TUM Munich converted to .x3d and .glb in the test site, each with its viewer page."""
+    if not SOURCE.exists():
+        pytest.skip(f"{SOURCE} is absent (shared test data not checked out)")
+    return {s: make_chain(site, SOURCE, f"inspect_tum.{s}") for s in ("x3d", "glb")}
+
+
+def _roof(path: Path) -> tuple[str, list[float]]:
+    """An object of ``path`` and a point on its roof, safe to click: of all upward-facing
+    triangles of the objects' finest levels, the centre of the largest inscribed circle (from
+    above, as the page first shows the district, a roof shows, its edges farthest away)."""
+    best = (0.0, "", [0.0, 0.0, 0.0])
+    for chain in read_chains(path):
+        corners = chain.levels[0].mesh.vertices[chain.levels[0].mesh.faces]
+        sides = np.linalg.norm(corners[:, [1, 2, 0]] - corners[:, [2, 0, 1]], axis=2)
+        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        twice_area = np.linalg.norm(normals, axis=1)
+        upward = normals[:, 2] > 0.5 * twice_area
+        radii = np.where(upward, twice_area / np.maximum(sides.sum(axis=1), 1e-12), 0.0)
+        k = int(np.argmax(radii))
+        if radii[k] > best[0]:
+            centre = (sides[k] @ corners[k]) / sides[k].sum()
+            best = (radii[k], chain.object_id, (chain.origin + centre).tolist())
+    return best[1], best[2]
+
+
+def _source_attributes(gml_id: str) -> dict[str, str]:
+    """The ``bldg:`` attributes of the building ``gml_id`` in the source file, as text, by
+    local name."""
+    with zipfile.ZipFile(SOURCE) as archive:
+        (member,) = [n for n in archive.namelist() if n.endswith(".gml")]
+        with archive.open(member) as handle:
+            tree = etree.parse(handle)
+    (building,) = tree.xpath(f"//bldg:Building[@gml:id='{gml_id}']", namespaces=NAMESPACES)
+    children = building.iterchildren(f"{{{NAMESPACES['bldg']}}}*")
+    return {etree.QName(child).localname: (child.text or "").strip() for child in children}
+
+
+@pytest.mark.parametrize("suffix", ["x3d", "glb"])
+def test_clicking_a_building_shows_its_id_and_attributes(
+    district: dict[str, Chain], inspect: Drive, site: Path, suffix: str
+) -> None:
+    chain = district[suffix]
+    gml_id, roof = _roof(site / district["x3d"].name)
+    out = inspect("clicks", page=chain.page, clicks=[{"point": roof}, {"at": SKY}])
+    building, sky = out["result"]["clicks"]
+    message = f"{out['result']}\n{console_text(out)}"
+    assert building["selected"] == gml_id and building["heading"] == gml_id, message
+    assert not building["hidden"], message
+    rows = dict(building["rows"])
+    source = _source_attributes(gml_id)
+    assert float(rows["measuredHeight"]) == pytest.approx(float(source["measuredHeight"])), message
+    assert rows["function"] == source["function"] and rows["type"] == "Building", message
+    assert sky["selected"] is None and sky["hidden"], message
+    assert sky["heading"] is None and sky["rows"] == [], message
+    assert not _errors(out), message
