@@ -17,6 +17,8 @@ from ..cli.options import (
     parse_list,
 )
 from ..errors import UsageError
+from ..io import output_format
+from ..io.x3d import SWITCHING_MODES
 from ..limits import DEFAULT_LIMITS
 from ..semantics import DEFAULT_PALETTE
 from ..sinks import FileSink, Outputs
@@ -100,6 +102,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_range_options(parser)
     out = parser.add_argument_group("output and messages")
     out.add_argument(
+        "--switching",
+        choices=SWITCHING_MODES,
+        default="lod",
+        help="X3D only: switch each object's levels by distance from its centre (lod, an X3D LOD "
+        "node; default) or on boxes around it (prism: its bounding box grown by each cutoff on "
+        "every side, ProximitySensors driving Switch nodes)",
+    )
+    out.add_argument(
         "--report", metavar="FILE", help="write a JSON report (schemas/report.schema.json)"
     )
     out.add_argument(
@@ -119,10 +129,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     out.add_argument("-v", "--verbose", action="store_true", help="print every step")
 
 
+def _check_switching(args: argparse.Namespace) -> None:
+    """:class:`UsageError` when ``--switching`` names a mode other than ``lod`` for an output
+    whose format takes no switching option (every format but X3D), before any work."""
+    if args.switching != "lod" and "switching" not in output_format(args.output).write_options:
+        raise UsageError(
+            f"--switching {args.switching} is X3D-only; write an .x3d output, not {args.output}"
+        )
+
+
 def run(args: argparse.Namespace, console: Console) -> int:
     """Convert, print what was made, return the exit code."""
     from ..pipeline import convert
 
+    _check_switching(args)
     options = chain_options(args)
     limits = DEFAULT_LIMITS.with_text(args.limit)
     if args.viewer_lib and not args.html:
@@ -156,6 +176,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
             "crs": args.crs,
         },
         strict=args.strict,
+        write_options={"switching": args.switching},
         also=stage_page if args.html else None,
         limits=limits,
     )

@@ -22,7 +22,7 @@ import importlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 from ..errors import InputError, UsageError
 from ..model import LodChain, Scene
@@ -76,16 +76,17 @@ class Format:
         self.write(chains, sink, info, **_taken(options, self.write_options))
 
 
-StreamWriter = Callable[[Iterable[LodChain], BinaryIO, OutputInfo], None]
+StreamWriter = Callable[..., None]
+"""``writer(chains, handle, info, **options)``: chains into a binary stream."""
 
 
 def streamed(writers: dict[str, StreamWriter]) -> Callable[..., None]:
     """A ``write`` for formats written as one stream: the writer for the sink's suffix, into
-    the sink's file."""
+    the sink's file, with the format's write options."""
 
-    def write(chains: Iterable[LodChain], sink: Any, info: OutputInfo) -> None:
+    def write(chains: Iterable[LodChain], sink: Any, info: OutputInfo, **options: Any) -> None:
         with sink.open() as handle:
-            writers[sink.path.suffix.lower()](chains, handle, info)
+            writers[sink.path.suffix.lower()](chains, handle, info, **options)
 
     return write
 

@@ -5,7 +5,14 @@ from __future__ import annotations
 
 from .. import Format, imported_on_call, streamed
 from .reader import X3DLevel, read_back, read_x3d_points, x3d_read_errors
-from .writer import METADATA_SET, point_properties, vertex_colors, write_x3d
+from .writer import (
+    METADATA_SET,
+    SWITCHING_MODES,
+    point_properties,
+    prism_boxes,
+    vertex_colors,
+    write_x3d,
+)
 
 FORMAT = Format(
     name="x3d",
@@ -13,13 +20,16 @@ FORMAT = Format(
     write=streamed({".x3d": write_x3d}),
     read_back=read_back,
     check=imported_on_call("lodconvert.io.x3d.check", "check_x3d"),
+    write_options=("switching",),
 )
 
 __all__ = [
     "FORMAT",
     "METADATA_SET",
+    "SWITCHING_MODES",
     "X3DLevel",
     "point_properties",
+    "prism_boxes",
     "read_back",
     "read_x3d_points",
     "vertex_colors",

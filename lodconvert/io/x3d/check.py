@@ -1,10 +1,13 @@
 """X3D checks: well-formed XML with an ``X3D`` root and a ``Scene``; the components that ``LOD``
-(Navigation 2) and ``PointProperties`` (Shape 5) need; every ``LOD`` with strictly increasing,
-non-negative ranges and one child more than ranges; ``PointSet`` s with one colour per point and
-no ``Normal``; ``IndexedTriangleSet`` s of whole triangles indexing existing vertices; at least
-one lodconvert chain (an ``LOD`` in a ``Transform`` holding ``MetadataSet name='lodconvert'``);
-and, when a schema is given, the XSD (the official X3D 4.0 XSD is a test-time reference, not
-shipped).
+(Navigation 2), ``PointProperties`` (Shape 5) and the nodes of prism switching
+(``ProximitySensor``: EnvironmentalSensor 1; ``BooleanFilter``, ``IntegerTrigger``:
+EventUtilities 1) need; every ``LOD`` with strictly increasing, non-negative ranges and one child
+more than ranges; ``PointSet`` s with one colour per point and no ``Normal``;
+``IndexedTriangleSet`` s of whole triangles indexing existing vertices; every ``ROUTE`` after the
+nodes it connects; at least one lodconvert chain (an ``LOD`` in a ``Transform`` holding
+``MetadataSet name='lodconvert'``, directly or, with prism switching, through the ``Switch``
+that hides it); and, when a schema is given, the XSD (the official X3D 4.0 XSD is a test-time
+reference, not shipped).
 
 The document is streamed with libxml2's default limits and without resolving entities; each
 ``Shape`` is cleared once checked, so memory stays small for large files.
@@ -26,9 +29,16 @@ from .writer import METADATA_SET
 
 MAX_SCHEMA_FINDINGS = 20
 """Schema errors listed one by one; any more are summed up in one finding."""
-_FULL_PROFILE = "Full"
-_LOD_PROFILES = ("Immersive", _FULL_PROFILE)
-"""Profiles that include Navigation level 2 (LOD) without a component statement."""
+_SENSING_PROFILES = ("Interactive", "Immersive", "Full")
+_NEEDED_COMPONENTS: dict[str, tuple[str, int, tuple[str, ...]]] = {
+    "LOD": ("Navigation", 2, ("Immersive", "Full")),
+    "PointProperties": ("Shape", 5, ("Full",)),
+    "ProximitySensor": ("EnvironmentalSensor", 1, _SENSING_PROFILES),
+    "BooleanFilter": ("EventUtilities", 1, _SENSING_PROFILES),
+    "IntegerTrigger": ("EventUtilities", 1, _SENSING_PROFILES),
+}
+"""Node type → the component and level it needs beyond the Interchange profile, and the
+profiles that include that level without a component statement."""
 
 
 class _Catalog(etree.Resolver):
@@ -174,9 +184,11 @@ def _check_lod(element: etree._Element, findings: Findings) -> None:
 
 
 def _is_chain(lod: etree._Element) -> bool:
-    """Whether ``lod`` is a lodconvert chain: its parent ``Transform`` holds the chain's
-    ``MetadataSet name='lodconvert'``."""
+    """Whether ``lod`` is a lodconvert chain: its parent ``Transform`` (with prism switching, the
+    parent of the ``Switch`` holding it) holds the chain's ``MetadataSet name='lodconvert'``."""
     parent = lod.getparent()
+    if parent is not None and parent.tag == "Switch":
+        parent = parent.getparent()
     return (
         parent is not None
         and parent.tag == "Transform"
@@ -192,7 +204,7 @@ _X3D_CHECKS: dict[str, Callable[[etree._Element, Findings], None]] = {
 
 
 def _check_components(root: etree._Element, used: set[str], findings: Findings) -> None:
-    """The components that the nodes used need beyond the profile."""
+    """The components that the nodes used need beyond the profile (:data:`_NEEDED_COMPONENTS`)."""
     profile = root.get("profile", "")
     levels = {c.get("name"): c.get("level", "1") for c in root.iterfind("head/component")}
 
@@ -202,16 +214,23 @@ def _check_components(root: etree._Element, used: set[str], findings: Findings) 
         except ValueError:
             return 0
 
-    if "LOD" in used and profile not in _LOD_PROFILES and level("Navigation") < 2:
-        findings.error(
-            "X3D_COMPONENT",
-            f"LOD needs component Navigation level 2, which profile {profile!r} lacks",
-        )
-    if "PointProperties" in used and profile != _FULL_PROFILE and level("Shape") < 5:
-        findings.error(
-            "X3D_COMPONENT",
-            f"PointProperties needs component Shape level 5, which profile {profile!r} lacks",
-        )
+    for node, (component, needed, profiles) in _NEEDED_COMPONENTS.items():
+        if node in used and profile not in profiles and level(component) < needed:
+            findings.error(
+                "X3D_COMPONENT",
+                f"{node} needs component {component} level {needed}, which profile "
+                f"{profile!r} lacks",
+            )
+
+
+def _check_route(route: etree._Element, defined: set[str], findings: Findings) -> None:
+    """A ``ROUTE`` connects nodes DEF'd before it (a browser cannot resolve later ones)."""
+    for end in ("fromNode", "toNode"):
+        name = route.get(end)
+        if name not in defined:
+            findings.error(
+                "ROUTE_NODE", f"{_label(route)} {end} {name!r} names no node DEF'd before it"
+            )
 
 
 def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) -> None:
@@ -220,6 +239,7 @@ def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) ->
     large files and many objects."""
     root: etree._Element | None = None
     used: set[str] = set()
+    defined: set[str] = set()  # DEF names seen so far
     chains = 0
     try:
         events = etree.iterparse(str(path), events=("start", "end"), resolve_entities=False)
@@ -230,11 +250,15 @@ def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) ->
                     if element.tag != "X3D":
                         findings.error("X3D_ROOT", f"root element is <{element.tag}>, not <X3D>")
                         return
+                if element.get("DEF"):
+                    defined.add(element.get("DEF"))
                 continue
             used.add(element.tag)
             check = _X3D_CHECKS.get(element.tag)
             if check is not None:
                 check(element, findings)
+            if element.tag == "ROUTE":
+                _check_route(element, defined, findings)
             if element.tag == "LOD" and _is_chain(element):
                 chains += 1
             if element.tag == "Shape":

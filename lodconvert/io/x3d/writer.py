@@ -1,4 +1,5 @@
-"""X3D 4.0 XML output: one ``Transform`` + ``LOD`` per chain, and a reader for our own files.
+"""X3D 4.0 XML output: one ``Transform`` + ``LOD`` per chain (or, with prism switching, the
+``LOD`` as the list of levels and nested ``Switch`` es on ProximitySensor boxes showing them).
 
 Layout of a written file (validates against the official x3d-4.0.xsd)::
 
@@ -44,6 +45,43 @@ clipped to ``[pointSizeMinValue, pointSizeMaxValue]`` × the minimum point size.
 ``a = c = 0`` and ``b = s / (p·d)`` a point is ``p·d / r`` pixels wide: ``p`` (the level's
 ``params.point_size``) at its design distance ``d``, shrinking with 1/r like a surface splat.
 The scale factor ``s = max(1, p)`` keeps the XSD's ``pointSizeScaleFactor >= 1``.
+
+Prism switching (``switching='prism'``, the box regions of the ProxyPrismLOD paper) switches an
+object's levels on boxes instead of spheres around its centre, without a ``Script``. The ``LOD``
+stays, unchanged, as the list of the object's levels that readers find, but inside a ``Switch``
+that draws nothing; nested ``Switch`` es draw the levels by ``USE``::
+
+    <Transform DEF='id' translation=...>
+      <MetadataSet name='lodconvert' containerField='metadata'> (as above)
+      <Switch DEF='id_levels' whichChoice='-1'>           never drawn
+        <LOD DEF='id_LOD' ...> the level Groups, as above
+      <Switch DEF='id_Switch0' whichChoice='1'>
+        <Group USE='id_LOD4'/>                            inside box 0
+        <Switch DEF='id_Switch1' whichChoice='1'>
+          <Group USE='id_LOD3'/>                          inside box 1, outside box 0
+          <Switch DEF='id_Switch2' whichChoice='1'>
+            <Group USE='id_LOD2'/>                        inside box 2, outside box 1
+            <Group USE='id_LOD1'/>                        outside box 2 (culled: an empty Group)
+      <ProximitySensor DEF='id_Prism0' center='box centre' size='box size + 2 cutoffs[0]'/>
+      <BooleanFilter DEF='id_Filter0'/>
+      <IntegerTrigger DEF='id_Inside0' integerKey='0'/>
+      <IntegerTrigger DEF='id_Outside0' integerKey='1'/>
+      <ROUTE> id_Prism0.isActive → id_Filter0.set_boolean; id_Filter0.inputTrue →
+              id_Inside0.set_boolean; id_Filter0.inputFalse → id_Outside0.set_boolean;
+              id_Inside0.triggerValue and id_Outside0.triggerValue → id_Switch0.set_whichChoice
+      … the same for boxes 1 and 2
+
+Box ``k`` is the finest level's axis-aligned bounding box in the object's frame, grown by
+``cutoffs[k]`` on every side, so each box holds the one before. Each ``Switch`` has a sensor of
+its own: one flat Switch fed by overlapping sensors would get conflicting events. The
+``BooleanFilter`` splits ``isActive`` in two, as an ``IntegerTrigger`` fires on any
+``set_boolean``, false included. Every ``Switch`` starts at its far choice, so a viewer that
+starts outside every box sees the coarsest level (nothing, culled) before any event; a viewer
+inside boxes at load gets their ``isActive TRUE`` with the first frame (a browser without
+ProximitySensor keeps the coarsest level). An instance of shared
+geometry has sensors and Switches of its own (a ``USE`` d sensor would sense the union of its
+boxes) and ``USE`` s the first instance's ``LOD`` and level Groups. The head records the mode
+(``meta name='switching'``); the profile is Interactive (:data:`PROFILES`).
 """
 
 from __future__ import annotations
@@ -55,13 +93,14 @@ import json
 import math
 import re
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import replace
+from dataclasses import astuple, dataclass, replace
 from typing import Any, BinaryIO
 
 import numpy as np
 from lxml import etree
 from PIL import Image as PILImage
 
+from ...errors import UsageError
 from ...model import Level, LodChain, Mesh, Surface
 from .. import OutputInfo
 from ..numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
@@ -91,6 +130,15 @@ MAX_TEXTURE_URL = 8_000_000
 libxml2's 10 MB limit like every other: a larger image is halved until it fits."""
 
 PNG_DATA_URI = "data:image/png;base64,"
+
+SWITCHING_MODES = ("lod", "prism")
+"""How levels switch: ``lod``, by distance from the object's centre (an X3D ``LOD``); ``prism``,
+on boxes around the object (see the module docstring)."""
+PROFILES = {"lod": "Interchange", "prism": "Interactive"}
+"""The X3D profile per switching mode. Prism switching's ProximitySensor, BooleanFilter and
+IntegerTrigger are in Interactive (EnvironmentalSensor 1, EventUtilities 1), which holds all of
+Interchange. A profile, not component statements: a script adding a component the scene
+already declares fails in X_ITE (lodconvert's viewer page adds EnvironmentalSensor)."""
 
 METADATA_SET = "lodconvert"
 _NOT_NCNAME = re.compile(r"[^A-Za-z0-9_.\-]")
@@ -133,7 +181,14 @@ def _mfstring(values: Iterable[str]) -> str:
     return " ".join('"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"' for v in values)
 
 
-def _head(out: _Out, info: OutputInfo) -> None:
+_PRISM_TEXT = (
+    "each object's levels switch on nested ProximitySensor boxes, the finest level's bounding "
+    "box grown by each LOD range on every side, driving Switch nodes through BooleanFilter and "
+    "IntegerTrigger; the LOD inside a Switch with whichChoice -1 lists the levels and is not drawn"
+)
+
+
+def _head(out: _Out, info: OutputInfo, switching: str) -> None:
     view = info.view
     meta = [
         ("generator", info.generator),
@@ -144,6 +199,8 @@ def _head(out: _Out, info: OutputInfo) -> None:
             f"{view.height_px} px high viewport, {view.fov_y_deg:g} degree vertical field of "
             f"view (focal length {view.focal_px:.2f} px)",
         ),
+        ("switching", switching),
+        *([("prism-switching", _PRISM_TEXT)] if switching == "prism" else []),
         (
             "lod-ranges",
             "LOD range values are distances in scene units from the LOD center at which the next "
@@ -179,9 +236,41 @@ def _appearance_name(level_def: str) -> str:
     return f"{level_def}_Appearance"
 
 
-def _unique_names(object_id: str, used: set[str], levels: list[Level]) -> tuple[str, list[str]]:
+@dataclass(frozen=True)
+class _Region:
+    """DEFs of the nodes that switch an object's levels at one of its cutoffs (prism switching):
+    the box's ``ProximitySensor``, the ``BooleanFilter`` splitting its ``isActive``, the
+    ``IntegerTrigger`` s sending the near and the far choice, and the ``Switch`` they set."""
+
+    sensor: str
+    filter: str
+    inside: str
+    outside: str
+    switch: str
+
+
+NEAR_CHOICE, FAR_CHOICE = 0, 1
+"""A prism Switch's choices: the level inside its box, and what shows outside it."""
+
+
+def _regions(base: str, count: int) -> list[_Region]:
+    """The DEFs of the first ``count`` regions of the object whose DEF base is ``base``."""
+    roles = ("Prism", "Filter", "Inside", "Outside", "Switch")
+    return [_Region(*(f"{base}_{role}{k}" for role in roles)) for k in range(count)]
+
+
+def _hidden_name(base: str) -> str:
+    """DEF of the ``Switch`` that holds the ``LOD`` of a prism-switched object, undrawn."""
+    return f"{base}_levels"
+
+
+def _unique_names(
+    object_id: str, used: set[str], levels: list[Level], regions: int | None = None
+) -> tuple[str, list[str]]:
     """A DEF base (an XML NCName) for ``object_id`` whose derived names (LOD, level Groups and
-    their Appearances) are not yet in ``used``, and the level DEFs; all are added to ``used``."""
+    their Appearances; with prism switching, the Switch hiding the LOD and the nodes of
+    ``regions`` regions) are not yet in ``used``, and the level DEFs; all are added to
+    ``used``."""
     base = _NOT_NCNAME.sub("_", object_id) or "_"
     if not (base[0].isalpha() or base[0] == "_"):
         base = "_" + base
@@ -195,6 +284,9 @@ def _unique_names(object_id: str, used: set[str], levels: list[Level]) -> tuple[
             *level_defs,
             *map(_appearance_name, level_defs),
         ]
+        if regions is not None:
+            names.append(_hidden_name(candidate))
+            names += [name for region in _regions(candidate, regions) for name in astuple(region)]
         if not used.intersection(names):
             used.update(names)
             return candidate, level_defs
@@ -458,15 +550,28 @@ def instance_fields(matrix: np.ndarray) -> dict[str, str]:
     return fields
 
 
+@dataclass(frozen=True)
+class _Written:
+    """Levels shared by instances, as first written: the list (kept alive, so that ids stay
+    unique), the DEF of their ``LOD`` and those of their level Groups."""
+
+    levels: list[Level]
+    lod: str
+    level_defs: list[str]
+
+
 def _write_chain(
-    out: _Out, chain: LodChain, used: set[str], written: dict[int, tuple[list[Level], str]]
+    out: _Out, chain: LodChain, used: set[str], written: dict[int, _Written], switching: str
 ) -> None:
     """One chain: its ``Transform`` (inside one more for an instance of shared geometry) with
-    the chain's metadata, and its ``LOD`` — defined the first time its levels are written,
-    ``USE`` d by later instances."""
+    the chain's metadata and its ``LOD`` — defined the first time its levels are written,
+    ``USE`` d by later instances. With prism switching the LOD goes into a ``Switch`` that
+    draws nothing, followed by the nodes that draw its levels (:func:`_write_prism`)."""
     _check_chain(chain)
-    shared = written[id(chain.levels)][1] if id(chain.levels) in written else None
-    base, level_defs = _unique_names(chain.object_id, used, [] if shared else chain.levels)
+    shared = written.get(id(chain.levels))
+    prism_regions = len(chain.cutoffs) if switching == "prism" else None
+    levels = [] if shared else chain.levels
+    base, level_defs = _unique_names(chain.object_id, used, levels, prism_regions)
     transform = {"DEF": base, "translation": format_exact(chain.origin)}
     with contextlib.ExitStack() as stack:
         if chain.transform is not None:
@@ -476,19 +581,98 @@ def _write_chain(
             # The chain's metadata goes on the Transform: X3DOM counts a MetadataSet inside
             # LOD as its first level.
             _metadata_set(out, _chain_metadata(chain))
-            if shared:
-                out.leaf("LOD", {"USE": shared})
+            if prism_regions is None:
+                _write_lod(out, chain, base, level_defs, shared, written)
                 return
-            lod = {
-                "DEF": f"{base}_LOD",
-                "center": format_exact(chain.center),
-                "range": format_exact(chain.cutoffs),
-                "forceTransitions": "true",
-            }
-            if chain.transform is not None:
-                written[id(chain.levels)] = (chain.levels, lod["DEF"])
-            with out.node("LOD", lod):
-                _write_levels(out, chain, level_defs)
+            hidden = {"DEF": _hidden_name(base), "whichChoice": "-1"}
+            with out.node("Switch", hidden):
+                _write_lod(out, chain, base, level_defs, shared, written)
+            defs = shared.level_defs if shared else level_defs
+            _write_prism(out, chain, _regions(base, prism_regions), defs)
+
+
+def _write_lod(
+    out: _Out,
+    chain: LodChain,
+    base: str,
+    level_defs: list[str],
+    shared: _Written | None,
+    written: dict[int, _Written],
+) -> None:
+    """The chain's ``LOD``: a ``USE`` of the ``shared`` one, or defined with its levels (and,
+    for an instance, remembered in ``written``)."""
+    if shared:
+        out.leaf("LOD", {"USE": shared.lod})
+        return
+    lod = {
+        "DEF": f"{base}_LOD",
+        "center": format_exact(chain.center),
+        "range": format_exact(chain.cutoffs),
+        "forceTransitions": "true",
+    }
+    if chain.transform is not None:
+        written[id(chain.levels)] = _Written(chain.levels, lod["DEF"], level_defs)
+    with out.node("LOD", lod):
+        _write_levels(out, chain, level_defs)
+
+
+def _finest_box(chain: LodChain) -> np.ndarray:
+    """(2, 3) min and max corner of ``chain``'s finest level in its frame: the vertices its
+    faces use, or its points; the chain centre (a box of no size) when it has neither."""
+    finest = chain.levels[0]
+    if finest.mesh is not None and finest.mesh.vertex_count:
+        return finest.mesh.bounds
+    if finest.points is not None and len(finest.points):
+        positions = finest.points.positions
+        return np.stack([positions.min(axis=0), positions.max(axis=0)])
+    return np.stack([chain.center, chain.center]).astype(np.float64)
+
+
+def prism_boxes(chain: LodChain) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Centre and size of each of ``chain``'s switching boxes, nearest first: its finest level's
+    bounding box (:func:`_finest_box`) grown by each cutoff on every side."""
+    low, high = _finest_box(chain)
+    return [((low + high) / 2, high - low + 2 * cutoff) for cutoff in chain.cutoffs]
+
+
+def _write_prism(out: _Out, chain: LodChain, regions: list[_Region], level_defs: list[str]) -> None:
+    """The nodes that draw a chain's levels on boxes: the nested Switches, then each box's
+    sensor, filter, triggers and the ROUTEs between them (see the module docstring)."""
+    _write_switches(out, regions, level_defs)
+    for region, (centre, size) in zip(regions, prism_boxes(chain), strict=True):
+        box = {"center": format_exact(centre), "size": format_exact(size)}
+        out.leaf("ProximitySensor", {"DEF": region.sensor, **box})
+        out.leaf("BooleanFilter", {"DEF": region.filter})
+        out.leaf("IntegerTrigger", {"DEF": region.inside, "integerKey": str(NEAR_CHOICE)})
+        out.leaf("IntegerTrigger", {"DEF": region.outside, "integerKey": str(FAR_CHOICE)})
+        for route in _routes(region):
+            out.leaf("ROUTE", route)
+
+
+def _write_switches(out: _Out, regions: list[_Region], level_defs: list[str]) -> None:
+    """One ``Switch`` per region, each holding the next: its near choice ``USE`` s the level
+    inside its box, its far choice is the next Switch; past the last region, the remaining
+    level (an empty ``Group`` when none remains: a culled chain). Each starts at its far choice."""
+    if not regions:
+        out.leaf("Group", {"USE": level_defs[0]} if level_defs else {})
+        return
+    with out.node("Switch", {"DEF": regions[0].switch, "whichChoice": str(FAR_CHOICE)}):
+        out.leaf("Group", {"USE": level_defs[0]})
+        _write_switches(out, regions[1:], level_defs[1:])
+
+
+def _routes(region: _Region) -> list[dict[str, str]]:
+    """The ROUTEs of one region: ``isActive`` into the filter, its true and false outputs into
+    the near and far triggers, and both triggers into the Switch's ``whichChoice``."""
+    connections = (
+        (region.sensor, "isActive", region.filter, "set_boolean"),
+        (region.filter, "inputTrue", region.inside, "set_boolean"),
+        (region.filter, "inputFalse", region.outside, "set_boolean"),
+        (region.inside, "triggerValue", region.switch, "set_whichChoice"),
+        (region.outside, "triggerValue", region.switch, "set_whichChoice"),
+    )
+    keys = ("fromNode", "fromField", "toNode", "toField")
+    return [dict(zip(keys, connection, strict=True)) for connection in connections]
 
 
 def _write_levels(out: _Out, chain: LodChain, level_defs: list[str]) -> None:
@@ -507,27 +691,33 @@ def _write_levels(out: _Out, chain: LodChain, level_defs: list[str]) -> None:
         out.leaf("Group")
 
 
-def write_x3d(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) -> None:
-    """Write ``chains`` as an X3D 4.0 XML document to the binary ``handle``.
+def write_x3d(
+    chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo, switching: str = "lod"
+) -> None:
+    """Write ``chains`` as an X3D 4.0 XML document to the binary ``handle``, each object's
+    levels switching as ``switching`` says (one of :data:`SWITCHING_MODES`; else
+    :class:`~lodconvert.errors.UsageError`).
 
     The document is streamed: each chain is written (and flushed) as the iterable yields it, so
     only one chain's text is held in memory. Same input, same bytes.
     """
+    if switching not in SWITCHING_MODES:
+        modes = " or ".join(SWITCHING_MODES)
+        raise UsageError(f"must be {modes}, not {switching!r}", field="switching")
     used: set[str] = set()
-    # instances: id of a levels list → (the list, kept alive so ids stay unique; its LOD's DEF)
-    written: dict[int, tuple[list[Level], str]] = {}
+    written: dict[int, _Written] = {}  # instances: id of a shared levels list → its DEFs
     with etree.xmlfile(handle, encoding="UTF-8") as xf:
         xf.write_declaration()
         out = _Out(xf)
         root = {
-            "profile": "Interchange",
+            "profile": PROFILES[switching],
             "version": "4.0",
             f"{{{XSI}}}noNamespaceSchemaLocation": SCHEMA_URL,
         }
         with out.node("X3D", root, nsmap={"xsd": XSI}):
-            _head(out, info)
+            _head(out, info, switching)
             with out.node("Scene"):
                 for chain in chains:
-                    _write_chain(out, chain, used, written)
+                    _write_chain(out, chain, used, written, switching)
                     xf.flush()
     handle.write(b"\n")

@@ -1,0 +1,134 @@
+"""X_ITE switches prism-written levels on boxes, not spheres: with an elongated building, two
+viewpoints at the same distance from its centre, one off its long side and one off its short
+end, show different levels, as its boxes predict (its LOD ranges would show one level at both).
+Moving far away reaches the coarsest level, moving in the finest; a viewer already inside the
+boxes when the file loads gets the finest level, one outside keeps the coarsest. Levels are read
+from the Switches' ``whichChoice`` through X_ITE's scripting API (tests/browser/prism.mjs)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import trimesh
+
+from lodconvert.io import OutputInfo
+from lodconvert.io.x3d import prism_boxes, write_x3d
+from lodconvert.model import Level, LodChain, Surface
+from lodconvert.ranges import cutoffs
+
+from .conftest import SAFETY_S, console_text
+
+pytestmark = pytest.mark.browser
+
+DRIVER = Path(__file__).with_name("prism.mjs")
+BUILDING = (60.0, 10.0, 10.0)
+"""A 60 m × 10 m × 10 m building, long along x."""
+BETA, GAMMA = 0.5, 2.0
+"""Ranges Y = α·β·γˣ of 39, 49 and 62 m, comparable to the building, so its shape shows."""
+LEVELS = ("LOD4", "LOD3", "LOD2", "LOD1")
+X3D_START = (0.0, 0.0, 10.0)
+"""Where X_ITE puts the viewer of a scene without a Viewpoint (X3D's default position)."""
+DISTANCE = 60.0
+"""From the building's centre, off its long side and off its short end."""
+
+
+def _building(object_id: str, origin: tuple[float, float, float]) -> LodChain:
+    """A city-like chain of the building: four levels (the same box) switching at Y(0.33),
+    Y(0.66) and Y(1.0), placed at ``origin``."""
+    box = trimesh.creation.box(extents=BUILDING)
+    surface = Surface(np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces))
+    alpha = float(np.linalg.norm(BUILDING))
+    xs = [0.33, 0.66, 1.0]
+    return LodChain(
+        object_id=object_id,
+        levels=[Level(name, "source", mesh=surface) for name in LEVELS],
+        cutoffs=cutoffs(alpha, BETA, GAMMA, xs),
+        origin=np.asarray(origin, dtype=np.float64),
+        center=np.zeros(3),
+        alpha=alpha,
+        beta=BETA,
+        gamma=GAMMA,
+        xs=xs,
+    )
+
+
+def _box_level(chain: LodChain, position: tuple[float, float, float]) -> int:
+    """The level prism switching shows a viewer at ``position`` (world): that of the first box
+    holding it, the coarsest outside every box."""
+    local = np.asarray(position) - chain.origin
+    boxes = prism_boxes(chain)
+    inside = [k for k, (centre, size) in enumerate(boxes) if np.all(abs(local - centre) < size / 2)]
+    return inside[0] if inside else len(boxes)
+
+
+def _sphere_level(chain: LodChain, position: tuple[float, float, float]) -> int:
+    """The level an X3D LOD with the chain's ranges shows a viewer at ``position``."""
+    distance = float(np.linalg.norm(np.asarray(position) - chain.origin - chain.center))
+    return sum(cutoff <= distance for cutoff in chain.cutoffs)
+
+
+@pytest.fixture(scope="module")
+def block(site: Path) -> tuple[str, list[LodChain]]:
+    """The building at the origin (the viewer starts inside its boxes) and again 2 km away
+    (outside them), written with prism switching into the test site."""
+    chains = [_building("near", (0.0, 0.0, 0.0)), _building("far", (2000.0, 0.0, 0.0))]
+    name = "prism_block.x3d"
+    with (site / name).open("wb") as handle:
+        write_x3d(chains, handle, OutputInfo("lodconvert tests", "building"), switching="prism")
+    return name, chains
+
+
+def _drive(node: str, base_url: str, **params: Any) -> list[list[dict[str, Any]]]:
+    """Run prism.mjs on the test site; the levels it saw per stop and object, or a failure
+    with its error and the browser console."""
+    params["safety_ms"] = SAFETY_S * 1000
+    command = [node, str(DRIVER), base_url, json.dumps(params)]
+    try:
+        # The driver ends itself after SAFETY_S; this only catches a driver that cannot.
+        proc = subprocess.run(
+            command, capture_output=True, text=True, timeout=SAFETY_S + 120, check=False
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"prism.mjs hung (no exit in {SAFETY_S + 120} s)")
+    lines = proc.stdout.strip().splitlines()
+    if not lines:
+        pytest.fail(f"prism.mjs printed no result\n{proc.stderr[-4000:]}")
+    out = json.loads(lines[-1])
+    if not out["ok"]:
+        pytest.fail(f"prism.mjs: {out['error']}\n{console_text(out)}")
+    return out["result"]["stops"]
+
+
+def test_x_ite_switches_levels_on_boxes(
+    block: tuple[str, list[LodChain]], browser_tools: str, base_url: str, measure
+) -> None:
+    name, chains = block
+    near = chains[0]
+    side, end = (0.0, 0.0, DISTANCE), (DISTANCE, 0.0, 0.0)
+    # the premise: spheres give both viewpoints one level, boxes two
+    assert _sphere_level(near, side) == _sphere_level(near, end)
+    assert _box_level(near, side) != _box_level(near, end)
+    far_away, close = (0.0, 0.0, 400.0), (0.0, 0.0, 20.0)
+    places = [X3D_START, side, end, far_away, close, (0.0, 0.0, 48.0), side]
+    expected = [[_box_level(chain, place) for chain in chains] for place in places]
+    stops = [{"expected": expected[0]}]  # the viewer X_ITE starts with, before any move
+    stops += [{"position": p, "expected": e} for p, e in zip(places[1:], expected[1:], strict=True)]
+    objects = [{"base": chain.object_id, "switches": len(chain.cutoffs)} for chain in chains]
+    seen = _drive(browser_tools, base_url, file=name, objects=objects, stops=stops)
+    levels = [[obj["level"] for obj in stop] for stop in seen]
+    message = f"expected {expected}, saw {seen}"
+    assert levels == expected, message
+    coarsest, finest = len(LEVELS) - 1, 0
+    assert levels[0] == [finest, coarsest], message  # at load: inside near's boxes, outside far's
+    assert levels[3][0] == coarsest and levels[4][0] == finest, message
+    assert levels[1][0] != levels[2][0], message
+    measure(
+        f"X_ITE prism switching {DISTANCE:g} m from a {BUILDING[0]:g} m × {BUILDING[1]:g} m "
+        "building's centre",
+        f"off its long side {LEVELS[levels[1][0]]}, off its short end {LEVELS[levels[2][0]]}",
+    )
