@@ -4,8 +4,12 @@ call per cell instead of one per building."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
+from lxml import etree
 
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
@@ -19,10 +23,11 @@ from lodconvert.hlod import (
     parse_sizes,
     plan_cells,
 )
-from lodconvert.io import read_scene
+from lodconvert.io import read_chains, read_scene
 from lodconvert.model import CellChain, LodChain, Node, Scene
 from lodconvert.pipeline import iter_chains
 from tests.test_citygml import sample
+from tests.test_cli import run
 from tests.test_sourcelods import block
 
 TUM = "tum_munich_lod2_v2.zip"
@@ -125,3 +130,50 @@ def test_bad_cell_sizes_are_usage_errors(text: str, words: str) -> None:
     with pytest.raises(UsageError, match=words):
         parse_sizes(text)
     assert parse_sizes("auto") is None and parse_sizes("250,1000") == (250.0, 1000.0)
+
+
+def _convert(tmp_path: Path, name: str, *flags: str) -> tuple[Path, dict]:
+    out, report = tmp_path / name, tmp_path / f"{name}.json"
+    result = run(sample(TUM), "-o", out, "-q", "--report", report, *flags)
+    assert result.returncode == 0, result.stderr
+    return out, json.loads(report.read_text())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("switching", ["lod", "prism"])
+def test_x3d_nests_cells_validly_and_keeps_every_building(
+    tmp_path: Path, schema: etree.XMLSchema, switching: str
+) -> None:
+    out, report = _convert(tmp_path, "d.x3d", "--hlod", "250,1000", "--switching", switching)
+    doc = etree.parse(str(out))
+    assert schema.validate(doc), "\n".join(str(e) for e in schema.error_log)
+    cells = report["hlod"]["cells"]
+    assert {c["tier"] for c in cells} == {1, 2}
+    for cell in cells:  # each cell: a Group around an LOD whose far child is its one level
+        (group,) = doc.xpath(f"//Group[@DEF='{cell['id']}']")
+        lod = group.find("LOD")
+        near, far = lod.findall("*")[:2]
+        assert near.get("DEF") == f"{cell['id']}_near" and far.tag == "Transform"
+        assert [float(v) for v in lod.get("range").split()] == pytest.approx(cell["cutoffs"])
+    # every building is read back with its attributes, from inside its cell
+    chains = read_chains(out)
+    assert len(chains) == 290 == report["totals"]["objects"]
+    assert all(chain.metadata.get("measuredHeight") is not None for chain in chains[:5])
+    assert report["hlod"]["draw"]["with"]["far_draw_calls"] < 290 / 5
+    again, _ = _convert(tmp_path, "again.x3d", "--hlod", "250,1000", "--switching", switching)
+    assert again.read_bytes() == out.read_bytes()
+
+
+@pytest.mark.parametrize(
+    ("flags", "words"),
+    [(["--hlod", "-5"], "--hlod cell sizes must be positive"),
+     (["--hlod", "500,250"], "increase"),
+     (["--hlod-kind", "mesh"], "--hlod-kind is for the cells that --hlod makes")],
+)  # fmt: skip
+def test_bad_hlod_options_are_one_line_usage_errors(
+    tmp_path: Path, flags: list[str], words: str
+) -> None:
+    out = tmp_path / "d.x3d"
+    result = run(sample("sig3d_house_lod0-4/Building_LOD2-EPSG25832.gml"), "-o", out, *flags)
+    assert result.returncode == 2 and words in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr and not out.exists()

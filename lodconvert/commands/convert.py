@@ -17,6 +17,7 @@ from ..cli.options import (
     parse_list,
 )
 from ..errors import UsageError
+from ..hlod import KINDS, HlodOptions, parse_sizes
 from ..io import output_format
 from ..io.x3d import SWITCHING_MODES
 from ..limits import DEFAULT_LIMITS
@@ -100,6 +101,22 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     bake.add_argument("--no-mesh", action="store_true", help="bake the finest level too")
     add_range_options(parser)
+    group = parser.add_argument_group("LOD parents (cities)")
+    group.add_argument(
+        "--hlod",
+        metavar="SIZES",
+        help="group objects into grid cells of SIZES metres (one tier, or coarser tiers after "
+        "commas: 250,1000; 'auto' picks one from building density); each cell shows one far "
+        "level beyond where all its objects are at their coarsest",
+    )
+    group.add_argument(
+        "--hlod-kind",
+        choices=KINDS,
+        default="auto",
+        help="far level of a cell: points baked from all its objects, their coarsest levels "
+        "merged into one mesh, or auto: the cheaper of the two that keeps silhouette F ≥ 0.95 "
+        "(default)",
+    )
     out = parser.add_argument_group("output and messages")
     out.add_argument(
         "--switching",
@@ -138,12 +155,29 @@ def _check_switching(args: argparse.Namespace) -> None:
         )
 
 
+def _hlod_line(hlod: dict[str, Any]) -> str:
+    """The summary of the LOD parents: cells by kind, far-view draw calls with and without."""
+    kinds = Counter(cell["kind"] for cell in hlod["cells"])
+    made = ", ".join(f"{n:,} {kind}" for kind, n in sorted(kinds.items()))
+    lowest = min(min(cell["silhouette_f"].values()) for cell in hlod["cells"])
+    chosen = min(cell["silhouette_f"][cell["kind"]] for cell in hlod["cells"])
+    calls = hlod["draw"]["with"]["far_draw_calls"], hlod["draw"]["without"]["far_draw_calls"]
+    return (
+        f"LOD parents: {len(hlod['cells']):,} cell(s) ({made}); seen from afar "
+        f"{calls[0]:,} draw call(s) instead of {calls[1]:,}; far levels' silhouette F ≥ "
+        f"{chosen:.3f} (lowest candidate {lowest:.3f})"
+    )
+
+
 def run(args: argparse.Namespace, console: Console) -> int:
     """Convert, print what was made, return the exit code."""
     from ..pipeline import convert
 
     _check_switching(args)
     options = chain_options(args)
+    hlod = HlodOptions(parse_sizes(args.hlod), args.hlod_kind) if args.hlod else None
+    if args.hlod_kind != "auto" and hlod is None:
+        raise UsageError("--hlod-kind is for the cells that --hlod makes")
     limits = DEFAULT_LIMITS.with_text(args.limit)
     if args.viewer_lib and not args.html:
         raise UsageError("--viewer-lib is for the page that --html writes")
@@ -176,6 +210,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
             "crs": args.crs,
         },
         strict=args.strict,
+        hlod=hlod,
         write_options={"switching": args.switching},
         also=stage_page if args.html else None,
         limits=limits,
@@ -193,6 +228,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
             f"{sum(fewer.values()):,} object(s) keep fewer levels ({kept} level(s)): no coarser "
             "level was both cheaper and faithful there, so the finer one stays on (see README)"
         )
+    if "hlod" in report:
+        console.info(_hlod_line(report["hlod"]))
     skipped = len(report["skipped"])
     dropped = report["totals"]["dropped_faces"]
     console.summary(

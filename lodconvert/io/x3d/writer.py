@@ -101,7 +101,7 @@ from lxml import etree
 from PIL import Image as PILImage
 
 from ...errors import UsageError
-from ...model import Level, LodChain, Mesh, Surface
+from ...model import CellChain, Level, LodChain, Mesh, Surface
 from .. import OutputInfo
 from ..numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
 
@@ -675,18 +675,86 @@ def _routes(region: _Region) -> list[dict[str, str]]:
     return [dict(zip(keys, connection, strict=True)) for connection in connections]
 
 
+def _write_item(
+    out: _Out,
+    item: LodChain | CellChain,
+    used: set[str],
+    written: dict[int, _Written],
+    switching: str,
+) -> None:
+    """An object's chain, or a LOD parent with everything in it."""
+    if isinstance(item, CellChain):
+        _write_cell(out, item, used, written, switching)
+    else:
+        _write_chain(out, item, used, written, switching)
+
+
+def _cell_metadata(cell: CellChain) -> list[Metadata]:
+    members = [m.cell_id if isinstance(m, CellChain) else m.object_id for m in cell.members]
+    facts = json.dumps(cell.facts, sort_keys=True, default=str, ensure_ascii=False)
+    return [
+        ("MetadataString", "cell_id", _mfstring([cell.cell_id])),
+        ("MetadataInteger", "tier", str(cell.tier)),
+        ("MetadataDouble", "size", format_exact([cell.size])),
+        ("MetadataInteger", "key", " ".join(map(str, cell.key))),
+        ("MetadataDouble", "alpha", format_exact([cell.alpha])),
+        ("MetadataDouble", "beta", format_exact([cell.beta])),
+        ("MetadataDouble", "gamma", format_exact([cell.gamma])),
+        ("MetadataDouble", "xs", format_exact(cell.xs)),
+        ("MetadataDouble", "cutoffs", format_exact(cell.cutoffs)),
+        ("MetadataBoolean", "culled", "true" if cell.culled else "false"),
+        ("MetadataString", "members", _mfstring(members)),
+        ("MetadataString", "facts", _mfstring([facts])),
+    ]
+
+
+def _write_cell(
+    out: _Out, cell: CellChain, used: set[str], written: dict[int, _Written], switching: str
+) -> None:
+    """A LOD parent: a ``Group`` with the cell's metadata around an ``LOD`` (centred on the
+    members' bounding box, in scene coordinates) whose near child holds the members as they
+    are written alone and whose far child is the cell's one level, in a ``Transform`` to the
+    cell's origin (then an empty ``Group`` for a culled cell)."""
+    base, (far_def,) = _unique_names(cell.cell_id, used, [cell.far])
+    near, far = f"{base}_near", f"{base}_far"
+    used.update((near, far))
+    with out.node("Group", {"DEF": base}):
+        _metadata_set(out, _cell_metadata(cell))
+        lod = {
+            "DEF": f"{base}_LOD",
+            "center": format_exact(cell.origin + cell.center),
+            "range": format_exact(cell.cutoffs),
+            "forceTransitions": "true",
+        }
+        with out.node("LOD", lod):
+            with out.node("Group", {"DEF": near}):
+                for member in cell.members:
+                    _write_item(out, member, used, written, switching)
+            with out.node("Transform", {"DEF": far, "translation": format_exact(cell.origin)}):
+                _write_level(out, cell.far, far_def, cell.cutoffs, 0, cell.alpha)
+            if cell.culled:
+                out.leaf("Group")
+
+
+def _write_level(
+    out: _Out, level: Level, name: str, cutoffs: Sequence[float], index: int, alpha: float
+) -> None:
+    """Level ``index`` of a chain with ``cutoffs`` as a ``Group`` named ``name``."""
+    bounds = [0.0, *cutoffs]
+    switch_out = bounds[index + 1] if index + 1 < len(bounds) else None
+    with out.node("Group", {"DEF": name}):
+        _metadata_set(out, _level_metadata(level, bounds[index], switch_out))
+        if not level.is_points:
+            assert level.mesh is not None
+            _mesh_shapes(out, level.mesh, _appearance_name(name))
+        else:
+            _point_shapes(out, level, bounds[index], alpha, _appearance_name(name))
+
+
 def _write_levels(out: _Out, chain: LodChain, level_defs: list[str]) -> None:
     """The LOD's children: one Group per level, finest first, then the empty cull child."""
-    bounds = [0.0, *chain.cutoffs]
     for i, (level, name) in enumerate(zip(chain.levels, level_defs, strict=True)):
-        switch_out = bounds[i + 1] if i + 1 < len(bounds) else None
-        with out.node("Group", {"DEF": name}):
-            _metadata_set(out, _level_metadata(level, bounds[i], switch_out))
-            if not level.is_points:
-                assert level.mesh is not None
-                _mesh_shapes(out, level.mesh, _appearance_name(name))
-            else:
-                _point_shapes(out, level, bounds[i], chain.alpha, _appearance_name(name))
+        _write_level(out, level, name, chain.cutoffs, i, chain.alpha)
     if chain.culled:
         out.leaf("Group")
 
@@ -717,7 +785,7 @@ def write_x3d(
         with out.node("X3D", root, nsmap={"xsd": XSI}):
             _head(out, info, switching)
             with out.node("Scene"):
-                for chain in chains:
-                    _write_chain(out, chain, used, written, switching)
+                for item in chains:
+                    _write_item(out, item, used, written, switching)
                     xf.flush()
     handle.write(b"\n")
