@@ -11,22 +11,28 @@ No viewer switches levels by distance from ``MSFT_lod``, so the switching data (
 parameters, point sizes) is also written to ``extras.lodconvert`` on the nodes and the asset.
 Colours in buffers are linear, as glTF requires; :func:`read_lod_gltf` converts them back to the
 sRGB bytes that were written.
+
+The document is written as it is made: the binary buffer and each JSON array (accessors,
+nodes, …) go to a temporary file of their own (in memory up to ``_SPOOL_BYTES`` each), so memory
+holds the chain being added, not the chains before it. The file is then put together from them
+in blocks, its JSON laid out exactly as ``json.dumps`` lays out the whole document; a ``.gltf``
+buffer is base64-encoded block by block into its data URI.
 """
 
 from __future__ import annotations
 
 import base64
-import dataclasses
-import functools
+import contextlib
 import io
 import json
 import math
+import shutil
 import struct
-from collections.abc import Iterable
-from typing import Any, BinaryIO
+import tempfile
+from collections.abc import Iterable, Iterator
+from typing import IO, Any, BinaryIO
 
 import numpy as np
-import pygltflib as gl
 from PIL import Image as PILImage
 
 from ...errors import LodConvertError
@@ -41,15 +47,22 @@ GLB_MAGIC = b"glTF"
 GLB_JSON = b"JSON"
 GLB_BIN = b"BIN\x00"
 DATA_URI = "data:application/octet-stream;base64,"
-_TYPES = {1: gl.SCALAR, 2: gl.VEC2, 3: gl.VEC3, 4: gl.VEC4}
+_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
+_POINTS, _TRIANGLES = 0, 4
+_LINEAR, _LINEAR_MIPMAP_LINEAR, _REPEAT = 9729, 9987, 10497
+_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
+_WIDTHS = {name: width for width, name in _TYPES.items()}
 _COMPONENTS = {
-    np.dtype(np.float32): gl.FLOAT,
-    np.dtype(np.uint8): gl.UNSIGNED_BYTE,
-    np.dtype(np.uint16): gl.UNSIGNED_SHORT,
-    np.dtype(np.uint32): gl.UNSIGNED_INT,
+    np.dtype(np.float32): 5126,
+    np.dtype(np.uint8): 5121,
+    np.dtype(np.uint16): 5123,
+    np.dtype(np.uint32): 5125,
 }
 _DTYPES = {code: dtype for dtype, code in _COMPONENTS.items()}
-_WIDTHS = {gl.SCALAR: 1, gl.VEC2: 2, gl.VEC3: 3, gl.VEC4: 4}
+_SPOOL_BYTES = 1 << 20
+"""How much of each temporary file (the buffer, each JSON array) stays in memory."""
+_BLOCK = 3 << 18
+"""Bytes copied at a time (768 KiB, a multiple of 3: base64 blocks join without padding)."""
 
 
 def float32_positions(positions: np.ndarray) -> np.ndarray:
@@ -121,7 +134,7 @@ def vertex_normals(surface: Surface) -> np.ndarray:
 def _alpha_mode(*alphas: np.ndarray | None) -> str:
     """``BLEND`` when any given alpha byte is below 255, else ``OPAQUE``."""
     blend = any(a is not None and a.size and int(a.min()) < 255 for a in alphas)
-    return gl.BLEND if blend else gl.OPAQUE
+    return "BLEND" if blend else "OPAQUE"
 
 
 def _png(rgba: np.ndarray) -> bytes:
@@ -212,267 +225,417 @@ def _asset_extras(info: OutputInfo) -> dict[str, Any]:
     )
 
 
+# --- JSON laid out as it is written ---------------------------------------------------------------
+
+
+class _Layout:
+    """How JSON text is laid out: exactly as ``json.dumps`` with ``indent`` (``None``: compact,
+    for GLB; 1: one space per depth, for ``.gltf``) and no NaN or infinity."""
+
+    def __init__(self, indent: int | None) -> None:
+        self.indent = indent
+        separators = (",", ":") if indent is None else (",", ": ")
+        self.colon = separators[1]
+        self.encode = json.JSONEncoder(indent=indent, separators=separators, allow_nan=False).encode
+
+    def newline(self, depth: int) -> str:
+        """What comes before a member at ``depth``: a line break and its indentation (nothing
+        when compact)."""
+        return "" if self.indent is None else "\n" + " " * (self.indent * depth)
+
+    def text(self, value: Any, depth: int) -> str:
+        """``value`` as JSON text that starts at ``depth`` (compact text has no line breaks)."""
+        return self.encode(value).replace("\n", self.newline(depth))
+
+
+_COMPACT = _Layout(None)
+_INDENTED = _Layout(1)
+
+
+class _Array:
+    """A JSON array at a fixed depth of the document, written item by item to a temporary file
+    (one item in memory at a time)."""
+
+    def __init__(self, layout: _Layout, depth: int, spool: IO[bytes]) -> None:
+        self.layout = layout
+        self.depth = depth
+        self.spool = spool
+        self.count = 0
+
+    def __len__(self) -> int:
+        return self.count
+
+    def append(self, item: Any) -> int:
+        """Write ``item`` as the next element; its index."""
+        head = ("," if self.count else "") + self.layout.newline(self.depth + 1)
+        self.spool.write((head + self.layout.text(item, self.depth + 1)).encode())
+        self.count += 1
+        return self.count - 1
+
+    def write_json(self, out: BinaryIO) -> None:
+        """Write the array's JSON text to ``out``."""
+        out.write(b"[")
+        _copy(self.spool, out)
+        out.write(((self.layout.newline(self.depth) if self.count else "") + "]").encode())
+
+
+class _DataUri:
+    """The binary buffer as a JSON string: a base64 ``data:`` URI, encoded block by block."""
+
+    def __init__(self, blob: IO[bytes]) -> None:
+        self.blob = blob
+
+    def write_json(self, out: BinaryIO) -> None:
+        """Write the quoted URI to ``out``."""
+        out.write(b'"' + DATA_URI.encode())
+        self.blob.seek(0)
+        rest = b""
+        while block := self.blob.read(_BLOCK):
+            block = rest + block
+            whole = len(block) - len(block) % 3
+            out.write(base64.b64encode(block[:whole]))
+            rest = block[whole:]
+        out.write(base64.b64encode(rest) + b'"')
+
+
+def _copy(source: IO[bytes], out: BinaryIO) -> None:
+    """Copy ``source`` from its start to ``out``, :data:`_BLOCK` bytes at a time."""
+    source.seek(0)
+    shutil.copyfileobj(source, out, _BLOCK)
+
+
+def _write_json(value: Any, out: BinaryIO, layout: _Layout, depth: int = 0) -> None:
+    """Write ``value`` (starting at ``depth``) to ``out`` as ``json.dumps`` lays it out, with
+    the :class:`_Array` and :class:`_DataUri` values it holds streamed from their files."""
+    if isinstance(value, _Array | _DataUri):
+        value.write_json(out)
+        return
+    if not (isinstance(value, dict | list) and value):
+        out.write(layout.text(value, depth).encode())
+        return
+    members = value.items() if isinstance(value, dict) else ((None, item) for item in value)
+    brackets = "{}" if isinstance(value, dict) else "[]"
+    out.write(brackets[0].encode())
+    for i, (key, item) in enumerate(members):
+        name = "" if key is None else layout.encode(key) + layout.colon
+        out.write((("," if i else "") + layout.newline(depth + 1) + name).encode())
+        _write_json(item, out, layout, depth + 1)
+    out.write((layout.newline(depth) + brackets[1]).encode())
+
+
+def _object(**members: Any) -> dict[str, Any]:
+    """A JSON object of the ``members`` that are set: no ``None`` and no empty list, object or
+    :class:`_Array`."""
+    return {
+        key: value
+        for key, value in members.items()
+        if value is not None and not (isinstance(value, list | dict | _Array) and not value)
+    }
+
+
+def _material(
+    base_color: list[float],
+    alpha_mode: str,
+    double_sided: bool,
+    texture: int | None = None,
+    extensions: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """A non-metallic, fully rough material (``emissiveFactor`` written out, black)."""
+    pbr = _object(
+        baseColorFactor=base_color,
+        metallicFactor=0.0,
+        roughnessFactor=1.0,
+        baseColorTexture=None if texture is None else {"index": texture, "texCoord": 0},
+    )
+    return _object(
+        extensions=extensions,
+        pbrMetallicRoughness=pbr,
+        emissiveFactor=[0.0, 0.0, 0.0],
+        alphaMode=alpha_mode,
+        doubleSided=double_sided,
+    )
+
+
+def _root_node(chain: LodChain, finest: int) -> dict[str, Any]:
+    """A chain's root node: translated to the chain's origin, or placed by the instance's
+    matrix, with the object's attributes (where a GIS user looks for them)."""
+    placed = np.eye(4) if chain.transform is None else chain.transform.copy()
+    placed[:3, 3] += placed[:3, :3] @ chain.origin
+    moved_only = np.allclose(placed[:3, :3], np.eye(3), rtol=0, atol=0)
+    return _object(
+        extras={"attributes": _plain(chain.metadata)} if chain.metadata else None,
+        translation=[float(v) for v in placed[:3, 3]] if moved_only else None,
+        children=[finest],
+        matrix=None if moved_only else [float(v) for v in placed.T.ravel()],
+        name=chain.object_id,
+    )
+
+
 # --- document assembly --------------------------------------------------------------------------
 
 
 class _Document:
-    """A glTF document being assembled: pygltflib objects plus one growing binary buffer."""
+    """A glTF document being written: its JSON arrays and binary buffer go to temporary files
+    as they are made, so memory holds the chain being added, not what was added before."""
 
-    def __init__(self, info: OutputInfo) -> None:
+    def __init__(self, info: OutputInfo, layout: _Layout) -> None:
         self.reference_view = info.view
-        self.gltf = gl.GLTF2(
-            asset=gl.Asset(generator=info.generator, extras={"lodconvert": _asset_extras(info)}),
-            scene=0,
-            scenes=[gl.Scene(nodes=[])],
-        )
-        self.blob = bytearray()
+        self.asset = {
+            "extras": {"lodconvert": _asset_extras(info)},
+            "generator": info.generator,
+            "version": "2.0",
+        }
+        self._layout = layout
+        self._files = contextlib.ExitStack()
+        self.blob = self._spool()
+        self.blob_length = 0
+        self.accessors = self._array()
+        self.buffer_views = self._array()
+        self.images = self._array()
+        self.materials = self._array()
+        self.meshes = self._array()
+        self.nodes = self._array()
+        self.samplers = self._array()
+        self.textures = self._array()
+        self.scene_nodes = self._array(depth=3)  # at scenes[0].nodes
+        self.extensions_used: list[str] = []
         self._point_materials: dict[str, int] = {}
         self._shared: dict[int, tuple[Level, int]] = {}  # level of an instance → its mesh
 
-    @staticmethod
-    def _append(items: list[Any], item: Any) -> int:
-        items.append(item)
-        return len(items) - 1
+    def _spool(self) -> IO[bytes]:
+        return self._files.enter_context(tempfile.SpooledTemporaryFile(_SPOOL_BYTES))
+
+    def _array(self, depth: int = 1) -> _Array:
+        """A JSON array in a temporary file of its own (``depth`` 1: a top-level member)."""
+        return _Array(self._layout, depth, self._spool())
+
+    def close(self) -> None:
+        """Delete the temporary files."""
+        self._files.close()
 
     def _use(self, extension: str) -> None:
-        if extension not in self.gltf.extensionsUsed:
-            self.gltf.extensionsUsed.append(extension)
+        if extension not in self.extensions_used:
+            self.extensions_used.append(extension)
 
-    def _buffer_view(self, data: bytes, target: int | None) -> int:
+    def _buffer_view(self, data: bytes | memoryview, target: int | None = None) -> int:
         """Append ``data`` at the next 4-byte boundary of the buffer as a new buffer view."""
-        self.blob.extend(b"\x00" * (-len(self.blob) % 4))
-        view = gl.BufferView(
-            buffer=0, byteOffset=len(self.blob), byteLength=len(data), target=target
-        )
-        self.blob.extend(data)
-        return self._append(self.gltf.bufferViews, view)
+        pad = -self.blob_length % 4
+        self.blob.write(b"\x00" * pad)
+        self.blob.write(data)
+        start = self.blob_length + pad
+        self.blob_length = start + len(data)
+        view = _object(buffer=0, byteOffset=start, byteLength=len(data), target=target)
+        return self.buffer_views.append(view)
 
     def _accessor(
         self,
         array: np.ndarray,
-        target: int = gl.ARRAY_BUFFER,
+        target: int = _ARRAY_BUFFER,
         normalized: bool = False,
         bounds: bool = False,
     ) -> int:
         """An accessor over ``array`` ((k,) scalars or (k, w) vectors, dtype of the buffer)."""
         data = np.ascontiguousarray(array)
-        width = 1 if data.ndim == 1 else data.shape[1]
-        accessor = gl.Accessor(
-            bufferView=self._buffer_view(
-                data.astype(data.dtype.newbyteorder("<")).tobytes(), target
-            ),
+        stored = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
+        accessor = _object(
+            bufferView=self._buffer_view(memoryview(stored).cast("B"), target),
+            byteOffset=0,
             componentType=_COMPONENTS[data.dtype],
             normalized=True if normalized else None,
             count=len(data),
-            type=_TYPES[width],
+            type=_TYPES[1 if data.ndim == 1 else data.shape[1]],
+            max=[float(v) for v in data.max(axis=0)] if bounds else None,
+            min=[float(v) for v in data.min(axis=0)] if bounds else None,
         )
-        if bounds:
-            accessor.min = [float(v) for v in data.min(axis=0)]
-            accessor.max = [float(v) for v in data.max(axis=0)]
-        return self._append(self.gltf.accessors, accessor)
+        return self.accessors.append(accessor)
 
     def _colors(self, rgba: np.ndarray) -> int:
         """COLOR_0 accessor: VEC4 normalised unsigned shorts in linear space."""
         return self._accessor(_unit16(linear_rgba(rgba)), normalized=True)
 
     def _texture(self, rgba: np.ndarray) -> int:
-        image = gl.Image(bufferView=self._buffer_view(_png(rgba), None), mimeType="image/png")
-        sampler = gl.Sampler(
-            magFilter=gl.LINEAR,
-            minFilter=gl.LINEAR_MIPMAP_LINEAR,
-            wrapS=gl.REPEAT,
-            wrapT=gl.REPEAT,
+        image = {"mimeType": "image/png", "bufferView": self._buffer_view(_png(rgba))}
+        sampler = {
+            "magFilter": _LINEAR,
+            "minFilter": _LINEAR_MIPMAP_LINEAR,
+            "wrapS": _REPEAT,
+            "wrapT": _REPEAT,
+        }
+        return self.textures.append(
+            {"sampler": self.samplers.append(sampler), "source": self.images.append(image)}
         )
-        texture = gl.Texture(
-            source=self._append(self.gltf.images, image),
-            sampler=self._append(self.gltf.samplers, sampler),
-        )
-        return self._append(self.gltf.textures, texture)
 
-    def _mesh_primitive(self, surface: Surface) -> gl.Primitive:
-        attributes = gl.Attributes(
-            POSITION=self._accessor(float32_positions(surface.vertices), bounds=True),
-            NORMAL=self._accessor(vertex_normals(surface)),
-        )
+    def _mesh_primitive(self, surface: Surface) -> dict[str, Any]:
+        position = self._accessor(float32_positions(surface.vertices), bounds=True)
+        normal = self._accessor(vertex_normals(surface))
+        color = None
         if surface.vertex_colors is not None:
-            attributes.COLOR_0 = self._colors(surface.vertex_colors)
-        base = linear_rgba(surface.material_color)
-        pbr = gl.PbrMetallicRoughness(
-            baseColorFactor=[float(v) for v in base], metallicFactor=0.0, roughnessFactor=1.0
-        )
+            color = self._colors(surface.vertex_colors)
         textured = surface.texture is not None and surface.uv is not None
+        texcoord = texture = None
         if textured:
             # Surface.uv has its origin at the image's bottom-left, glTF at the top-left.
             flipped = np.column_stack([surface.uv[:, 0], 1.0 - surface.uv[:, 1]])
-            attributes.TEXCOORD_0 = self._accessor(flipped.astype(np.float32))
-            pbr.baseColorTexture = gl.TextureInfo(index=self._texture(surface.texture))
-        material = gl.Material(
-            pbrMetallicRoughness=pbr,
-            doubleSided=True,
-            alphaMode=_alpha_mode(
-                surface.material_color[3:],
-                None if surface.vertex_colors is None else surface.vertex_colors[:, 3],
-                surface.texture[..., 3] if textured else None,
-            ),
-        )
+            texcoord = self._accessor(flipped.astype(np.float32))
+            texture = self._texture(surface.texture)
         index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
-        return gl.Primitive(
-            attributes=attributes,
-            indices=self._accessor(
-                surface.faces.ravel().astype(index_type), target=gl.ELEMENT_ARRAY_BUFFER
-            ),
-            mode=gl.TRIANGLES,
-            material=self._append(self.gltf.materials, material),
+        indices = self._accessor(
+            surface.faces.ravel().astype(index_type), target=_ELEMENT_ARRAY_BUFFER
         )
+        alpha_mode = _alpha_mode(
+            surface.material_color[3:],
+            None if surface.vertex_colors is None else surface.vertex_colors[:, 3],
+            surface.texture[..., 3] if textured else None,
+        )
+        base = [float(v) for v in linear_rgba(surface.material_color)]
+        material = _material(base, alpha_mode, double_sided=True, texture=texture)
+        attributes = _object(POSITION=position, NORMAL=normal, TEXCOORD_0=texcoord, COLOR_0=color)
+        return {
+            "attributes": attributes,
+            "indices": indices,
+            "mode": _TRIANGLES,
+            "material": self.materials.append(material),
+        }
 
     def _point_material(self, alpha_mode: str) -> int:
         """The shared unlit white material of point levels (one per alpha mode)."""
         if alpha_mode not in self._point_materials:
             self._use(UNLIT)
-            material = gl.Material(
-                pbrMetallicRoughness=gl.PbrMetallicRoughness(
-                    baseColorFactor=[1.0, 1.0, 1.0, 1.0], metallicFactor=0.0, roughnessFactor=1.0
-                ),
-                alphaMode=alpha_mode,
-                extensions={UNLIT: {}},
+            material = _material(
+                [1.0, 1.0, 1.0, 1.0], alpha_mode, double_sided=False, extensions={UNLIT: {}}
             )
-            self._point_materials[alpha_mode] = self._append(self.gltf.materials, material)
+            self._point_materials[alpha_mode] = self.materials.append(material)
         return self._point_materials[alpha_mode]
 
-    def _point_primitive(self, points: PointCloud) -> gl.Primitive:
-        attributes = gl.Attributes(
-            POSITION=self._accessor(float32_positions(points.positions), bounds=True),
-            NORMAL=self._accessor(unit_normals(points.normals)),
-            COLOR_0=self._colors(points.colors),
-        )
-        return gl.Primitive(
-            attributes=attributes,
-            mode=gl.POINTS,
-            material=self._point_material(_alpha_mode(points.colors[:, 3])),
-        )
+    def _point_primitive(self, points: PointCloud) -> dict[str, Any]:
+        attributes = {
+            "POSITION": self._accessor(float32_positions(points.positions), bounds=True),
+            "NORMAL": self._accessor(unit_normals(points.normals)),
+            "COLOR_0": self._colors(points.colors),
+        }
+        return {
+            "attributes": attributes,
+            "mode": _POINTS,
+            "material": self._point_material(_alpha_mode(points.colors[:, 3])),
+        }
 
-    def _level_node(self, chain: LodChain, level: Level) -> gl.Node:
-        """A node holding one level's geometry (no mesh when the level is empty). The levels
-        of instances of one geometry share their meshes."""
-        name = f"{chain.object_id}_{level.name}"
-        node = gl.Node(name=name)
+    def _level_mesh(self, chain: LodChain, level: Level) -> int | None:
+        """The mesh of one level's geometry (``None`` when the level is empty). The levels of
+        instances of one geometry share their meshes."""
         if not level.count:
-            return node
+            return None
         if id(level) in self._shared:
-            node.mesh = self._shared[id(level)][1]
-            return node
+            return self._shared[id(level)][1]
         if level.mesh is not None:
             primitives = [self._mesh_primitive(part) for part in level.mesh.parts]
         else:
             primitives = [self._point_primitive(level.points)]
-        node.mesh = self._append(self.gltf.meshes, gl.Mesh(name=name, primitives=primitives))
+        mesh = self.meshes.append({"primitives": primitives, "name": _level_name(chain, level)})
         if chain.transform is not None:  # kept alive with the level, so its id stays unique
-            self._shared[id(level)] = (level, node.mesh)
-        return node
+            self._shared[id(level)] = (level, mesh)
+        return mesh
 
     def add_chain(self, chain: LodChain) -> None:
-        """Add a chain's root node (to the scene), finest node (its child) and coarser nodes.
-        The root is translated to the chain's origin, or placed by the instance's matrix."""
-        nodes = self.gltf.nodes
-        placed = np.eye(4) if chain.transform is None else chain.transform.copy()
-        placed[:3, 3] += placed[:3, :3] @ chain.origin
-        if np.allclose(placed[:3, :3], np.eye(3), rtol=0, atol=0):
-            root = gl.Node(name=chain.object_id, translation=[float(v) for v in placed[:3, 3]])
-        else:
-            root = gl.Node(name=chain.object_id, matrix=[float(v) for v in placed.T.ravel()])
-        if chain.metadata:  # the object's attributes, where a GIS user looks for them
-            root.extras = {"attributes": _plain(chain.metadata)}
-        root_index = self._append(nodes, root)
-        self.gltf.scenes[0].nodes.append(root_index)
-        finest = self._level_node(chain, chain.levels[0])
-        root.children = [self._append(nodes, finest)]
-        ids = []
-        for level, switch_in in zip(chain.levels[1:], chain.cutoffs, strict=False):
-            node = self._level_node(chain, level)
-            node.extras = {
-                "lodconvert": {
-                    "level": level.name,
-                    **_level_params(level),
-                    "switch_in": float(switch_in),
-                }
-            }
-            ids.append(self._append(nodes, node))
+        """Add a chain's root node (to the scene), finest node (its child) and coarser nodes."""
+        finest_mesh = self._level_mesh(chain, chain.levels[0])
+        coarser = [
+            (level, switch_in, self._level_mesh(chain, level))
+            for level, switch_in in zip(chain.levels[1:], chain.cutoffs, strict=False)
+        ]
+        root = self.nodes.append(_root_node(chain, len(self.nodes) + 1))
+        self.scene_nodes.append(root)
+        ids = list(range(root + 2, root + 2 + len(coarser)))
         extras: dict[str, Any] = {}
         if ids:
             self._use(MSFT_LOD)
-            finest.extensions = {MSFT_LOD: {"ids": ids}}
             extras["MSFT_screencoverage"] = _coverages(chain, self.reference_view)
         extras["lodconvert"] = _chain_extras(chain)
-        finest.extras = extras
+        extensions = {MSFT_LOD: {"ids": ids}} if ids else None
+        self.nodes.append(_level_node(chain, chain.levels[0], finest_mesh, extras, extensions))
+        for level, switch_in, mesh in coarser:
+            facts = {"level": level.name, **_level_params(level), "switch_in": float(switch_in)}
+            self.nodes.append(_level_node(chain, level, mesh, {"lodconvert": facts}))
 
-    def finish(self, data_uri: bool) -> tuple[dict[str, Any], bytes]:
-        """The glTF JSON object and the buffer bytes; the buffer is embedded in the JSON as a
-        base64 data URI when ``data_uri``, else left for a GLB BIN chunk."""
-        blob = bytes(self.blob)
-        if blob:
-            uri = DATA_URI + base64.b64encode(blob).decode("ascii") if data_uri else None
-            self.gltf.buffers = [gl.Buffer(byteLength=len(blob), uri=uri)]
-        return _json_of(self.gltf), blob
-
-
-def _json_of(value: Any) -> Any:
-    """pygltflib objects as JSON data, without ``None`` and empty values, leaving ``extras``
-    and ``extensions`` contents as they are (their ``null``, ``[]`` and ``{}`` mean something).
-    One pass, no copies (pygltflib's own ``gltf_asdict`` deep-copies every value)."""
-    if isinstance(value, list | tuple):
-        return [_json_of(v) for v in value]
-    if isinstance(value, dict):
-        items: Iterable[tuple[str, Any]] = value.items()
-    elif isinstance(value, gl.Attributes):
-        items = vars(value).items()
-    elif dataclasses.is_dataclass(value):
-        items = ((name, getattr(value, name)) for name in _field_names(type(value)))
-    else:
-        return value
-    out = {}
-    for key, item in items:
-        kept = item if key in ("extras", "extensions") else _json_of(item)
-        if kept is not None and not (isinstance(kept, list | dict) and not kept):
-            out[key] = kept
-    return out
+    def json_value(self, data_uri: bool) -> dict[str, Any]:
+        """The glTF JSON object; the buffer is embedded as a base64 data URI when ``data_uri``,
+        else left for a GLB BIN chunk."""
+        buffers = []
+        if self.blob_length:
+            uri = _DataUri(self.blob) if data_uri else None
+            buffers.append(_object(uri=uri, byteLength=self.blob_length))
+        return _object(
+            accessors=self.accessors,
+            asset=self.asset,
+            bufferViews=self.buffer_views,
+            buffers=buffers,
+            extensionsUsed=self.extensions_used,
+            images=self.images,
+            materials=self.materials,
+            meshes=self.meshes,
+            nodes=self.nodes,
+            samplers=self.samplers,
+            scene=0,
+            scenes=[_object(nodes=self.scene_nodes)],
+            textures=self.textures,
+        )
 
 
-@functools.cache
-def _field_names(cls: type) -> tuple[str, ...]:
-    return tuple(field.name for field in dataclasses.fields(cls))
+def _level_name(chain: LodChain, level: Level) -> str:
+    return f"{chain.object_id}_{level.name}"
 
 
-def _document(chains: Iterable[LodChain], info: OutputInfo) -> _Document:
-    doc = _Document(info)
-    for chain in chains:
-        doc.add_chain(chain)
-    return doc
+def _level_node(
+    chain: LodChain,
+    level: Level,
+    mesh: int | None,
+    extras: dict[str, Any],
+    extensions: dict[str, Any] | None = None,
+) -> dict[str, Any]:
+    """A node holding one level's mesh (none when the level is empty)."""
+    return _object(extensions=extensions, extras=extras, mesh=mesh, name=_level_name(chain, level))
 
 
-def _json_bytes(obj: dict[str, Any], indent: int | None = None) -> bytes:
-    separators = (",", ":") if indent is None else (",", ": ")
-    return json.dumps(obj, indent=indent, separators=separators, allow_nan=False).encode("utf-8")
+@contextlib.contextmanager
+def _document(chains: Iterable[LodChain], info: OutputInfo, layout: _Layout) -> Iterator[_Document]:
+    """A document holding ``chains``; its temporary files are deleted when the block ends."""
+    doc = _Document(info, layout)
+    try:
+        for chain in chains:
+            doc.add_chain(chain)
+        yield doc
+    finally:
+        doc.close()
 
 
-def _padded(data: bytes, fill: bytes) -> bytes:
-    return data + fill * (-len(data) % 4)
+def _padded_length(length: int) -> int:
+    return length + -length % 4
+
+
+def _write_chunk(out: BinaryIO, kind: bytes, source: IO[bytes], length: int, fill: bytes) -> None:
+    """A GLB chunk of ``source``'s ``length`` bytes, padded with ``fill`` to a multiple of 4."""
+    out.write(struct.pack("<I4s", _padded_length(length), kind))
+    _copy(source, out)
+    out.write(fill * (_padded_length(length) - length))
 
 
 def write_glb(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) -> None:
     """Write ``chains`` as binary glTF (one JSON chunk, one BIN chunk) to ``handle``."""
-    obj, blob = _document(chains, info).finish(data_uri=False)
-    chunks = [(GLB_JSON, _padded(_json_bytes(obj), b" "))]
-    if blob:
-        chunks.append((GLB_BIN, _padded(blob, b"\x00")))
-    total = 12 + sum(8 + len(data) for _, data in chunks)
-    handle.write(struct.pack("<4sII", GLB_MAGIC, 2, total))
-    for kind, data in chunks:
-        handle.write(struct.pack("<I4s", len(data), kind))
-        handle.write(data)
+    with (
+        _document(chains, info, _COMPACT) as doc,
+        tempfile.SpooledTemporaryFile(_SPOOL_BYTES) as text,
+    ):
+        _write_json(doc.json_value(data_uri=False), text, _COMPACT)
+        chunks = [(GLB_JSON, text, text.tell(), b" ")]
+        if doc.blob_length:
+            chunks.append((GLB_BIN, doc.blob, doc.blob_length, b"\x00"))
+        total = 12 + sum(8 + _padded_length(length) for _, _, length, _ in chunks)
+        handle.write(struct.pack("<4sII", GLB_MAGIC, 2, total))
+        for chunk in chunks:
+            _write_chunk(handle, *chunk)
 
 
 def write_gltf(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) -> None:
     """Write ``chains`` as one self-contained glTF JSON file (buffer as a base64 data URI)."""
-    obj, _ = _document(chains, info).finish(data_uri=True)
-    handle.write(_json_bytes(obj, indent=1))
+    with _document(chains, info, _INDENTED) as doc:
+        _write_json(doc.json_value(data_uri=True), handle, _INDENTED)
     handle.write(b"\n")
