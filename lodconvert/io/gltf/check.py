@@ -17,15 +17,18 @@ from __future__ import annotations
 import base64
 import binascii
 import codecs
+import contextlib
 import itertools
 import json
 import math
+import mmap
+import os
 import re
 import struct
 from collections import Counter
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 from lxml import etree
@@ -119,14 +122,18 @@ def _chunk_name(kind: bytes) -> str:
     return {GLB_JSON: "JSON", GLB_BIN: "BIN"}.get(kind, repr(kind))
 
 
-def _glb_chunks(data: bytes, findings: Findings) -> tuple[bytes, bytes | None] | None:
+def _glb_chunks(
+    data: memoryview, findings: Findings
+) -> tuple[memoryview, memoryview | None] | None:
     """The JSON chunk and BIN chunk (``None`` when absent) of GLB ``data``, checked against the
     framing of glTF 2.0 (section 4.4); ``None`` when no JSON chunk can be read. Each broken rule
     is its own finding."""
     if data[:4] != GLB_MAGIC:
-        hint = " (it looks like glTF JSON: name it .gltf)" if data.lstrip()[:1] == b"{" else ""
+        start = bytes(data[:64]).lstrip()[:1]
+        hint = " (it looks like glTF JSON: name it .gltf)" if start == b"{" else ""
         findings.error(
-            "GLB_MAGIC", f"not a GLB file: the first 4 bytes are {data[:4]!r}, not 'glTF'{hint}"
+            "GLB_MAGIC",
+            f"not a GLB file: the first 4 bytes are {bytes(data[:4])!r}, not 'glTF'{hint}",
         )
         return None
     if len(data) < GLB_HEADER_SIZE:
@@ -153,8 +160,8 @@ def _glb_chunks(data: bytes, findings: Findings) -> tuple[bytes, bytes | None] |
     if length <= GLB_HEADER_SIZE:
         findings.error("GLB_JSON_CHUNK", "the GLB has no chunks; its first must be JSON")
         return None
-    json_chunk: bytes | None = None
-    bin_chunk: bytes | None = None
+    json_chunk: memoryview | None = None
+    bin_chunk: memoryview | None = None
     offset, index = GLB_HEADER_SIZE, 0
     while offset < length:
         where = f"chunk {index} at byte {offset}"
@@ -198,12 +205,15 @@ def _first_buffer(doc: dict[str, Any]) -> dict[str, Any] | None:
     return None
 
 
-def _read_glb(data: bytes, findings: Findings) -> tuple[dict[str, Any], bytes] | None:
-    """The JSON object and buffer 0 of a GLB; ``None`` when the JSON cannot be read."""
+def _read_glb(
+    data: memoryview, findings: Findings
+) -> tuple[dict[str, Any], memoryview | bytes] | None:
+    """The JSON object and buffer 0 (a view of ``data``, not a copy) of a GLB; ``None`` when
+    the JSON cannot be read."""
     chunks = _glb_chunks(data, findings)
     if chunks is None:
         return None
-    raw, blob = chunks
+    raw, blob = bytes(chunks[0]), chunks[1]
     text = raw.rstrip(b"\x00")
     if len(text) < len(raw):
         findings.error(
@@ -222,13 +232,13 @@ def _read_glb(data: bytes, findings: Findings) -> tuple[dict[str, Any], bytes] |
     return doc, blob or b""
 
 
-def _read_gltf(data: bytes, findings: Findings) -> tuple[dict[str, Any], bytes] | None:
+def _read_gltf(data: memoryview, findings: Findings) -> tuple[dict[str, Any], bytes] | None:
     """The JSON object and buffer 0 (a base64 data URI) of a ``.gltf``; ``None`` when the JSON
     cannot be read."""
     if data[:4] == GLB_MAGIC:
         findings.error("GLTF_JSON_SYNTAX", "the file is binary glTF (GLB), not JSON: name it .glb")
         return None
-    doc = _load_json(data, "the glTF file", findings)
+    doc = _load_json(bytes(data), "the glTF file", findings)
     if doc is None:
         return None
     buffer = _first_buffer(doc)
@@ -251,7 +261,7 @@ def _read_gltf(data: bytes, findings: Findings) -> tuple[dict[str, Any], bytes] 
 class _Gltf:
     """The checks of one parsed glTF document (``doc``, the JSON; ``blob``, buffer 0)."""
 
-    def __init__(self, doc: dict[str, Any], blob: bytes, findings: Findings) -> None:
+    def __init__(self, doc: dict[str, Any], blob: memoryview | bytes, findings: Findings) -> None:
         self.doc, self.blob, self.findings = doc, blob, findings
         self.bad_views: set[int] = set()
         self.bad_accessors: set[int] = set()
@@ -584,11 +594,29 @@ def check_gltf(path: Path, findings: Findings, _: etree.XMLSchema | None) -> Non
     named as such; a file with another suffix is read as GLB when it starts with ``glTF``.
     """
     try:
-        data = path.read_bytes()
+        with path.open("rb") as handle, _mapped(handle) as data:
+            _check_data(data, path.suffix.lower(), findings)
     except OSError as exc:
         findings.error("READ", f"cannot read: {exc.strerror or exc}")
+
+
+@contextlib.contextmanager
+def _mapped(handle: BinaryIO) -> Iterator[memoryview]:
+    """The file's bytes, memory-mapped (so a large buffer is read as it is checked, never
+    copied); an empty file is an empty view."""
+    size = os.fstat(handle.fileno()).st_size
+    if size == 0:
+        yield memoryview(b"")
         return
-    suffix = path.suffix.lower()
+    with mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+        view = memoryview(mapped)
+        try:
+            yield view
+        finally:
+            view.release()
+
+
+def _check_data(data: memoryview, suffix: str, findings: Findings) -> None:
     binary = suffix == ".glb" if suffix in (".glb", ".gltf") else data[:4] == GLB_MAGIC
     parsed = _read_glb(data, findings) if binary else _read_gltf(data, findings)
     if parsed is None:
