@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import json
 import os
+import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -112,3 +115,28 @@ def schema() -> etree.XMLSchema:
     parser = etree.XMLParser()
     parser.resolvers.add(_Catalog(X3D_SCHEMAS / "catalog.xml"))
     return etree.XMLSchema(etree.parse(str(xsd), parser))
+
+
+@pytest.fixture(scope="session")
+def gltf_validator():
+    """A function validating a file with the Khronos glTF-Validator, returning its report."""
+    node = shutil.which("node")
+    require(node is not None, "node is not on PATH (needed for the Khronos glTF validator)")
+    require(
+        (ROOT / "node_modules" / "gltf-validator").is_dir(),
+        "npm package gltf-validator is not installed; run "
+        f"`npm install --no-save --prefix {ROOT} gltf-validator`",
+    )
+
+    def validate(path: Path) -> dict:
+        run = subprocess.run(
+            [node, str(ROOT / "tests" / "gltf_validate.mjs"), str(path)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            check=False,
+        )
+        assert run.returncode in (0, 1), run.stderr
+        return json.loads(run.stdout)
+
+    return validate

@@ -7,9 +7,7 @@ import base64
 import io
 import itertools
 import json
-import shutil
 import struct
-import subprocess
 from dataclasses import replace
 from pathlib import Path
 
@@ -26,10 +24,7 @@ from lodconvert.io.gltf import SRGB_TO_LINEAR, read_lod_gltf, write_glb, write_g
 from lodconvert.model import LodChain, Node, PointCloud, Surface
 from lodconvert.ranges import screen_coverage
 
-from .conftest import require
-
 ROOT = Path(__file__).resolve().parents[1]
-VALIDATOR_SCRIPT = ROOT / "tests" / "gltf_validate.mjs"
 FAR = np.array([500000.0, 5400000.0, 100.0])
 # The validator knows neither MSFT_lod (unsupported extension) nor that coarser level nodes,
 # outside the scene, are used (unused object). Nothing else may be a warning or worse.
@@ -127,31 +122,6 @@ def _accessor(doc: dict, blob: bytes, index: int) -> np.ndarray:
     assert start % 4 == 0
     values = np.frombuffer(blob, dtype=dtype, count=acc["count"] * width, offset=start)
     return values.reshape(acc["count"], width) if width > 1 else values
-
-
-@pytest.fixture(scope="session")
-def gltf_validator():
-    """A function validating a file with the Khronos glTF-Validator, returning its report."""
-    node = shutil.which("node")
-    require(node is not None, "node is not on PATH (needed for the Khronos glTF validator)")
-    require(
-        (ROOT / "node_modules" / "gltf-validator").is_dir(),
-        "npm package gltf-validator is not installed; run "
-        f"`npm install --no-save --prefix {ROOT} gltf-validator`",
-    )
-
-    def validate(path: Path) -> dict:
-        run = subprocess.run(
-            [node, str(VALIDATOR_SCRIPT), str(path)],
-            capture_output=True,
-            text=True,
-            timeout=120,
-            check=False,
-        )
-        assert run.returncode in (0, 1), run.stderr
-        return json.loads(run.stdout)
-
-    return validate
 
 
 def _assert_valid(report: dict) -> set[str]:

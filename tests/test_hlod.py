@@ -28,6 +28,8 @@ from lodconvert.model import CellChain, LodChain, Node, Scene
 from lodconvert.pipeline import iter_chains
 from tests.test_citygml import sample
 from tests.test_cli import run
+from tests.test_gltf import _assert_valid as assert_khronos_valid
+from tests.test_gltf import _load as gltf_load
 from tests.test_sourcelods import block
 
 TUM = "tum_munich_lod2_v2.zip"
@@ -177,3 +179,22 @@ def test_bad_hlod_options_are_one_line_usage_errors(
     result = run(sample("sig3d_house_lod0-4/Building_LOD2-EPSG25832.gml"), "-o", out, *flags)
     assert result.returncode == 2 and words in result.stderr, result.stderr
     assert "Traceback" not in result.stderr and not out.exists()
+
+
+@pytest.mark.slow
+def test_glb_chains_cells_with_msft_lod_validly(tmp_path: Path, gltf_validator) -> None:
+    out, report = _convert(tmp_path, "d.glb", "--hlod", "250,1000")
+    assert_khronos_valid(gltf_validator(out))
+    doc, _ = gltf_load(out)
+    nodes = doc["nodes"]
+    for cell in report["hlod"]["cells"]:
+        (root,) = [n for n in nodes if n.get("name") == cell["id"]]
+        near = nodes[root["children"][0]]
+        (far,) = near["extensions"]["MSFT_lod"]["ids"]
+        assert near["extras"]["lodconvert"]["cell_id"] == cell["id"]
+        assert near["extras"]["lodconvert"]["cutoffs"] == pytest.approx(cell["cutoffs"])
+        assert len(near["extras"]["MSFT_screencoverage"]) == 2  # far level, then nothing
+        assert nodes[far]["name"] == f"{cell['id']}_FAR" and "mesh" in nodes[far]
+    # every building is read back, from inside its cells, with its attributes
+    chains = read_chains(out)
+    assert len(chains) == 290 and all("measuredHeight" in c.metadata for c in chains[:5])

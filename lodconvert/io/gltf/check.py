@@ -565,9 +565,15 @@ class _Gltf:
             self.check_chain_facts(name, facts, len(ids))
 
     def check_chain_facts(self, name: str, facts: dict[str, Any], ids: int) -> None:
-        """``extras.lodconvert`` of a finest node: one level per node, cutoffs as the chain."""
+        """``extras.lodconvert`` of a finest node: one level per node, cutoffs as the chain
+        (a LOD parent's near node: one far node, the near level being its members)."""
         levels, cutoffs = facts.get("levels", []), facts.get("cutoffs", [])
-        if len(levels) != ids + 1:
+        if "cell_id" in facts:
+            if ids != 1:
+                self.findings.error(
+                    "LODCONVERT_CELL", f"{name} is a LOD parent with {ids} far nodes, not 1"
+                )
+        elif len(levels) != ids + 1:
             self.findings.error(
                 "LODCONVERT_LEVELS", f"{name} extras list {len(levels)} levels for {ids + 1} nodes"
             )

@@ -7,6 +7,7 @@ import base64
 import binascii
 import json
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -80,11 +81,25 @@ def read_lod_gltf(path: str | Path, geometry: bool = True) -> list[GltfObject]:
         if not isinstance(obj.get("asset", {}).get("extras", {}).get("lodconvert"), dict):
             raise InputError("not a glTF written by lodconvert (no asset.extras.lodconvert)")
         scene = obj["scenes"][obj.get("scene", 0)]
-        return [_read_object(obj, blob, i, geometry) for i in scene.get("nodes", [])]
+        roots = _object_roots(obj["nodes"], scene.get("nodes", []))
+        return [_read_object(obj, blob, i, geometry) for i in roots]
     except InputError as exc:
         raise InputError(str(exc), str(path)) from None
     except (ValueError, KeyError, IndexError, TypeError, AttributeError, struct.error) as exc:
         raise InputError(f"malformed glTF ({type(exc).__name__}: {exc})", str(path)) from None
+
+
+def _object_roots(nodes: list[dict[str, Any]], indices: list[int]) -> Iterator[int]:
+    """The root nodes of objects among ``indices``, looking inside LOD parents (a root whose
+    first child's ``extras.lodconvert`` names a ``cell_id``: its members are that child's
+    children)."""
+    for index in indices:
+        children = nodes[index].get("children", [])
+        near = nodes[children[0]] if children else {}
+        if "cell_id" in near.get("extras", {}).get("lodconvert", {}):
+            yield from _object_roots(nodes, near.get("children", []))
+        else:
+            yield index
 
 
 def _parse(data: bytes) -> tuple[dict[str, Any], bytes]:

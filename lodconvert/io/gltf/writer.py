@@ -36,7 +36,7 @@ import numpy as np
 from PIL import Image as PILImage
 
 from ...errors import LodConvertError
-from ...model import Level, LodChain, PointCloud, Surface
+from ...model import CellChain, Level, LodChain, PointCloud, Surface
 from ...ranges import ReferenceView, screen_coverage
 from .. import OutputInfo
 
@@ -206,7 +206,37 @@ def _chain_extras(chain: LodChain) -> dict[str, Any]:
     )
 
 
-def _coverages(chain: LodChain, view: ReferenceView) -> list[float]:
+def _cell_extras(cell: CellChain) -> dict[str, Any]:
+    """``extras.lodconvert`` of a LOD parent's near node: its switching data and facts."""
+    members = [m.cell_id if isinstance(m, CellChain) else m.object_id for m in cell.members]
+    return _plain(
+        {
+            "cell_id": cell.cell_id,
+            "tier": cell.tier,
+            "size": cell.size,
+            "key": list(cell.key),
+            "cutoffs": cell.cutoffs,
+            "alpha": cell.alpha,
+            "beta": cell.beta,
+            "gamma": cell.gamma,
+            "xs": cell.xs,
+            "culled": cell.culled,
+            "center": cell.origin + cell.center,
+            "members": members,
+            "facts": cell.facts,
+        }
+    )
+
+
+def _node_count(item: LodChain | CellChain) -> int:
+    """Nodes a chain (root and one per level) or a LOD parent (root, near, far and its
+    members') adds."""
+    if isinstance(item, CellChain):
+        return 3 + sum(_node_count(member) for member in item.members)
+    return 1 + len(item.levels)
+
+
+def _coverages(chain: LodChain | CellChain, view: ReferenceView) -> list[float]:
     """``MSFT_screencoverage``: one threshold per cutoff, then 0 unless the chain is culled."""
     values = [screen_coverage(chain.alpha, d, view) for d in chain.cutoffs]
     return [float(v) for v in values] + ([] if chain.culled else [0.0])
@@ -519,9 +549,9 @@ class _Document:
             "material": self._point_material(_alpha_mode(points.colors[:, 3])),
         }
 
-    def _level_mesh(self, chain: LodChain, level: Level) -> int | None:
+    def _level_mesh(self, name: str, level: Level, shared: bool = False) -> int | None:
         """The mesh of one level's geometry (``None`` when the level is empty). The levels of
-        instances of one geometry share their meshes."""
+        instances of one geometry (``shared``) share their meshes."""
         if not level.count:
             return None
         if id(level) in self._shared:
@@ -530,20 +560,64 @@ class _Document:
             primitives = [self._mesh_primitive(part) for part in level.mesh.parts]
         else:
             primitives = [self._point_primitive(level.points)]
-        mesh = self.meshes.append({"primitives": primitives, "name": _level_name(chain, level)})
-        if chain.transform is not None:  # kept alive with the level, so its id stays unique
+        mesh = self.meshes.append({"primitives": primitives, "name": name})
+        if shared:  # kept alive with the level, so its id stays unique
             self._shared[id(level)] = (level, mesh)
         return mesh
 
-    def add_chain(self, chain: LodChain) -> None:
-        """Add a chain's root node (to the scene), finest node (its child) and coarser nodes."""
-        finest_mesh = self._level_mesh(chain, chain.levels[0])
+    def add(self, item: LodChain | CellChain) -> None:
+        """Add a chain, or a LOD parent with everything in it, to the scene."""
+        self.scene_nodes.append(len(self.nodes))
+        self._add(item)
+
+    def _add(self, item: LodChain | CellChain) -> None:
+        if isinstance(item, CellChain):
+            self._add_cell(item)
+        else:
+            self._add_chain(item)
+
+    def _add_cell(self, cell: CellChain) -> None:
+        """A LOD parent's nodes: its root; its near node (the root's child: the members' roots
+        as children, ``MSFT_lod`` naming the far node); the members' nodes; the far node
+        (translated to the cell's origin, in no scene and no parent, like coarser levels)."""
+        root = len(self.nodes)
+        near = root + 1
+        members, at = [], near + 1
+        for member in cell.members:
+            members.append(at)
+            at += _node_count(member)
+        self._use(MSFT_LOD)
+        self.nodes.append(_object(children=[near], name=cell.cell_id))
+        extras = {
+            "MSFT_screencoverage": _coverages(cell, self.reference_view),
+            "lodconvert": _cell_extras(cell),
+        }
+        extensions = {MSFT_LOD: {"ids": [at]}}
+        name = f"{cell.cell_id}_near"
+        near_node = _object(children=members, extensions=extensions, extras=extras, name=name)
+        self.nodes.append(near_node)
+        for member in cell.members:
+            self._add(member)
+        far_name = f"{cell.cell_id}_{cell.far.name}"
+        mesh = self._level_mesh(far_name, cell.far)
+        facts = {"level": cell.far.name, **_level_params(cell.far), "switch_in": cell.cutoffs[0]}
+        far = _object(
+            extras={"lodconvert": _plain(facts)},
+            mesh=mesh,
+            name=far_name,
+            translation=[float(v) for v in cell.origin],
+        )
+        assert self.nodes.append(far) == at
+
+    def _add_chain(self, chain: LodChain) -> None:
+        """Add a chain's root node, finest node (its child) and coarser nodes."""
+        shared = chain.transform is not None
+        finest_mesh = self._level_mesh(_level_name(chain, chain.levels[0]), chain.levels[0], shared)
         coarser = [
-            (level, switch_in, self._level_mesh(chain, level))
+            (level, switch_in, self._level_mesh(_level_name(chain, level), level, shared))
             for level, switch_in in zip(chain.levels[1:], chain.cutoffs, strict=False)
         ]
         root = self.nodes.append(_root_node(chain, len(self.nodes) + 1))
-        self.scene_nodes.append(root)
         ids = list(range(root + 2, root + 2 + len(coarser)))
         extras: dict[str, Any] = {}
         if ids:
@@ -600,8 +674,8 @@ def _document(chains: Iterable[LodChain], info: OutputInfo, layout: _Layout) -> 
     """A document holding ``chains``; its temporary files are deleted when the block ends."""
     doc = _Document(info, layout)
     try:
-        for chain in chains:
-            doc.add_chain(chain)
+        for item in chains:
+            doc.add(item)
         yield doc
     finally:
         doc.close()
