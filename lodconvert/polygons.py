@@ -61,6 +61,17 @@ def _plane_axes(normal: np.ndarray) -> np.ndarray:
     return np.stack([u, _cross(normal, u)])
 
 
+def _area_normal(ring: np.ndarray) -> np.ndarray | None:
+    """The unit Newell normal of an opened ring, or None when it has fewer than 3 points or
+    no area (below :data:`AREA_EPSILON` × its extent²), whatever its position in space."""
+    if len(ring) < 3:
+        return None
+    normal = newell_normal(ring - ring[0])
+    extent = float(np.ptp(ring, axis=0).max())
+    length = float(np.linalg.norm(normal))
+    return normal / length if length > 2 * AREA_EPSILON * extent * extent else None
+
+
 def triangulate(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (n, 3) and triangles (m, 3) of the polygon whose exterior ring is ``rings[0]``
     and interior rings (holes) the rest. Triangles wind like the exterior ring (their normals
@@ -71,19 +82,12 @@ def triangulate(rings: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     exterior = _open_ring(rings[0])
     if len(exterior) < 3:
         raise DegenerateRing(f"a ring of {len(exterior)} distinct point(s); a polygon needs 3")
-    normal = newell_normal(exterior - exterior[0])
-    extent = float(np.ptp(exterior, axis=0).max())
-    length = float(np.linalg.norm(normal))
-    if not length > 2 * AREA_EPSILON * extent * extent:
+    normal = _area_normal(exterior)
+    if normal is None:
         raise DegenerateRing("a ring without area (its points lie on a line)")
     if len(exterior) == 3 and len(rings) == 1:
         return exterior, np.array([[0, 1, 2]], dtype=np.int64)
-    normal /= length
-    holes = []
-    for ring in rings[1:]:
-        hole = _open_ring(ring)
-        if len(hole) >= 3 and np.linalg.norm(newell_normal(hole)) > 0:
-            holes.append(hole)
+    holes = [hole for hole in map(_open_ring, rings[1:]) if _area_normal(hole) is not None]
     points = np.concatenate([exterior, *holes]) if holes else exterior
     flat = (points - points[0]) @ _plane_axes(normal).T
     ends = np.cumsum([len(exterior), *(len(h) for h in holes)]).astype(np.uint32)
@@ -186,7 +190,10 @@ def _convex_corners(
     turn = np.einsum("ij,ij->i", np.cross(incoming, outgoing), unit[owner])
     margin = 1e-9 * extents[owner] ** 2
     corner = turn > margin
-    straight = (np.abs(turn) <= margin) & (np.einsum("ij,ij->i", incoming, outgoing) > 0)
+    # a point in line with its neighbours, between them, and clear of both: an edge point
+    clear = 1e-6 * extents[owner]
+    apart = (np.linalg.norm(incoming, axis=1) > clear) & (np.linalg.norm(outgoing, axis=1) > clear)
+    straight = (np.abs(turn) <= margin) & (np.einsum("ij,ij->i", incoming, outgoing) > 0) & apart
     bent = np.bincount(owner[~(corner | straight)], minlength=len(lengths)) > 0
     corners = np.bincount(owner[corner], minlength=len(lengths))
     return usable & ~bent & (corners >= 3), corner

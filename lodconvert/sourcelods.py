@@ -117,16 +117,14 @@ def prism(lods: dict[str, Mesh], finest: Mesh, attributes: dict[str, object]) ->
     faces: list[np.ndarray] = []
     count = 0
     for rings in footprint(lods, finest):
-        for z in (top, base):
-            try:
-                points, tri = triangulate([np.column_stack([r, np.full(len(r), z)]) for r in rings])
-            except DegenerateRing:
-                break
-            if z == base:
-                tri = tri[:, ::-1]  # the floor faces down
-            vertices.append(points)
-            faces.append(tri + count)
-            count += len(points)
+        try:
+            roof, tri = triangulate([np.column_stack([r, np.full(len(r), top)]) for r in rings])
+        except DegenerateRing:
+            roof, tri = np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+        floor = np.column_stack([roof[:, :2], np.full(len(roof), base)])
+        vertices += [roof, floor]
+        faces += [tri + count, tri[:, ::-1] + count + len(roof)]  # the floor faces down
+        count += 2 * len(roof)
         for ring in rings:
             ring = ring[:-1] if np.array_equal(ring[0], ring[-1]) else ring
             k = len(ring)

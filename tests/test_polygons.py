@@ -38,8 +38,8 @@ def _placed(flat: np.ndarray, seed: int) -> np.ndarray:
 
 @st.composite
 def rings(draw: st.DrawFn) -> np.ndarray:
-    """A ring: a star-shaped or convex polygon, sometimes closed, with repeated points, or a
-    degenerate one (collinear or too short)."""
+    """A ring: a star-shaped or convex polygon, sometimes closed, with repeated points or
+    points a rounding error apart, or a degenerate one (collinear or too short)."""
     kind = draw(st.sampled_from(["convex", "star", "line", "short"]))
     count = draw(st.integers(3, 12))
     angles = np.sort(draw(st.lists(st.floats(0, 2 * np.pi), min_size=count, max_size=count)))
@@ -58,7 +58,10 @@ def rings(draw: st.DrawFn) -> np.ndarray:
         flat = np.concatenate([flat, flat[:1]])
     if draw(st.booleans()) and len(flat) > 1:
         flat = np.insert(flat, 1, flat[1], axis=0)
-    return _placed(flat, draw(st.integers(0, 1000)))
+    placed = _placed(flat, draw(st.integers(0, 1000)))
+    if draw(st.booleans()) and len(placed) > 2:  # a point a rounding error from another
+        placed = np.insert(placed, 2, placed[2] + [0.0, 0.0, 1e-11], axis=0)
+    return placed
 
 
 @settings(max_examples=150, deadline=None)
