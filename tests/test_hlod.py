@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 from lxml import etree
@@ -26,6 +27,7 @@ from lodconvert.hlod import (
 from lodconvert.io import read_chains, read_scene
 from lodconvert.model import CellChain, LodChain, Node, Scene
 from lodconvert.pipeline import iter_chains
+from tests.conftest import ROOT
 from tests.test_citygml import sample
 from tests.test_cli import run
 from tests.test_gltf import _assert_valid as assert_khronos_valid
@@ -135,10 +137,13 @@ def test_bad_cell_sizes_are_usage_errors(text: str, words: str) -> None:
 
 
 def _convert(tmp_path: Path, name: str, *flags: str) -> tuple[Path, dict]:
+    """Convert TUM Munich with ``flags``; the output and its report (valid by its schema)."""
     out, report = tmp_path / name, tmp_path / f"{name}.json"
     result = run(sample(TUM), "-o", out, "-q", "--report", report, *flags)
     assert result.returncode == 0, result.stderr
-    return out, json.loads(report.read_text())
+    data = json.loads(report.read_text())
+    jsonschema.validate(data, json.loads((ROOT / "schemas" / "report.schema.json").read_text()))
+    return out, data
 
 
 @pytest.mark.slow

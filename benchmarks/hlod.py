@@ -1,0 +1,138 @@
+"""LOD parents side by side: far levels of points against merged meshes (and ``auto``).
+
+Bakes TUM Munich (and ``--factors`` larger districts of shifted copies, made as
+``benchmarks/city.py`` makes them) with ``--hlod`` cells of each size set in ``--sizes``, once
+per far-level kind, in this process on one core:
+
+    python benchmarks/hlod.py                      # writes results/hlod.md
+    python benchmarks/hlod.py --factors 1,10 --sizes 250 250,1000 auto
+
+Per configuration: cells, the far view (every cell and object beyond all its cutoffs) — draw
+calls and vertices + points drawn, with and without the LOD parents — the silhouette F of each
+cell's far level against its buildings' finest geometry where it switches in (the planner's
+estimate, :func:`lodconvert.plan.silhouette_estimate`; minimum and median over cells), how many
+cells reach F ≥ 0.95, and the bake time. Frame times of the same districts along flight paths
+are in ``city_render.md`` (``benchmarks/city_render.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+from city import TUM, Template, tum_document, write_district  # noqa: E402
+from tables import markdown_table, write_results  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE / "results" / "hlod.md"
+KINDS = ("points", "mesh", "auto")
+
+
+def measure(path: Path, sizes: str, kind: str) -> list[str]:
+    """One table row: ``path`` baked into cells of ``sizes`` with far levels of ``kind``."""
+    from lodconvert.bake import get_backend
+    from lodconvert.chain import ChainOptions
+    from lodconvert.hlod import MIN_CELL_F, HlodOptions, draw_counts, parse_sizes
+    from lodconvert.io import read_scene
+    from lodconvert.pipeline import iter_chains
+
+    hlod = HlodOptions(parse_sizes(sizes), kind)
+    start = time.process_time()
+    cells = []
+    with_cells = {"far_draw_calls": 0, "far_vertices_and_points": 0}
+    without = dict(with_cells)
+    scene = read_scene(path)
+    for top in iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod):
+        for key, value in draw_counts([top]).items():
+            if key in with_cells:
+                with_cells[key] += value
+        for key, value in draw_counts(top.objects()).items():
+            if key in without:
+                without[key] += value
+        cells += [(cell.facts["kind"], cell.facts["silhouette_f"]) for cell in top.cells()]
+    seconds = time.process_time() - start
+    chosen = [f[k] for k, f in cells]
+    kinds = {k: sum(1 for c, _ in cells if c == k) for k in ("points", "mesh")}
+    return [
+        sizes,
+        kind,
+        f"{len(cells):,}",
+        ", ".join(f"{n} {k}" for k, n in kinds.items() if n),
+        f"{without['far_draw_calls']:,} → {with_cells['far_draw_calls']:,}",
+        f"{without['far_vertices_and_points']:,} → {with_cells['far_vertices_and_points']:,}",
+        f"{min(chosen):.3f}",
+        f"{statistics.median(chosen):.3f}",
+        f"{sum(f >= MIN_CELL_F for f in chosen)}/{len(chosen)}",
+        f"{seconds:.1f}",
+    ]
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--factors", default="1,10", help="district sizes, × TUM Munich")
+    parser.add_argument("--sizes", nargs="+", default=["250", "250,1000", "auto"])
+    parser.add_argument("--output", type=Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    if not TUM.is_file():
+        print(f"skipped: {TUM} is absent")
+        return 0
+    sys.path.insert(0, str(HERE.parent))
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    header = [
+        "cells (m)", "far kind", "cells", "kinds kept", "far draw calls (without → with)",
+        "far vertices + points (without → with)", "min F", "median F", "F ≥ 0.95", "CPU s",
+    ]  # fmt: skip
+    sections = []
+    started = time.perf_counter()
+    template = Template(tum_document())
+    with tempfile.TemporaryDirectory(prefix="lodconvert-hlod-") as tmp:
+        for factor in (int(f) for f in args.factors.split(",")):
+            path = Path(tmp) / f"district_{factor}.gml"
+            write_district(template, factor, path)
+            rows = []
+            for sizes in args.sizes:
+                for kind in KINDS:
+                    rows.append(measure(path, sizes, kind))
+                    print(" | ".join(rows[-1]), flush=True)
+            title = f"## {factor}× TUM Munich ({factor * template.buildings:,} buildings)"
+            sections.append(f"{title}\n\n{markdown_table(header, rows, 2)}")
+    import lodconvert
+
+    text = "\n".join(
+        [
+            "# LOD parents: far levels of points against merged meshes",
+            "",
+            f"- Date: {datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}",
+            f"- Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+            f"{platform.platform()}; one core (affinity), in one process",
+            f"- Software: Python {platform.python_version()}, lodconvert {lodconvert.__version__}",
+            f"- Command: `python benchmarks/hlod.py {' '.join(argv or sys.argv[1:])}`".rstrip()
+            + f" ({time.perf_counter() - started:.0f} s)",
+            "- Far view: every cell and building seen from beyond all its cutoffs; *without* is "
+            "the same buildings with their own chains only. F: silhouette F of the kept far "
+            "level against the cell's buildings (finest geometry) at its switch-in distance, "
+            "1080-px reference view (the planner's estimate). CPU s: reading, baking every "
+            "building and every cell.",
+            "",
+            *sections,
+            "",
+        ]
+    )
+    write_results(args.output, text)
+    print(f"wrote {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
