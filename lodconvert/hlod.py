@@ -58,6 +58,8 @@ designed (:mod:`.chain`)."""
 MIN_CELL_F = 0.95
 """Least silhouette F of a far level against its members where it switches in."""
 SEAM_MARGIN = 1e-9
+ADMISSION_ROUNDS = 4
+"""Times a cell's admitted members (and so its centre) are found again."""
 """Relative margin that keeps a far level's switch strictly beyond its members'."""
 
 Member = LodChain | CellChain
@@ -165,15 +167,21 @@ def bake_cell(
     backend: Backend,
     warn: Warn | None = None,
     limits: Limits = DEFAULT_LIMITS,
-) -> CellChain:
-    """The LOD parent of ``plan`` over its baked ``members`` (object chains or finer cells)."""
+) -> tuple[CellChain | None, list[Member]]:
+    """The LOD parent of ``plan`` over those of its baked ``members`` (object chains or finer
+    cells) that it admits (see the module docstring), and the members left out of it, to be
+    drawn on their own; no cell when it admits none."""
+    gamma = max(plan.size / 2.0, 1.0 + 1e-6)
+    admitted = _admitted(members, options, gamma)
+    if not admitted:
+        return None, members
+    members, left_out = admitted, [m for m in members if not any(m is a for a in admitted)]
     objects = [c for m in members for c in (m.objects() if isinstance(m, CellChain) else [m])]
     finest = _merged([_finest_mesh(chain) for chain in objects])
     world = finest.bounds
     origin = (world[0] + world[1]) / 2.0
     alpha = float(np.linalg.norm(world[1] - world[0]))
-    gamma = max(plan.size / 2.0, 1.0 + 1e-6)
-    seam = max(_coarsest_from(m) + float(np.linalg.norm(_centre(m) - origin)) for m in members)
+    seam = max(_reach(m, origin) for m in members)
     switch = max(cutoff(alpha, options.beta, gamma, CELL_EXPONENT), seam * (1 + SEAM_MARGIN))
     source = finest.translated(-origin)
     candidates: dict[str, tuple[Level, float]] = {}
@@ -197,8 +205,9 @@ def bake_cell(
         "members": len(members),
         "objects": len(objects),
         "seam": seam,
+        "left_out": [m.cell_id if isinstance(m, CellChain) else m.object_id for m in left_out],
     }
-    return CellChain(
+    cell = CellChain(
         cell_id=plan.cell_id,
         tier=plan.tier,
         size=plan.size,
@@ -215,6 +224,7 @@ def bake_cell(
         culled=options.cull is not None,
         facts=facts,
     )
+    return cell, left_out
 
 
 def _choice(candidates: dict[str, tuple[Level, float]], kind: str) -> tuple[str, str]:
@@ -290,6 +300,39 @@ def _centre(member: Member) -> np.ndarray:
         matrix = np.asarray(member.transform, dtype=np.float64)
         centre = matrix[:3, :3] @ centre + matrix[:3, 3]
     return centre
+
+
+def _admitted(members: list[Member], options: ChainOptions, gamma: float) -> list[Member]:
+    """The members a cell admits: those that reach their coarsest level within the cell's
+    switch distance by the formula, measured from the admitted members' centre (found again
+    until it stays, at most :data:`ADMISSION_ROUNDS` times); when none does, the one that
+    reaches it first (a cell of one switches where that member reaches its coarsest)."""
+    bounds = {id(m): _world_bounds(m) for m in members}
+    admitted = list(members)
+    for _ in range(ADMISSION_ROUNDS):
+        boxes = np.stack([bounds[id(m)] for m in admitted])
+        low, high = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+        origin, alpha = (low + high) / 2.0, float(np.linalg.norm(high - low))
+        limit = cutoff(alpha, options.beta, gamma, CELL_EXPONENT)
+        kept = [m for m in members if _reach(m, origin) <= limit]
+        if not kept:  # none would let it switch in time: a cell of the nearest-switching one
+            return [min(members, key=lambda m: _reach(m, _centre(m)))]
+        if [id(m) for m in kept] == [id(m) for m in admitted]:
+            return kept
+        admitted = kept
+    return admitted
+
+
+def _world_bounds(member: Member) -> np.ndarray:
+    """(2, 3) bounding box of a member's objects' finest geometry in scene coordinates."""
+    chains = member.objects() if isinstance(member, CellChain) else [member]
+    boxes = np.stack([_finest_mesh(chain).bounds for chain in chains])
+    return np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+
+
+def _reach(member: Member, origin: np.ndarray) -> float:
+    """Distance from ``origin`` beyond which ``member`` surely shows its coarsest level."""
+    return _coarsest_from(member) + float(np.linalg.norm(_centre(member) - origin))
 
 
 def _coarsest_from(member: Member) -> float:

@@ -127,7 +127,8 @@ def iter_chains(
     """Bake the scene's objects one at a time; objects with bad geometry are reported through
     ``warn`` (unless ``strict``: the caller fails), recorded in ``skipped`` and left out.
     ``step`` hears how many are done. With ``hlod``, the objects come grouped in LOD parents
-    (:mod:`.hlod`): one :class:`CellChain` per cell of the coarsest tier, in grid order."""
+    (:mod:`.hlod`): one :class:`CellChain` per cell of the coarsest tier, in grid order, each
+    followed by the members it left out (objects or finer cells, drawn on their own)."""
     total = scene.size if scene.size is not None else None
     if total is None and isinstance(scene.nodes, list):
         total = sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
@@ -189,30 +190,31 @@ class _ObjectBaker:
 
 def _cell_chains(
     scene: Scene, options: ChainOptions, hlod: HlodOptions, bake: _ObjectBaker
-) -> Iterator[CellChain]:
+) -> Iterator[LodChain | CellChain]:
     """The scene's objects baked and grouped into LOD parents, one coarsest cell at a time
-    (the objects wait on disk meanwhile, so memory is bounded by a cell)."""
+    (the objects wait on disk meanwhile, so memory is bounded by a cell), each followed by
+    the members it left out."""
     hlod.check()
     with NodeSpool() as spool:
         centres, radii = _spooled(scene.with_geometry(), options, spool)
         sizes = hlod.sizes or (auto_size(centres),)
 
-        def baked(plan: CellPlan) -> CellChain | None:
+        def baked(plan: CellPlan) -> list[LodChain | CellChain]:
+            """The cell of ``plan`` (if it admits any member) and the members it left out."""
             if plan.tier == 1:
-                found = (bake(spool.get(i), radii[i]) for i in plan.objects)
+                found = [bake(spool.get(i), radii[i]) for i in plan.objects]
+                members = [m for m in found if m is not None]
             else:
-                found = (baked(cell) for cell in plan.cells)
-            members: list[LodChain | CellChain] = [m for m in found if m is not None]
+                members = [item for cell in plan.cells for item in baked(cell)]
             if not members:
-                return None
-            return bake_cell(
+                return []
+            cell, left_out = bake_cell(
                 plan, members, options, hlod.kind, bake.backend, bake.warn, bake.limits
             )
+            return ([cell] if cell is not None else []) + left_out
 
         for plan in plan_cells(centres, sizes):
-            cell = baked(plan)
-            if cell is not None:
-                yield cell
+            yield from baked(plan)
 
 
 def merged(scenes: Sequence[Scene]) -> Scene:
@@ -376,6 +378,7 @@ def convert(
                 records.extend(chain_record(chain) for chain in objects)
                 if isinstance(item, CellChain):
                     cells.extend(cell_record(cell) for cell in item.cells())
+                if hlod is not None:
                     _add_counts(draw["without"], draw_counts(objects))
                     _add_counts(draw["with"], draw_counts([item]))
                 yield item

@@ -17,6 +17,7 @@ from lodconvert.chain import ChainOptions
 from lodconvert.errors import UsageError
 from lodconvert.hlod import (
     AUTO_SIZES,
+    CELL_EXPONENT,
     MIN_CELL_F,
     HlodOptions,
     auto_size,
@@ -27,6 +28,7 @@ from lodconvert.hlod import (
 from lodconvert.io import read_chains, read_scene
 from lodconvert.model import CellChain, LodChain, Node, Scene
 from lodconvert.pipeline import iter_chains
+from lodconvert.ranges import cutoff
 from tests.conftest import ROOT
 from tests.test_citygml import sample
 from tests.test_cli import run
@@ -56,51 +58,77 @@ def assert_seamless(cell: CellChain) -> None:
             assert_seamless(member)
 
 
+Item = LodChain | CellChain
+
+
+def _objects(items: list[Item]) -> list[LodChain]:
+    return [
+        c for item in items for c in (item.objects() if isinstance(item, CellChain) else [item])
+    ]
+
+
+def _cells(items: list[Item]) -> list[CellChain]:
+    return [cell for item in items if isinstance(item, CellChain) for cell in item.cells()]
+
+
 @pytest.fixture(scope="module")
-def tum_cells() -> list[CellChain]:
+def tum_items() -> list[Item]:
     scene = read_scene(sample(TUM))
     hlod = HlodOptions((250.0, 1000.0), "auto")
     return list(iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod))
 
 
-def test_every_building_is_in_one_cell_and_cells_nest(tum_cells: list[CellChain]) -> None:
-    ids = [chain.object_id for cell in tum_cells for chain in cell.objects()]
+def test_every_building_comes_once_and_cells_nest(tum_items: list[Item]) -> None:
+    ids = [chain.object_id for chain in _objects(tum_items)]
     assert len(ids) == len(set(ids)) == 290
-    for top in tum_cells:
+    # most buildings are in a cell; the cells nest tier by tier
+    assert (
+        len([c for item in tum_items if isinstance(item, CellChain) for c in item.objects()]) > 250
+    )
+    for top in (item for item in tum_items if isinstance(item, CellChain)):
         assert top.tier == 2 and top.size == 1000.0
-        for cell in top.members:
-            assert isinstance(cell, CellChain) and cell.tier == 1 and cell.size == 250.0
-            # a 250 m cell lies in its 1000 m cell
-            assert [k // 4 for k in cell.key] == list(top.key)
+        for cell in (m for m in top.members if isinstance(m, CellChain)):
+            assert cell.tier == 1 and cell.size == 250.0
+            assert [k // 4 for k in cell.key] == list(top.key)  # a 250 m cell in its 1000 m cell
 
 
-def test_a_cells_far_level_never_shows_while_a_building_is_finer(
-    tum_cells: list[CellChain],
-) -> None:
-    for cell in tum_cells:
+def test_a_cells_far_level_never_shows_while_a_building_is_finer(tum_items: list[Item]) -> None:
+    for cell in _cells(tum_items):
         assert_seamless(cell)
 
 
-def test_the_far_view_draws_one_call_per_cell(tum_cells: list[CellChain]) -> None:
-    objects = [chain for cell in tum_cells for chain in cell.objects()]
-    without, with_cells = draw_counts(objects), draw_counts(tum_cells)
+def test_a_cell_admits_the_members_that_reach_their_coarsest_before_its_formula(
+    tum_items: list[Item],
+) -> None:
+    for cell in _cells(tum_items):
+        formula = cutoff(cell.alpha, cell.beta, cell.gamma, CELL_EXPONENT)
+        # the admitted members let it switch where its formula says (up to the re-centring),
+        # or it is a cell of one, switching where its one member reaches its coarsest level
+        assert cell.cutoffs[0] <= formula * 1.2 or len(cell.members) == 1
+        left_out = set(cell.facts["left_out"])
+        assert not left_out & {getattr(m, "object_id", None) for m in cell.members}
+
+
+def test_the_far_view_draws_one_call_per_cell_and_left_out_building(
+    tum_items: list[Item],
+) -> None:
+    without, with_cells = draw_counts(_objects(tum_items)), draw_counts(tum_items)
     assert without["far_draw_calls"] == 290
-    assert with_cells["far_draw_calls"] == len(tum_cells)
+    assert with_cells["far_draw_calls"] == len(tum_items) < 290 / 5
     # each cell's far level is one part; the buildings' own shapes are all still written
-    assert with_cells["shapes"] == without["shapes"] + sum(len(c.cells()) for c in tum_cells)
+    assert with_cells["shapes"] == without["shapes"] + len(_cells(tum_items))
 
 
-def test_auto_keeps_the_cheaper_faithful_far_level(tum_cells: list[CellChain]) -> None:
-    for top in tum_cells:
-        for cell in top.cells():
-            f = cell.facts["silhouette_f"]
-            chosen = cell.facts["kind"]
-            assert cell.far.kind == ("pcd" if chosen == "points" else "merged")
-            faithful = [kind for kind, value in f.items() if value >= MIN_CELL_F]
-            if faithful:
-                assert chosen in faithful
-            else:
-                assert f[chosen] == max(f.values())
+def test_auto_keeps_the_cheaper_faithful_far_level(tum_items: list[Item]) -> None:
+    for cell in _cells(tum_items):
+        f = cell.facts["silhouette_f"]
+        chosen = cell.facts["kind"]
+        assert cell.far.kind == ("pcd" if chosen == "points" else "merged")
+        faithful = [kind for kind, value in f.items() if value >= MIN_CELL_F]
+        if faithful:
+            assert chosen in faithful
+        else:
+            assert f[chosen] == max(f.values())
 
 
 @pytest.mark.parametrize("kind", ["points", "mesh"])
