@@ -16,7 +16,12 @@ radius) and x = :data:`CELL_EXPONENT`, raised where needed by the **seam rule**:
 never shows while a member would still show a level finer than its coarsest. A viewer ``d``
 from the cell centre is at least ``d - |c_m - c|`` from member ``m``'s centre, so
 ``Y_cell ≥ max_m (Y_m + |c_m - c|)``, where ``Y_m`` is where ``m`` reaches its coarsest level
-(an object's last cutoff before it, 0 with one level; a finer cell's ``Y_cell``). With culling,
+(an object's last cutoff before it, 0 with one level; a finer cell's ``Y_cell``). A cell
+therefore **admits** only the members whose reach ``Y_m + |c_m - c|`` lies within its formula
+distance (a few lone or large buildings with wide plots would otherwise push a whole block's
+switch out by kilometres); the others stay beside it, drawn on their own (a coarser tier may
+admit them in turn). When it would admit none, it holds the one member that reaches its
+coarsest level first: a cell of one. With culling,
 a cell disappears at the formula's distance for the cull exponent, and never before its far
 level has shown.
 
