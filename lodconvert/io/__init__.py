@@ -9,6 +9,12 @@ whichever of these it offers —
 - ``read_back(path, geometry=True) -> list[LodChain]``: our own files, with their chains,
   ranges, point sizes and bake parameters (used by evaluate, bench and the viewer page, which
   needs no geometry);
+- ``read_cells(path) -> list[dict]``: the LOD parents (cells) of our own files, coarsest first
+  in document order (none: an empty list), each with the facts the writer declared
+  (``cell_id``, ``tier``, ``size``, ``key``, ``alpha``, ``beta``, ``gamma``, ``xs``,
+  ``cutoffs``, ``culled``, ``members``: object or finer cell ids, ``facts``: what the planner
+  measured), its ``center`` in scene coordinates, ``far``: its far level's declared facts, and
+  under the format's name where its nodes lie in the file (used by the viewer page);
 - ``check(path, findings, options)``: the structural checks ``validate`` runs, and every
   conversion runs on its staged output before committing it.
 
@@ -59,6 +65,7 @@ class Format:
     read: Callable[..., Scene] | None = None
     write: Callable[..., None] | None = None
     read_back: Callable[..., list[LodChain]] | None = None
+    read_cells: Callable[..., list[dict[str, Any]]] | None = None
     check: Callable[..., None] | None = None
     read_options: tuple[str, ...] = ()
     write_options: tuple[str, ...] = ()

@@ -5,11 +5,15 @@ The page holds its own script and the configuration read from the output
 one viewer library — three.js for glTF (the levels of each ``MSFT_lod`` chain put in a
 ``THREE.LOD`` at the cutoffs, points drawn at our point size) or X_ITE for X3D (its own ``LOD``
 and ``PointProperties``). The library comes from a public CDN unless a URL or a local copy of the
-npm package is given. An on-screen readout shows each object's active level and distance, and
-clicking an object shows its id and attributes (``chain.metadata`` as read back: a city object's
-type, name, function, measured height, address, generic attributes…), clicking empty space
-clears them; ``window.lodconvertViewer`` exposes the same state, ``setDistance(d)`` and
-``screenPoint([x, y, z])`` (where a world point shows on the page).
+npm package is given. An on-screen readout shows each object's active level and distance and,
+for a file with LOD parents, each cell's state (open, merged: showing its far level, culled, or
+hidden inside a coarser cell that is not open) and how many are merged; a LOD scale (the page's
+field, or ``?lodscale=`` in its URL) multiplies every cutoff the page switches at. Clicking an
+object shows its id and attributes (``chain.metadata`` as read back: a city object's type,
+name, function, measured height, address, generic attributes…), clicking empty space clears
+them; ``window.lodconvertViewer`` exposes the same state (``objects``, ``cells``, ``merged``,
+``lodScale``), ``setDistance(d)``, ``setLodScale(s)`` and ``screenPoint([x, y, z])`` (where a
+world point shows on the page).
 
 Browsers do not let a page opened from a file fetch its neighbours, so the page must be served:
 :func:`serve` (``lodconvert view OUT --serve``) serves a folder on 127.0.0.1. A local library

@@ -1,11 +1,14 @@
 // glTF part: three.js draws each MSFT_lod chain as a THREE.LOD whose levels switch at the chain's
 // cutoffs (extras.lodconvert), points sized as lodconvert sizes them and lit like the mesh; a
-// ray through the clicked pixel picks the nearest level shown, and so its object. The library
-// is imported in load(), so that a wrong library URL is reported on the page.
+// LOD parent (cell) is a THREE.LOD too, whose first level holds its members' LODs (objects', or
+// finer cells') and whose second is its far node; a ray through the clicked pixel picks the
+// nearest level shown, and so its object. The library is imported in load(), so that a wrong
+// library URL is reported on the page.
 
 const halfFov = (config.view.fov_y_deg * Math.PI) / 360;
 const referenceFocal = config.view.height_px / (2 * Math.tan(halfFov));
-const lods = [];
+const lods = []; // per object
+const cellLods = []; // per cell
 const pointScale = { value: 1 }; // half the drawing buffer's height, set by resize()
 let THREE, renderer, scene, camera, controls, origin, raycaster;
 
@@ -65,9 +68,13 @@ function deviceCoordinates(event) {
   return new THREE.Vector2(x, 1 - ((event.clientY - rect.top) / rect.height) * 2);
 }
 
+/** Distance of the camera from where `lod` lies. */
+const cameraDistance = (lod) => camera.position.distanceTo(lod.getWorldPosition(new THREE.Vector3()));
+
 function render() {
-  renderer.render(scene, camera); // also picks each LOD's level
-  lods.forEach((lod, i) => update(i, lod.getCurrentLevel(), camera.position.distanceTo(lod.position)));
+  renderer.render(scene, camera); // also picks the level of each LOD drawn
+  lods.forEach((lod, i) => update(i, lod.getCurrentLevel(), cameraDistance(lod)));
+  cellLods.forEach((lod, i) => updateCell(i, lod.getCurrentLevel(), cameraDistance(lod)));
 }
 
 function resize(host) {
@@ -78,22 +85,73 @@ function resize(host) {
   render();
 }
 
-async function buildLod(gltf, object) {
+/** Draw and pick the points under `level` at `size` (none: a mesh level, left as it is). */
+function sizePoints(level, size) {
+  if (!size) return;
+  level.traverse((part) => {
+    if (part.isPoints) {
+      part.material = pointsMaterial(part.material, size);
+      pickLikeDrawn(part, size);
+    }
+  });
+}
+
+/**
+ * A THREE.LOD at `center` (world coordinates) showing `levels` in turn from 0 and from each of
+ * `cutoffs` on (times the LOD scale), then nothing beyond the last cutoff of a `culled` one.
+ */
+function makeLod(center, levels, cutoffs, culled) {
   const lod = new THREE.LOD();
-  lod.position.set(...object.center).sub(origin);
+  lod.position.set(...center).sub(origin);
+  lod.userData.cutoffs = [0, ...cutoffs];
+  const all = culled ? [...levels, new THREE.Object3D()] : levels;
+  all.forEach((level, k) => lod.addLevel(level, lod.userData.cutoffs[k] * lodScale));
+  return lod;
+}
+
+async function buildLod(gltf, object) {
+  const levels = [];
   for (const [k, index] of [object.node, ...object.ids].entries()) {
     const level = await gltf.parser.getDependency("node", index);
     level.position.set(...object.local_center).negate(); // geometry is relative to the origin
-    level.traverse((part) => {
-      if (part.isPoints && object.points[k]) {
-        part.material = pointsMaterial(part.material, object.points[k]);
-        pickLikeDrawn(part, object.points[k]);
-      }
-    });
-    lod.addLevel(level, k === 0 ? 0 : object.cutoffs[k - 1]);
+    sizePoints(level, object.points[k]);
+    levels.push(level);
   }
-  if (object.culled) lod.addLevel(new THREE.Object3D(), object.cutoffs.at(-1));
+  return makeLod(object.center, levels, object.cutoffs, object.culled);
+}
+
+/** The LOD of `cell`, holding `members` (THREE.LODs placed in the page's coordinates). */
+async function buildCellLod(gltf, cell, members) {
+  const near = new THREE.Group();
+  for (const member of members) near.add(member);
+  const far = await gltf.parser.getDependency("node", cell.far);
+  sizePoints(far, cell.points);
+  const lod = makeLod(cell.center, [near, far], cell.cutoffs, cell.culled);
+  near.position.copy(lod.position).negate(); // the members stay where they are
+  far.position.sub(new THREE.Vector3(...cell.center)); // from the cell's origin (scene units)
   return lod;
+}
+
+/**
+ * Build the LODs of the objects and cells; the cells nest (a cell's members are the LODs of
+ * the objects or cells whose `cell` or `parent` it is), the outermost go into the scene.
+ */
+async function buildScene(gltf) {
+  for (const object of config.objects) lods.push(await buildLod(gltf, object));
+  const members = cells.map(() => []);
+  const place = (lod, holder) => (holder === null ? scene.add(lod) : members[holder].push(lod));
+  config.objects.forEach((object, k) => place(lods[k], object.cell));
+  for (let i = cells.length - 1; i >= 0; i--) { // the finer cells a cell holds come after it
+    cellLods[i] = await buildCellLod(gltf, cells[i], members[i]);
+    place(cellLods[i], cells[i].parent);
+  }
+}
+
+/** Switch every LOD at `scale` times its cutoffs. */
+function scaleLods(scale) {
+  for (const lod of [...lods, ...cellLods]) {
+    lod.levels.forEach((level, k) => { level.distance = lod.userData.cutoffs[k] * scale; });
+  }
 }
 
 const backend = {
@@ -113,12 +171,7 @@ const backend = {
     camera = new THREE.PerspectiveCamera(config.view.fov_y_deg, 1, nearest / 50, 10 * farthest);
     camera.add(new THREE.DirectionalLight(0xffffff, 1.5));
     scene.add(camera, new THREE.HemisphereLight(0xffffff, 0x444444, 2));
-    const gltf = await new GLTFLoader().loadAsync(config.asset);
-    for (const object of config.objects) {
-      const lod = await buildLod(gltf, object);
-      scene.add(lod);
-      lods.push(lod);
-    }
+    await buildScene(await new GLTFLoader().loadAsync(config.asset));
     raycaster = new THREE.Raycaster();
     controls = new OrbitControls(camera, renderer.domElement);
     controls.addEventListener("change", render);
@@ -132,6 +185,12 @@ const backend = {
     controls.update();
     render();
     await nextFrame();
+  },
+  /** Switch at `scale` times every cutoff (drawn by the next move), seeing to the slider's end. */
+  setLodScale(scale) {
+    scaleLods(scale);
+    camera.far = 10 * farthest;
+    camera.updateProjectionMatrix();
   },
   /** Index of the object of the nearest drawn level under the pointer of `event`, or null. */
   pick(event) {

@@ -1,16 +1,25 @@
 // lodconvert viewer page, common part: the configuration written by lodconvert, the readout of
-// each object's active level and distance, the distance slider, the panel that shows the id and
-// attributes of a clicked object, and window.lodconvertViewer (state for tests and curious
-// users, setDistance and screenPoint). The format part after it (gltf.js or x3d.js) defines a
-// backend { load(host), setDistance(d), pick(event), screenPoint(point) } and calls
-// start(backend); it reports levels and distances through update().
+// each object's active level and distance and of each LOD parent (cell): open (its members
+// shown), merged (its far level shown), culled, or hidden inside a coarser cell that is not
+// open; the distance slider, the LOD scale (a factor on every cutoff the page switches at, from
+// ?lodscale= in the URL or its field), the panel that shows the id and attributes of a clicked
+// object, and window.lodconvertViewer (state for tests and curious users, setDistance,
+// setLodScale and screenPoint). The format part after it (gltf.js or x3d.js) defines a backend
+// { load(host), setDistance(d), setLodScale(s), pick(event), screenPoint(point) } and calls
+// start(backend); it reports the levels and distances of objects through update() and of
+// cells through updateCell(). An object or cell inside a cell that is not open is not drawn by
+// its own LOD, whose level the page then ignores (a viewer need not update it).
 
 const config = JSON.parse(document.getElementById("lodconvert-config").textContent);
 const readout = document.getElementById("readout");
 const slider = document.getElementById("distance");
 const status = document.getElementById("status");
 const inspect = document.getElementById("inspect");
+const cellReadout = document.getElementById("cells");
+const lodScaleField = document.getElementById("lodscale");
+const cells = config.cells;
 const MAX_LISTED = 8;
+const MAX_CELLS_LISTED = 12;
 /** How far (CSS pixels) the pointer may move between press and release of a click: farther, it
  * is a drag of the view, which selects nothing. */
 const CLICK_SLOP_PX = 4;
@@ -23,37 +32,74 @@ const focus = [0, 1, 2].map((k) => {
   const values = centers.map((c) => c[k]);
   return (least(values) + most(values)) / 2;
 });
-const offsets = centers.map((c) => Math.hypot(...c.map((v, k) => v - focus[k])));
+/** Distance between the points `a` and `b`. */
+const distanceBetween = (a, b) => Math.hypot(...a.map((v, k) => v - b[k]));
+const offsets = centers.map((c) => distanceBetween(c, focus));
+const cellOffsets = cells.map((cell) => distanceBetween(cell.center, focus));
 
-// The slider spans half the smallest diagonal to twice the farthest reach of any object
-// (its last cutoff, or where its diagonal spans SMALLEST_PX of the reference view if that is
-// farther — an object that keeps its mesh at every distance has no cutoff —, plus its offset
-// from the focus), logarithmically: at its end every object is beyond its last cutoff.
+/** The LOD scale: the factor on every cutoff the page switches at. */
+let lodScale = 1;
+const scaled = (cutoffs) => cutoffs.map((c) => c * lodScale);
+
+// The slider spans half the smallest diagonal to twice the farthest reach of any object or cell
+// (an object's last cutoff, or where its diagonal spans SMALLEST_PX of the reference view if
+// that is farther — an object that keeps its mesh at every distance has no cutoff —; a cell's
+// last cutoff; both scaled and plus the offset from the focus), logarithmically: at its end
+// every object and cell is beyond its last cutoff. A new LOD scale moves its end.
 const SMALLEST_PX = 16;
 const focal = config.view.height_px / 2 / Math.tan((config.view.fov_y_deg * Math.PI) / 360);
-const reachOf = (o) => most([(o.alpha * focal) / SMALLEST_PX, ...o.cutoffs]);
+const reachOf = (o) => most([(o.alpha * focal) / SMALLEST_PX, ...scaled(o.cutoffs)]);
 const nearest = least(config.objects.map((o) => o.alpha)) / 2;
-const farthest = 2 * most(config.objects.map((o, i) => reachOf(o) + offsets[i]));
-const span = Math.log(farthest / nearest);
+let farthest, span;
+/** Set the slider's far end (and so its span) for the LOD scale. */
+function spanSlider() {
+  const reaches = [
+    ...config.objects.map((o, i) => reachOf(o) + offsets[i]),
+    ...cells.map((cell, i) => most(scaled(cell.cutoffs)) + cellOffsets[i]),
+  ];
+  farthest = 2 * most(reaches);
+  span = Math.log(farthest / nearest);
+}
 const sliderDistance = (value) => nearest * Math.exp((span * value) / 1000);
 const sliderValue = (distance) => (1000 * Math.log(distance / nearest)) / span;
 /** The first view: every object whole in view (for one object, at 1.25 diagonals). */
 const reach = most(config.objects.map((o, i) => o.alpha / 2 + offsets[i]));
-const overview = Math.min(farthest, 2.5 * reach);
 
-/** Index of the level `object` shows at `distance` from its centre (past the last: nothing). */
-const levelAt = (object, distance) => object.cutoffs.filter((c) => c <= distance).length;
+/**
+ * Index of the level `entry` (an object or a cell) shows at `distance` from its centre, at the
+ * LOD scale (past the last: nothing).
+ */
+const levelAt = (entry, distance) => scaled(entry.cutoffs).filter((c) => c <= distance).length;
+
+/**
+ * The outermost of cell `index` and the cells holding it that does not show its members, its
+ * level (`levelOf(i)`, null or negative while unknown) beyond 0; null when every one is open.
+ */
+function closedCell(index, levelOf) {
+  let closed = null;
+  for (let i = index; i !== null; i = cells[i].parent) if (levelOf(i) > 0) closed = i;
+  return closed;
+}
+const CELL_STATES = ["open", "merged", "culled"];
 
 const state = {
   ready: false,
   error: null,
   loadMs: null,
-  objects: config.objects.map((o) => ({ id: o.id, level: null, levelIndex: null, distance: null })),
+  // level: the name of the level it shows; cell: the id of the cell drawn in its place, if any
+  objects: config.objects.map((o) => ({
+    id: o.id, level: null, levelIndex: null, distance: null, cell: null,
+  })),
+  // per cell id: {state: open, merged, culled or hidden, level: its level when not hidden}
+  cells: {},
+  merged: 0, // cells showing their far level
+  lodScale,
   distance: null, // of the viewer from the focus, once drawn there
   settled: false, // no move under way: the levels and distances shown are final
   selected: null, // id of the object whose attributes the panel shows
   clicks: 0, // clicks on the view handled (each selects an object or nothing)
   setDistance: null,
+  setLodScale: null, // resolves once drawn at the new scale; false for a scale not positive
   screenPoint: null, // [x, y, z] in world coordinates → {x, y} in CSS pixels, or null
 };
 window.lodconvertViewer = state;
@@ -63,29 +109,88 @@ function levelName(object, index) {
   return index < object.levels.length ? object.levels[index] : "nothing (culled)";
 }
 
+/** Levels and distances as the viewer reports them, per object and per cell. */
+const reported = {
+  objects: config.objects.map(() => ({ levelIndex: null, distance: null })),
+  cells: cells.map(() => ({ levelIndex: null, distance: null })),
+};
+const known = (level) => (level !== null && level >= 0 ? level : null);
+
+/** Set state.cells, state.merged and state.objects from the levels reported. */
+function derive() {
+  const levelOf = (i) => reported.cells[i].levelIndex;
+  state.merged = 0;
+  cells.forEach((cell, i) => {
+    const { levelIndex, distance } = reported.cells[i];
+    const hidden = cell.parent !== null && closedCell(cell.parent, levelOf) !== null;
+    const level = hidden ? null : known(levelIndex);
+    const name = hidden ? "hidden" : (CELL_STATES[level] ?? "…");
+    state.cells[cell.id] = { state: name, level, distance };
+    if (name === "merged") state.merged += 1;
+  });
+  config.objects.forEach((object, i) => {
+    const { levelIndex, distance } = reported.objects[i];
+    const closed = object.cell === null ? null : closedCell(object.cell, levelOf);
+    const level = closed === null ? known(levelIndex) : null;
+    Object.assign(state.objects[i], {
+      level: level === null ? null : levelName(object, level),
+      levelIndex: level,
+      distance,
+      cell: closed === null ? null : cells[closed].id,
+    });
+  });
+}
+
+const brief = (value) => (value === null ? "…" : value.toPrecision(4));
+const cutoffText = (entry) => scaled(entry.cutoffs).map(brief).join(" | ");
+
+/** Lines of the first `max` of `lines`, and one more counting the others as `what`. */
+function listed(lines, max, what) {
+  const shown = lines.slice(0, max);
+  if (lines.length > max) shown.push(`… and ${lines.length - max} more ${what}`);
+  return shown.join("\n");
+}
+
+function objectLine(o, i) {
+  const shown = o.cell === null ? o.level ?? "…" : `${state.cells[o.cell].state} with ${o.cell}`;
+  const cutoffs = cutoffText(config.objects[i]);
+  return `${o.id}: ${shown} at distance ${brief(o.distance)} (cutoffs ${cutoffs})`;
+}
+
+function cellLine(cell) {
+  const { state: shown, distance } = state.cells[cell.id];
+  const cutoffs = cutoffText(cell);
+  return `${cell.id} (${cell.kind}): ${shown} at distance ${brief(distance)} (cutoffs ${cutoffs})`;
+}
+
 let readoutPending = false;
 
 function showReadout() {
   readoutPending = false;
-  const lines = state.objects.slice(0, MAX_LISTED).map((o, i) => {
-    const cutoffs = config.objects[i].cutoffs.map((c) => c.toPrecision(4)).join(" | ");
-    const distance = o.distance === null ? "…" : o.distance.toPrecision(4);
-    return `${o.id}: ${o.level ?? "…"} at distance ${distance} (cutoffs ${cutoffs})`;
-  });
-  if (state.objects.length > MAX_LISTED) lines.push(`… and ${state.objects.length - MAX_LISTED} more objects`);
-  readout.textContent = lines.join("\n");
+  derive();
+  readout.textContent = listed(state.objects.map(objectLine), MAX_LISTED, "objects");
+  if (cells.length === 0) return;
+  const merged = `cells: ${state.merged} of ${cells.length} merged (showing their far level)`;
+  cellReadout.textContent = `${merged}\n${listed(cells.map(cellLine), MAX_CELLS_LISTED, "cells")}`;
 }
 
-/** Record object `index`'s active level (an index into its levels) and its distance. */
-function update(index, levelIndex, distance) {
-  const object = state.objects[index];
-  object.levelIndex = levelIndex;
-  object.level = levelIndex === null ? null : levelName(config.objects[index], levelIndex);
-  object.distance = distance;
+function scheduleReadout() {
   if (!readoutPending) {
     readoutPending = true;
     requestAnimationFrame(showReadout);
   }
+}
+
+/** Record object `index`'s active level (an index into its levels) and its distance. */
+function update(index, levelIndex, distance) {
+  Object.assign(reported.objects[index], { levelIndex, distance });
+  scheduleReadout();
+}
+
+/** Record cell `index`'s active level (0 open, 1 merged, 2 culled) and its distance. */
+function updateCell(index, levelIndex, distance) {
+  Object.assign(reported.cells[index], { levelIndex, distance });
+  scheduleReadout();
 }
 
 const isRecord = (value) => value !== null && typeof value === "object" && !Array.isArray(value);
@@ -161,9 +266,44 @@ async function moveTo(backend, distance) {
   state.settled = false;
   await backend.setDistance(distance);
   if (move === moves) {
+    showReadout(); // the state is final before it is declared settled
     state.distance = distance;
     state.settled = true;
   }
+}
+
+const positive = (value) => Number.isFinite(value) && value > 0;
+
+/** The LOD scale the page's URL asks for (?lodscale=2), 1 when it asks for none. */
+function urlLodScale() {
+  const text = new URLSearchParams(location.search).get("lodscale");
+  if (text === null) return 1;
+  if (positive(Number(text))) return Number(text);
+  status.textContent = `lodscale=${text} in the URL is not a positive number: the scale is 1.`;
+  return 1;
+}
+
+/** Take `scale` as the LOD scale in the page's state, its field and the slider's span. */
+function applyLodScale(scale) {
+  lodScale = state.lodScale = scale;
+  lodScaleField.value = String(scale);
+  spanSlider();
+}
+
+/**
+ * Switch at `scale` times every cutoff; resolves once drawn so. A scale that is not positive
+ * changes nothing (the field shows the scale again) and resolves to false.
+ */
+async function setLodScale(backend, scale) {
+  if (!positive(scale)) {
+    lodScaleField.value = String(lodScale);
+    return false;
+  }
+  applyLodScale(scale);
+  backend.setLodScale(scale);
+  slider.value = String(sliderValue(state.distance));
+  await moveTo(backend, state.distance);
+  return true;
 }
 
 async function start(backend) {
@@ -175,7 +315,10 @@ async function start(backend) {
   try {
     const started = performance.now();
     const view = document.getElementById("view");
+    applyLodScale(urlLodScale());
+    cellReadout.hidden = cells.length === 0;
     await backend.load(view);
+    if (lodScale !== 1) backend.setLodScale(lodScale);
     watchClicks(backend, view);
     state.screenPoint = (point) => backend.screenPoint(point);
     state.setDistance = async (distance) => {
@@ -185,7 +328,11 @@ async function start(backend) {
     slider.addEventListener("input", () => {
       moveTo(backend, sliderDistance(Number(slider.value))).catch(fail);
     });
-    await state.setDistance(overview);
+    await state.setDistance(Math.min(farthest, 2.5 * reach)); // the overview
+    state.setLodScale = (scale) => setLodScale(backend, scale);
+    lodScaleField.addEventListener("change", () => {
+      setLodScale(backend, Number(lodScaleField.value)).catch(fail);
+    });
     state.loadMs = performance.now() - started;
     state.ready = true;
   } catch (error) {

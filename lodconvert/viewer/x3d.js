@@ -1,6 +1,9 @@
 // X3D part: X_ITE loads the file and switches its LOD nodes itself (at the ranges lodconvert
-// wrote, points sized by PointProperties); the page adds a viewpoint it can move, and reads the
-// levels from level_changed and the viewer position and orientation from a ProximitySensor.
+// wrote, points sized by PointProperties; a LOD parent's LOD holds its members' nodes, so the
+// LODs nest); the page adds a viewpoint it can move, and reads the levels of objects and cells
+// from level_changed (with prism switching, an object's from its Switches' whichChoice) and the
+// viewer position and orientation from a ProximitySensor. The LOD scale sets the LODs' range
+// and grows the prism sensors' boxes by the scaled cutoffs.
 // A click is picked by X_ITE itself, with the browser methods its pointing-device sensors use
 // (getPointerFromEvent, touch(x, y), then getHit(): the Shape drawn at that pixel; they are not
 // part of its typed API), and the page maps the Shape to the object whose LOD holds it; objects
@@ -14,6 +17,13 @@
 const SETTLE_FRAMES = 120;
 const levels = config.objects.map(() => null);
 const distances = config.objects.map(() => null);
+const cellLevels = cells.map(() => null);
+const cellDistances = cells.map(() => null);
+const scalings = []; // per LOD or prism sensor, (scale) => what it needs for a new LOD scale
+/** Per object, (viewer position) => the level it should show there. */
+const levelsAt = config.objects.map((object) => (position) => {
+  return levelAt(object, distanceBetween(object.center, position));
+});
 const objectOfShape = new Map(); // Shape (X_ITE's node, not its SFNode) → first object's index
 let X3D, browser, canvas, viewpoint;
 const eye = { position: focus, orientation: null }; // the viewer's, from the sensor
@@ -23,6 +33,74 @@ const vector = (values) => new X3D.SFVec3f(...values);
 
 function report(index) {
   update(index, levels[index], distances[index]);
+}
+
+function reportCell(index) {
+  updateCell(index, cellLevels[index], cellDistances[index]);
+}
+
+let watchers = 0;
+
+/** Call `changed(value)` with the value of `node`'s field `name` now and whenever it changes. */
+function watch(node, name, changed) {
+  node.addFieldCallback(`lodconvert ${++watchers}`, name, changed);
+  changed(node[name]);
+}
+
+/**
+ * Follow the level of the LOD node `lod` (of an object or cell `entry`) into `into[index]`,
+ * reporting it by `reported(index)`; a LOD scale sets its range to the scaled cutoffs.
+ */
+function followLod(lod, entry, into, index, reported) {
+  watch(lod, "level_changed", (level) => {
+    into[index] = level;
+    reported(index);
+  });
+  scalings.push((scale) => { lod.range = new X3D.MFFloat(...entry.cutoffs.map((c) => c * scale)); });
+}
+
+/**
+ * The nodes of prism-switched `object` in `role` (its "Switch"es or its sensors, "Prism"), one
+ * per cutoff, nearest first: lodconvert's writer names them after the object's Transform.
+ */
+const prismNodes = (scene, object, role) =>
+  object.cutoffs.map((_, k) => scene.getNamedNode(`${object.transform}_${role}${k}`));
+
+/**
+ * Follow the level that object `index`, prism-switched, shows: that of its first Switch at its
+ * near choice (0), else its coarsest (or nothing, culled).
+ */
+function followSwitches(scene, object, index) {
+  const switches = prismNodes(scene, object, "Switch");
+  const read = () => {
+    const near = switches.findIndex((node) => node.whichChoice === 0);
+    levels[index] = near < 0 ? switches.length : near;
+    report(index);
+  };
+  for (const node of switches) watch(node, "whichChoice", read);
+}
+
+/**
+ * Object `index`, prism-switched, should show the level of the first of its sensors' boxes that
+ * holds the viewer (its coarsest outside them). The boxes are the finest level's box grown by
+ * each cutoff on every side, so a LOD scale grows them by the scaled cutoff.
+ */
+function followBoxes(scene, object, index) {
+  const sensors = prismNodes(scene, object, "Prism");
+  sensors.forEach((sensor, k) => {
+    const size = [sensor.size.x, sensor.size.y, sensor.size.z];
+    const grown = (scale) => 2 * (scale - 1) * object.cutoffs[k];
+    scalings.push((scale) => { sensor.size = vector(size.map((v) => v + grown(scale))); });
+  });
+  const origin = object.center.map((c, k) => c - object.local_center[k]); // of its Transform
+  const holds = (sensor, local) => ["x", "y", "z"].every((axis, k) => {
+    return Math.abs(local[k] - sensor.center[axis]) < sensor.size[axis] / 2;
+  });
+  levelsAt[index] = (position) => {
+    const local = position.map((v, k) => v - origin[k]);
+    const inside = sensors.findIndex((sensor) => holds(sensor, local));
+    return inside < 0 ? sensors.length : inside;
+  };
 }
 
 /** Record in objectOfShape that the Shapes under `node` are drawn by object `index`. */
@@ -40,8 +118,31 @@ function collectShapes(node, index) {
 function viewerMoved(position) {
   eye.position = position;
   config.objects.forEach((object, i) => {
-    distances[i] = Math.hypot(...object.center.map((c, k) => position[k] - c));
+    distances[i] = distanceBetween(object.center, position);
     report(i);
+  });
+  cells.forEach((cell, i) => {
+    cellDistances[i] = distanceBetween(cell.center, position);
+    reportCell(i);
+  });
+}
+
+/**
+ * Whether, with the viewer at `position`, every object and cell whose own LOD (or Switches) is
+ * drawn shows the level it should there, and every distance arrived.
+ */
+function arrivedAt(position) {
+  const near = (seen, expected) => Math.abs(seen - expected) <= 1e-4 * expected;
+  const expectedCells = cells.map((cell) => levelAt(cell, distanceBetween(cell.center, position)));
+  const drawn = (holder) => holder === null || closedCell(holder, (i) => expectedCells[i]) === null;
+  const objectsArrived = config.objects.every((object, i) => {
+    const distance = distanceBetween(object.center, position);
+    const own = !drawn(object.cell) || levels[i] === levelsAt[i](position);
+    return own && near(distances[i], distance);
+  });
+  return objectsArrived && cells.every((cell, i) => {
+    const own = !drawn(cell.parent) || cellLevels[i] === expectedCells[i];
+    return own && near(cellDistances[i], distanceBetween(cell.center, position));
   });
 }
 
@@ -65,38 +166,42 @@ const backend = {
     viewpoint.centerOfRotation = vector(focus);
     const sensor = scene.createNode("ProximitySensor");
     sensor.center = vector(focus);
-    sensor.size = vector([40 * farthest, 40 * farthest, 40 * farthest]);
+    const reaching = () => { sensor.size = vector([40 * farthest, 40 * farthest, 40 * farthest]); };
+    reaching();
+    scalings.push(reaching);
     eye.orientation = new X3D.SFRotation();
     sensor.addFieldCallback("lodconvert", "position_changed", (p) => viewerMoved([p.x, p.y, p.z]));
     sensor.addFieldCallback("lodconvert", "orientation_changed", (r) => { eye.orientation = r; });
     for (const node of [navigation, viewpoint, sensor]) scene.rootNodes.push(node);
     navigation.set_bind = true;
+    const prism = scene.getMetaData("switching")?.includes("prism"); // as the file declares
     config.objects.forEach((object, i) => {
       const lod = scene.getNamedNode(object.lod);
       collectShapes(lod, i);
-      levels[i] = lod.level_changed;
-      lod.addFieldCallback("lodconvert", "level_changed", (level) => {
-        levels[i] = level;
-        report(i);
-      });
+      if (!prism) followLod(lod, object, levels, i, report);
+      else {
+        followSwitches(scene, object, i);
+        followBoxes(scene, object, i);
+      }
+    });
+    cells.forEach((cell, i) => {
+      followLod(scene.getNamedNode(cell.lod), cell, cellLevels, i, reportCell);
     });
   },
-  /** Resolves once every LOD shows its level at the new place, and the sensor reported it. */
+  /** Resolves once every LOD drawn shows its level at the new place, and the sensor said so. */
   async setDistance(distance) {
     const move = ++target;
     const position = [focus[0], focus[1], focus[2] + distance];
     viewpoint.position = vector(position);
     viewpoint.set_bind = true;
-    const expected = config.objects.map((object) => {
-      const d = Math.hypot(...object.center.map((c, k) => position[k] - c));
-      return { level: levelAt(object, d), distance: d };
-    });
-    const arrived = () => expected.every((e, i) =>
-      levels[i] === e.level && Math.abs(distances[i] - e.distance) <= 1e-4 * e.distance);
     for (let frame = 0; frame < SETTLE_FRAMES && move === target; frame++) {
       await nextFrame();
-      if (arrived()) break;
+      if (arrivedAt(position)) break;
     }
+  },
+  /** Switch at `scale` times every cutoff (drawn by the next move), seeing to the slider's end. */
+  setLodScale(scale) {
+    for (const scaling of scalings) scaling(scale);
   },
   /** Index of the object drawing the Shape under the pointer of `event`, or null. */
   pick(event) {

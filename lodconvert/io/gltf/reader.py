@@ -1,10 +1,12 @@
 """Reading back the glTF files lodconvert wrote: per root node its levels in ``MSFT_lod`` order
-(:func:`read_lod_gltf`) and chains with the facts of ``extras.lodconvert`` (:func:`read_back`)."""
+(:func:`read_lod_gltf`), chains with the facts of ``extras.lodconvert`` (:func:`read_back`) and
+LOD parents (:func:`read_cells`)."""
 
 from __future__ import annotations
 
 import base64
 import binascii
+import contextlib
 import json
 import struct
 from collections.abc import Iterator
@@ -71,35 +73,85 @@ def read_lod_gltf(path: str | Path, geometry: bool = True) -> list[GltfObject]:
     Raises :class:`InputError` when the file cannot be read, is truncated or malformed, or was
     not written by lodconvert.
     """
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror or exc}", str(path)) from None
-    try:
-        obj, blob = _parse(data)
-        if not isinstance(obj.get("asset", {}).get("extras", {}).get("lodconvert"), dict):
-            raise InputError("not a glTF written by lodconvert (no asset.extras.lodconvert)")
-        scene = obj["scenes"][obj.get("scene", 0)]
-        roots = _object_roots(obj["nodes"], scene.get("nodes", []))
+    with _read_errors(path):
+        obj, blob = _load(Path(path))
+        roots = _object_roots(obj["nodes"], _scene_roots(obj))
         return [_read_object(obj, blob, i, geometry) for i in roots]
+
+
+def read_cells(path: str | Path) -> list[dict[str, Any]]:
+    """The LOD parents of a ``.glb``/``.gltf`` lodconvert wrote, coarsest first in document
+    order (see :mod:`lodconvert.io`): the ``extras.lodconvert`` of each cell's near node,
+    ``far`` (the far node's ``extras.lodconvert``) and, under ``"gltf"``, the indices of the
+    near and far nodes. Raises :class:`InputError` as :func:`read_lod_gltf` does."""
+    with _read_errors(path):
+        obj, _ = _load(Path(path))
+        nodes = obj["nodes"]
+        cells = []
+        for near in _cell_nears(nodes, _scene_roots(obj)):
+            (far,) = nodes[near]["extensions"][MSFT_LOD]["ids"]
+            facts = nodes[near]["extras"]["lodconvert"]
+            where = {"near": near, "far": far}
+            cells.append({**facts, "far": nodes[far]["extras"]["lodconvert"], "gltf": where})
+        return cells
+
+
+@contextlib.contextmanager
+def _read_errors(path: str | Path) -> Iterator[None]:
+    """Turn what reading a glTF file can raise into an :class:`InputError` naming ``path``."""
+    try:
+        yield
     except InputError as exc:
         raise InputError(str(exc), str(path)) from None
     except (ValueError, KeyError, IndexError, TypeError, AttributeError, struct.error) as exc:
         raise InputError(f"malformed glTF ({type(exc).__name__}: {exc})", str(path)) from None
 
 
+def _load(path: Path) -> tuple[dict[str, Any], bytes]:
+    """JSON object and binary buffer of a glTF lodconvert wrote; :class:`InputError` for a file
+    that cannot be read or that lodconvert did not write."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror or exc}") from None
+    obj, blob = _parse(data)
+    if not isinstance(obj.get("asset", {}).get("extras", {}).get("lodconvert"), dict):
+        raise InputError("not a glTF written by lodconvert (no asset.extras.lodconvert)")
+    return obj, blob
+
+
+def _scene_roots(obj: dict[str, Any]) -> list[int]:
+    """The root nodes of the glTF's scene."""
+    return obj["scenes"][obj.get("scene", 0)].get("nodes", [])
+
+
+def _cell_near(nodes: list[dict[str, Any]], index: int) -> int | None:
+    """The near node of the LOD parent whose root is node ``index`` (its first child, whose
+    ``extras.lodconvert`` names a ``cell_id``); ``None`` when node ``index`` is no cell."""
+    children = nodes[index].get("children", [])
+    if children and "cell_id" in nodes[children[0]].get("extras", {}).get("lodconvert", {}):
+        return children[0]
+    return None
+
+
 def _object_roots(nodes: list[dict[str, Any]], indices: list[int]) -> Iterator[int]:
-    """The root nodes of objects among ``indices``, looking inside LOD parents (a root whose
-    first child's ``extras.lodconvert`` names a ``cell_id``: its members are that child's
-    children)."""
+    """The root nodes of objects among ``indices``, looking inside LOD parents (their members
+    are their near node's children)."""
     for index in indices:
-        children = nodes[index].get("children", [])
-        near = nodes[children[0]] if children else {}
-        if "cell_id" in near.get("extras", {}).get("lodconvert", {}):
-            yield from _object_roots(nodes, near.get("children", []))
-        else:
+        near = _cell_near(nodes, index)
+        if near is None:
             yield index
+        else:
+            yield from _object_roots(nodes, nodes[near].get("children", []))
+
+
+def _cell_nears(nodes: list[dict[str, Any]], indices: list[int]) -> Iterator[int]:
+    """The near nodes of the LOD parents among ``indices`` and inside them, coarsest first."""
+    for index in indices:
+        near = _cell_near(nodes, index)
+        if near is not None:
+            yield near
+            yield from _cell_nears(nodes, nodes[near].get("children", []))
 
 
 def _parse(data: bytes) -> tuple[dict[str, Any], bytes]:

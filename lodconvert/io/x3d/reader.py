@@ -1,9 +1,11 @@
-"""Reading back the X3D files lodconvert wrote: level geometry (:func:`read_x3d_points`) and
-chains with the facts declared in the lodconvert ``MetadataSet`` s (:func:`read_back`)."""
+"""Reading back the X3D files lodconvert wrote: level geometry (:func:`read_x3d_points`),
+chains with the facts declared in the lodconvert ``MetadataSet`` s (:func:`read_back`) and
+LOD parents (:func:`read_cells`)."""
 
 from __future__ import annotations
 
 import contextlib
+import json
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -48,6 +50,11 @@ def _numbers(text: str | None, width: int, dtype: type, what: str) -> np.ndarray
     if len(values) % width:
         raise ValueError(f"{what} has {len(values)} values, not a multiple of {width}")
     return values.reshape(-1, width)
+
+
+def _sum(offsets: list[np.ndarray]) -> np.ndarray:
+    """The sum of the enclosing translations ``offsets`` (zero without any)."""
+    return np.sum(offsets, axis=0) if offsets else np.zeros(3)
 
 
 def _read_shape(shape: etree._Element, translation: np.ndarray) -> X3DLevel | None:
@@ -123,8 +130,7 @@ def read_x3d_points(path: str | Path) -> dict[str, X3DLevel]:
             if element.tag == "Transform":
                 offsets.pop()
             elif element.tag == "Shape" and groups and groups[-1][0]:
-                translation = np.sum(offsets, axis=0) if offsets else np.zeros(3)
-                shape = _read_shape(element, translation)
+                shape = _read_shape(element, _sum(offsets))
                 if shape is not None:
                     groups[-1][1].append(shape)
                 element.clear()
@@ -152,6 +158,8 @@ def x3d_read_errors(path: str | Path, malformed: str) -> Iterator[None]:
 
 
 _MFSTRING = re.compile(r'"((?:[^"\\]|\\.)*)"')
+_LISTS = ("xs", "cutoffs", "members")
+"""Metadata entries read as lists even when they hold one value."""
 
 
 def _metadata_values(element: etree._Element) -> dict[str, Any]:
@@ -171,7 +179,7 @@ def _metadata_values(element: etree._Element) -> dict[str, Any]:
             values = [float(v) for v in text.replace(",", " ").split()]
         else:
             continue
-        facts[name] = values if len(values) != 1 or name in ("xs", "cutoffs") else values[0]
+        facts[name] = values if len(values) != 1 or name in _LISTS else values[0]
     return facts
 
 
@@ -182,8 +190,9 @@ def _vector(text: str | None) -> np.ndarray:
 
 def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
     """Per ``LOD`` node carrying lodconvert metadata: its origin (the enclosing translations),
-    centre, chain facts (from the ``MetadataSet`` of its ``Transform``, or of the LOD itself)
-    and, per level ``Group``, its DEF and facts. Shapes are skipped."""
+    centre, chain facts (from the ``MetadataSet`` of its ``Transform``, or of the LOD itself),
+    the DEF of the chain's ``Transform`` and, per level ``Group``, its DEF and facts. Shapes are
+    skipped."""
     objects: list[dict[str, Any]] = []
     lods: dict[str, dict[str, Any]] = {}  # DEF → entry, for LODs that instances USE
     transforms: list[dict[str, Any]] = []  # open Transforms: translation and metadata
@@ -191,7 +200,8 @@ def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
         tag = element.tag
         if event == "start":
             if tag == "Transform":
-                transforms.append({"offset": _vector(element.get("translation")), "facts": {}})
+                offset = _vector(element.get("translation"))
+                transforms.append({"offset": offset, "facts": {}, "def": element.get("DEF")})
             elif tag == "LOD":
                 facts = dict(transforms[-1]["facts"]) if transforms else {}
                 # an instance's own Transform is declared in its facts; the origin is the
@@ -201,12 +211,13 @@ def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
                 ]
                 used = lods.get(element.get("USE", ""))
                 entry = {
-                    "origin": np.sum(offsets, axis=0) if offsets else np.zeros(3),
+                    "origin": _sum(offsets),
                     "center": _vector(element.get("center")) if used is None else used["center"],
                     "facts": facts,
                     "levels": [] if used is None else [dict(lv) for lv in used["levels"]],
                     "element": element,
                     "lod": element.get("DEF") or element.get("USE"),
+                    "transform": transforms[-1]["def"] if transforms else None,
                 }
                 objects.append(entry)
                 if element.get("DEF"):
@@ -244,7 +255,8 @@ def read_back(path: Path, geometry: bool = True) -> list[LodChain]:
     ``MetadataSet`` s and (unless ``geometry`` is false) the level geometry, relative to each
     chain's origin. ``chain.metadata`` holds the object's attributes (the JSON of its
     ``MetadataString name='attributes'``) and, under ``"x3d"`` (in place of an attribute of
-    that name), the ``LOD`` node's DEF."""
+    that name), the DEFs of the ``LOD`` node and of the chain's ``Transform`` (after which
+    prism switching names the nodes that draw the levels)."""
     with x3d_read_errors(path, "metadata"):
         objects = _x3d_facts(path)
     if not objects:
@@ -264,6 +276,74 @@ def read_back(path: Path, geometry: bool = True) -> list[LodChain]:
             levels.append(level_from_facts(facts, positions, faces, colors, where))
         chain_facts = {**obj["facts"], "center": obj["center"]}
         chain = chain_from_facts(object_id, chain_facts, levels, obj["origin"], where)
-        chain.metadata["x3d"] = {"lod": obj["lod"]}
+        chain.metadata["x3d"] = {"lod": obj["lod"], "transform": obj["transform"]}
         chains.append(chain)
     return chains
+
+
+def read_cells(path: str | Path) -> list[dict[str, Any]]:
+    """The LOD parents of an ``.x3d`` lodconvert wrote, coarsest first in document order (see
+    :mod:`lodconvert.io`): the facts of each cell ``Group``'s lodconvert ``MetadataSet``
+    (``facts`` parsed from its JSON), ``center`` (its ``LOD``'s, plus the enclosing
+    translations), ``far`` (the facts of its far level ``Group``) and, under ``"x3d"``, its
+    ``LOD``'s DEF. Raises :class:`~lodconvert.errors.InputError` for a file that cannot be
+    read, or a cell without its ``LOD`` or far level."""
+    cells: list[dict[str, Any]] = []
+    with x3d_read_errors(path, "cell metadata"):
+        opened: list[dict[str, Any]] = []  # cells whose Group is open: group, LOD, entry
+        offsets: list[np.ndarray] = []
+        for event, element in etree.iterparse(str(path), events=("start", "end")):
+            tag, cell = element.tag, opened[-1] if opened else None
+            if event == "start":
+                if tag == "Transform":
+                    offsets.append(_vector(element.get("translation")))
+                elif tag == "LOD" and cell is not None and element.getparent() is cell["group"]:
+                    cell["lod"] = element
+                    centre = _sum(offsets) + _vector(element.get("center"))
+                    cell["entry"]["center"] = centre.tolist()
+                    cell["entry"]["x3d"] = {"lod": element.get("DEF")}
+            elif tag == "Transform":
+                offsets.pop()
+            elif tag == "Shape":
+                element.clear()
+            elif tag == "MetadataSet" and element.get("name") == METADATA_SET:
+                _cell_metadata(element, cell, cells, opened)
+            elif tag == "Group" and cell is not None and element is cell["group"]:
+                _check_cell(opened.pop()["entry"])
+    return cells
+
+
+def _cell_metadata(
+    element: etree._Element,
+    cell: dict[str, Any] | None,
+    cells: list[dict[str, Any]],
+    opened: list[dict[str, Any]],
+) -> None:
+    """Read a lodconvert ``MetadataSet`` ``element`` that :func:`read_cells` met inside the open
+    ``cell`` (or none): a new cell's facts (added to ``cells`` and ``opened``), or its far
+    level's facts (its parent Group lies in a ``Transform`` that is a child of the cell's
+    ``LOD``); other MetadataSets are the objects'."""
+    group = element.getparent()
+    if group is None or group.tag != "Group":
+        return
+    placed = group.getparent()
+    lod = cell["lod"] if cell is not None else None
+    if lod is not None and placed.tag == "Transform" and placed.getparent() is lod:
+        cell["entry"]["far"] = _metadata_values(element)
+        return
+    facts = _metadata_values(element)
+    if "cell_id" in facts:
+        facts["facts"] = json.loads(facts.get("facts") or "{}")
+        cells.append(facts)
+        opened.append({"group": group, "lod": None, "entry": facts})
+
+
+_CELL_PARTS = {"x3d": "LOD", "far": "far level"}
+"""What :func:`read_cells` finds of a cell besides its metadata: entry key → node."""
+
+
+def _check_cell(cell: dict[str, Any]) -> None:
+    """Raise :class:`ValueError` for a cell read without its ``LOD`` or far level."""
+    missing = [node for key, node in _CELL_PARTS.items() if key not in cell]
+    if missing:
+        raise ValueError(f"cell {cell['cell_id']!r} has no {' and no '.join(missing)}")
