@@ -48,7 +48,7 @@ from .bake import Backend
 from .chain import ChainOptions, point_level_at
 from .errors import UsageError
 from .limits import DEFAULT_LIMITS, Limits
-from .model import CellChain, Level, LodChain, Mesh, Surface
+from .model import WHITE, CellChain, Level, LodChain, Mesh, Surface
 from .plan import level_cost, mesh_silhouette_estimate, silhouette_estimate
 from .ranges import cutoff
 
@@ -288,14 +288,15 @@ def _merged(meshes: Sequence[Mesh]) -> Mesh:
 
 
 def _one_part(mesh: Mesh) -> Mesh:
-    """``mesh`` as one part (one draw call): parts' colours become vertex colours; textures
-    are left out (their material colour stands in)."""
+    """``mesh`` as one part (one draw call): parts' colours become vertex colours (on a white
+    base colour, which glTF multiplies them by); textures are left out (their material colour
+    stands in)."""
     colors = mesh.vertex_colors
     if colors is None:
         colors = np.concatenate(
             [np.repeat(p.material_color[None], len(p.vertices), axis=0) for p in mesh.parts]
         )
-    return Mesh([Surface(mesh.vertices, mesh.faces, vertex_colors=colors)])
+    return Mesh([Surface(mesh.vertices, mesh.faces, vertex_colors=colors, base_color=WHITE.copy())])
 
 
 def _centre(member: Member) -> np.ndarray:

@@ -731,7 +731,8 @@ def _write_cell(
                 for member in cell.members:
                     _write_item(out, member, used, written, switching)
             with out.node("Transform", {"DEF": far, "translation": format_exact(cell.origin)}):
-                _write_level(out, cell.far, far_def, cell.cutoffs, 0, cell.alpha)
+                # the far level shows from the cell's first cutoff on, like a chain's second
+                _write_level(out, cell.far, far_def, cell.cutoffs, 1, cell.alpha)
             if cell.culled:
                 out.leaf("Group")
 
