@@ -64,7 +64,7 @@ def cell_record(cell: CellChain) -> dict[str, Any]:
         "id": cell.cell_id,
         "tier": cell.tier,
         "size": cell.size,
-        "members": [m.cell_id if isinstance(m, CellChain) else m.object_id for m in cell.members],
+        "members": cell.member_ids(),
         "cutoffs": list(cell.cutoffs),
         "alpha": cell.alpha,
         "gamma": cell.gamma,

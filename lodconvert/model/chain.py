@@ -132,6 +132,10 @@ class CellChain:
     culled: bool = False
     facts: dict[str, Any] = field(default_factory=dict)
 
+    def member_ids(self) -> list[str]:
+        """Each member's id: an object's, or a finer cell's."""
+        return [m.cell_id if isinstance(m, CellChain) else m.object_id for m in self.members]
+
     def objects(self) -> list[LodChain]:
         """The object chains of this cell and of its finer cells, in order."""
         found: list[LodChain] = []

@@ -208,7 +208,6 @@ def _chain_extras(chain: LodChain) -> dict[str, Any]:
 
 def _cell_extras(cell: CellChain) -> dict[str, Any]:
     """``extras.lodconvert`` of a LOD parent's near node: its switching data and facts."""
-    members = [m.cell_id if isinstance(m, CellChain) else m.object_id for m in cell.members]
     return _plain(
         {
             "cell_id": cell.cell_id,
@@ -222,7 +221,7 @@ def _cell_extras(cell: CellChain) -> dict[str, Any]:
             "xs": cell.xs,
             "culled": cell.culled,
             "center": cell.origin + cell.center,
-            "members": members,
+            "members": cell.member_ids(),
             "facts": cell.facts,
         }
     )

@@ -308,15 +308,22 @@ def _check_chain(chain: LodChain) -> None:
         raise ValueError(f"{chain.object_id}: cutoffs must increase strictly: {chain.cutoffs}")
 
 
+def _switching_metadata(item: LodChain | CellChain) -> list[Metadata]:
+    """α, β, γ, exponents, cutoffs and culling of a chain or a LOD parent."""
+    return [
+        ("MetadataDouble", "alpha", format_exact([item.alpha])),
+        ("MetadataDouble", "beta", format_exact([item.beta])),
+        ("MetadataDouble", "gamma", format_exact([item.gamma])),
+        ("MetadataDouble", "xs", format_exact(item.xs)),
+        ("MetadataDouble", "cutoffs", format_exact(item.cutoffs)),
+        ("MetadataBoolean", "culled", "true" if item.culled else "false"),
+    ]
+
+
 def _chain_metadata(chain: LodChain) -> list[Metadata]:
     entries = [
         ("MetadataString", "object_id", _mfstring([chain.object_id])),
-        ("MetadataDouble", "alpha", format_exact([chain.alpha])),
-        ("MetadataDouble", "beta", format_exact([chain.beta])),
-        ("MetadataDouble", "gamma", format_exact([chain.gamma])),
-        ("MetadataDouble", "xs", format_exact(chain.xs)),
-        ("MetadataDouble", "cutoffs", format_exact(chain.cutoffs)),
-        ("MetadataBoolean", "culled", "true" if chain.culled else "false"),
+        *_switching_metadata(chain),
     ]
     if chain.transform is not None:
         entries.append(("MetadataDouble", "transform", format_exact(chain.transform.ravel())))
@@ -690,20 +697,14 @@ def _write_item(
 
 
 def _cell_metadata(cell: CellChain) -> list[Metadata]:
-    members = [m.cell_id if isinstance(m, CellChain) else m.object_id for m in cell.members]
     facts = json.dumps(cell.facts, sort_keys=True, default=str, ensure_ascii=False)
     return [
         ("MetadataString", "cell_id", _mfstring([cell.cell_id])),
         ("MetadataInteger", "tier", str(cell.tier)),
         ("MetadataDouble", "size", format_exact([cell.size])),
         ("MetadataInteger", "key", " ".join(map(str, cell.key))),
-        ("MetadataDouble", "alpha", format_exact([cell.alpha])),
-        ("MetadataDouble", "beta", format_exact([cell.beta])),
-        ("MetadataDouble", "gamma", format_exact([cell.gamma])),
-        ("MetadataDouble", "xs", format_exact(cell.xs)),
-        ("MetadataDouble", "cutoffs", format_exact(cell.cutoffs)),
-        ("MetadataBoolean", "culled", "true" if cell.culled else "false"),
-        ("MetadataString", "members", _mfstring(members)),
+        *_switching_metadata(cell),
+        ("MetadataString", "members", _mfstring(cell.member_ids())),
         ("MetadataString", "facts", _mfstring([facts])),
     ]
 
