@@ -1,4 +1,4 @@
-"""Browser-test fixtures: a test site served on 127.0.0.1, the node driver, the files under
+"""Browser-test fixtures: a test site served on 127.0.0.1, the node drivers, the files under
 test, and the measurements printed at the end of the run.
 
 The site is a temporary folder holding links to ``node_modules`` (the viewer libraries npm
@@ -10,6 +10,7 @@ Without Chromium, node or the npm packages the tests skip, or fail where
 
 from __future__ import annotations
 
+import functools
 import itertools
 import json
 import os
@@ -31,7 +32,6 @@ from lodconvert.viewer import LIBRARIES, page_path, serve, write_page
 from ..conftest import ROOT, SAMPLE, require
 
 HERE = Path(__file__).resolve().parent
-DRIVER = HERE / "drive.mjs"
 CHROMIUM = Path(os.environ.get("LODCONVERT_CHROMIUM", "/usr/bin/chromium"))
 PACKAGES = ("playwright-core", "x_ite", "x3dom", "three", "@babylonjs/core", "@babylonjs/loaders")
 REQUIRE = "LODCONVERT_REQUIRE_BROWSER"
@@ -97,6 +97,9 @@ def base_url(site: Path) -> Iterator[str]:
 
 
 Drive = Callable[..., dict[str, Any]]
+"""A node driver's runner: its output for a scenario and params (see ``_runner``)."""
+Driver = Callable[[str], Drive]
+"""The runner of a node driver of this folder, by file name."""
 
 
 def console_text(out: dict[str, Any]) -> str:
@@ -105,31 +108,45 @@ def console_text(out: dict[str, Any]) -> str:
     return "browser console:\n  " + "\n  ".join(lines)
 
 
-@pytest.fixture(scope="session")
-def drive(browser_tools: str, base_url: str) -> Drive:
-    """Run a scenario of drive.mjs on the test site (or on the server at ``base``); returns
-    its output, or fails with its error and the browser console."""
+def _runner(node: str, site_url: str, script: str) -> Drive:
+    """``run(*args, base=None, **params)``: run ``node SCRIPT *args BASE_URL PARAMS_JSON``
+    (``args``: the scenario, none for prism.mjs) on the test site at ``site_url``, or on the
+    server at ``base``; returns its output, or fails with its error and the browser console."""
 
-    def run(scenario: str, base: str | None = None, **params: Any) -> dict[str, Any]:
+    def run(*args: str, base: str | None = None, **params: Any) -> dict[str, Any]:
+        what = " ".join((script, *args))
         params["safety_ms"] = SAFETY_S * 1000
-        command = [browser_tools, str(DRIVER), scenario, base or base_url, json.dumps(params)]
+        command = [node, str(HERE / script), *args, base or site_url, json.dumps(params)]
         try:
             # The driver ends itself after SAFETY_S; this only catches a driver that cannot.
             proc = subprocess.run(
                 command, capture_output=True, text=True, timeout=SAFETY_S + 120, check=False
             )
         except subprocess.TimeoutExpired:
-            pytest.fail(f"{scenario}: the browser driver hung (no exit in {SAFETY_S + 120} s)")
+            pytest.fail(f"{what}: the browser driver hung (no exit in {SAFETY_S + 120} s)")
         lines = proc.stdout.strip().splitlines()
         try:
             out = json.loads(lines[-1])
         except (IndexError, json.JSONDecodeError):
-            pytest.fail(f"{scenario}: the driver printed no result\n{proc.stderr[-4000:]}")
+            pytest.fail(f"{what}: the driver printed no result\n{proc.stderr[-4000:]}")
         if not out["ok"]:
-            pytest.fail(f"{scenario}: {out['error']}\n{console_text(out)}")
+            pytest.fail(f"{what}: {out['error']}\n{console_text(out)}")
         return out
 
     return run
+
+
+@pytest.fixture(scope="session")
+def driver(browser_tools: str, base_url: str) -> Driver:
+    """The runner of a node driver of this folder, by file name: ``driver("hlod.mjs")("stops",
+    page=...)`` runs a scenario of hlod.mjs on the test site (see ``_runner``)."""
+    return functools.partial(_runner, browser_tools, base_url)
+
+
+@pytest.fixture(scope="session")
+def drive(driver: Driver) -> Drive:
+    """Run a scenario of drive.mjs: ``drive(scenario, base=None, **params)``."""
+    return driver("drive.mjs")
 
 
 @dataclass

@@ -1,66 +1,13 @@
 #!/usr/bin/env node
-// Drive a web3D viewer in headless Chromium and print what it saw as one line of JSON.
+// Drive a web3D viewer (X_ITE, X3DOM, Babylon.js, three.js or lodconvert's viewer page) in
+// headless Chromium and print what it saw as one line of JSON, with the WebGL renderer's name;
+// its command line, output, waits and hang guard are those of harness.mjs (see there):
 //
 //   node tests/browser/drive.mjs SCENARIO BASE_URL PARAMS_JSON
 //
-// BASE_URL serves the test site (pages/, node_modules/ and the files under test, see
-// conftest.py). Output: {"ok": true, "result": {...}, "console": [...], "renderer": "..."} or
-// {"ok": false, "error": "...", "console": [...]}; exit status 0 or 1. Every wait is on page
-// state (waitForFunction on a flag, a promise the page resolves after its frames are drawn),
-// never a fixed sleep nor a time limit: a loaded machine is slower, not wrong. The one clock is
-// PARAMS.safety_ms, a guard against a hung browser far beyond any normal run, which ends the run
-// with an error naming the step it hung in. "console" holds the page's console messages, page
-// errors and failed requests, for the test's failure message.
-//
-// playwright-core is resolved from node_modules at the repository root; Chromium is Debian's
-// /usr/bin/chromium (LODCONVERT_CHROMIUM overrides), rendering WebGL with SwiftShader.
+// SCENARIO: x_ite, x3dom, babylon, three or viewer (PARAMS: see each below).
 
-import { createRequire } from "node:module";
-import path from "node:path";
-import { fileURLToPath } from "node:url";
-
-const root = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "..", "..");
-const { chromium } = createRequire(path.join(root, "package.json"))("playwright-core");
-
-const FLAGS = [
-  "--headless",
-  "--no-sandbox",
-  "--disable-gpu",
-  "--disable-gpu-watchdog", // SwiftShader frames of a large model on a loaded machine are slow
-  "--disable-background-networking",
-  "--disable-component-update",
-  "--disable-sync",
-  "--no-first-run",
-];
-const NOISE = /GPU stall due to ReadPixels|GL Driver Message/;
-const VIEWPORT = { width: 640, height: 480 };
-
-const [scenario, base, json] = process.argv.slice(2);
-const params = JSON.parse(json ?? "{}");
-const safety = params.safety_ms ?? 600000;
-const log = [];
-let step = "starting Chromium";
-
-/** Print the run's one line of JSON. */
-const emit = (out) => process.stdout.write(JSON.stringify(out) + "\n");
-
-setTimeout(() => {
-  const error = `${step}: no result after ${safety / 1000} s (a guard far beyond a normal run)`;
-  emit({ ok: false, error, console: log });
-  process.exit(1); // Playwright kills the browser on exit
-}, safety).unref();
-
-/** Wait, without a time limit, until `predicate(arg)` is true in the page. */
-async function waitFor(page, what, predicate, arg = null) {
-  step = what;
-  await page.waitForFunction(predicate, arg, { timeout: 0, polling: 100 });
-}
-
-/** `page.evaluate`, recording what it is doing for the hang guard's message. */
-function evaluate(page, what, fn, arg) {
-  step = what;
-  return page.evaluate(fn, arg);
-}
+import { doing, evaluate, openTestPage, openViewer, run, waitFor } from "./harness.mjs";
 
 /**
  * Pixels of the element `selector` that differ from the background (by more than 24 in a
@@ -69,7 +16,7 @@ function evaluate(page, what, fn, arg) {
  * is decoded in the page itself.
  */
 async function pixels(page, selector, background = null) {
-  step = `screenshot of ${selector}`;
+  doing(`screenshot of ${selector}`);
   const png = await page.locator(selector).screenshot();
   return evaluate(page, `reading the screenshot of ${selector}`,
     async ({ data, background }) => {
@@ -94,17 +41,13 @@ async function pixels(page, selector, background = null) {
   );
 }
 
-const fileUrl = (file) => `${base}/${file}`;
-
 const scenarios = {
   /** X_ITE: load params.file, then per stop place the viewer and read params.lod's level. */
-  async x_ite(page) {
-    step = "loading the X_ITE test page";
-    await page.goto(`${base}/pages/x_ite.html`);
-    await waitFor(page, "the X_ITE test page starting", () => window.harness);
+  async x_ite(page, { base, params }) {
+    await openTestPage(page, base, "x_ite", "X_ITE");
     const firstFrameMs = await evaluate(page, `X_ITE loading ${params.file}`,
       ([url, lods]) => window.harness.load(url, lods),
-      [fileUrl(params.file), params.lod ? [params.lod] : []],
+      [`${base}/${params.file}`, params.lod ? [params.lod] : []],
     );
     const stops = [];
     for (const stop of params.stops ?? []) {
@@ -120,9 +63,10 @@ const scenarios = {
   },
 
   /** X3DOM: load params.file in an Inline, wait until it is drawn, collect X3DOM's log. */
-  async x3dom(page) {
-    step = "loading the X3DOM test page";
-    await page.goto(`${base}/pages/x3dom.html?file=${encodeURIComponent(fileUrl(params.file))}`);
+  async x3dom(page, { base, params }) {
+    doing("loading the X3DOM test page");
+    const file = encodeURIComponent(`${base}/${params.file}`);
+    await page.goto(`${base}/pages/x3dom.html?file=${file}`);
     await waitFor(page, "X3DOM loading the Inline", () => {
       return window.harness?.loaded || window.harness?.error;
     });
@@ -143,25 +87,21 @@ const scenarios = {
   },
 
   /** Babylon.js: load params.file (MSFT_lod limited to params.maxLods levels if given). */
-  async babylon(page) {
-    step = "loading the Babylon.js test page";
-    await page.goto(`${base}/pages/babylon.html`);
-    await waitFor(page, "the Babylon.js test page starting", () => window.harness);
+  async babylon(page, { base, params }) {
+    await openTestPage(page, base, "babylon", "Babylon.js");
     const result = await evaluate(page, `Babylon.js loading ${params.file}`,
       ([url, maxLods]) => window.harness.load(url, maxLods),
-      [fileUrl(params.file), params.maxLods ?? null],
+      [`${base}/${params.file}`, params.maxLods ?? null],
     );
     return { ...result, ...(await pixels(page, "canvas")) };
   },
 
   /** three.js: load params.file and draw node params.node alone. */
-  async three(page) {
-    step = "loading the three.js test page";
-    await page.goto(`${base}/pages/three.html`);
-    await waitFor(page, "the three.js test page starting", () => window.harness);
+  async three(page, { base, params }) {
+    await openTestPage(page, base, "three", "three.js");
     const result = await evaluate(page, `three.js loading ${params.file}`,
       ([url, node]) => window.harness.show(url, node),
-      [fileUrl(params.file), params.node],
+      [`${base}/${params.file}`, params.node],
     );
     return { ...result, ...(await pixels(page, "canvas")) };
   },
@@ -171,27 +111,21 @@ const scenarios = {
    * by pressing `key` on the distance slider, and read every object's state once drawn there
    * (with `shot`, the page is saved there as a PNG first).
    */
-  async viewer(page) {
-    step = `loading the viewer page ${params.page}`;
-    await page.goto(fileUrl(params.page));
-    await waitFor(page, "the viewer page loading", () => {
-      return window.lodconvertViewer?.ready || window.lodconvertViewer?.error;
-    });
-    const error = await evaluate(page, "reading its error", () => window.lodconvertViewer.error);
-    if (error) throw new Error(`viewer page: ${error}`);
+  async viewer(page, { base, params }) {
+    await openViewer(page, base, params.page);
     const stops = [];
     for (const stop of params.stops) {
       if (stop.key === undefined) {
         const move = (d) => window.lodconvertViewer.setDistance(d);
         await evaluate(page, `moving to ${stop.distance}`, move, stop.distance);
       } else {
-        step = `pressing ${stop.key} on the slider`;
+        doing(`pressing ${stop.key} on the slider`);
         await page.locator("#distance").press(stop.key);
         const settled = () => window.lodconvertViewer.settled;
         await waitFor(page, `moving after ${stop.key} on the slider`, settled);
       }
       if (stop.shot) {
-        step = `saving a screenshot at ${stop.distance}`;
+        doing(`saving a screenshot at ${stop.distance}`);
         await page.screenshot({ path: stop.shot });
       }
       const panel = (shown) => { document.getElementById("panel").style.visibility = shown; };
@@ -211,37 +145,4 @@ const scenarios = {
   },
 };
 
-async function main() {
-  if (!(scenario in scenarios)) throw new Error(`unknown scenario ${scenario}`);
-  const browser = await chromium.launch({
-    executablePath: process.env.LODCONVERT_CHROMIUM || "/usr/bin/chromium",
-    args: FLAGS,
-    timeout: 0,
-  });
-  try {
-    const page = await browser.newPage({ viewport: VIEWPORT });
-    page.setDefaultTimeout(0); // no time limits: the guard above catches a hung browser
-    page.on("console", (m) => NOISE.test(m.text()) || log.push(`${m.type()}: ${m.text()}`));
-    page.on("pageerror", (e) => log.push(`pageerror: ${e.message}`));
-    page.on("requestfailed", (r) => log.push(`requestfailed: ${r.url()} ${r.failure()?.errorText}`));
-    page.on("response", (r) => r.status() >= 400 && log.push(`HTTP ${r.status()}: ${r.url()}`));
-    const result = await scenarios[scenario](page);
-    const renderer = await evaluate(page, "reading the WebGL renderer", () => {
-      const gl = document.createElement("canvas").getContext("webgl2");
-      const info = gl?.getExtension("WEBGL_debug_renderer_info");
-      return info ? gl.getParameter(info.UNMASKED_RENDERER_WEBGL) : "no WebGL 2";
-    });
-    return { ok: true, result, console: log, renderer };
-  } finally {
-    step = "closing Chromium";
-    await browser.close();
-  }
-}
-
-main().then(
-  (out) => emit(out),
-  (error) => {
-    emit({ ok: false, error: String(error?.message ?? error), console: log });
-    process.exitCode = 1;
-  },
-);
+run(scenarios, { renderer: true });

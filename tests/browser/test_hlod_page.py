@@ -23,8 +23,7 @@ from lodconvert.pipeline import convert
 from lodconvert.viewer import LIBRARIES, page_config, write_page
 
 from ..conftest import SAMPLE, SHARED
-from . import conftest
-from .conftest import Chain, Drive, console_text
+from .conftest import Chain, Drive, Driver, console_text
 from .test_prism_switching import _box_level
 from .test_viewers import _errors
 
@@ -35,12 +34,10 @@ LISTED = 8
 """Objects the page's readout lists (the first ones)."""
 
 
-@pytest.fixture
-def hlod(drive: Drive, monkeypatch: pytest.MonkeyPatch) -> Drive:
-    """The browser fixture ``drive`` running hlod.mjs instead of drive.mjs (same command line,
-    output and failures)."""
-    monkeypatch.setattr(conftest, "DRIVER", conftest.HERE / "hlod.mjs")
-    return drive
+@pytest.fixture(scope="module")
+def hlod(driver: Driver) -> Drive:
+    """Run hlod.mjs's scenario ``stops``."""
+    return driver("hlod.mjs")
 
 
 def _make(site: Path, source: Path, name: str, **options: Any) -> Chain:

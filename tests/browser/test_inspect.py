@@ -14,8 +14,7 @@ from lxml import etree
 from lodconvert.io import read_chains
 
 from ..conftest import SHARED
-from . import conftest
-from .conftest import Chain, Drive, console_text, make_chain
+from .conftest import Chain, Drive, Driver, console_text, make_chain
 from .test_viewers import _errors
 
 pytestmark = pytest.mark.browser
@@ -32,12 +31,10 @@ no object shows beyond asin(1 / 2.5) = 23.6° off the axis; the corner of a 4:3 
 34.6° off it."""
 
 
-@pytest.fixture
-def inspect(drive: Drive, monkeypatch: pytest.MonkeyPatch) -> Drive:
-    """The browser fixture ``drive`` running inspect.mjs instead of drive.mjs (same command
-    line, output and failures)."""
-    monkeypatch.setattr(conftest, "DRIVER", conftest.HERE / "inspect.mjs")
-    return drive
+@pytest.fixture(scope="module")
+def inspect(driver: Driver) -> Drive:
+    """Run inspect.mjs's scenario ``clicks``."""
+    return driver("inspect.mjs")
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,7 @@ from the Switches' ``whichChoice`` through X_ITE's scripting API (tests/browser/
 
 from __future__ import annotations
 
-import json
-import subprocess
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -21,11 +18,10 @@ from lodconvert.io.x3d import prism_boxes, write_x3d
 from lodconvert.model import Level, LodChain, Surface
 from lodconvert.ranges import cutoffs
 
-from .conftest import SAFETY_S, console_text
+from .conftest import Drive, Driver
 
 pytestmark = pytest.mark.browser
 
-DRIVER = Path(__file__).with_name("prism.mjs")
 BUILDING = (60.0, 10.0, 10.0)
 """A 60 m × 10 m × 10 m building, long along x."""
 BETA, GAMMA = 0.5, 2.0
@@ -83,29 +79,14 @@ def block(site: Path) -> tuple[str, list[LodChain]]:
     return name, chains
 
 
-def _drive(node: str, base_url: str, **params: Any) -> list[list[dict[str, Any]]]:
-    """Run prism.mjs on the test site; the levels it saw per stop and object, or a failure
-    with its error and the browser console."""
-    params["safety_ms"] = SAFETY_S * 1000
-    command = [node, str(DRIVER), base_url, json.dumps(params)]
-    try:
-        # The driver ends itself after SAFETY_S; this only catches a driver that cannot.
-        proc = subprocess.run(
-            command, capture_output=True, text=True, timeout=SAFETY_S + 120, check=False
-        )
-    except subprocess.TimeoutExpired:
-        pytest.fail(f"prism.mjs hung (no exit in {SAFETY_S + 120} s)")
-    lines = proc.stdout.strip().splitlines()
-    if not lines:
-        pytest.fail(f"prism.mjs printed no result\n{proc.stderr[-4000:]}")
-    out = json.loads(lines[-1])
-    if not out["ok"]:
-        pytest.fail(f"prism.mjs: {out['error']}\n{console_text(out)}")
-    return out["result"]["stops"]
+@pytest.fixture(scope="module")
+def prism(driver: Driver) -> Drive:
+    """Run prism.mjs (no scenario on its command line)."""
+    return driver("prism.mjs")
 
 
 def test_x_ite_switches_levels_on_boxes(
-    block: tuple[str, list[LodChain]], browser_tools: str, base_url: str, measure
+    block: tuple[str, list[LodChain]], prism: Drive, measure
 ) -> None:
     name, chains = block
     near = chains[0]
@@ -119,7 +100,7 @@ def test_x_ite_switches_levels_on_boxes(
     stops = [{"expected": expected[0]}]  # the viewer X_ITE starts with, before any move
     stops += [{"position": p, "expected": e} for p, e in zip(places[1:], expected[1:], strict=True)]
     objects = [{"base": chain.object_id, "switches": len(chain.cutoffs)} for chain in chains]
-    seen = _drive(browser_tools, base_url, file=name, objects=objects, stops=stops)
+    seen = prism(file=name, objects=objects, stops=stops)["result"]["stops"]
     levels = [[obj["level"] for obj in stop] for stop in seen]
     message = f"expected {expected}, saw {seen}"
     assert levels == expected, message
