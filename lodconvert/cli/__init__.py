@@ -13,6 +13,7 @@ terminated. Errors are one line on stderr (``lodconvert: error: FILE: what is wr
 from __future__ import annotations
 
 import argparse
+import ctypes
 import importlib
 import signal
 import sys
@@ -110,9 +111,34 @@ def run_command(name: str, argv: Sequence[str]) -> int:
     return _guarded(args, console, lambda: module.run(args, console))
 
 
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+"""glibc ``mallopt`` parameters."""
+HEAP_RETURN_BYTES = 64 * 1024
+"""Freed blocks from this size up go back to the system at once (see
+:func:`_return_freed_memory`)."""
+
+
+def _return_freed_memory() -> None:
+    """Ask glibc's allocator to hand freed memory back to the system at once: blocks of
+    :data:`HEAP_RETURN_BYTES` or more get mappings of their own, and the heap is trimmed when
+    that much is free at its top. A conversion allocates and frees arrays of every size object
+    after object; with the defaults the holes this leaves in the heap keep the peak growing with
+    the city (29,000 buildings to X3D: 362 MiB, against 235 MiB so, at the same speed). Other C
+    libraries are left as they are."""
+    if not sys.platform.startswith("linux"):
+        return
+    try:
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):
+        return
+    mallopt(M_MMAP_THRESHOLD, HEAP_RETURN_BYTES)
+    mallopt(M_TRIM_THRESHOLD, HEAP_RETURN_BYTES)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lodconvert`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    _return_freed_memory()
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         if argv and argv[0] in COMMANDS:
