@@ -623,7 +623,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     )  # fmt: skip
     parser.add_argument(
         "--altitudes", type=lambda t: [float(v) for v in t.split(",")],
-        default=[100.0, 300.0, 600.0, 1200.0], metavar="H,..", help="flight altitudes, m",
+        default=[100.0, 300.0, 600.0, 1200.0, 2500.0, 5000.0], metavar="H,..",
+        help="flight altitudes, m",
     )  # fmt: skip
     parser.add_argument("--flight-frames", type=int, help="positions per flight (24; quick 8)")
     parser.add_argument("--no-gl", action="store_true", help="count only, draw nothing")

@@ -268,3 +268,16 @@ def test_a_drawn_frame_shows_the_selected_parts(block: CityDraw, renderer: CityR
     cameras = [camera, looking_at(block, 5000.0)]
     stats = walk(block, cameras, [Mode("parent", tiers=1)], 1.0, renderer)
     assert len(stats["parent"].frame_seconds) == 2
+
+
+def test_one_tier_draws_the_objects_only_a_coarser_cell_admitted() -> None:
+    city = city_draw(baked(town(4), (50.0, 200.0)))
+    # some building no 50 m cell admits (its prism is far out) is held by its 200 m cell
+    held = city.object_cell[city.object_cell >= 0]
+    assert (city.cell_tier[held] == 2).any()
+    camera = looking_at(city, 100.0)
+    lod = select(city, camera, Mode("lod", culling=False))
+    for tiers in (1, 2):
+        near = select(city, camera, Mode("parent", culling=False, tiers=tiers))
+        # near every cell, LOD parents draw what per-building LOD draws: every object
+        assert near.calls == lod.calls == city.objects

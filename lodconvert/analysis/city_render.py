@@ -571,8 +571,10 @@ def select(city: CityDraw, camera: Camera, mode: Mode, scale: float = 1.0) -> Se
     opened, far_shown = _open_cells(city, eye, planes, mode, scale)
     candidates = np.arange(city.objects)
     if mode.tiers > 0:
-        cell = city.object_cell
-        candidates = candidates[(cell < 0) | opened[np.maximum(cell, 0)]]
+        cell = np.maximum(city.object_cell, 0)
+        # an object in no cell, or held directly by a tier above those in use, draws alone
+        alone = (city.object_cell < 0) | (city.cell_tier[cell] > mode.tiers)
+        candidates = candidates[alone | opened[cell]]
     if planes is not None:
         inside = spheres_in_frustum(city.centres[candidates], city.radii[candidates, None], planes)
         candidates = candidates[inside]
