@@ -6,7 +6,6 @@ from __future__ import annotations
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -24,15 +23,19 @@ def test_an_interrupted_run_leaves_nothing(
     trimesh.creation.icosphere(subdivisions=5).export(source)
     out = tmp_path / "out" / "sphere.glb"
     out.parent.mkdir()
-    command = [sys.executable, "-m", "lodconvert", str(source), "-o", str(out)]
-    # a slow bake, so that the signal arrives while the run is under way
+    command = [sys.executable, "-m", "lodconvert", str(source), "-o", str(out), "-v"]
+    # a slow bake (seconds a level), so that the signal arrives while the run is under way
     command += ["--resolution", "1024,512,256", "--no-mesh", "--levels", "3"]
     with subprocess.Popen(command, stderr=subprocess.PIPE, text=True) as run:
-        while not any(out.parent.iterdir()):  # the staged output: the run has started
-            assert run.poll() is None, run.stderr.read() if run.stderr else ""
-            time.sleep(0.01)  # poll the state, not a time limit
+        assert run.stderr is not None
+        seen = []
+        while not any("baking" in line for line in seen[-1:]):  # the state: a level is baking
+            line = run.stderr.readline()
+            assert line, "".join(seen)  # the run ended before baking
+            seen.append(line)
+        assert any(out.parent.iterdir())  # its staged output exists
         run.send_signal(sig)
-        stderr = run.stderr.read() if run.stderr else ""
+        stderr = "".join(seen) + run.stderr.read()
         assert run.wait() == code, stderr
     lines = stderr.strip().splitlines()
     assert lines[-1] == f"lodconvert: {word}" and "Traceback" not in stderr, stderr
