@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import itertools
 import math
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -350,25 +350,27 @@ def _coarsest_from(member: Member) -> float:
 
 
 def draw_counts(items: Sequence[Member]) -> dict[str, int]:
-    """Shapes written, and draw calls and vertices + points drawn when every item is seen
-    from beyond all its cutoffs (culling aside): the far view of a city."""
-    shapes = calls = drawn = 0
+    """Scene-graph nodes (a root and a node per level for an object; a root, a near and a far
+    node for a cell, as in glTF) and shapes written, and draw calls and vertices + points drawn
+    when every item is seen from beyond all its cutoffs (culling aside): the far view of a
+    city."""
+    nodes = shapes = calls = drawn = 0
     for item in items:
-        for cell in item.cells() if isinstance(item, CellChain) else []:
-            shapes += _parts(cell.far)
-        for chain in item.objects() if isinstance(item, CellChain) else [item]:
-            shapes += sum(_parts(level) for level in chain.levels)
+        cells = item.cells() if isinstance(item, CellChain) else []
+        chains = item.objects() if isinstance(item, CellChain) else [item]
+        nodes += 3 * len(cells) + sum(1 + len(chain.levels) for chain in chains)
+        shapes += sum(_parts(cell.far) for cell in cells)
+        shapes += sum(_parts(level) for chain in chains for level in chain.levels)
         far = item.far if isinstance(item, CellChain) else item.levels[-1]
         calls += _parts(far)
         drawn += far.count
-    return {"shapes": shapes, "far_draw_calls": calls, "far_vertices_and_points": drawn}
+    return {
+        "nodes": nodes,
+        "shapes": shapes,
+        "far_draw_calls": calls,
+        "far_vertices_and_points": drawn,
+    }
 
 
 def _parts(level: Level) -> int:
     return len(level.mesh.parts) if level.mesh is not None else 1
-
-
-def walk_cells(cells: Sequence[CellChain]) -> Iterator[CellChain]:
-    """Every cell of ``cells`` and their finer cells, coarsest first."""
-    for cell in cells:
-        yield from cell.cells()

@@ -161,11 +161,13 @@ def _hlod_line(hlod: dict[str, Any]) -> str:
     made = ", ".join(f"{n:,} {kind}" for kind, n in sorted(kinds.items()))
     lowest = min(min(cell["silhouette_f"].values()) for cell in hlod["cells"])
     chosen = min(cell["silhouette_f"][cell["kind"]] for cell in hlod["cells"])
-    calls = hlod["draw"]["with"]["far_draw_calls"], hlod["draw"]["without"]["far_draw_calls"]
+    ours, alone = hlod["draw"]["with"], hlod["draw"]["without"]
     return (
-        f"LOD parents: {len(hlod['cells']):,} cell(s) ({made}); seen from afar "
-        f"{calls[0]:,} draw call(s) instead of {calls[1]:,}; far levels' silhouette F ≥ "
-        f"{chosen:.3f} (lowest candidate {lowest:.3f})"
+        f"LOD parents: {len(hlod['cells']):,} cell(s) ({made}); {ours['nodes']:,} nodes and "
+        f"{ours['shapes']:,} shapes (without: {alone['nodes']:,} and {alone['shapes']:,}); "
+        f"seen from afar {ours['far_draw_calls']:,} draw call(s) instead of "
+        f"{alone['far_draw_calls']:,}; far levels' silhouette F ≥ {chosen:.3f} (lowest "
+        f"candidate {lowest:.3f})"
     )
 
 
