@@ -6,7 +6,9 @@ import json
 import os
 import shutil
 import subprocess
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -140,3 +142,16 @@ def gltf_validator():
         return json.loads(run.stdout)
 
     return validate
+
+
+def gl_renderer(make: Callable[[], Any]) -> Iterator[Any]:
+    """For a fixture to ``yield from``: the renderer ``make()`` opens, released afterwards;
+    skips (or fails under LODCONVERT_REQUIRE_GL=1) without an EGL context."""
+    from lodconvert.errors import LodConvertError
+
+    try:
+        renderer = make()
+    except LodConvertError as exc:
+        require(False, str(exc), env="LODCONVERT_REQUIRE_GL")
+    yield renderer
+    renderer.release()

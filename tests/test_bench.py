@@ -25,11 +25,11 @@ from lodconvert.analysis.bench import (
 )
 from lodconvert.analysis.render import look_at, perspective
 from lodconvert.cli import main
-from lodconvert.errors import InputError, LodConvertError
+from lodconvert.errors import InputError
 from lodconvert.pipeline import convert
 from lodconvert.plan import POINT_COST
 
-from .conftest import SAMPLE, require
+from .conftest import SAMPLE, gl_renderer
 
 SMALL = "4,9,25"
 
@@ -62,12 +62,7 @@ def knot(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 def renderer() -> Iterator[GridRenderer]:
     """One renderer for the module; skips (or fails under LODCONVERT_REQUIRE_GL=1) without an
     EGL context."""
-    try:
-        r = GridRenderer()
-    except LodConvertError as exc:
-        require(False, str(exc), env="LODCONVERT_REQUIRE_GL")
-    yield r
-    r.release()
+    yield from gl_renderer(GridRenderer)
 
 
 def test_grid_is_a_centred_square_lattice_going_away_from_the_camera() -> None:

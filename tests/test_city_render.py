@@ -32,12 +32,11 @@ from lodconvert.analysis.city_render import (
 )
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
-from lodconvert.errors import LodConvertError
 from lodconvert.hlod import HlodOptions
 from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene, Surface
 from lodconvert.pipeline import iter_chains
 
-from .conftest import require
+from .conftest import gl_renderer
 
 LONG_BOX = np.array([[[-15.0, -3.0, 0.0], [15.0, 3.0, 10.0]]])
 """A 30 m × 6 m × 10 m building, its centre at (0, 0, 5)."""
@@ -247,12 +246,7 @@ def test_a_flight_counts_what_each_mode_submits_without_gl() -> None:
 @pytest.fixture(scope="module")
 def renderer() -> Iterator[CityRenderer]:
     """One renderer; skips (or fails under LODCONVERT_REQUIRE_GL=1) without an EGL context."""
-    try:
-        r = CityRenderer()
-    except LodConvertError as exc:
-        require(False, str(exc), env="LODCONVERT_REQUIRE_GL")
-    yield r
-    r.release()
+    yield from gl_renderer(CityRenderer)
 
 
 @pytest.mark.gl
