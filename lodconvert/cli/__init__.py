@@ -123,8 +123,7 @@ def _return_freed_memory() -> None:
     :data:`HEAP_RETURN_BYTES` or more get mappings of their own, and the heap is trimmed when
     that much is free at its top. A conversion allocates and frees arrays of every size object
     after object; with the defaults the holes this leaves in the heap keep the peak growing with
-    the city (29,000 buildings to X3D: 362 MiB, against 235 MiB so, at the same speed). Other C
-    libraries are left as they are."""
+    the city (``benchmarks/results/city.md``). Other C libraries are left as they are."""
     if not sys.platform.startswith("linux"):
         return
     try:
