@@ -351,6 +351,28 @@ def test_degenerate_ring_object_is_reported_and_the_rest_convert(
     refused(alone, out_dir, "flat", "no area")
 
 
+@pytest.mark.parametrize(
+    ("ring", "reason"),
+    [
+        ("0 0 0 10 0 0 10 ten 0 0 0 0", "not a number"),
+        ("0 0 0 10 0 0 10 10 0 0 0", "not whole points"),
+        ("0 0 0 2e15 0 0 2e15 2e15 0 0 0 0", "magnitude"),
+    ],
+)
+def test_unreadable_coordinates_skip_their_building_only(
+    tmp_path: Path, ring: str, reason: str
+) -> None:
+    """One building with coordinates that cannot be read is skipped with the reason; the
+    buildings before and after it in the same batch convert."""
+    good = [building(f"good{i}", box(20.0 * i)) for i in range(3)]
+    path = tmp_path / "city.gml"
+    path.write_text(document(good[0], building("bad", [*box(100.0), ring]), *good[1:]))
+    scene = read_scene(path)
+    assert [node.id for node in scene.nodes] == ["good0", "good1", "good2"]
+    (skipped,) = scene.attributes["input_checks"].skipped
+    assert skipped["id"] == "bad" and reason in skipped["reason"]
+
+
 def test_depth_and_text_limits_are_one_line_errors(tmp_path: Path) -> None:
     path = tmp_path / "city.gml"
     path.write_text(document(building("B1", box())))

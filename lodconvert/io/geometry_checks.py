@@ -166,11 +166,19 @@ def kept_faces(vertices: np.ndarray, faces: Any, where: str) -> tuple[np.ndarray
             f"exist (index {example}; {n:,} vertices, 0 to {n - 1:,})",
             where,
         )
-    keep = np.concatenate(
-        [_with_area(vertices, f[start : start + _CHUNK]) for start in range(0, len(f), _CHUNK)]
-    )
+    keep = faces_with_area(vertices, f)
     dropped = int(len(f) - keep.sum())
     return (f[keep] if dropped else f), dropped
+
+
+def faces_with_area(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Whether each of ``faces`` ((m, 3) int64, valid indices) has area: three distinct
+    vertices, not (nearly exactly) on a line. Checked in chunks of :data:`_CHUNK` faces."""
+    if len(faces) <= _CHUNK:
+        return _with_area(vertices, faces)
+    return np.concatenate(
+        [_with_area(vertices, faces[at : at + _CHUNK]) for at in range(0, len(faces), _CHUNK)]
+    )
 
 
 def _with_area(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

@@ -1,0 +1,112 @@
+"""CityGML reader: CityGML 1.0, 2.0 and 3.0 (``.gml``, ``.xml``, and a ``.gz`` or ``.zip``
+holding one such file), streamed one city object at a time.
+
+Every top-level city object (a ``Building``, ``Bridge``, ``Road``, ``LandUse``, ``WaterBody``,
+``PlantCover``, ``GenericCityObject``… typed by its element's local name) becomes one
+:class:`Node`. Each LoD the object carries (``lodNSolid``, ``lodNMultiSurface``,
+``lodNGeometry``, ``lod0FootPrint``/``lod0RoofEdge``, and the same properties of its thematic
+surfaces, openings and installations) is read into ``node.lods`` as ``"lod0"`` … ``"lod4"``, one
+:class:`Surface` per semantic type (``RoofSurface``, ``WallSurface``, ``Window``…) coloured by
+:mod:`lodconvert.semantics`; ``node.geometry`` is the highest LoD above 0 with faces (LoD 0 when
+there is no other). A polygon that a solid refers to (``xlink:href``) and a thematic surface
+holds is read once, with its semantics. Building (bridge, tunnel) parts are children of their
+object: each keeps its own attributes and LoDs, and their geometry is part of the object's, so
+that a building is one object of the output however many parts it has. Interiors (rooms,
+furniture) and terrain (``ReliefFeature``) are not read.
+
+Geometry stays in the file's coordinates (float64) when its CRS is projected; a geographic CRS
+(latitude, longitude, height: EPSG:6697, 4326, 4979) is projected onto a transverse Mercator
+centred on the data (:class:`LocalFrame`), whose PROJ definition becomes the scene's CRS.
+
+The parse is hardened: no DTD is loaded, no entity resolved, no network used, and a document
+with a DOCTYPE is refused before its content is read; the nesting depth and text size of the
+geometry read are held to the run's :class:`~lodconvert.limits.Limits` (libxml2's own limits
+bound the rest), and so is what a ``.gz`` or ``.zip`` inflates to. Only the root's children
+reach Python as the document streams; city objects are read :data:`~.document.BATCH` at a time
+and their elements freed once converted, so memory follows the batch, not the file.
+
+What a reader must check passes :mod:`..geometry_checks`: a polygon whose ring is degenerate
+(fewer than three distinct points, no area) is dropped and counted with the object's dropped
+faces; an object left with nothing, or whose coordinates cannot be read (a word that is not a
+number, a ring of partial points, a vertex that is not finite), is recorded as skipped.
+"""
+
+from __future__ import annotations
+
+from itertools import chain
+from pathlib import Path
+from typing import Any
+
+from ...errors import InputError
+from ...limits import DEFAULT_LIMITS, Limits
+from ...model import Scene
+from ...semantics import DEFAULT_PALETTE, Palette
+from .. import Format
+from ..geometry_checks import InputTally, attach_tally
+from .crs import Crs, LocalFrame
+from .document import Document
+from .names import CITYGML_NAMESPACE
+
+__all__ = ["CITYGML_NAMESPACE", "FORMAT", "LocalFrame", "read_citygml"]
+
+
+def read_citygml(
+    path: Path,
+    limits: Limits = DEFAULT_LIMITS,
+    types: frozenset[str] | None = None,
+    colors: Palette = DEFAULT_PALETTE,
+    crs: str | None = None,
+) -> Scene:
+    """Read a CityGML file (``.gml``/``.xml``, or a ``.gz``/``.zip`` of one) into a Scene whose
+    nodes are streamed; raise :class:`InputError` with a one-line reason. ``crs`` (an EPSG
+    name or URN) replaces whatever CRS the document declares.
+
+    ``types``: read only top-level city objects of these types (local names: ``Building``,
+    ``Road``…); None reads every type. The document is parsed up to its first city object
+    before this returns (so that the scene's CRS is known); the rest as the nodes are taken.
+    The scene's attributes hold the CityGML version, the vertical CRS, the local frame of a
+    geographic CRS, and counts (links not resolved, degenerate polygons, features not read).
+    """
+    path = Path(path)
+    source = str(path)
+    if not path.exists():
+        raise InputError("no such file", source)
+    if path.is_dir():
+        raise InputError("is a directory, not a CityGML file", source)
+    if path.stat().st_size == 0:
+        raise InputError("is empty", source)
+    tally = InputTally(source, limits)
+    document = Document(path, limits, types, tally, colors)
+    if crs is not None:
+        document.crs = Crs.of(crs)
+    nodes = document.nodes()
+    first = next(nodes, None)
+    if first is None and len(tally.skipped) == 1:
+        raise InputError(tally.skipped[0]["reason"], source)
+    if first is None and tally.skipped:
+        reason = tally.skipped[0]["reason"]
+        raise InputError(f"none of its {len(tally.skipped):,} objects is left ({reason}…)", source)
+    if first is None:
+        wanted = f" of type {', '.join(sorted(types))}" if types else ""
+        raise InputError(f"has no city objects{wanted} with surface geometry", source)
+    declared = document.crs or Crs()
+    attributes: dict[str, Any] = {"citygml_version": document.version, "citygml": document.stats}
+    if declared.vertical:
+        attributes["vertical_crs"] = declared.vertical
+    if declared.frame is not None:
+        attributes["local_frame"] = declared.frame.record()
+    scene = Scene(
+        source=source,
+        nodes=chain([first], nodes),
+        crs=declared.scene_crs,
+        attributes=attributes,
+    )
+    return attach_tally(scene, tally)
+
+
+FORMAT = Format(
+    name="citygml",
+    suffixes=(".gml", ".xml", ".zip"),
+    read=read_citygml,
+    read_options=("limits", "types", "colors", "crs"),
+)

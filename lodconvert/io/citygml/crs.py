@@ -1,0 +1,114 @@
+"""Coordinate reference systems of CityGML documents: the declared EPSG CRS, and the local
+metric frame that geographic coordinates (latitude, longitude, height) are projected into."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+_EPSG = re.compile(r"EPSG(?:/[\d.]+/|:[\d.]*:|:)(\d+)", re.IGNORECASE)
+
+
+@dataclass(frozen=True)
+class LocalFrame:
+    """A transverse Mercator centred on geographic data (``lat0``, ``lon0`` in degrees) on the
+    source's ellipsoid: metres east, north and the source's height."""
+
+    source_crs: str
+    lat0: float
+    lon0: float
+    semi_major: float
+    inverse_flattening: float
+    lat_axis: int
+    lon_axis: int
+
+    @property
+    def proj(self) -> str:
+        """The frame's PROJ definition."""
+        return (
+            f"+proj=tmerc +lat_0={self.lat0:.9f} +lon_0={self.lon0:.9f} +k=1 +x_0=0 +y_0=0 "
+            f"+a={self.semi_major!r} +rf={self.inverse_flattening!r} +units=m +no_defs"
+        )
+
+    def record(self) -> dict[str, Any]:
+        """What the scene's attributes keep of the frame (JSON-able)."""
+        return {"proj": self.proj, "source_crs": self.source_crs, "center": [self.lat0, self.lon0]}
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """``points`` (n, 3) in the source's axis order, in this frame's metres."""
+        import pyproj
+
+        pipeline = pyproj.Transformer.from_pipeline(
+            "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
+            f"+step {self.proj.replace(' +units=m +no_defs', '')}"
+        )
+        x, y = pipeline.transform(points[:, self.lon_axis], points[:, self.lat_axis])
+        return np.stack([x, y, points[:, 2]], axis=1)
+
+
+@dataclass
+class Crs:
+    """The document's CRS: its EPSG name (horizontal part), vertical part, and the local frame
+    geographic coordinates are projected into (set from the first object's coordinates)."""
+
+    name: str | None = None
+    vertical: str | None = None
+    geographic: Any = None
+    frame: LocalFrame | None = None
+
+    @classmethod
+    def of(cls, srs_name: str) -> Crs:
+        codes = _EPSG.findall(srs_name)
+        if not codes:
+            return cls(name=srs_name)
+        crs = cls(name=f"EPSG:{codes[0]}", vertical=f"EPSG:{codes[1]}" if len(codes) > 1 else None)
+        crs.geographic = _geographic(int(codes[0]))
+        return crs
+
+    @property
+    def scene_crs(self) -> str | None:
+        """What outputs record: the local frame's PROJ definition, else the EPSG name."""
+        return self.frame.proj if self.frame is not None else self.name
+
+    def to_metric(self, points: np.ndarray, first: int | None = None) -> np.ndarray:
+        """``points`` in metres: projected onto the local frame when geographic (the frame is
+        centred on the first call's points, or on its first ``first`` of them)."""
+        if self.geographic is None or not len(points):
+            return points
+        if self.frame is None:
+            lat_axis, lon_axis = self.geographic["axes"]
+            centred = points[:first] if first else points
+            center = (centred.min(axis=0) + centred.max(axis=0)) / 2.0
+            self.frame = LocalFrame(
+                self.name or "",
+                float(np.round(center[lat_axis], 6)),
+                float(np.round(center[lon_axis], 6)),
+                self.geographic["a"],
+                self.geographic["rf"],
+                lat_axis,
+                lon_axis,
+            )
+        return self.frame.project(points)
+
+
+def _geographic(code: int) -> dict[str, Any] | None:
+    """For a geographic (or geographic + vertical) EPSG CRS: the latitude and longitude axis
+    indices and its ellipsoid; None for any other (or an unknown) code."""
+    import pyproj
+
+    try:
+        crs = pyproj.CRS.from_epsg(code)
+    except pyproj.exceptions.CRSError:
+        return None
+    horizontal = crs.sub_crs_list[0] if crs.is_compound else crs
+    if not horizontal.is_geographic or horizontal.ellipsoid is None:
+        return None
+    directions = [axis.direction for axis in horizontal.axis_info]
+    return {
+        "axes": (directions.index("north"), directions.index("east")),
+        "a": horizontal.ellipsoid.semi_major_metre,
+        "rf": horizontal.ellipsoid.inverse_flattening,
+    }

@@ -1,0 +1,228 @@
+"""A CityGML document streamed a batch of city objects at a time: the root checked first, then
+only the root's children (members) reach Python, each member's objects are collected, and a
+batch of them is triangulated together before their nodes are handed on and their elements
+freed."""
+
+from __future__ import annotations
+
+import zipfile
+import zlib
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from lxml import etree
+
+from ...errors import InputError
+from ...limits import Limits
+from ...model import Mesh, Node
+from ...semantics import DEFAULT_PALETTE, Palette
+from ..geometry_checks import InputTally, check_extent
+from ..mesh import object_id
+from .attributes import attributes_of
+from .crs import Crs
+from .geometry import Holder, collect, holders_of, triangulate_batch
+from .names import (
+    CITYGML_NAMESPACE,
+    GML_NAMESPACES,
+    MEMBERS,
+    NOT_OBJECTS,
+    is_feature,
+    local,
+    namespace,
+)
+from .source import first_look, open_document, parser_options
+
+BATCH = 64
+"""City objects triangulated together (their elements are held until then)."""
+_ROOT_CHILDREN = tuple(f"{{*}}{name}" for name in sorted(MEMBERS | {"boundedBy"}))
+"""Tags of the root's children that reach Python (any namespace; nested ones are passed)."""
+
+
+@dataclass
+class Document:
+    """The state of one streamed document: its version, CRS, the run's checks and what was
+    counted along the way (:attr:`stats`, kept in the scene's attributes)."""
+
+    path: Path
+    limits: Limits
+    types: frozenset[str] | None
+    tally: InputTally
+    palette: Palette = DEFAULT_PALETTE
+    version: str = ""
+    gml: str = GML_NAMESPACES[0]
+    crs: Crs | None = None
+    taken: set[str] = field(default_factory=set)
+    stats: dict[str, dict[str, int]] = field(
+        default_factory=lambda: {"unresolved_links": {}, "degenerate_polygons": {}, "not_read": {}}
+    )
+
+    @property
+    def source(self) -> str:
+        return str(self.path)
+
+    def nodes(self) -> Iterator[Node]:
+        """The document's city objects with geometry, one at a time, as it is parsed."""
+        stream = open_document(self.path, self.limits)
+        try:
+            replay, root = first_look(stream, self.limits, self.source)
+            self._check_root(root)
+            events = etree.iterparse(
+                replay, events=("end",), tag=_ROOT_CHILDREN, **parser_options(self.limits)
+            )
+            batch: list[tuple[Node, Holder]] = []
+            for _, element in events:
+                parent = element.getparent()
+                if parent is None or parent.getparent() is not None:
+                    continue  # not a child of the root
+                for collected in self._member(element):
+                    batch.append(collected)
+                    if len(batch) >= BATCH:
+                        yield from self._finished(batch)
+                        batch = []
+                if not batch:
+                    _free(element)
+            yield from self._finished(batch)
+        except etree.XMLSyntaxError as exc:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise InputError(f"is not well-formed XML ({reason})", self.source) from None
+        except (OSError, EOFError, zlib.error, zipfile.BadZipFile) as exc:
+            raise InputError(f"cannot be read ({exc})", self.source) from None
+        finally:
+            stream.close()
+
+    def _check_root(self, root: etree._Element) -> None:
+        """Refuse a root that is not a CityGML ``CityModel``; note the version."""
+        version = CITYGML_NAMESPACE.fullmatch(namespace(root))
+        if version is None or local(root) != "CityModel":
+            name = namespace(root)
+            raise InputError(
+                f"is not CityGML: its root element is <{local(root)}>"
+                + (f" in namespace {name}" if name else " without a namespace"),
+                self.source,
+            )
+        self.version = version.group(1)
+        self.gml = GML_NAMESPACES[1 if self.version == "3.0" else 0]
+
+    def _member(self, element: etree._Element) -> Iterator[tuple[Node, Holder]]:
+        """The objects of one child of the root, collected (nodes without geometry yet); the
+        root's envelope gives the CRS."""
+        name = local(element)
+        if name == "boundedBy" and self.crs is None:
+            srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
+            self.crs = Crs.of(srs) if srs else None
+        if name in MEMBERS:
+            for child in element:
+                if (collected := self._collected(child)) is not None:
+                    yield collected
+
+    def _collected(self, element: etree._Element) -> tuple[Node, Holder] | None:
+        """A top-level city object's node (parts as children, without geometry) and its
+        holder with the polygons found in it; None when the object is not read."""
+        kind = local(element)
+        if not is_feature(kind) or kind in NOT_OBJECTS:
+            self._count("not_read", kind or "?")
+            return None
+        if self.types is not None and kind not in self.types:
+            self._count("not_read", kind)
+            return None
+        if self.crs is None:
+            srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
+            self.crs = Crs.of(srs) if srs else Crs()
+        top = holders_of(element)
+        node = self._node(top)
+        collect(top, self.gml, self.limits.xml_depth, self.source)
+        return node, top
+
+    def _node(self, holder: Holder) -> Node:
+        """The node of a holder and, as its children, of its parts (ids taken in document
+        order); each holder learns the name its messages use."""
+        node = Node(
+            id=object_id(holder.gml_id or holder.kind, self.taken),
+            type=holder.kind,
+            attributes=attributes_of(holder.element, holder.kind, holder.gml_id),
+        )
+        holder.where = f"{self.source}: {node.id}"
+        node.children = [self._node(part) for part in holder.parts]
+        return node
+
+    def _finished(self, batch: list[tuple[Node, Holder]]) -> Iterator[Node]:
+        """Triangulate a batch of collected objects; their nodes with geometry (those left
+        with nothing, or unreadable, are recorded as skipped)."""
+        if not batch:
+            return
+        assert self.crs is not None
+        broken = dict(
+            (id(top), reason)
+            for top, reason in triangulate_batch(
+                [top for _, top in batch],
+                self.crs,
+                self.palette,
+                self.tally,
+                self.limits.xml_text_bytes,
+                self.source,
+            )
+        )
+        for node, top in batch:
+            if id(top) in broken:
+                self._skip(node.id, broken[id(top)])
+                continue
+            finished = self._with_geometry(node, top)
+            if finished is not None:
+                yield finished
+
+    def _with_geometry(self, node: Node, top: Holder) -> Node | None:
+        """``node`` with its LoDs (its own surfaces and its parts') and geometry; None when
+        it has nothing left (then recorded in the tally)."""
+        unresolved = degenerate = dropped = 0
+        merged: dict[str, list] = {}
+        for holder, each in zip(top.walk(), node.walk(), strict=True):
+            each.crs = self.crs.scene_crs if self.crs is not None else None
+            each.lods = {lod: Mesh(parts) for lod, parts in holder.surfaces.items()}
+            unresolved += holder.unresolved
+            degenerate += holder.degenerate
+            dropped += holder.dropped
+            for lod, parts in holder.surfaces.items():
+                merged.setdefault(lod, []).extend(parts)
+        if unresolved:
+            self.stats["unresolved_links"][node.id] = unresolved
+        if degenerate:
+            self.stats["degenerate_polygons"][node.id] = degenerate
+        dropped += degenerate
+        if dropped:
+            self.tally.dropped_faces += dropped
+            self.tally.dropped_by_object[node.id] = dropped
+        node.lods = {lod: Mesh(parts) for lod, parts in merged.items()}
+        node.geometry = _finest(node.lods)
+        if node.geometry is None:
+            if dropped:
+                self.tally.skip(node.id, dropped)
+            else:
+                self._skip(node.id, "has no surface geometry")
+            return None
+        try:
+            check_extent(node.geometry.bounds, node.id)
+        except InputError as exc:
+            self._skip(node.id, str(exc).removeprefix(f"{node.id}: "))
+            return None
+        return node
+
+    def _count(self, key: str, name: str) -> None:
+        self.stats[key][name] = self.stats[key].get(name, 0) + 1
+
+    def _skip(self, node_id: str, reason: str) -> None:
+        """Record object ``node_id`` as skipped for ``reason``."""
+        self.tally.skipped.append({"id": node_id, "reason": str(InputError(reason, node_id))})
+
+
+def _free(element: etree._Element) -> None:
+    """Free a child of the root and the children before it."""
+    element.clear(keep_tail=False)
+    while element.getprevious() is not None:
+        del element.getparent()[0]
+
+
+def _finest(lods: dict[str, Mesh]) -> Mesh | None:
+    """The highest LoD above 0, else LoD 0, else None."""
+    above = [label for label in sorted(lods) if label != "lod0"]
+    return lods[above[-1]] if above else lods.get("lod0")

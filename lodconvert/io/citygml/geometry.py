@@ -1,0 +1,570 @@
+"""The geometry of CityGML city objects: which polygons an object and each of its parts hold
+(with LoD, semantic type and orientation), and, for a batch of objects at once, their
+coordinates in metres and their triangles as one checked :class:`Surface` per LoD and semantic
+type.
+
+A polygon belongs to the nearest object or part above it and is read when it lies under a
+geometry property (``lod2Solid``, ``lod0FootPrint``…) of that object, of a thematic surface,
+opening or installation of it, and not in a property that holds no exterior geometry (rooms,
+furniture, appearances, addresses). Its semantic type is the feature holding the geometry
+property (``WallSurface``; none for the object itself; ``FootPrint``/``RoofEdge`` for LoD 0),
+and ``OrientableSurface``s with ``orientation="-"`` above it reverse it. ``xlink:href`` links
+to polygons (or to geometries holding them) within the object are followed; a polygon that a
+solid refers to and a thematic surface holds is read once, with its semantics, and so is a
+polygon whose exterior ring repeats another's of the same LoD. A solid's interior shells are
+left out.
+
+Triangulating a batch of objects together (:func:`triangulate_batch`) lets the per-polygon work
+run as array operations over thousands of polygons instead of a few dozen.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+import numpy as np
+from lxml import etree
+
+from ...errors import InputError
+from ...model import Surface
+from ...polygons import triangulate_many
+from ...semantics import Palette
+from ..geometry_checks import MAX_MAGNITUDE, InputTally, checked_vertices, faces_with_area
+from .crs import Crs
+from .names import (
+    GML_NAMESPACES,
+    LOD_PROPERTY,
+    NOT_SURFACES,
+    PART_PROPERTIES,
+    POLYGONS,
+    UNREAD_PROPERTIES,
+    XLINK_HREF,
+    is_feature,
+    local,
+    namespace,
+)
+
+OBJECT_DEPTH = 3
+"""Nesting depth of a top-level city object (the root ``CityModel``, a member, the object)."""
+_RING_DEPTH = 3
+"""Levels from a polygon down to its coordinates (``exterior``, ``LinearRing``, ``posList``)."""
+_DEDUP_DECIMALS = 6
+"""A polygon whose exterior ring repeats another's of the same LoD to this many decimals is
+read once (a solid's copy of a thematic surface's polygon)."""
+_GML_IDS = tuple(f"{{{ns}}}id" for ns in GML_NAMESPACES)
+_ITEMS = {
+    gml: etree.XPath(
+        " | ".join(
+            [f"descendant::gml:{name}" for name in sorted(POLYGONS)]
+            + ["descendant::*/@xlink:href/.."]
+        ),
+        namespaces={"gml": gml, "xlink": XLINK_HREF[1:].partition("}")[0]},
+    )
+    for gml in GML_NAMESPACES
+}
+"""By GML namespace: the polygons and the elements with an ``xlink:href`` below an element,
+in document order."""
+_EXTERIOR = frozenset({"exterior", "outerBoundaryIs"})
+_INTERIOR = frozenset({"interior", "innerBoundaryIs"})
+
+
+@dataclass(eq=False)
+class Polygon:
+    """One polygon met in an object: its LoD, semantic type (``""``: none), whether an
+    ``OrientableSurface`` reversed it, its element, and its rings (exterior first; (k, 3)
+    float64 in metres) once the batch's coordinates are read."""
+
+    lod: str
+    semantic: str
+    flip: bool
+    element: etree._Element
+    rings: list[np.ndarray] = field(default_factory=list)
+
+
+@dataclass(eq=False)
+class Holder:
+    """A city object or one of its parts: its element and id, its parts, the polygons found in
+    it, what was wrong with them, and (after :func:`triangulate_batch`) its surfaces by LoD."""
+
+    element: etree._Element
+    kind: str
+    gml_id: str
+    parts: list[Holder]
+    where: str = ""
+    polygons: list[Polygon] = field(default_factory=list)
+    unresolved: int = 0
+    degenerate: int = 0
+    dropped: int = 0
+    surfaces: dict[str, list[Surface]] = field(default_factory=dict)
+    _ids: dict[str, etree._Element] | None = None
+
+    def walk(self) -> Iterator[Holder]:
+        """This holder, then its parts' holders depth first, in document order."""
+        yield self
+        for part in self.parts:
+            yield from part.walk()
+
+    def target(self, href: str) -> etree._Element | None:
+        """The element of this holder that ``href`` (``#id``) refers to, or None."""
+        if self._ids is None:
+            self._ids = {
+                value: e
+                for e in self.element.iter()
+                for key, value in e.attrib.items()
+                if key.endswith("}id")
+            }
+        return self._ids.get(href.removeprefix("#"))
+
+    def add_linked(
+        self, element: etree._Element, lod: str, semantic: str, flip: bool, seen: frozenset[str]
+    ) -> None:
+        """Add every polygon under ``element`` (a geometry, or an element linking to one),
+        following ``xlink:href`` within this holder; a solid's interior shells are left out."""
+        href = element.get(XLINK_HREF)
+        if href is not None:
+            target = self.target(href) if href not in seen else None
+            if target is None:
+                self.unresolved += href not in seen
+                return
+            seen = seen | {href}
+            element = target
+        name = local(element)
+        if name in POLYGONS:
+            self.polygons.append(Polygon(lod, semantic, flip, element))
+            return
+        if name in NOT_SURFACES:
+            return
+        if name == "OrientableSurface":
+            flip ^= element.get("orientation") == "-"
+        for child in element:
+            if name == "Solid" and local(child) == "interior":
+                continue
+            self.add_linked(child, lod, semantic, flip, seen)
+
+
+def holders_of(element: etree._Element) -> Holder:
+    """The holder of a city object (or part) and, nested, of its parts."""
+    parts = [
+        holders_of(part)
+        for prop in element
+        if local(prop) in PART_PROPERTIES
+        for part in prop
+        if is_feature(local(part))
+    ]
+    gml_id = next((element.get(key) for key in _GML_IDS if element.get(key)), "")
+    return Holder(element, local(element), gml_id, parts)
+
+
+class _Place(NamedTuple):
+    """Where a polygon (or a link) lies in an object: the holder it belongs to, its LoD,
+    semantic type, orientation, and its depth below the top-level object."""
+
+    holder: Holder
+    lod: str
+    semantic: str
+    flip: bool
+    depth: int
+
+
+@dataclass
+class _Walker:
+    """Finds where elements lie below a top-level object (:meth:`place`), remembering what lies
+    above each geometry property met."""
+
+    top: Holder
+    holders: dict[Any, Holder]
+    places: dict[Any, _Place | None] = field(default_factory=dict)
+
+    def place(self, element: etree._Element) -> _Place | None:
+        """Where ``element`` lies, or None when it is not read (not under a geometry property,
+        or in a solid's interior shell, a curve or a property not read). Remembered, so that
+        elements sharing ancestors walk up only once."""
+        if element in self.places:
+            return self.places[element]
+        found: _Place | None = None
+        name = local(element)
+        parent = element.getparent()
+        if parent is None or element is self.top.element or name in NOT_SURFACES:
+            pass
+        elif (match := LOD_PROPERTY.fullmatch(name)) is not None:
+            above = self._above(element)
+            if above is not None:
+                holder, semantic, depth = above
+                if match.group(2) in ("FootPrint", "RoofEdge"):
+                    semantic = name[4:]
+                found = _Place(holder, f"lod{match.group(1)}", semantic, False, depth)
+        elif not (name == "interior" and local(parent) == "Solid"):
+            outer = self.place(parent)
+            if outer is not None:
+                flip = outer.flip ^ (
+                    name == "OrientableSurface" and element.get("orientation") == "-"
+                )
+                found = _Place(outer.holder, outer.lod, outer.semantic, flip, outer.depth + 1)
+        self.places[element] = found
+        return found
+
+    def _above(self, prop: etree._Element) -> tuple[Holder, str, int] | None:
+        """For a geometry property: the holder it belongs to, the semantic type of the
+        feature holding it ("" for the holder itself) and its depth below the top-level
+        object; None when the features and properties above it are not read."""
+        semantic = ""
+        holder = None
+        feature_next = True
+        depth = 0
+        element = prop
+        while element is not self.top.element:
+            depth += 1
+            element = element.getparent()
+            if element is None:
+                return None
+            if holder is not None or element is self.top.element:
+                continue
+            name = local(element)
+            if feature_next:
+                if not is_feature(name):
+                    return None
+                holder = self.holders.get(element)
+                if holder is None and not semantic:
+                    semantic = name
+            elif (
+                name in UNREAD_PROPERTIES
+                or name in PART_PROPERTIES
+                or namespace(element) in GML_NAMESPACES
+            ):
+                return None
+            feature_next = not feature_next
+        if holder is None and not feature_next:
+            return None
+        return holder or self.top, semantic, depth
+
+
+def collect(top: Holder, gml: str, depth_limit: int, source: str) -> None:
+    """Find the polygons of ``top`` (a top-level object of a document whose GML namespace is
+    ``gml``) and of its parts, each put in the holder it belongs to in document order,
+    following links; :class:`InputError` when coordinates would lie deeper than
+    ``depth_limit``."""
+    walker = _Walker(top, {holder.element: holder for holder in top.walk()})
+    items = _ITEMS[gml](top.element)
+    polygon_ids: dict[str, etree._Element] = {}
+    for item in items:
+        for key in _GML_IDS:
+            if (value := item.get(key)) is not None and item.get(XLINK_HREF) is None:
+                polygon_ids[value] = item
+    deepest = 0
+    for item in items:
+        href = item.get(XLINK_HREF)
+        place = walker.place(item)
+        if place is None:
+            continue
+        holder = place.holder
+        if href is None:
+            deepest = max(deepest, place.depth)
+            holder.polygons.append(Polygon(place.lod, place.semantic, place.flip, item))
+            continue
+        target = polygon_ids.get(href.removeprefix("#"))
+        if target is not None and not place.semantic:
+            direct = walker.place(target)
+            if (
+                direct is not None
+                and direct.holder is holder
+                and direct.lod == place.lod
+                and direct.semantic
+            ):
+                continue  # read directly, with its semantics, which win over this copy
+        holder.add_linked(item, place.lod, place.semantic, place.flip, frozenset())
+    if OBJECT_DEPTH + deepest + _RING_DEPTH > depth_limit:
+        raise InputError(
+            f"nests XML elements deeper than the limit of {depth_limit} "
+            "(raise it with --limit xml_depth=N)",
+            source,
+        )
+
+
+# --- a batch of objects ---------------------------------------------------------------------------
+
+
+class BrokenObject(ValueError):
+    """An object whose geometry cannot be read (the message says why)."""
+
+
+@dataclass
+class _Rings:
+    """The coordinate words of a batch's rings and, per ring, its value count and width."""
+
+    words: list[str] = field(default_factory=list)
+    counts: list[int] = field(default_factory=list)
+    widths: list[int] = field(default_factory=list)
+
+
+def _ring_words(ring: etree._Element, rings: _Rings, text_limit: int, source: str) -> None:
+    """Add the coordinates of a ``LinearRing`` (its ``posList`` or ``pos`` elements)."""
+    count = 0
+    dimension = None
+    for child in ring:
+        name = local(child)
+        if name == "posList" or name == "pos":
+            text = child.text or ""
+            if len(text) > text_limit:
+                raise InputError(
+                    f"has an XML text of {len(text):,} characters, over the limit of "
+                    f"{text_limit:,} (raise it with --limit xml_text_bytes=N)",
+                    source,
+                )
+            words = text.split()
+            rings.words += words
+            count += len(words)
+            dimension = dimension or child.get("srsDimension")
+    if dimension is None:
+        declared = (a.get("srsDimension") for a in ring.iterancestors())
+        dimension = next((d for d in declared if d), "3")
+    try:
+        width = int(dimension)
+    except ValueError:
+        raise BrokenObject(f"has an srsDimension of {dimension!r}") from None
+    if width not in (2, 3) or count % width:
+        raise BrokenObject(f"has a ring of {count} values, not whole points of dimension {width}")
+    rings.counts.append(count)
+    rings.widths.append(width)
+
+
+def _read_rings(polygons: list[Polygon], rings: _Rings, text_limit: int, source: str) -> list[int]:
+    """Add the rings of ``polygons``; per polygon, its rings' order (exterior first)."""
+    layout: list[int] = []
+    for polygon in polygons:
+        exterior: list[int] = []
+        interior: list[int] = []
+        for boundary in polygon.element:
+            kind = local(boundary)
+            into = exterior if kind in _EXTERIOR else interior if kind in _INTERIOR else None
+            if into is None:
+                continue
+            for ring in boundary:
+                into.append(len(rings.counts))
+                _ring_words(ring, rings, text_limit, source)
+        layout.append(len(exterior) + len(interior))
+        layout += exterior[::-1] + interior
+    return layout
+
+
+def _top_rings(
+    top: Holder, text_limit: int, source: str
+) -> tuple[list[Polygon], list[int], np.ndarray, np.ndarray]:
+    """The polygons of ``top`` and its parts, their rings' layout (per polygon: its number of
+    rings, then their indices, exterior first), the rings' points ((n, 3) float64, 2-D rings
+    with z = 0) and each ring's number of points. :class:`BrokenObject` when a ring cannot be
+    read."""
+    rings = _Rings()
+    polygons = [polygon for holder in top.walk() for polygon in holder.polygons]
+    layout = _read_rings(polygons, rings, text_limit, source)
+    try:
+        flat = np.array(rings.words, dtype=np.float64)
+    except ValueError:
+        raise BrokenObject("has a coordinate that is not a number") from None
+    widths = np.array(rings.widths, dtype=np.int64)
+    lengths = np.array(rings.counts, dtype=np.int64) // np.maximum(widths, 1)
+    if (widths == 3).all():
+        return polygons, layout, flat.reshape(-1, 3), lengths
+    pieces = np.split(flat, np.cumsum(rings.counts)[:-1])
+    padded = [
+        np.pad(v.reshape(-1, 2), ((0, 0), (0, 1))) if w == 2 else v.reshape(-1, 3)
+        for v, w in zip(pieces, rings.widths, strict=True)
+    ]
+    return polygons, layout, np.concatenate(padded), lengths
+
+
+def _coordinates(
+    tops: list[Holder], crs: Crs, text_limit: int, source: str
+) -> tuple[list[tuple[Holder, str]], list[Holder]]:
+    """Read the rings of every polygon of ``tops`` into ``Polygon.rings`` (in metres, a
+    geographic CRS's frame centred on the first object read); the objects that could not be
+    read (with the reason) and those that were."""
+    broken: list[tuple[Holder, str]] = []
+    read: list[tuple[Holder, list[Polygon], list[int]]] = []
+    points: list[np.ndarray] = []
+    lengths: list[np.ndarray] = []
+    for top in tops:
+        try:
+            polygons, layout, top_points, top_lengths = _top_rings(top, text_limit, source)
+        except BrokenObject as exc:
+            broken.append((top, str(exc)))
+            continue
+        read.append((top, polygons, layout))
+        points.append(top_points)
+        lengths.append(top_lengths)
+    if not read:
+        return broken, []
+    metric = crs.to_metric(np.concatenate(points), first=len(points[0]))
+    counts = np.concatenate(lengths)
+    pieces = np.split(metric, np.cumsum(counts)[:-1]) if len(counts) else []
+    offset = 0
+    for (_, polygons, layout), top_lengths in zip(read, lengths, strict=True):
+        cursor = 0
+        for polygon in polygons:
+            n = layout[cursor]
+            polygon.rings = [pieces[offset + i] for i in layout[cursor + 1 : cursor + 1 + n]]
+            cursor += 1 + n
+        offset += len(top_lengths)
+    return broken, [top for top, _, _ in read]
+
+
+def _dedup_keys(polygons: list[Polygon]) -> list[Any]:
+    """Per polygon (each with rings), a key that two polygons share when they are of the same
+    LoD and their exterior rings have the same distinct points to :data:`_DEDUP_DECIMALS`
+    decimals, whatever their start and direction. The rounded bounding box stands in for the
+    points where no other polygon has the same box."""
+    exteriors = [polygon.rings[0] for polygon in polygons]
+    lengths = np.array([len(ring) for ring in exteriors], dtype=np.int64)
+    rounded = np.round(np.concatenate(exteriors), _DEDUP_DECIMALS)
+    boxes = np.zeros((len(polygons), 6))
+    full = lengths > 0
+    if full.any():
+        starts = (np.cumsum(lengths) - lengths)[full]
+        boxes[full] = np.hstack(
+            [np.minimum.reduceat(rounded, starts), np.maximum.reduceat(rounded, starts)]
+        )
+    keys: list[Any] = [
+        (polygon.lod, n > 0, box.tobytes())
+        for polygon, n, box in zip(polygons, lengths.tolist(), boxes, strict=True)
+    ]
+    shared = Counter(keys)
+    ends = np.cumsum(lengths).tolist()
+    for i, key in enumerate(keys):
+        if shared[key] > 1:
+            ring = rounded[ends[i] - lengths[i] : ends[i]]
+            keys[i] = (polygons[i].lod, frozenset(map(tuple, ring.tolist())))
+    return keys
+
+
+def _kept(holder: Holder) -> list[Polygon]:
+    """The holder's polygons to triangulate: those with semantics first, each element and
+    each exterior ring once per LoD; polygons without rings are counted as degenerate."""
+    ordered = sorted(holder.polygons, key=lambda p: not p.semantic)
+    with_rings = [p for p in ordered if p.rings]
+    holder.degenerate += len(ordered) - len(with_rings)
+    if not with_rings:
+        return []
+    seen: set[Any] = set()
+    kept = []
+    for polygon, key in zip(with_rings, _dedup_keys(with_rings), strict=True):
+        by_element = (polygon.lod, polygon.element)
+        if by_element in seen or key in seen:
+            continue
+        seen.add(by_element)
+        seen.add(key)
+        kept.append(polygon)
+    return kept
+
+
+@dataclass
+class _Group:
+    """The triangles of one LoD and semantic type of a holder: where its pieces lie in the
+    batch's vertex and face arrays."""
+
+    holder: Holder
+    lod: str
+    semantic: str
+    vertices: slice
+    faces: slice
+
+
+def _groups(holders: list[Holder]) -> tuple[list[_Group], np.ndarray, np.ndarray]:
+    """Triangulate the kept polygons of ``holders`` together; the groups by holder, LoD (in
+    order) and semantic type (as met), with the batch's vertices and faces (each group's
+    faces indexing the batch's vertices)."""
+    kept = [(holder, _kept(holder)) for holder in holders]
+    polygons = [polygon for _, polygons in kept for polygon in polygons]
+    results = iter(triangulate_many([polygon.rings for polygon in polygons]))
+    pieces: list[tuple[np.ndarray, np.ndarray, bool]] = []
+    groups: list[_Group] = []
+    vertex_at = face_at = 0
+    for holder, polygons in kept:
+        by_lod: dict[str, dict[str, list[tuple[np.ndarray, np.ndarray, bool]]]] = {}
+        for polygon in polygons:
+            triangles = next(results)
+            if triangles is None:
+                holder.degenerate += 1
+                continue
+            by_semantic = by_lod.setdefault(polygon.lod, {})
+            by_semantic.setdefault(polygon.semantic, []).append((*triangles, polygon.flip))
+        for lod in sorted(by_lod):
+            for semantic, group in by_lod[lod].items():
+                n_vertices = sum(len(v) for v, _, _ in group)
+                n_faces = sum(len(f) for _, f, _ in group)
+                groups.append(
+                    _Group(
+                        holder,
+                        lod,
+                        semantic,
+                        slice(vertex_at, vertex_at + n_vertices),
+                        slice(face_at, face_at + n_faces),
+                    )
+                )
+                pieces += group
+                vertex_at += n_vertices
+                face_at += n_faces
+    if not pieces:
+        return groups, np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    vertices = np.concatenate([v for v, _, _ in pieces])
+    faces = np.concatenate([f for _, f, _ in pieces])
+    counts = np.array([len(f) for _, f, _ in pieces], dtype=np.int64)
+    starts = np.cumsum([0] + [len(v) for v, _, _ in pieces[:-1]])
+    faces = faces + np.repeat(starts, counts)[:, None]
+    flip = np.repeat([f for _, _, f in pieces], counts)
+    if flip.any():
+        faces[flip] = faces[flip][:, ::-1]
+    return groups, vertices, faces
+
+
+def _unreadable(
+    groups: list[_Group], vertices: np.ndarray, top_of: dict[int, Holder]
+) -> dict[int, str]:
+    """The objects (by ``id`` of their top holder) with a vertex that is not finite or beyond
+    :data:`MAX_MAGNITUDE`, with the reason."""
+    bad = ~(np.abs(vertices) <= MAX_MAGNITUDE).all(axis=1)
+    failed: dict[int, str] = {}
+    if not bad.any():
+        return failed
+    for group in groups:
+        top = top_of[id(group.holder)]
+        if id(top) in failed or not bad[group.vertices].any():
+            continue
+        where = group.holder.where
+        try:
+            checked_vertices(vertices[group.vertices], where)
+        except InputError as exc:
+            failed[id(top)] = str(exc).removeprefix(f"{where}: ")
+    return failed
+
+
+def triangulate_batch(
+    tops: list[Holder], crs: Crs, palette: Palette, tally: InputTally, text_limit: int, source: str
+) -> list[tuple[Holder, str]]:
+    """Read and triangulate the polygons of a batch of top-level objects (and their parts)
+    into each holder's :attr:`Holder.surfaces`: one checked :class:`Surface` per LoD and
+    semantic type, coloured by it, without faces that have no area (counted in
+    :attr:`Holder.dropped`). The objects that could not be read, with the reason."""
+    broken, tops = _coordinates(tops, crs, text_limit, source)
+    top_of = {id(holder): top for top in tops for holder in top.walk()}
+    groups, vertices, faces = _groups([holder for top in tops for holder in top.walk()])
+    failed = _unreadable(groups, vertices, top_of)
+    if failed:
+        broken += [(top, failed[id(top)]) for top in tops if id(top) in failed]
+        groups = [g for g in groups if id(top_of[id(g.holder)]) not in failed]
+    tally.count(
+        sum(g.vertices.stop - g.vertices.start for g in groups),
+        sum(g.faces.stop - g.faces.start for g in groups),
+    )
+    keep = faces_with_area(vertices, faces)
+    for group in groups:
+        first = group.vertices.start
+        kept = faces[group.faces][keep[group.faces]] - first
+        group.holder.dropped += (group.faces.stop - group.faces.start) - len(kept)
+        if len(kept):
+            surface = Surface(
+                vertices[group.vertices].copy(), kept, base_color=palette.of(group.semantic).copy()
+            )
+            group.holder.surfaces.setdefault(group.lod, []).append(surface)
+    return broken

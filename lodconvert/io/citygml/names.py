@@ -1,0 +1,73 @@
+"""XML names the CityGML reader knows: namespaces, local names of geometry properties and
+geometries, and the properties it does not read."""
+
+from __future__ import annotations
+
+import re
+
+from lxml import etree
+
+CITYGML_NAMESPACE = re.compile(r"http://www\.opengis\.net/citygml/(1\.0|2\.0|3\.0)")
+"""The core namespace of each CityGML version (the root ``CityModel``'s)."""
+GML_NAMESPACES = ("http://www.opengis.net/gml", "http://www.opengis.net/gml/3.2")
+XLINK_HREF = "{http://www.w3.org/1999/xlink}href"
+LOD_PROPERTY = re.compile(
+    r"lod([0-4])(Solid|MultiSolid|MultiSurface|CompositeSurface|Surface|Geometry|FootPrint|RoofEdge)"
+)
+"""Geometry properties read, with their LoD (curves, points and implicit geometry are not)."""
+PART_PROPERTIES = frozenset(
+    {
+        "consistsOfBuildingPart",
+        "buildingPart",
+        "consistsOfBridgePart",
+        "bridgePart",
+        "consistsOfTunnelPart",
+        "tunnelPart",
+    }
+)
+UNREAD_PROPERTIES = frozenset(
+    {
+        "address",
+        "appearance",
+        "externalReference",
+        "genericAttribute",
+        "interiorRoom",
+        "interiorFurniture",
+        "interiorBuildingInstallation",
+        "buildingRoom",
+        "buildingFurniture",
+        "roomInstallation",
+        "interiorBridgeRoom",
+        "interiorBridgeInstallation",
+        "bridgeRoom",
+        "bridgeFurniture",
+        "interiorHollowSpace",
+        "hollowSpace",
+    }
+)
+"""Properties of a city object that hold no exterior geometry (or geometry not read)."""
+NOT_OBJECTS = frozenset({"ReliefFeature", "CityObjectGroup", "Appearance", "Version"})
+"""Top-level features that are not read as objects (terrain, groups, appearances)."""
+POLYGONS = frozenset({"Polygon", "Triangle", "Rectangle", "PolygonPatch"})
+NOT_SURFACES = frozenset(
+    {"Point", "MultiPoint", "LineString", "Curve", "MultiCurve", "CompositeCurve", "Envelope"}
+)
+MEMBERS = frozenset({"cityObjectMember", "featureMember", "featureMembers", "member"})
+"""Children of the root that hold city objects."""
+
+
+def local(element: etree._Element) -> str:
+    """The local name of an element's tag ("" for comments and processing instructions)."""
+    tag = element.tag
+    return tag.rpartition("}")[2] if isinstance(tag, str) else ""
+
+
+def namespace(element: etree._Element) -> str:
+    """The namespace of an element's tag ("" when it has none)."""
+    tag = element.tag
+    return tag[1:].partition("}")[0] if isinstance(tag, str) and tag.startswith("{") else ""
+
+
+def is_feature(name: str) -> bool:
+    """Whether a local name names a feature (``WallSurface``), not a property (``boundedBy``)."""
+    return name[:1].isupper()
