@@ -29,7 +29,9 @@ level has shown.
 together, designed for ``Y_cell`` as any point level is (:mod:`.chain`): no mesh merging, one
 draw call, and it reduces what decimation cannot (a block is hundreds of separate parts).
 ``mesh``: the members' coarsest mesh levels merged into one mesh with vertex colours (one
-draw call as well). ``auto`` bakes both and keeps the cheaper (points at
+draw call as well); where that mesh's silhouette F at ``Y_cell`` stays below
+:data:`MIN_CELL_F` (a block of LOD1 prisms against its LoD2 roofs), the members' next finer
+mesh levels in turn, their finest at most. ``auto`` bakes both and keeps the cheaper (points at
 :data:`~.plan.POINT_COST`) of those whose silhouette F against the members' finest geometry at
 ``Y_cell`` (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when neither
 is, the one with the higher F.
@@ -194,10 +196,10 @@ def bake_cell(
         level = point_level_at(source, "FAR", switch, options, backend, plan.cell_id, warn, limits)
         if level is not None:
             candidates["points"] = (level, _silhouette_f(source, level, switch, options))
+    finer = 0
     if kind in ("mesh", "auto") or not candidates:
-        coarse = _merged([_coarsest_mesh(chain) for chain in objects]).translated(-origin)
-        level = Level(name="FAR", kind="merged", mesh=_one_part(coarse))
-        candidates["mesh"] = (level, _silhouette_f(source, level, switch, options))
+        level, f, finer = _merged_level(objects, origin, source, switch, options)
+        candidates["mesh"] = (level, f)
     chosen, why = _choice(candidates, kind)
     cutoffs = [switch]
     if options.cull is not None:
@@ -207,6 +209,7 @@ def bake_cell(
         "why": why,
         "silhouette_f": {name: round(f, 4) for name, (_, f) in candidates.items()},
         "counts": {name: level.count for name, (level, _) in candidates.items()},
+        "mesh_levels_finer": finer,
         "members": len(members),
         "objects": len(objects),
         "seam": seam,
@@ -276,11 +279,33 @@ def _finest_mesh(chain: LodChain) -> Mesh:
     return _placed(chain, level.mesh)
 
 
-def _coarsest_mesh(chain: LodChain) -> Mesh:
-    """The coarsest mesh level of ``chain`` in scene coordinates."""
-    level = next(lv for lv in reversed(chain.levels) if lv.mesh is not None)
-    assert level.mesh is not None
-    return _placed(chain, level.mesh)
+def _merged_level(
+    objects: list[LodChain],
+    origin: np.ndarray,
+    source: Mesh,
+    distance: float,
+    options: ChainOptions,
+) -> tuple[Level, float, int]:
+    """The objects' coarsest mesh levels merged into one far level, or, where its silhouette
+    F against ``source`` (the objects' finest geometry about ``origin``) from ``distance``
+    stays below :data:`MIN_CELL_F`, their next finer mesh levels in turn (their finest at
+    most); the level, its F and how many levels finer than the coarsest it took."""
+    meshes = [
+        [lv.mesh for lv in reversed(chain.levels) if lv.mesh is not None] for chain in objects
+    ]
+    depth = max(len(levels) for levels in meshes)
+    for finer in range(depth):
+        merged = _merged(
+            [
+                _placed(chain, levels[min(finer, len(levels) - 1)])
+                for chain, levels in zip(objects, meshes, strict=True)
+            ]
+        )
+        level = Level(name="FAR", kind="merged", mesh=_one_part(merged.translated(-origin)))
+        f = _silhouette_f(source, level, distance, options)
+        if f >= MIN_CELL_F:
+            break
+    return level, f, finer
 
 
 def _merged(meshes: Sequence[Mesh]) -> Mesh:

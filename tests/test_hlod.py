@@ -131,6 +131,20 @@ def test_auto_keeps_the_cheaper_faithful_far_level(tum_items: list[Item]) -> Non
             assert f[chosen] == max(f.values())
 
 
+def test_a_merged_far_mesh_takes_finer_levels_until_it_is_faithful(tum_items: list[Item]) -> None:
+    """Where the merged prisms miss F 0.95 against the buildings, the cell's far mesh merges
+    their next finer levels (here their LoD2 roofs), and reaches it."""
+    finer = [cell for cell in _cells(tum_items) if cell.facts["mesh_levels_finer"] > 0]
+    assert finer  # TUM Munich has such a cell at 250 m
+    for cell in _cells(tum_items):
+        assert cell.facts["silhouette_f"]["mesh"] >= MIN_CELL_F
+    for cell in finer:
+        vertices = sum(
+            len(lv.mesh.vertices) for c in cell.objects() for lv in c.levels[-1:] if lv.mesh
+        )
+        assert cell.facts["counts"]["mesh"] > vertices  # more than the coarsest levels hold
+
+
 @pytest.mark.parametrize("kind", ["points", "mesh"])
 def test_a_district_of_one_building_is_a_cell_of_one(kind: str) -> None:
     house = block(10, 8, 6)
