@@ -5,11 +5,13 @@ streaming, determinism, number formatting and errors on bad files."""
 from __future__ import annotations
 
 import base64
+import decimal
 import io
 import math
 import re
 from collections.abc import Iterator
 from dataclasses import replace
+from decimal import ROUND_HALF_EVEN, Decimal
 from pathlib import Path
 
 import numpy as np
@@ -652,6 +654,64 @@ def test_coordinates_beyond_int64_are_written_exactly() -> None:
     assert format_fixed([-1.5e300], 0) == str(int(-1.5e300))
     with pytest.raises(ValueError, match="decimals"):
         format_fixed([1.0], MAX_DECIMALS + 1)
+
+
+def _fixed_oracle(values: list[float], decimals: int) -> str:
+    """:func:`format_fixed`'s rule, value by value in exact decimal arithmetic: each value is
+    scaled in float64 and rounded half to even (``rint(v * 10**decimals)``) and printed in those
+    units, or, where a scaled magnitude of the list reaches 2^62, every value is rounded from its
+    exact binary value; trailing zeros and ``-0`` dropped."""
+    with np.errstate(over="ignore"):
+        units = [float(np.rint(np.float64(v) * 10.0**decimals)) for v in values]
+    with decimal.localcontext(prec=1000):
+        if max(map(abs, units), default=0.0) >= 2.0**62:
+            place = Decimal(1).scaleb(-decimals)
+            numbers = [Decimal(v).quantize(place, ROUND_HALF_EVEN) for v in values]
+        else:
+            numbers = [Decimal(int(u)).scaleb(-decimals) for u in units]
+    tokens = [f"{number:f}" for number in numbers]
+    tokens = [t.rstrip("0").rstrip(".") if "." in t else t for t in tokens]
+    return " ".join("0" if t == "-0" else t for t in tokens)
+
+
+EDGE_FLOATS = st.sampled_from(
+    [
+        *(0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 1.7976931348623157e308),
+        *(0.5, -2.5, 0.125, 1.005, 2.675, 1e-4, 9.99995e-5, -1.5e-5),
+        *(1e15, 2.0**51, 2.0**53, 2.0**62, 1e20),
+    ]
+)
+ON_GRID = st.builds(  # on a decimal grid or halfway between two of its points
+    lambda units, decimals, half: (units + 0.5 * half) / 10.0**decimals,
+    st.integers(-(10**16), 10**16),
+    st.integers(0, 25),
+    st.booleans(),
+)
+FIXED_VALUES = st.lists(st.one_of(FINITE, EDGE_FLOATS, ON_GRID), max_size=12)
+
+
+@settings(max_examples=500, deadline=None)
+@given(FIXED_VALUES, st.one_of(st.integers(0, 25), st.integers(0, MAX_DECIMALS)))
+def test_format_fixed_follows_its_rule_value_by_value(values: list[float], decimals: int) -> None:
+    assert format_fixed(values, decimals) == _fixed_oracle(values, decimals)
+
+
+@settings(max_examples=300, deadline=None)
+@given(FIXED_VALUES)
+def test_format_floats_follows_the_fixed_rule(values: list[float]) -> None:
+    assert format_floats(values) == _fixed_oracle(values, geometry_decimals(values))
+
+
+@settings(max_examples=500, deadline=None)
+@given(st.one_of(st.text(), st.text(alphabet="&<>\"'\t\n\r\x00\x1f\x7f\x85\ufffe\uffffaß😀 ")))
+def test_attribute_text_is_escaped_as_lxml_escapes_it(text: str) -> None:
+    try:
+        expected = etree.tostring(etree.Element("a", v=text), encoding="unicode")
+    except ValueError:  # a character XML forbids
+        with pytest.raises(ValueError, match="XML compatible"):
+            x3d.writer._escape(text)
+        return
+    assert f'<a v="{x3d.writer._escape(text)}"/>' == expected
 
 
 @pytest.mark.parametrize(

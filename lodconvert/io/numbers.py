@@ -1,12 +1,13 @@
 """Fast, deterministic number formatting for text formats (X3D attributes, reports).
 
-Large arrays (hundreds of thousands of vertices) are written without a per-number Python call:
-the digits are computed with numpy straight into a byte buffer. Geometry is printed in fixed
-point with trailing zeros trimmed (``0.125``, ``-3``, ``12.5``), at a number of decimals that
-keeps a given count of significant digits on the array's largest magnitude, so the rounding
-error is at most half a unit in that last digit for every value. Scalars that must survive
-exactly (a georeferenced origin in the millions, metadata) use Python's shortest round-trip
-``repr``. The same input always gives the same text.
+Large arrays (hundreds of thousands of vertices) are written without a Python statement per
+number: numpy rounds a whole array to integers in units of the last decimal, and one ``%``
+format call prints them all (``%g`` of the units scaled back, which drops trailing zeros).
+Geometry is printed in fixed point with trailing zeros trimmed (``0.125``, ``-3``, ``12.5``), at
+a number of decimals that keeps a given count of significant digits on the array's largest
+magnitude, so the rounding error is at most half a unit in that last digit for every value.
+Scalars that must survive exactly (a georeferenced origin in the millions, metadata) use
+Python's shortest round-trip ``repr``. The same input always gives the same text.
 """
 
 from __future__ import annotations
@@ -22,12 +23,17 @@ MAX_DECIMALS = 308
 """Most decimals printed (10^308 is the largest power of ten a float64 holds); magnitudes below
 1e-302 print with fewer than :data:`GEOMETRY_DIGITS` significant digits."""
 _FAST_LIMIT = 2.0**62
-"""Scaled magnitudes below this are formatted with int64 digit arithmetic, larger ones exactly
-with Python's decimal conversion."""
+"""Scaled magnitudes below this are rounded to int64 units of the last decimal, larger ones
+printed exactly with Python's decimal conversion of the values themselves."""
+_FLOAT_LIMIT = 10**15
+"""Units below this (at most 15 digits) at most :data:`_EXACT_POWER` decimals are printed with
+``%g`` of ``units / 10**decimals`` to as many significant digits as the largest has: that
+float64 is off the decimal value by at most 2⁻⁵³ of it, far less than half a unit in its 15th
+significant digit, so rounding it to those digits gives back exactly the units' digits."""
+_EXACT_POWER = 22
+"""Largest exponent ``d`` for which ``10.0**d`` is exact in float64."""
 
-_POW10 = 10 ** np.arange(19, dtype=np.int64)
-_SPACE, _MINUS, _DOT, _ZERO = (ord(c) for c in " -.0")
-_UNIT_BYTES = np.array([f"{i / 255:.4f}".rstrip("0").rstrip(".") for i in range(256)], dtype=object)
+_UNIT_TEXT = tuple(f"{i / 255:.4f}".rstrip("0").rstrip(".") for i in range(256))
 
 
 def decimals_for(max_abs: float, significant: int = GEOMETRY_DIGITS) -> int:
@@ -53,49 +59,13 @@ def geometry_decimals(
     5
     """
     flat = np.asarray(values, dtype=np.float64).ravel()
-    return decimals_for(float(np.abs(flat).max()) if len(flat) else 0.0, significant)
-
-
-def _digit_counts(values: np.ndarray) -> np.ndarray:
-    """Decimal digits of non-negative int64 ``values`` (0 has one digit)."""
-    return np.maximum(np.searchsorted(_POW10, values, side="right"), 1)
-
-
-def _put_digits(buf: np.ndarray, ends: np.ndarray, values: np.ndarray, widths: np.ndarray) -> None:
-    """Write each of ``values`` as ``widths`` digits (zero-padded) ending before ``ends``."""
-    rest = values.copy()
-    for place in range(int(widths.max(initial=0))):
-        live = widths > place
-        buf[ends[live] - 1 - place] = _ZERO + rest[live] % 10
-        rest //= 10
-
-
-def _join(
-    negative: np.ndarray, whole: np.ndarray, fraction: np.ndarray, fraction_digits: np.ndarray
-) -> str:
-    """Space-separated ``[-]whole[.fraction]`` tokens; ``fraction`` has ``fraction_digits``
-    digits (zero-padded on the left), and no fraction part is written where that count is 0."""
-    if len(whole) == 0:
-        return ""
-    whole_digits = _digit_counts(whole)
-    has_fraction = fraction_digits > 0
-    lengths = negative + whole_digits + has_fraction * (1 + fraction_digits)
-    starts = np.zeros(len(lengths), dtype=np.int64)
-    np.cumsum(lengths[:-1] + 1, out=starts[1:])
-    buf = np.full(int(starts[-1] + lengths[-1]), _SPACE, dtype=np.uint8)
-    buf[starts[negative]] = _MINUS
-    point = starts + negative + whole_digits
-    _put_digits(buf, point, whole, whole_digits)
-    buf[point[has_fraction]] = _DOT
-    _put_digits(buf, starts + lengths, fraction, fraction_digits)
-    return buf.tobytes().decode("ascii")
+    return decimals_for(float(np.maximum.reduce(np.abs(flat))) if len(flat) else 0.0, significant)
 
 
 def format_ints(values: np.ndarray | Iterable[int]) -> str:
     """Integers separated by single spaces (any shape, flattened in C order)."""
     flat = np.asarray(values, dtype=np.int64).ravel()
-    zeros = np.zeros(len(flat), dtype=np.int64)
-    return _join(flat < 0, np.abs(flat), zeros, zeros)
+    return ("%d " * len(flat))[:-1] % tuple(flat.tolist())
 
 
 def format_fixed(values: np.ndarray | Iterable[float], decimals: int) -> str:
@@ -112,23 +82,35 @@ def format_fixed(values: np.ndarray | Iterable[float], decimals: int) -> str:
     if not 0 <= decimals <= MAX_DECIMALS:
         raise ValueError(f"decimals must be between 0 and {MAX_DECIMALS}, got {decimals}")
     flat = np.asarray(values, dtype=np.float64).ravel()
-    if not np.isfinite(flat).all():
-        raise ValueError("cannot format NaN or infinite values")
-    with np.errstate(over="ignore"):  # overflows go the exact way below
-        scaled = np.rint(flat * 10.0**decimals)
-    if len(flat) and float(np.abs(scaled).max()) >= _FAST_LIMIT:
-        return " ".join(_exact_fixed(float(v), decimals) for v in flat)
-    scaled = scaled.astype(np.int64)
-    magnitude = np.abs(scaled)
-    if decimals < len(_POW10):
-        whole, fraction = np.divmod(magnitude, _POW10[decimals])
-    else:  # below 2^62 < 10^19: no whole part
-        whole, fraction = np.zeros_like(magnitude), magnitude
-    trailing = np.zeros(len(flat), dtype=np.int64)
-    for place in range(1, min(decimals, len(_POW10) - 1) + 1):
-        trailing += (fraction % _POW10[place]) == 0
-    fraction_digits = np.where(fraction == 0, 0, decimals - trailing)
-    return _join(scaled < 0, whole, fraction // _POW10[trailing], fraction_digits)
+    if not len(flat):
+        return ""
+    scale = 10.0**decimals
+    # the largest scaled magnitude (NaN or infinite for such values, infinite past float64);
+    # rounding to units cannot lift a float64 below 2^62 to it
+    peak = float(np.maximum.reduce(np.abs(flat))) * scale
+    if not peak < _FAST_LIMIT:
+        if not np.isfinite(flat).all():
+            raise ValueError("cannot format NaN or infinite values")
+        return " ".join(_exact_fixed(v, decimals) for v in flat.tolist())
+    units = np.rint(flat * scale).astype(np.int64)  # the cast also turns -0.0 into 0
+    if decimals == 0:
+        return format_ints(units)
+    top = round(peak)  # the largest of the units
+    if top < _FLOAT_LIMIT and decimals <= _EXACT_POWER:
+        # %g drops trailing zeros; it writes an exponent for a value below 1e-4 (not for the
+        # largest, with at least one decimal), which then takes the slow way
+        template = f"%.{len(str(top))}g "
+        text = (template * len(units))[:-1] % tuple((units / scale).tolist())
+        if "e" not in text:
+            return text
+    return " ".join(_units_fixed(u, decimals) for u in units.tolist())
+
+
+def _units_fixed(units: int, decimals: int) -> str:
+    """``units`` × 10^-``decimals`` (``decimals`` ≥ 1) in fixed point, trailing zeros dropped."""
+    whole, fraction = divmod(abs(units), 10**decimals)
+    text = f"{'-' if units < 0 else ''}{whole}.{fraction:0{decimals}d}"
+    return text.rstrip("0").rstrip(".")
 
 
 def _exact_fixed(value: float, decimals: int) -> str:
@@ -154,10 +136,11 @@ def format_floats(values: np.ndarray | Iterable[float], significant: int = GEOME
 def format_unit_bytes(values: np.ndarray) -> str:
     """uint8 values as fractions of 255 with at most 4 decimals (``0``, ``0.502``, ``1``):
     colour channels that read back to the same byte with ``rint(x * 255)``."""
-    return " ".join(_UNIT_BYTES[np.asarray(values, dtype=np.uint8).ravel()].tolist())
+    flat = np.asarray(values, dtype=np.uint8).ravel()
+    return " ".join([_UNIT_TEXT[value] for value in flat.tolist()])
 
 
 def format_exact(values: Iterable[float]) -> str:
     """Floats with Python's shortest round-trip ``repr`` (full float64 precision), for the few
     numbers that must survive exactly, such as a georeferenced origin."""
-    return " ".join(repr(float(v)) for v in values)
+    return " ".join([repr(float(v)) for v in values])

@@ -94,10 +94,9 @@ import math
 import re
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import astuple, dataclass, replace
-from typing import Any, BinaryIO
+from typing import BinaryIO
 
 import numpy as np
-from lxml import etree
 from PIL import Image as PILImage
 
 from ...errors import UsageError
@@ -147,33 +146,97 @@ Metadata = tuple[str, str, str]
 """One metadata entry: node type (``MetadataDouble`` …), name, value as X3D field text."""
 
 
+_DECLARATION = "<?xml version='1.0' encoding='UTF-8'?>"
+_NOT_XML_CHARS = r"\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff"
+"""Characters that XML 1.0 forbids, which lxml refuses (a lone surrogate fails UTF-8 encoding)."""
+_NOT_XML = re.compile(f"[{_NOT_XML_CHARS}]")
+_NOT_XML_ERROR = (
+    "All strings must be XML compatible: Unicode or ASCII, no NULL bytes or control characters"
+)
+_ENTITIES = (
+    ("&", "&amp;"),
+    ("<", "&lt;"),
+    (">", "&gt;"),
+    ('"', "&quot;"),
+    ("\t", "&#9;"),
+    ("\n", "&#10;"),
+    ("\r", "&#13;"),
+)
+"""What libxml2 escapes in a double-quoted attribute value, ``&`` first."""
+_TO_ESCAPE = re.compile(f'[&<>"\\t\\n\\r{_NOT_XML_CHARS}]')
+
+
+def _escape(value: str) -> str:
+    """``value`` as double-quoted XML attribute text, escaped as libxml2 (lxml) writes it; a
+    character XML forbids raises :class:`ValueError`, as lxml does."""
+    if _TO_ESCAPE.search(value) is None:
+        return value
+    if _NOT_XML.search(value):
+        raise ValueError(_NOT_XML_ERROR)
+    for char, entity in _ENTITIES:
+        if char in value:
+            value = value.replace(char, entity)
+    return value
+
+
+_VERBATIM_FIELDS = frozenset(
+    {
+        *("DEF", "USE", "name", "containerField", "solid"),
+        *("fromNode", "toNode", "fromField", "toField"),
+        *("index", "point", "color", "diffuseColor", "transparency", "level"),
+        *("translation", "rotation", "scale", "scaleOrientation", "center", "size", "range"),
+        *("whichChoice", "integerKey", "attenuation"),
+        *("pointSizeScaleFactor", "pointSizeMinValue", "pointSizeMaxValue"),
+    }
+)
+"""Fields that this writer fills only with number text (:mod:`..numbers`, ``repr``, ``str``),
+its own constant names, ``true``/``false`` or the NCName DEFs of :func:`_unique_names`: nothing
+in them needs escaping, so they are written as they are (coordinates are most of the text)."""
+
+
 class _Out:
-    """An ``lxml.etree.xmlfile`` with two-space indentation."""
+    """The XML text of a document, as lxml's ``xmlfile`` writes it with two-space indentation:
+    each element on a line of its own, indented by its depth, empty ones self-closed, attribute
+    values escaped (:func:`_escape`; not those of :data:`_VERBATIM_FIELDS`). :meth:`flush`
+    writes the text added so far to the binary ``handle`` in UTF-8."""
 
-    def __init__(self, xf: Any) -> None:
-        self.xf = xf
-        self.depth = 0
+    def __init__(self, handle: BinaryIO) -> None:
+        self.handle = handle
+        self.parts: list[str] = [_DECLARATION]
+        self.indent = "\n"
+        self.open_tags: list[str] = []
 
-    def _newline(self) -> None:
-        self.xf.write("\n" + "  " * self.depth)
+    def _start_tag(self, tag: str, attrib: dict[str, str] | None) -> str:
+        text = f"{self.indent}<{tag}"
+        if attrib:
+            for name, value in attrib.items():
+                text += f' {name}="{value if name in _VERBATIM_FIELDS else _escape(value)}"'
+        return text
 
-    @contextlib.contextmanager
-    def node(
-        self, tag: str, attrib: dict[str, str] | None = None, nsmap: dict[str, str] | None = None
-    ) -> Iterator[None]:
-        """Open an element whose children are written inside the ``with`` block."""
-        if self.depth:  # no text may precede the root element
-            self._newline()
-        with self.xf.element(tag, attrib or {}, nsmap=nsmap):
-            self.depth += 1
-            yield
-            self.depth -= 1
-            self._newline()
+    def node(self, tag: str, attrib: dict[str, str] | None = None) -> _Out:
+        """Open an element whose children are written inside the ``with`` block that this
+        call starts (``with out.node(tag):``)."""
+        self.parts.append(f"{self._start_tag(tag, attrib)}>")
+        self.open_tags.append(tag)
+        self.indent += "  "
+        return self
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, *exc_info: object) -> None:
+        """Close the element :meth:`node` opened last."""
+        self.indent = indent = self.indent[:-2]
+        self.parts.append(f"{indent}</{self.open_tags.pop()}>")
 
     def leaf(self, tag: str, attrib: dict[str, str] | None = None) -> None:
         """Write an element without children."""
-        self._newline()
-        self.xf.write(etree.Element(tag, attrib or {}))
+        self.parts.append(f"{self._start_tag(tag, attrib)}/>")
+
+    def flush(self) -> None:
+        """Write the text added since the last flush to the handle."""
+        self.handle.write("".join(self.parts).encode("utf-8"))
+        self.parts.clear()
 
 
 def _mfstring(values: Iterable[str]) -> str:
@@ -410,6 +473,9 @@ def _face_runs(faces: np.ndarray) -> Iterator[np.ndarray]:
     """Split ``faces`` (m, 3) into consecutive runs of at most :data:`MAX_SHAPE_TRIANGLES`
     faces using at most :data:`MAX_SHAPE_VERTICES` distinct vertices (each run as long as
     both allow; at least one face, and one empty run for a mesh without faces)."""
+    if len(faces) <= MAX_SHAPE_TRIANGLES and faces.size <= MAX_SHAPE_VERTICES:
+        yield faces  # too few corners to use too many vertices
+        return
     start = 0
     while True:
         window = faces[start : start + MAX_SHAPE_TRIANGLES]
@@ -422,6 +488,17 @@ def _face_runs(faces: np.ndarray) -> Iterator[np.ndarray]:
         if stop >= len(faces):
             return
         start = stop
+
+
+def _run_vertices(run: np.ndarray, vertex_count: int) -> tuple[np.ndarray | slice, np.ndarray]:
+    """The vertices (of ``vertex_count``) that the faces ``run`` use, ascending, and ``run``
+    re-indexed into them, as ``np.unique(run, return_inverse=True)`` gives them; all vertices
+    as a slice when every one is used."""
+    used = np.zeros(vertex_count, dtype=bool)
+    used[run.ravel()] = True
+    if used.all():
+        return slice(None), run
+    return np.flatnonzero(used), (np.cumsum(used) - 1)[run]
 
 
 def _point_slices(count: int) -> Iterator[slice]:
@@ -501,7 +578,7 @@ def _part_shapes(out: _Out, surface: Surface, appearance: str) -> None:
     decimals = geometry_decimals(surface.vertices)
     uv_decimals = geometry_decimals(uv) if uv is not None else 0
     for k, run in enumerate(_face_runs(surface.faces)):
-        used, index = np.unique(run, return_inverse=True)
+        used, index = _run_vertices(run, len(surface.vertices))
         with out.node("Shape"):
             _appearance(out, appearance, k == 0, children)
             attrib = {"solid": "false", "index": format_ints(index)}
@@ -776,18 +853,18 @@ def write_x3d(
         raise UsageError(f"must be {modes}, not {switching!r}", field="switching")
     used: set[str] = set()
     written: dict[int, _Written] = {}  # instances: id of a shared levels list → its DEFs
-    with etree.xmlfile(handle, encoding="UTF-8") as xf:
-        xf.write_declaration()
-        out = _Out(xf)
-        root = {
-            "profile": PROFILES[switching],
-            "version": "4.0",
-            f"{{{XSI}}}noNamespaceSchemaLocation": SCHEMA_URL,
-        }
-        with out.node("X3D", root, nsmap={"xsd": XSI}):
-            _head(out, info, switching)
-            with out.node("Scene"):
-                for item in chains:
-                    _write_item(out, item, used, written, switching)
-                    xf.flush()
+    out = _Out(handle)
+    root = {
+        "xmlns:xsd": XSI,
+        "profile": PROFILES[switching],
+        "version": "4.0",
+        "xsd:noNamespaceSchemaLocation": SCHEMA_URL,
+    }
+    with out.node("X3D", root):
+        _head(out, info, switching)
+        with out.node("Scene"):
+            for item in chains:
+                _write_item(out, item, used, written, switching)
+                out.flush()
+    out.flush()
     handle.write(b"\n")
