@@ -391,6 +391,12 @@ def point_level_at(
     return level if isinstance(level, Level) else None
 
 
+def _least_cost(surface: Mesh, opts: ChainOptions) -> float:
+    """The draw cost at or below which a level is not replaced by points of ``surface``
+    (:func:`~.plan.least_point_cost`; 0 where ``opts`` give the resolutions)."""
+    return least_point_cost(surface) if not opts.resolutions else 0.0
+
+
 def bake_chain(
     obj: Node,
     opts: ChainOptions,
@@ -428,7 +434,7 @@ def bake_chain(
     dropped: dict[str, str] = {}
     if opts.keep_mesh:
         levels.append(Level(name=LEVEL_NAMES[0], kind="mesh", mesh=surface))
-    floor = least_point_cost(surface) if not opts.resolutions else 0.0
+    floor = _least_cost(surface, opts)
     for i in range(opts.pcd_levels):
         n = i + 1 if opts.keep_mesh else i
         name = LEVEL_NAMES[n]
@@ -478,7 +484,6 @@ def _source_chain(
     kept_cuts: list[float] = []
     kept_xs: list[float] = []
     dropped: dict[str, str] = {}
-    floor = least_point_cost(surface) if not opts.resolutions else 0.0
     for slot in range(finest_slot - 1, 0, -1):
         index = SLOTS.index(slot) - 1  # LOD3 → 0 … LOD1 → 2: its cutoff and exponent
         name = f"LOD{slot}"
@@ -492,7 +497,7 @@ def _source_chain(
                 if shape is not None
                 else "no footprint with area to extrude"
             )
-        elif level_cost(levels[-1]) <= floor:
+        elif level_cost(levels[-1]) <= _least_cost(surface, opts):
             level = "no point level could be both cheaper and faithful"
         else:
             if progress:

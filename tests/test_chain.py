@@ -132,3 +132,16 @@ def test_bad_geometry_is_an_input_error() -> None:
     empty = Surface(np.zeros((3, 3)), np.zeros((0, 3), dtype=np.int64))
     with pytest.raises(InputError, match="no faces"):
         chain_of(Node("empty", empty))
+
+
+def test_a_moved_mesh_keeps_its_bounds_exact() -> None:
+    from lodconvert.model import Mesh
+
+    rng = np.random.default_rng(7)
+    parts = [Surface(rng.random((9, 3)) * 40 + 4.4e6, rng.integers(0, 9, (5, 3))) for _ in range(3)]
+    mesh = Mesh(parts)
+    offset = -mesh.bounds.mean(axis=0)
+    moved = mesh.translated(offset)  # the bounds come along from the mesh
+    fresh = Mesh([Surface(p.vertices + offset, p.faces) for p in parts])
+    np.testing.assert_array_equal(moved.bounds, fresh.bounds)
+    np.testing.assert_array_equal(moved.parts[0].bounds, fresh.parts[0].bounds)

@@ -3,6 +3,8 @@ footprint where a source has no LoD1."""
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 import trimesh
@@ -10,8 +12,9 @@ import trimesh
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.model import Mesh, Node, Surface
+from lodconvert.polygons import triangulate
 from lodconvert.ranges import cutoff
-from lodconvert.sourcelods import lod_rank, prism, source_levels
+from lodconvert.sourcelods import footprint, lod_rank, prism, source_levels
 
 
 def block(width: float, depth: float, height: float, x: float = 0.0, y: float = 0.0) -> Mesh:
@@ -34,6 +37,12 @@ def surfaces_area(mesh: Mesh, facing: float) -> float:
     area = np.linalg.norm(cross, axis=1) / 2
     nz = cross[:, 2] / np.maximum(2 * area, 1e-12)
     return float(area[np.isclose(nz, facing, atol=1e-6)].sum())
+
+
+def enclosed_volume(mesh: Mesh) -> float:
+    """Signed volume its faces enclose: positive when they face outward."""
+    tri = mesh.triangles - mesh.vertices[0]
+    return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))) / 6
 
 
 @pytest.mark.parametrize(
@@ -62,6 +71,8 @@ def test_a_lod2_building_shows_its_lod2_up_to_the_lod1_slot_and_a_prism_beyond()
     assert surfaces_area(shape, -1.0) == pytest.approx(300.0)
     assert shape.bounds[0, 2] == pytest.approx(0.0)
     assert shape.bounds[1, 2] == pytest.approx(12.0)  # measuredHeight
+    assert enclosed_volume(shape) == pytest.approx(300.0 * 12.0)  # faces outward, as the source's
+    assert enclosed_volume(house) > 0
 
 
 def test_a_source_lod1_wins_over_a_prism_and_finer_slots_keep_their_place() -> None:
@@ -80,6 +91,73 @@ def test_no_footprint_means_no_prism() -> None:
     assert prism({"lod2": wall}, wall, {}) is None
     chain = bake_chain(Node("w", wall, lods={"lod2": wall}), ChainOptions(), NumpyBackend())
     assert [lv.name for lv in chain.levels] == ["LOD2"] and "LOD1" in chain.dropped
+
+
+def closed_and_wound_alike(mesh: Mesh) -> bool:
+    """Whether every edge of ``mesh`` (by its corners' coordinates) is run once each way as
+    often as the other: no gap, and all faces wound alike."""
+    edges: dict[tuple[tuple[float, ...], tuple[float, ...]], int] = {}
+    for corners in mesh.triangles.tolist():
+        for a, b in itertools.pairwise([*map(tuple, corners), tuple(corners[0])]):
+            edges[a, b] = edges.get((a, b), 0) + 1
+    return all(edges.get((b, a)) == count for (a, b), count in edges.items())
+
+
+def with_slivers(slivers: list[list[tuple[float, float, float]]]) -> Mesh:
+    """The 10 × 8 × 6 block on the origin and steep triangles with the corners of ``slivers``
+    facing down, as leaning walls' do: slivers seen from above."""
+    parts = list(block(10, 8, 6).parts)
+    for corners in slivers:
+        sliver = np.array(corners, dtype=float)
+        (ax, ay), (bx, by), (cx, cy) = sliver[:, :2]
+        if (bx - ax) * (cy - ay) - (by - ay) * (cx - ax) > 0:
+            sliver = sliver[::-1].copy()
+        parts.append(Surface(sliver, np.array([[0, 1, 2]])))
+    return Mesh(parts)
+
+
+INSIDE = [(-5, -4, 0), (5, -4, 0), (0, -3.99, 6)]
+ALONG = [(5, -4, 0), (5, 4, 0), (5.01, 0, 6)]
+ACROSS = [(-5, 4, 0), (0, 4.01, 6), (5, 3.99, 6)]
+
+
+@pytest.mark.parametrize(
+    "slivers",
+    [
+        [INSIDE],  # inside the ground: it adds nothing
+        [ALONG],  # outside, along an edge of the ground: it merges with it
+        [INSIDE, ALONG],
+        [INSIDE, ACROSS],  # across an edge of the ground
+    ],
+)
+def test_the_slivers_of_steep_faces_join_the_footprint_exactly(
+    slivers: list[list[tuple[float, float, float]]],
+) -> None:
+    import shapely
+
+    house = with_slivers(slivers)
+    seen = [shapely.Polygon(np.array(corners)[:, :2]) for corners in slivers]
+    outline = shapely.union_all([shapely.box(-5, -4, 5, 4), *seen])
+    shape = prism({"lod2": house}, house, {})
+    assert shape is not None and closed_and_wound_alike(shape)
+    assert surfaces_area(shape, -1.0) == pytest.approx(outline.area, rel=1e-12)
+    assert surfaces_area(shape, 1.0) == pytest.approx(outline.area, rel=1e-12)
+    assert shape.bounds[:, :2] == pytest.approx(np.reshape(outline.bounds, (2, 2)))
+
+
+def test_a_footprint_with_a_courtyard_keeps_it() -> None:
+    square = [(0, 0, 0), (10, 0, 0), (10, 10, 0), (0, 10, 0)]
+    yard = [(3, 3, 0), (6, 3, 0), (6, 6, 0), (3, 6, 0)]
+    points, faces = triangulate([np.array(square, float), np.array(yard, float)])
+    ground = Mesh([Surface(points, faces)])
+    house = block(10, 10, 5, 5, 5)
+    (part,) = footprint({"lod0": ground, "lod2": house}, house)
+    assert len(part.rings) == 2  # the yard is a hole
+    shape = prism({"lod0": ground, "lod2": house}, house, {})
+    assert shape is not None and closed_and_wound_alike(shape)
+    assert surfaces_area(shape, 1.0) == pytest.approx(91.0)
+    assert surfaces_area(shape, 0.0) == pytest.approx(4 * 10 * 5 + 4 * 3 * 5)  # walls
+    assert enclosed_volume(shape) == pytest.approx(91.0 * 5)
 
 
 def test_plot_radii_come_from_the_neighbours_spacing() -> None:
@@ -120,3 +198,24 @@ def test_inputs_merge_the_lods_of_one_city_object() -> None:
         ("LOD2", "source"),
         ("LOD1", "source"),
     ]
+
+
+def test_every_prism_of_a_real_district_faces_outward_like_its_source() -> None:
+    """TUM Munich's LoD2 buildings and their derived LOD1 prisms all enclose their volume
+    with outward faces (viewers light and cull them by their winding)."""
+    from lodconvert.bake import get_backend
+    from lodconvert.io import read_scene
+    from lodconvert.pipeline import iter_chains
+
+    from .test_citygml import sample
+
+    chains = list(
+        iter_chains(
+            read_scene(sample("tum_munich_lod2_v2.zip")), ChainOptions(), get_backend("numpy")
+        )
+    )
+    prisms = [lv.mesh for chain in chains for lv in chain.levels if lv.kind == "prism"]
+    assert len(prisms) == len(chains) == 290
+    assert all(enclosed_volume(mesh) > 0 for mesh in prisms)
+    sources = [chain.levels[0].mesh for chain in chains]
+    assert sum(enclosed_volume(mesh) > 0 for mesh in sources) > 0.95 * len(sources)

@@ -60,6 +60,13 @@ class Surface:
         """Corner positions (m, 3, 3) of every face."""
         return self.derived("triangles", lambda: self.vertices[self.faces])
 
+    def translated(self, offset: np.ndarray) -> Surface:
+        """This surface moved by ``offset`` (sharing colours, texture and UVs), its bounds
+        moved along where they are known."""
+        moved = replace(self, vertices=self.vertices + offset)
+        _move_bounds(self._derived, moved._derived, offset)
+        return moved
+
     @property
     def material_color(self) -> np.ndarray:
         """The base colour in effect: the source's, else white under vertex colours or a
@@ -123,6 +130,13 @@ class Surface:
             rgba = np.einsum("ij,ijk->ik", bary, self.vertex_colors[corners].astype(np.float64))
         rgba = rgba * (base.astype(np.float64) / 255.0)
         return np.clip(np.rint(rgba), 0, 255).astype(np.uint8)
+
+
+def _move_bounds(derived: dict[str, Any], moved: dict[str, Any], offset: np.ndarray) -> None:
+    """Put the bounds in ``derived``, if any, moved by ``offset``, into ``moved``: rounding
+    keeps the order of coordinates, so the moved vertices' extremes are the extremes moved."""
+    if "bounds" in derived:
+        moved["bounds"] = derived["bounds"] + offset
 
 
 @dataclass
@@ -259,5 +273,9 @@ class Mesh:
         return out
 
     def translated(self, offset: np.ndarray) -> Mesh:
-        """This mesh moved by ``offset`` (new parts sharing colours, texture and UVs)."""
-        return Mesh([replace(p, vertices=p.vertices + offset) for p in self.parts])
+        """This mesh moved by ``offset`` (new parts sharing colours, texture and UVs), its
+        bounds moved along where they are known."""
+        moved = Mesh([p.translated(offset) for p in self.parts])
+        if self.single is None:
+            _move_bounds(self._derived, moved._derived, offset)
+        return moved
