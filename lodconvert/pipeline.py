@@ -11,7 +11,6 @@ from __future__ import annotations
 import contextlib
 import gc
 import itertools
-import json
 import platform
 import time
 from collections.abc import Callable, Iterable, Iterator, Sequence
@@ -32,6 +31,7 @@ from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
 from .ranges import DEFAULT_GAMMA
+from .records import Records, report_text
 from .sinks import FileSink, Outputs
 from .sourcelods import source_levels
 from .spool import NodeSpool
@@ -342,7 +342,7 @@ def convert(
     inputs = [input_path] if isinstance(input_path, str | Path) else list(input_path)
     sources = [input_format(path) for path in inputs]
     timings: dict[str, float] = {}
-    records: list[dict[str, Any]] = []
+    records = Records()
     skipped: list[dict[str, str]] = []
     cells: list[dict[str, Any]] = []
     draw: dict[str, dict[str, int]] = {"without": {}, "with": {}}
@@ -373,9 +373,14 @@ def convert(
         )
 
         def recorded(items: Iterator[LodChain | CellChain]) -> Iterator[LodChain | CellChain]:
+            tally = tally_of(scene)
+            dropped = tally.dropped_by_object if tally is not None else {}
             for item in items:
                 objects = item.objects() if isinstance(item, CellChain) else [item]
-                records.extend(chain_record(chain) for chain in objects)
+                for chain in objects:
+                    records.append(
+                        {**chain_record(chain), "dropped_faces": dropped.get(chain.object_id, 0)}
+                    )
                 if isinstance(item, CellChain):
                     cells.extend(cell_record(cell) for cell in item.cells())
                 if hlod is not None:
@@ -419,7 +424,9 @@ def convert(
         if also is not None:
             also(outputs, sink, report)
         if report_sink is not None:
-            report_sink.write_bytes((json.dumps(report, indent=2) + "\n").encode())
+            with report_sink.open() as stream:
+                for piece in report_text(report):
+                    stream.write(piece.encode())
     return report
 
 
@@ -440,16 +447,16 @@ def _report(
     output_path: str | Path,
     baker: Backend,
     options: ChainOptions,
-    records: list[dict[str, Any]],
+    records: Records,
     skipped: list[dict[str, str]],
     timings: dict[str, float],
     tally: InputTally | None = None,
 ) -> dict[str, Any]:
     """What ``--report`` records of a run; ``tally``: what the reader's checks dropped."""
-    reduced = [r for r in records if r["dropped"]]
-    by_object = tally.dropped_by_object if tally is not None else {}
+    reduced = points = 0
     for record in records:
-        record["dropped_faces"] = by_object.get(record["id"], 0)
+        reduced += bool(record["dropped"])
+        points += sum(lv["count"] for lv in record["levels"] if lv["kind"] == "pcd")
     return {
         "lodconvert": __version__,
         "input": str(input_path),
@@ -462,11 +469,9 @@ def _report(
         "skipped": skipped,
         "totals": {
             "objects": len(records),
-            "fewer_levels": len(reduced),
+            "fewer_levels": reduced,
             "dropped_faces": tally.dropped_faces if tally is not None else 0,
-            "points": int(
-                sum(lv["count"] for r in records for lv in r["levels"] if lv["kind"] == "pcd")
-            ),
+            "points": int(points),
         },
         "timings": {k: round(v, 4) for k, v in timings.items()},
     }
