@@ -42,7 +42,7 @@ from .ranges import (
     default_xs,
     projected_px,
 )
-from .sourcelods import SLOTS, prism, source_levels
+from .sourcelods import GROUND_COVERS, SLOTS, prism, source_levels
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
@@ -490,6 +490,8 @@ def _source_chain(
         level: Level | str
         if slot in sources:
             level = Level(name=name, kind="source", mesh=sources[slot][1].translated(-origin))
+        elif slot == 1 and obj.type in GROUND_COVERS:
+            level = f"a {obj.type} covers the ground: no prism"
         elif slot == 1:
             shape = prism(obj.lods, finest, obj.attributes)
             level = (

@@ -33,7 +33,7 @@ from .plots import plot_radii
 from .ranges import DEFAULT_GAMMA
 from .records import Records, report_text
 from .sinks import FileSink, Outputs
-from .sourcelods import source_levels
+from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
 from .validate import check_written
 
@@ -278,14 +278,15 @@ def _spooled(
     nodes: Iterable[Node], options: ChainOptions, spool: NodeSpool
 ) -> tuple[np.ndarray, list[float | None]]:
     """Park ``nodes`` in ``spool``; their ground centres ((n, 2), scene coordinates) and the
-    plot radius of each city object (``None`` for others, and for all where ``options`` set
-    γ)."""
+    plot radius of each city object standing on the ground, from its neighbours among them
+    (``None`` for others, terrain and ground covers among them, and for all where ``options``
+    set γ)."""
     centres: list[tuple[float, float]] = []
     city: list[bool] = []
     for node in nodes:
         spool.add(node)
         centres.append(_ground_centre(node))
-        city.append(bool(node.lods))
+        city.append(bool(node.lods) and node.type not in GROUND_COVERS)
     placed = np.array(centres, dtype=np.float64).reshape(-1, 2)
     radii: list[float | None] = [None] * len(placed)
     chosen = np.flatnonzero(city)

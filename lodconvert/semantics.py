@@ -43,6 +43,8 @@ TYPE_COLORS = {
     "WaterBody": _rgba(100, 150, 200),
     "Road": _rgba(110, 110, 115),
     "LandUse": _rgba(215, 205, 170),
+    "ReliefFeature": _rgba(150, 155, 110),  # terrain: CityGML's type
+    "TINRelief": _rgba(150, 155, 110),  # terrain: CityJSON's type
 }
 """Colour of surfaces of no semantic class, by object type (others: the ``other`` class)."""
 

@@ -8,8 +8,10 @@ edges) fills no slot; it is the footprint of a derived prism.
 
 A derived **prism** is the object's footprint — its lod0 surfaces, else the outline of its
 finest geometry seen from above — extruded from the lowest point to the object's height
-(``measuredHeight`` where the source gives a plausible one). Coordinates are z-up, as in
-CityGML and CityJSON.
+(``measuredHeight`` where the source gives a plausible one). Only objects that stand on the
+ground get one: terrain and the surfaces that cover the ground (:data:`GROUND_COVERS`: land
+use, roads, squares, waterways) would become blocks from their lowest to their highest point.
+Coordinates are z-up, as in CityGML and CityJSON.
 """
 
 from __future__ import annotations
@@ -49,6 +51,21 @@ def source_levels(lods: dict[str, Mesh]) -> dict[int, tuple[str, Mesh]]:
     return {slot: (label, mesh) for slot, (_, label, mesh) in best.items()}
 
 
+GROUND_COVERS = frozenset(
+    {
+        "ReliefFeature",
+        "TINRelief",
+        "LandUse",
+        "Road",
+        "Railway",
+        "Track",
+        "Square",
+        "TransportSquare",
+        "TransportationComplex",
+        "Waterway",
+    }
+)
+"""Object types (CityGML, CityJSON) that cover the ground rather than stand on it: no prism."""
 CLOSED_TOLERANCE = 1e-3
 """Downward-facing triangles covering this much less ground than the upward-facing ones still
 make the footprint."""

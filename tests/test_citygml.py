@@ -21,7 +21,7 @@ from lodconvert.io import read_chains, read_scene
 from lodconvert.limits import Limits
 from lodconvert.model import Mesh, Node
 from lodconvert.pipeline import convert
-from lodconvert.semantics import DEFAULT_CLASS_COLORS
+from lodconvert.semantics import DEFAULT_CLASS_COLORS, TYPE_COLORS
 from lodconvert.validate import errors_of, validate_file
 
 from .conftest import SHARED
@@ -56,6 +56,11 @@ def nodes_of(path: Path, **options: object) -> list[Node]:
     return list(read_scene(path, **options).nodes)
 
 
+def buildings_of(path: Path) -> list[Node]:
+    """The ``Building`` nodes of a sample (the SIG3D files also hold their terrain)."""
+    return [node for node in nodes_of(path) if node.type == "Building"]
+
+
 def colors(mesh: Mesh) -> set[tuple[int, ...]]:
     return {tuple(int(c) for c in part.material_color) for part in mesh.parts}
 
@@ -79,7 +84,7 @@ def test_every_sample_reads_with_its_building_count(name: str) -> None:
 
 def test_projected_samples_keep_their_crs_and_coordinates() -> None:
     scene = read_scene(sample(SIG3D.format(2)))
-    (node,) = scene.nodes
+    node, _terrain = scene.nodes
     assert scene.crs == node.crs == "EPSG:25832"
     assert scene.attributes["vertical_crs"] == "EPSG:5783"
     bounds = node.geometry.bounds
@@ -90,7 +95,7 @@ def test_projected_samples_keep_their_crs_and_coordinates() -> None:
 
 
 def test_lod2_house_has_roof_wall_and_ground_parts() -> None:
-    (node,) = nodes_of(sample(SIG3D.format(2)))
+    (node,) = buildings_of(sample(SIG3D.format(2)))
     assert list(node.lods) == ["lod2"]
     found = colors(node.geometry)
     assert {as_tuple(ROOF_COLOR), as_tuple(WALL_COLOR), as_tuple(GROUND_COLOR)} <= found
@@ -99,13 +104,13 @@ def test_lod2_house_has_roof_wall_and_ground_parts() -> None:
 
 
 def test_lod0_lod3_and_lod4_houses_carry_their_lods() -> None:
-    (lod0,) = nodes_of(sample(SIG3D.format(0)))
+    (lod0,) = buildings_of(sample(SIG3D.format(0)))
     assert list(lod0.lods) == ["lod0"]
     assert colors(lod0.geometry) == {as_tuple(ROOF_COLOR), as_tuple(GROUND_COLOR)}
-    (lod3,) = nodes_of(sample(SIG3D.format(3)))
+    (lod3,) = buildings_of(sample(SIG3D.format(3)))
     assert "lod3" in lod3.lods and lod3.geometry is lod3.lods["lod3"]
     assert as_tuple(OTHER_COLOR) in colors(lod3.geometry)  # windows and the door
-    (lod4,) = nodes_of(sample(SIG3D.format(4)))
+    (lod4,) = buildings_of(sample(SIG3D.format(4)))
     assert "lod4" in lod4.lods
     # rooms and furniture (hundreds of polygons) are interior: not read
     assert len(lod4.geometry.faces) < 200
@@ -131,7 +136,7 @@ def test_plateau_is_projected_to_a_metric_local_frame_and_both_versions_agree() 
 
 
 def test_attributes_are_read() -> None:
-    (house,) = nodes_of(sample(SIG3D.format(1)))
+    (house,) = buildings_of(sample(SIG3D.format(1)))
     attributes = house.attributes
     assert attributes["id"] == "GML_7b1a5a6f-ddad-4c3d-a507-3eb9ee0a8e68"
     assert attributes["name"] == "Example Building LOD1"
@@ -144,6 +149,48 @@ def test_attributes_are_read() -> None:
     plateau = nodes_of(sample(PLATEAU[1]))[0].attributes
     assert plateau["generic"]["建物ID"] == "13104-bldg-53"
     json.dumps([attributes, tum, plateau])
+
+
+@pytest.mark.parametrize("lod", range(5))
+def test_terrain_is_read_as_its_own_object(lod: int) -> None:
+    """Each SIG3D file's ``ReliefFeature`` (a ``TINRelief`` of 9 triangles, its ``dem:lod``
+    the file's LoD; the LoD4 file's is LoD3) is an object of its own, under the house,
+    coloured as terrain."""
+    house, terrain = nodes_of(sample(SIG3D.format(lod)))
+    assert (house.type, terrain.type) == ("Building", "ReliefFeature")
+    assert terrain.id == "GML_6bb30328-7599-4500-90ef-766fde6aa67b"
+    assert list(terrain.lods) == [f"lod{min(lod, 3)}"]
+    assert len(terrain.geometry.faces) == 9
+    assert colors(terrain.geometry) == {as_tuple(TYPE_COLORS["ReliefFeature"])}
+    low, high = terrain.geometry.bounds, house.geometry.bounds
+    assert (low[0, :2] <= high[0, :2]).all() and (low[1, :2] >= high[1, :2]).all()
+    assert low[0, 2] <= high[0, 2] + 0.5  # the ground, not floating above the house's base
+
+
+def test_terrain_and_ground_covers_get_no_prism(tmp_path: Path) -> None:
+    """A house's LoD2 file gives the house a prism for LOD1, its terrain none (a block from
+    its lowest to its highest point would hide the house); the terrain is no neighbour of the
+    house, which stands alone on its plot (γ 10 m, not the 2 m of half the distance between
+    their centres)."""
+    report = convert([sample(SIG3D.format(2))], tmp_path / "house.x3d")
+    house, terrain = report["objects"]
+    assert house["gamma"] == terrain["gamma"] == 10.0
+    assert [lv["kind"] for lv in house["levels"]] == ["source", "prism"]
+    assert [lv["kind"] for lv in terrain["levels"]] == ["source"]
+    assert "covers the ground: no prism" in terrain["dropped"]["LOD1"]
+    assert errors_of(validate_file(tmp_path / "house.x3d")) == []
+
+
+def test_objects_without_semantic_surfaces_take_their_type_colour(tmp_path: Path) -> None:
+    """A ``PlantCover`` whose geometry is its own (no thematic surface) is vegetation green."""
+    cover = building("cover", box()).replace("bldg:Building", "veg:PlantCover")
+    cover = cover.replace("bldg:lod2MultiSurface", "veg:lod2MultiSurface")
+    head = HEAD.replace(">", ' xmlns:veg="http://www.opengis.net/citygml/vegetation/2.0">', 1)
+    path = tmp_path / "cover.gml"
+    path.write_text(document(cover).replace(HEAD, head))
+    (node,) = nodes_of(path)
+    assert node.type == "PlantCover"
+    assert colors(node.geometry) == {as_tuple(TYPE_COLORS["PlantCover"])}
 
 
 def test_types_option_filters_objects() -> None:
@@ -442,7 +489,13 @@ def test_the_five_sig3d_files_are_one_building_with_four_levels(
     inputs = [sample(SIG3D.format(lod)) for lod in range(5)]
     out = tmp_path / f"house{suffix}"
     report = convert(inputs, out)
-    (obj,) = report["objects"]
+    obj, terrain = report["objects"]
+    assert terrain["id"] == "GML_6bb30328-7599-4500-90ef-766fde6aa67b"
+    assert [(lv["name"], lv["kind"]) for lv in terrain["levels"]] == [
+        ("LOD3", "source"),
+        ("LOD2", "source"),
+        ("LOD1", "source"),
+    ]
     assert [(lv["name"], lv["kind"]) for lv in obj["levels"]] == [
         ("LOD4", "source"),
         ("LOD3", "source"),

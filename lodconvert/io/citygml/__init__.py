@@ -2,8 +2,8 @@
 holding one such file), streamed one city object at a time.
 
 Every top-level city object (a ``Building``, ``Bridge``, ``Road``, ``LandUse``, ``WaterBody``,
-``PlantCover``, ``GenericCityObject``… typed by its element's local name) becomes one
-:class:`Node`. Each LoD the object carries (``lodNSolid``, ``lodNMultiSurface``,
+``PlantCover``, ``GenericCityObject``, ``ReliefFeature``… typed by its element's local name)
+becomes one :class:`Node`. Each LoD the object carries (``lodNSolid``, ``lodNMultiSurface``,
 ``lodNGeometry``, ``lod0FootPrint``/``lod0RoofEdge``, and the same properties of its thematic
 surfaces, openings and installations) is read into ``node.lods`` as ``"lod0"`` … ``"lod4"``, one
 :class:`Surface` per semantic type (``RoofSurface``, ``WallSurface``, ``Window``…) coloured by
@@ -11,8 +11,10 @@ surfaces, openings and installations) is read into ``node.lods`` as ``"lod0"`` �
 there is no other). A polygon that a solid refers to (``xlink:href``) and a thematic surface
 holds is read once, with its semantics. Building (bridge, tunnel) parts are children of their
 object: each keeps its own attributes and LoDs, and their geometry is part of the object's, so
-that a building is one object of the output however many parts it has. Interiors (rooms,
-furniture) and terrain (``ReliefFeature``) are not read.
+that a building is one object of the output however many parts it has. Terrain is read from
+its ``TINRelief`` components (their ``tin`` triangles, at the component's ``lod``); mass
+points, break lines and raster reliefs hold no surfaces. Interiors (rooms, furniture) are not
+read.
 
 Geometry stays in the file's coordinates (float64) when its CRS is projected; a geographic CRS
 (latitude, longitude, height: EPSG:6697, 4326, 4979) is projected onto a transverse Mercator

@@ -4,15 +4,15 @@ coordinates in metres and their triangles as one checked :class:`Surface` per Lo
 type.
 
 A polygon belongs to the nearest object or part above it and is read when it lies under a
-geometry property (``lod2Solid``, ``lod0FootPrint``…) of that object, of a thematic surface,
-opening or installation of it, and not in a property that holds no exterior geometry (rooms,
-furniture, appearances, addresses). Its semantic type is the feature holding the geometry
-property (``WallSurface``; none for the object itself; ``FootPrint``/``RoofEdge`` for LoD 0),
-and ``OrientableSurface``s with ``orientation="-"`` above it reverse it. ``xlink:href`` links
-to polygons (or to geometries holding them) within the object are followed; a polygon that a
-solid refers to and a thematic surface holds is read once, with its semantics, and so is a
-polygon whose exterior ring repeats another's of the same LoD. A solid's interior shells are
-left out.
+geometry property (``lod2Solid``, ``lod0FootPrint``…, a terrain component's ``tin``) of that
+object, of a thematic surface, opening or installation of it, and not in a property that holds
+no exterior geometry (rooms, furniture, appearances, addresses). Its semantic type is the
+feature holding the geometry property (``WallSurface``; none for the object itself;
+``FootPrint``/``RoofEdge`` for LoD 0), and ``OrientableSurface``s with ``orientation="-"``
+above it reverse it. ``xlink:href`` links to polygons (or to geometries holding them) within
+the object are followed; a polygon that a solid refers to and a thematic surface holds is read
+once, with its semantics, and so is a polygon whose exterior ring repeats another's of the same
+LoD. A solid's interior shells are left out.
 
 Triangulating a batch of objects together (:func:`triangulate_batch`) lets the per-polygon work
 run as array operations over thousands of polygons instead of a few dozen.
@@ -40,6 +40,7 @@ from .names import (
     NOT_SURFACES,
     PART_PROPERTIES,
     POLYGONS,
+    RELIEF_NAMESPACE,
     UNREAD_PROPERTIES,
     XLINK_HREF,
     is_feature,
@@ -196,6 +197,11 @@ class _Walker:
                 if match.group(2) in ("FootPrint", "RoofEdge"):
                     semantic = name[4:]
                 found = _Place(holder, f"lod{match.group(1)}", semantic, False, depth)
+        elif name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)):
+            above = self._above(element)
+            lod = _relief_lod(parent, self.top.element)
+            if above is not None and lod is not None:
+                found = _Place(above[0], lod, "", False, above[2])
         elif not (name == "interior" and local(parent) == "Solid"):
             outer = self.place(parent)
             if outer is not None:
@@ -239,6 +245,17 @@ class _Walker:
         if holder is None and not feature_next:
             return None
         return holder or self.top, semantic, depth
+
+
+def _relief_lod(component: etree._Element, top: etree._Element) -> str | None:
+    """The LoD label (``"lod2"``) of a terrain component: its ``lod``, else its relief
+    feature's; None when neither gives one from 0 to 4."""
+    for feature in (component, top):
+        for child in feature:
+            if local(child) == "lod":
+                text = (child.text or "").strip()
+                return f"lod{text}" if text in ("0", "1", "2", "3", "4") else None
+    return None
 
 
 def collect(top: Holder, gml: str, depth_limit: int, source: str) -> None:
@@ -564,7 +581,9 @@ def triangulate_batch(
         group.holder.dropped += (group.faces.stop - group.faces.start) - len(kept)
         if len(kept):
             surface = Surface(
-                vertices[group.vertices].copy(), kept, base_color=palette.of(group.semantic).copy()
+                vertices[group.vertices].copy(),
+                kept,
+                base_color=palette.of(group.semantic or None, top_of[id(group.holder)].kind).copy(),
             )
             group.holder.surfaces.setdefault(group.lod, []).append(surface)
     return broken

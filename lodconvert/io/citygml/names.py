@@ -46,8 +46,11 @@ UNREAD_PROPERTIES = frozenset(
     }
 )
 """Properties of a city object that hold no exterior geometry (or geometry not read)."""
-NOT_OBJECTS = frozenset({"ReliefFeature", "CityObjectGroup", "Appearance", "Version"})
-"""Top-level features that are not read as objects (terrain, groups, appearances)."""
+NOT_OBJECTS = frozenset({"CityObjectGroup", "Appearance", "Version"})
+"""Top-level features that are not read as objects (groups, appearances, versions)."""
+RELIEF_NAMESPACE = re.compile(r"http://www\.opengis\.net/citygml/relief/(1\.0|2\.0|3\.0)")
+"""The relief (terrain) module's namespace: a ``TINRelief``'s ``tin`` is a geometry property
+whose LoD is the ``lod`` of the component (or of its ``ReliefFeature``)."""
 POLYGONS = frozenset({"Polygon", "Triangle", "Rectangle", "PolygonPatch"})
 NOT_SURFACES = frozenset(
     {"Point", "MultiPoint", "LineString", "Curve", "MultiCurve", "CompositeCurve", "Envelope"}
