@@ -26,6 +26,8 @@ CLASS_OF = {
     "WallSurface": "wall",
     "GroundSurface": "ground",
     "FootPrint": "ground",
+    "InteriorWallSurface": "wall",
+    "FloorSurface": "ground",
 }
 """Semantic surface types (CityGML, CityJSON) → class; any other type is ``other``."""
 

@@ -111,9 +111,28 @@ def test_lod0_lod3_and_lod4_houses_carry_their_lods() -> None:
     assert "lod3" in lod3.lods and lod3.geometry is lod3.lods["lod3"]
     assert as_tuple(OTHER_COLOR) in colors(lod3.geometry)  # windows and the door
     (lod4,) = buildings_of(sample(SIG3D.format(4)))
-    assert "lod4" in lod4.lods
-    # rooms and furniture (hundreds of polygons) are interior: not read
-    assert len(lod4.geometry.faces) < 200
+    assert list(lod4.lods) == ["lod4"]
+
+
+def test_lod4_interior_is_read_as_parts_of_the_building() -> None:
+    """The SIG3D LoD4 house's room (its own walls, floor and ceiling; its links to the house's
+    ground surface are read once, by the house) and the furniture in it are parts of the
+    house: children with their own LoD4 and attributes, inside the house, in its LoD4."""
+    scene = read_scene(sample(SIG3D.format(4)))
+    house = next(node for node in scene.nodes if node.type == "Building")
+    (room,) = house.children
+    (furniture,) = room.children
+    assert (room.type, furniture.type) == ("Room", "BuildingFurniture")
+    assert list(room.lods) == list(furniture.lods) == ["lod4"]
+    assert furniture.attributes["function"] == "1340"
+    assert WALL_COLOR.tolist() in [p.material_color.tolist() for p in room.lods["lod4"].parts]
+    assert scene.attributes["citygml"]["unresolved_links"] == {}
+    own = house.lods["lod4"]
+    for part in (room, furniture):
+        box = part.lods["lod4"].bounds
+        assert (box[0] >= own.bounds[0] - 1e-6).all() and (box[1] <= own.bounds[1] + 1e-6).all()
+    faces = [len(n.lods["lod4"].faces) for n in (room, furniture)]
+    assert len(own.faces) > sum(faces) > 2000
 
 
 def test_plateau_is_projected_to_a_metric_local_frame_and_both_versions_agree() -> None:

@@ -11,10 +11,11 @@ surfaces, openings and installations) is read into ``node.lods`` as ``"lod0"`` â
 there is no other). A polygon that a solid refers to (``xlink:href``) and a thematic surface
 holds is read once, with its semantics. Building (bridge, tunnel) parts are children of their
 object: each keeps its own attributes and LoDs, and their geometry is part of the object's, so
-that a building is one object of the output however many parts it has. Terrain is read from
-its ``TINRelief`` components (their ``tin`` triangles, at the component's ``lod``); mass
-points, break lines and raster reliefs hold no surfaces. Interiors (rooms, furniture) are not
-read.
+that a building is one object of the output however many parts it has. Its interior (rooms,
+furniture, interior installations: ``interiorRoom``, 3.0 ``buildingRoom``â€¦) is read the same
+way, as parts, in the LoD it is given at (LoD4 in 1.0 and 2.0). Terrain is read from its
+``TINRelief`` components (their ``tin`` triangles, at the component's ``lod``); mass points,
+break lines and raster reliefs hold no surfaces.
 
 Geometry stays in the file's coordinates (float64) when its CRS is projected; a geographic CRS
 (latitude, longitude, height: EPSG:6697, 4326, 4979) is projected onto a transverse Mercator

@@ -6,7 +6,8 @@ type.
 A polygon belongs to the nearest object or part above it and is read when it lies under a
 geometry property (``lod2Solid``, ``lod0FootPrint``…, a terrain component's ``tin``) of that
 object, of a thematic surface, opening or installation of it, and not in a property that holds
-no exterior geometry (rooms, furniture, appearances, addresses). Its semantic type is the
+no geometry read (appearances, addresses). Parts and interiors (rooms, furniture) are holders
+of their own. Its semantic type is the
 feature holding the geometry property (``WallSurface``; none for the object itself;
 ``FootPrint``/``RoofEdge`` for LoD 0), and ``OrientableSurface``s with ``orientation="-"``
 above it reverse it. ``xlink:href`` links to polygons (or to geometries holding them) within
@@ -36,9 +37,9 @@ from ..geometry_checks import MAX_MAGNITUDE, InputTally, checked_vertices, faces
 from .crs import Crs
 from .names import (
     GML_NAMESPACES,
+    HOLDING_PROPERTIES,
     LOD_PROPERTY,
     NOT_SURFACES,
-    PART_PROPERTIES,
     POLYGONS,
     RELIEF_NAMESPACE,
     UNREAD_PROPERTIES,
@@ -151,7 +152,7 @@ def holders_of(element: etree._Element) -> Holder:
     parts = [
         holders_of(part)
         for prop in element
-        if local(prop) in PART_PROPERTIES
+        if local(prop) in HOLDING_PROPERTIES
         for part in prop
         if is_feature(local(part))
     ]
@@ -237,7 +238,7 @@ class _Walker:
                     semantic = name
             elif (
                 name in UNREAD_PROPERTIES
-                or name in PART_PROPERTIES
+                or name in HOLDING_PROPERTIES
                 or namespace(element) in GML_NAMESPACES
             ):
                 return None
@@ -282,15 +283,12 @@ def collect(top: Holder, gml: str, depth_limit: int, source: str) -> None:
             holder.polygons.append(Polygon(place.lod, place.semantic, place.flip, item))
             continue
         target = polygon_ids.get(href.removeprefix("#"))
-        if target is not None and not place.semantic:
-            direct = walker.place(target)
-            if (
-                direct is not None
-                and direct.holder is holder
-                and direct.lod == place.lod
-                and direct.semantic
-            ):
-                continue  # read directly, with its semantics, which win over this copy
+        direct = walker.place(target) if target is not None else None
+        if direct is not None and (
+            direct.holder is not holder
+            or (not place.semantic and direct.lod == place.lod and direct.semantic)
+        ):
+            continue  # read where it lies: by its own part, or here with its semantics
         holder.add_linked(item, place.lod, place.semantic, place.flip, frozenset())
     if OBJECT_DEPTH + deepest + _RING_DEPTH > depth_limit:
         raise InputError(
@@ -583,7 +581,7 @@ def triangulate_batch(
             surface = Surface(
                 vertices[group.vertices].copy(),
                 kept,
-                base_color=palette.of(group.semantic or None, top_of[id(group.holder)].kind).copy(),
+                base_color=palette.of(group.semantic or None, group.holder.kind).copy(),
             )
             group.holder.surfaces.setdefault(group.lod, []).append(surface)
     return broken

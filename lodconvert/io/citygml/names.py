@@ -25,27 +25,40 @@ PART_PROPERTIES = frozenset(
         "tunnelPart",
     }
 )
+"""Properties holding an object's parts (``BuildingPart``…)."""
+INTERIOR_PROPERTIES = frozenset(
+    {
+        "interiorRoom",
+        "interiorFurniture",
+        "interiorBuildingInstallation",
+        "roomInstallation",
+        "buildingRoom",
+        "buildingFurniture",
+        "interiorBridgeRoom",
+        "interiorBridgeInstallation",
+        "bridgeRoomInstallation",
+        "bridgeRoom",
+        "bridgeFurniture",
+        "interiorHollowSpace",
+        "interiorTunnelInstallation",
+        "hollowSpaceInstallation",
+        "hollowSpace",
+        "tunnelFurniture",
+    }
+)
+"""Properties holding an object's interior (CityGML 1.0/2.0 ``interiorRoom`` → ``Room``,
+3.0 ``buildingRoom`` → ``BuildingRoom``, furniture, interior installations): read as parts."""
+HOLDING_PROPERTIES = PART_PROPERTIES | INTERIOR_PROPERTIES
+"""Properties whose features are holders of their own (parts and interiors)."""
 UNREAD_PROPERTIES = frozenset(
     {
         "address",
         "appearance",
         "externalReference",
         "genericAttribute",
-        "interiorRoom",
-        "interiorFurniture",
-        "interiorBuildingInstallation",
-        "buildingRoom",
-        "buildingFurniture",
-        "roomInstallation",
-        "interiorBridgeRoom",
-        "interiorBridgeInstallation",
-        "bridgeRoom",
-        "bridgeFurniture",
-        "interiorHollowSpace",
-        "hollowSpace",
     }
 )
-"""Properties of a city object that hold no exterior geometry (or geometry not read)."""
+"""Properties of a city object that hold no geometry read."""
 NOT_OBJECTS = frozenset({"CityObjectGroup", "Appearance", "Version"})
 """Top-level features that are not read as objects (groups, appearances, versions)."""
 RELIEF_NAMESPACE = re.compile(r"http://www\.opengis\.net/citygml/relief/(1\.0|2\.0|3\.0)")
