@@ -327,9 +327,10 @@ def _extruded(part: FootprintPart, base: float, top: float) -> tuple[np.ndarray,
 def _encloses(vertices: np.ndarray, faces: np.ndarray) -> bool:
     """Whether the closed ``faces`` face outward: the volume they enclose is positive (measured
     about the first vertex, so that georeferenced coordinates keep their precision)."""
-    local = vertices - vertices[0]
-    a, b, c = local[faces[:, 0]], local[faces[:, 1]], local[faces[:, 2]]
-    return float(np.einsum("ij,ij->", a, np.cross(b, c))) >= 0.0
+    local = (vertices - vertices[0])[faces]  # (m, 3 corners, 3)
+    a, b, c = local[:, 0].T, local[:, 1].T, local[:, 2].T
+    across = b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0]
+    return float((a[0] @ across[0]) + (a[1] @ across[1]) + (a[2] @ across[2])) >= 0.0
 
 
 def prism(lods: dict[str, Mesh], finest: Mesh, attributes: dict[str, object]) -> Mesh | None:

@@ -110,6 +110,15 @@ def _edit(path: Path, pattern: str, replacement: str, count: int = 1) -> Path:
         (r"(<PointSet>)", r'\1<Normal vector="0 0 1"/>', "POINTSET_NORMAL"),
         (r'(<PointSet>.*?<Coordinate point=")', r"\g<1>1 2 ", "NUMBERS"),  # not whole points
         (r'(<IndexedTriangleSet solid="false" index=")', r"\g<1>100000 0 1 ", "INDEX_RANGE"),
+        (r'(<IndexedTriangleSet solid="false" index=")', r"\g<1>1.5 0 1 ", "NUMBERS"),
+        (r'(<IndexedTriangleSet solid="false" index=")', r"\g<1>0x1 0 1 ", "NUMBERS"),
+        (r'(<IndexedTriangleSet solid="false" index=")', r"\g<1>1e1 0 1 ", "NUMBERS"),
+        (
+            r'(<IndexedTriangleSet solid="false" index=")',
+            r"\g<1>99999999999999999999 0 1 ",
+            "NUMBERS",
+        ),
+        (r'(<IndexedTriangleSet solid="false" index=")', r"\g<1>0 1 ", "NUMBERS"),  # rows of 3
         (r'(<Coordinate point=")', r"\g<1>1 2 x ", "NUMBERS"),
         (r'<component name="Navigation" level="2"/>', "", "X3D_COMPONENT"),
         (r'<component name="Shape" level="5"/>', "", "X3D_COMPONENT"),

@@ -72,16 +72,33 @@ MEMBERS = frozenset({"cityObjectMember", "featureMember", "featureMembers", "mem
 """Children of the root that hold city objects."""
 
 
+_CACHED_TAGS = 4096
+"""Tags whose local name and namespace are remembered (a document uses a few hundred; a
+hostile one with more is answered without the cache)."""
+_LOCALS: dict[object, str] = {}
+_NAMESPACES: dict[object, str] = {}
+
+
 def local(element: etree._Element) -> str:
     """The local name of an element's tag ("" for comments and processing instructions)."""
     tag = element.tag
-    return tag.rpartition("}")[2] if isinstance(tag, str) else ""
+    name = _LOCALS.get(tag)
+    if name is None:
+        name = tag.rpartition("}")[2] if isinstance(tag, str) else ""
+        if len(_LOCALS) < _CACHED_TAGS:
+            _LOCALS[tag] = name
+    return name
 
 
 def namespace(element: etree._Element) -> str:
     """The namespace of an element's tag ("" when it has none)."""
     tag = element.tag
-    return tag[1:].partition("}")[0] if isinstance(tag, str) and tag.startswith("{") else ""
+    name = _NAMESPACES.get(tag)
+    if name is None:
+        name = tag[1:].partition("}")[0] if isinstance(tag, str) and tag.startswith("{") else ""
+        if len(_NAMESPACES) < _CACHED_TAGS:
+            _NAMESPACES[tag] = name
+    return name
 
 
 def is_feature(name: str) -> bool:

@@ -16,6 +16,7 @@ The document is streamed with libxml2's default limits and without resolving ent
 from __future__ import annotations
 
 import functools
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -91,8 +92,10 @@ def _numbers(
     """The attribute's numbers as (k, width) rows; ``None`` (with a finding) when they are not
     finite numbers or do not fill whole rows."""
     text = (element.get(attribute) or "").replace(",", " ")
+    values = _integers(text) if dtype is np.int64 else None
     try:
-        values = np.array(text.split(), dtype=dtype)
+        if values is None:
+            values = np.array(text.split(), dtype=dtype)
     except (ValueError, OverflowError):
         findings.error("NUMBERS", f"{_label(element)} {attribute} holds something not a number")
         return None
@@ -106,6 +109,23 @@ def _numbers(
         )
         return None
     return values.reshape(-1, width)
+
+
+_INT64 = np.iinfo(np.int64)
+
+
+def _integers(text: str) -> np.ndarray | None:
+    """The whole numbers of ``text`` parsed in C, or None where that parser would not take
+    them all or could have clamped one (then :func:`_numbers` parses them word by word)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        try:
+            values = np.fromstring(text, sep=" ", dtype=np.int64)
+        except (ValueError, DeprecationWarning):
+            return None
+    if values.size and (values.max() == _INT64.max or values.min() == _INT64.min):
+        return None
+    return values
 
 
 def _child_count(
