@@ -414,6 +414,10 @@ def bake_chain(
     sources = source_levels(obj.lods)
     if opts.keep_mesh and opts.levels == len(SLOTS) and any(k in SLOTS for k in sources):
         return _source_chain(obj, sources, opts, backend, progress, warn, limits)
+    if opts.keep_mesh and opts.levels == len(SLOTS) and 0 in sources:
+        only_prism = _lod0_chain(obj, opts)
+        if only_prism is not None:
+            return only_prism
     world_bounds = obj.geometry.bounds
     origin = (world_bounds[0] + world_bounds[1]) / 2.0
     surface = obj.geometry.translated(-origin)
@@ -515,6 +519,23 @@ def _source_chain(
         kept_cuts.append(cuts[index])
         kept_xs.append(xs[index])
     return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped)
+
+
+def _lod0_chain(obj: Node, opts: ChainOptions) -> LodChain | None:
+    """The chain of a city object whose only source LoD is 0 (footprints, roof edges): its
+    LOD1 prism, the height of which only ``measuredHeight`` can give (None without one, or for
+    a ground cover: then its LoD 0 surfaces are its geometry, as a mesh's)."""
+    if obj.type in GROUND_COVERS:
+        return None
+    shape = prism(obj.lods, obj.geometry, obj.attributes)
+    if shape is None:
+        return None
+    world_bounds = shape.bounds
+    origin = (world_bounds[0] + world_bounds[1]) / 2.0
+    alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
+    level = Level(name="LOD1", kind="prism", mesh=shape.translated(-origin))
+    dropped = {f"LOD{slot}": "the source has only LoD 0" for slot in SLOTS[:-1]}
+    return _finished(obj, opts, [level], [], [], origin, alpha, dropped)
 
 
 def _finished(

@@ -200,6 +200,26 @@ def test_terrain_and_ground_covers_get_no_prism(tmp_path: Path) -> None:
     assert errors_of(validate_file(tmp_path / "house.x3d")) == []
 
 
+@pytest.mark.parametrize("suffix", [".x3d", ".glb"])
+def test_a_lod0_only_building_is_its_prism(tmp_path: Path, suffix: str) -> None:
+    """The SIG3D LoD0 house (footprint and roof edge, measuredHeight 5 m) is one LOD1 prism
+    5 m high over its LoD0 outline; its terrain, a ground cover, stays as it is."""
+    (house,) = buildings_of(sample(SIG3D.format(0)))
+    out = tmp_path / f"house{suffix}"
+    report = convert([sample(SIG3D.format(0))], out)
+    obj, terrain = report["objects"]
+    assert [(lv["name"], lv["kind"]) for lv in obj["levels"]] == [("LOD1", "prism")]
+    assert obj["cutoffs"] == [] and set(obj["dropped"]) == {"LOD4", "LOD3", "LOD2"}
+    assert [lv["kind"] for lv in terrain["levels"]] == ["mesh"]
+    (chain, _) = read_chains(out)
+    prism = chain.levels[0].mesh.vertices + chain.origin
+    assert np.ptp(prism[:, 2]) == pytest.approx(5.0, abs=1e-3)
+    outline = house.lods["lod0"].bounds
+    assert np.allclose(prism[:, :2].min(axis=0), outline[0, :2], atol=1e-3)
+    assert np.allclose(prism[:, :2].max(axis=0), outline[1, :2], atol=1e-3)
+    assert errors_of(validate_file(out)) == []
+
+
 def test_objects_without_semantic_surfaces_take_their_type_colour(tmp_path: Path) -> None:
     """A ``PlantCover`` whose geometry is its own (no thematic surface) is vegetation green."""
     cover = building("cover", box()).replace("bldg:Building", "veg:PlantCover")
