@@ -380,6 +380,29 @@ def test_zip_with_a_parent_path_is_refused(tmp_path: Path, out_dir: Path) -> Non
     assert not (tmp_path.parent / "evil.gml").exists()
 
 
+@pytest.mark.parametrize(
+    ("flag", "method", "words"),
+    [
+        (0x1, zipfile.ZIP_STORED, ("encrypted", "city.gml")),
+        (0, 99, ("compression method 99", "city.gml")),
+    ],
+)
+def test_zip_member_that_zipfile_cannot_open_is_one_line_error(
+    tmp_path: Path, out_dir: Path, flag: int, method: int, words: tuple[str, ...]
+) -> None:
+    """An encrypted member, or one packed by a method zipfile lacks (found by the fuzzer: a
+    traceback), is refused in one line."""
+    path = tmp_path / "packed.zip"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("city.gml", document(building("B1", box())))
+    data = bytearray(path.read_bytes())
+    for header, at in ((b"PK\x03\x04", 6), (b"PK\x01\x02", 8)):  # local, central
+        start = data.index(header)
+        data[start + at : start + at + 4] = struct.pack("<HH", flag, method)
+    path.write_bytes(bytes(data))
+    refused(path, out_dir, *words)
+
+
 def test_zip_member_over_the_inflation_limit_is_refused(tmp_path: Path) -> None:
     path = tmp_path / "big.zip"
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:

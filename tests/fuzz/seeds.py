@@ -45,7 +45,7 @@ def generated() -> dict[str, tuple[bytes, ...]]:
         ".gltf": (json.dumps(json.loads(gltf["model.gltf"])).encode(),),
         ".json": (_cityjson()[0],),
         ".jsonl": (_cityjson()[1],),
-        ".gml": (_citygml(),),
+        ".gml": (_citygml(), _citygml_interior_and_terrain()),
         ".xml": (_citygml(),),
         ".zip": (_zipped("city.gml", _citygml()),),
     }
@@ -115,6 +115,56 @@ def _citygml() -> bytes:
         + surface("RoofSurface", ring.replace(" 0 ", " 5 ").replace(" 0", " 5"))
         + surface("WallSurface", wall)
         + "</bldg:Building></core:cityObjectMember></core:CityModel>"
+    ).encode()
+
+
+def _citygml_interior_and_terrain() -> bytes:
+    """A CityGML 2.0 LoD4 building with a room (its floor a reversed link to the building's
+    ground surface) holding furniture, and a terrain TIN of two triangles."""
+
+    def polygon(pos: str, gml_id: str = "") -> str:
+        own = f" gml:id='{gml_id}'" if gml_id else ""
+        return (
+            f"<gml:Polygon{own}><gml:exterior><gml:LinearRing><gml:posList>{pos}</gml:posList>"
+            "</gml:LinearRing></gml:exterior></gml:Polygon>"
+        )
+
+    def surfaces(*members: str) -> str:
+        return (
+            "<gml:MultiSurface>"
+            + "".join(f"<gml:surfaceMember>{m}</gml:surfaceMember>" for m in members)
+            + "</gml:MultiSurface>"
+        )
+
+    ground = "0 0 0 0 10 0 10 10 0 10 0 0 0 0 0"
+    wall = "1 1 0 9 1 0 9 1 3 1 1 3 1 1 0"
+    table = "2 2 1 4 2 1 4 4 1 2 4 1 2 2 1"
+    triangle = "-5 -5 0 15 -5 0 15 15 1 -5 -5 0"
+    return (
+        "<?xml version='1.0' encoding='UTF-8'?>"
+        "<CityModel xmlns='http://www.opengis.net/citygml/2.0' "
+        "xmlns:bldg='http://www.opengis.net/citygml/building/2.0' "
+        "xmlns:dem='http://www.opengis.net/citygml/relief/2.0' "
+        "xmlns:xlink='http://www.w3.org/1999/xlink' xmlns:gml='http://www.opengis.net/gml'>"
+        "<cityObjectMember><bldg:Building gml:id='b1'><bldg:boundedBy><bldg:GroundSurface>"
+        f"<bldg:lod4MultiSurface>{surfaces(polygon(ground, 'g1'))}</bldg:lod4MultiSurface>"
+        "</bldg:GroundSurface></bldg:boundedBy><bldg:interiorRoom><bldg:Room gml:id='r1'>"
+        "<bldg:lod4Solid><gml:Solid><gml:exterior><gml:CompositeSurface><gml:surfaceMember>"
+        "<gml:OrientableSurface orientation='-'><gml:baseSurface xlink:href='#g1'/>"
+        "</gml:OrientableSurface></gml:surfaceMember></gml:CompositeSurface></gml:exterior>"
+        "</gml:Solid></bldg:lod4Solid><bldg:boundedBy><bldg:InteriorWallSurface>"
+        f"<bldg:lod4MultiSurface>{surfaces(polygon(wall))}</bldg:lod4MultiSurface>"
+        "</bldg:InteriorWallSurface></bldg:boundedBy><bldg:interiorFurniture>"
+        "<bldg:BuildingFurniture gml:id='f1'><bldg:lod4Geometry>"
+        f"{surfaces(polygon(table))}</bldg:lod4Geometry></bldg:BuildingFurniture>"
+        "</bldg:interiorFurniture></bldg:Room></bldg:interiorRoom></bldg:Building>"
+        "</cityObjectMember><cityObjectMember><dem:ReliefFeature gml:id='t1'><dem:lod>2</dem:lod>"
+        "<dem:reliefComponent><dem:TINRelief><dem:lod>2</dem:lod><dem:tin>"
+        "<gml:TriangulatedSurface><gml:trianglePatches><gml:Triangle><gml:exterior>"
+        f"<gml:LinearRing><gml:posList>{triangle}</gml:posList></gml:LinearRing>"
+        "</gml:exterior></gml:Triangle></gml:trianglePatches></gml:TriangulatedSurface>"
+        "</dem:tin></dem:TINRelief></dem:reliefComponent></dem:ReliefFeature>"
+        "</cityObjectMember></CityModel>"
     ).encode()
 
 

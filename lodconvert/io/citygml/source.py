@@ -69,6 +69,12 @@ def _zip_member(archive: zipfile.ZipFile, limits: Limits, source: str) -> zipfil
     return members[0]
 
 
+_ZIP_METHODS = frozenset(
+    {zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED, zipfile.ZIP_BZIP2, zipfile.ZIP_LZMA}
+)
+"""Compression methods a ``.zip`` member may be packed with."""
+
+
 def open_document(path: Path, limits: Limits) -> IO[bytes] | _Capped:
     """The document's bytes as a stream: the file, or what its ``.gz`` or ``.zip`` inflates
     to, capped at ``limits.decompressed_bytes`` (never written to disk)."""
@@ -82,6 +88,14 @@ def open_document(path: Path, limits: Limits) -> IO[bytes] | _Capped:
         try:
             archive = zipfile.ZipFile(path)
             member = _zip_member(archive, limits, source)
+            if member.flag_bits & 0x1:
+                raise InputError(f"holds {member.filename!r} encrypted (not read)", source)
+            if member.compress_type not in _ZIP_METHODS:
+                raise InputError(
+                    f"holds {member.filename!r} packed with compression method "
+                    f"{member.compress_type}, which is not read",
+                    source,
+                )
             return _Capped(archive.open(member), limits.decompressed_bytes, source)
         except (zipfile.BadZipFile, zlib.error, OSError, EOFError) as exc:
             raise InputError(f"is not a valid zip file ({exc})", source) from None
