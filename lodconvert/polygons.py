@@ -337,3 +337,29 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a.take(_NEXT, axis=1) * b.take(_AFTER, axis=1) - a.take(_AFTER, axis=1) * b.take(
         _NEXT, axis=1
     )
+
+
+def points_surface(points: np.ndarray, max_length: float | None = None) -> Triangles | None:
+    """The surface through ``points`` ((n, 3), a terrain's control points) as a 2.5-D
+    triangulation: Delaunay in plan (x, y), each triangle turned to face up; triangles with a
+    side longer than ``max_length`` left out (GML's ``Tin`` rule). ``None`` when the points
+    span no area in plan or no triangle is left."""
+    from scipy.spatial import Delaunay, QhullError
+
+    vertices = np.unique(np.asarray(points, dtype=np.float64), axis=0)
+    vertices = vertices[np.unique(vertices[:, :2], axis=0, return_index=True)[1]]
+    if len(vertices) < 3:
+        return None
+    try:
+        faces = Delaunay(vertices[:, :2] - vertices[0, :2]).simplices.astype(np.int64)
+    except QhullError:  # all points on a line
+        return None
+    corners = vertices[faces]
+    if max_length is not None:
+        sides = corners - np.roll(corners, 1, axis=1)
+        faces = faces[_lengths(sides).max(axis=1) <= max_length]
+        corners = vertices[faces]
+    if not len(faces):
+        return None
+    up = _cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, 2] > 0
+    return vertices, np.where(up[:, None], faces, faces[:, ::-1])

@@ -186,6 +186,45 @@ def test_terrain_is_read_as_its_own_object(lod: int) -> None:
     assert low[0, 2] <= high[0, 2] + 0.5  # the ground, not floating above the house's base
 
 
+def relief(tin: str) -> str:
+    """A 2.0 ``ReliefFeature`` whose LoD2 ``TINRelief`` holds ``tin`` (a ``gml:Tin``)."""
+    return (
+        '<cityObjectMember><dem:ReliefFeature gml:id="ground"><dem:lod>2</dem:lod>'
+        "<dem:reliefComponent><dem:TINRelief><dem:lod>2</dem:lod>"
+        f"<dem:tin>{tin}</dem:tin></dem:TINRelief></dem:reliefComponent></dem:ReliefFeature>"
+        "</cityObjectMember>"
+    )
+
+
+@pytest.mark.parametrize(
+    ("max_length", "triangles"), [("", 4), ("<gml:maxLength>10.05</gml:maxLength>", 2)]
+)
+def test_a_tin_of_control_points_is_triangulated_in_plan(
+    tmp_path: Path, max_length: str, triangles: int
+) -> None:
+    """A ``gml:Tin`` that lists control points and no triangles (a square's corners and a
+    raised point off its centre) is triangulated in plan, every triangle facing up, and
+    triangles with a side over ``maxLength`` are left out."""
+    points = "0 0 0 10 0 0 10 10 0 0 10 0 3 3 2"
+    tin = (
+        f"<gml:Tin><gml:trianglePatches/>{max_length}"
+        f'<gml:controlPoint><gml:posList srsDimension="3">{points}</gml:posList>'
+        "</gml:controlPoint></gml:Tin>"
+    )
+    path = tmp_path / "terrain.gml"
+    head = HEAD.replace(">", ' xmlns:dem="http://www.opengis.net/citygml/relief/2.0">', 1)
+    path.write_text(document(relief(tin)).replace(HEAD, head))
+    (node,) = nodes_of(path)
+    assert node.type == "ReliefFeature" and list(node.lods) == ["lod2"]
+    mesh = node.geometry
+    assert len(mesh.faces) == triangles
+    corners = mesh.triangles
+    up = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, 2]
+    assert (up > 0).all()
+    if triangles == 4:  # the whole square is covered
+        assert np.abs(up).sum() / 2 == pytest.approx(100.0)
+
+
 def test_terrain_and_ground_covers_get_no_prism(tmp_path: Path) -> None:
     """A house's LoD2 file gives the house a prism for LOD1, its terrain none (a block from
     its lowest to its highest point would hide the house); the terrain is no neighbour of the

@@ -13,7 +13,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from lodconvert.polygons import DegenerateRing, _ring_measures, triangulate, triangulate_many
+from lodconvert.polygons import (
+    DegenerateRing,
+    _ring_measures,
+    points_surface,
+    triangulate,
+    triangulate_many,
+)
 
 
 def _vector_area(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -139,3 +145,16 @@ def test_degenerate_rings_say_why() -> None:
     assert np.array_equal(points, square) and len(faces) == 2
     assert triangulate_many([]) == []
     assert triangulate_many([[], [line], [square[:2]]]) == [None, None, None]
+
+
+def test_points_surface_faces_up_and_refuses_points_without_plan_area() -> None:
+    """Control points of a terrain: triangulated in plan, facing up, repeated points once;
+    points on a line (or one point repeated) give no surface."""
+    grid = np.array([[x, y, (x * y) % 3] for x in range(4) for y in range(4)], dtype=float)
+    vertices, faces = points_surface(np.concatenate([grid, grid[:5]]))
+    assert len(vertices) == 16 and len(faces) == 18  # 2 (n - 1)² triangles of a 4 × 4 grid
+    corners = vertices[faces]
+    up = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, 2]
+    assert (up > 0).all() and up.sum() / 2 == pytest.approx(9.0)
+    assert points_surface(np.array([[0, 0, 0], [1, 1, 1], [2, 2, 5.0]])) is None
+    assert points_surface(np.zeros((5, 3))) is None

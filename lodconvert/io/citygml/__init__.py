@@ -14,8 +14,9 @@ object: each keeps its own attributes and LoDs, and their geometry is part of th
 that a building is one object of the output however many parts it has. Its interior (rooms,
 furniture, interior installations: ``interiorRoom``, 3.0 ``buildingRoom``…) is read the same
 way, as parts, in the LoD it is given at (LoD4 in 1.0 and 2.0). Terrain is read from its
-``TINRelief`` components (their ``tin`` triangles, at the component's ``lod``); mass points,
-break lines and raster reliefs hold no surfaces.
+``TINRelief`` components (their ``tin`` triangles, at the component's ``lod``; a ``Tin`` of
+control points alone is triangulated in plan); mass points, break lines and raster reliefs
+hold no surfaces.
 
 Geometry stays in the file's coordinates (float64) when its CRS is projected; a geographic CRS
 (latitude, longitude, height: EPSG:6697, 4326, 4979) is projected onto a transverse Mercator

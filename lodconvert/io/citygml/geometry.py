@@ -31,7 +31,7 @@ from lxml import etree
 
 from ...errors import InputError
 from ...model import Surface
-from ...polygons import triangulate_many
+from ...polygons import Triangles, points_surface, triangulate_many
 from ...semantics import Palette
 from ..geometry_checks import MAX_MAGNITUDE, InputTally, checked_vertices, faces_with_area
 from .crs import Crs
@@ -61,14 +61,14 @@ _ITEMS = {
     gml: etree.XPath(
         " | ".join(
             [f"descendant::gml:{name}" for name in sorted(POLYGONS)]
-            + ["descendant::*/@xlink:href/.."]
+            + ["descendant::gml:Tin[not(.//gml:Triangle)]", "descendant::*/@xlink:href/.."]
         ),
         namespaces={"gml": gml, "xlink": XLINK_HREF[1:].partition("}")[0]},
     )
     for gml in GML_NAMESPACES
 }
-"""By GML namespace: the polygons and the elements with an ``xlink:href`` below an element,
-in document order."""
+"""By GML namespace: the polygons, the TINs given by their control points alone (no
+triangles) and the elements with an ``xlink:href`` below an element, in document order."""
 _EXTERIOR = frozenset({"exterior", "outerBoundaryIs"})
 _INTERIOR = frozenset({"interior", "innerBoundaryIs"})
 
@@ -134,7 +134,7 @@ class Holder:
             seen = seen | {href}
             element = target
         name = local(element)
-        if name in POLYGONS:
+        if name in POLYGONS or (name == "Tin" and _points_only(element)):
             self.polygons.append(Polygon(lod, semantic, flip, element))
             return
         if name in NOT_SURFACES:
@@ -351,6 +351,11 @@ def _read_rings(polygons: list[Polygon], rings: _Rings, text_limit: int, source:
     for polygon in polygons:
         exterior: list[int] = []
         interior: list[int] = []
+        if local(polygon.element) == "Tin":  # its control points, triangulated later
+            for points in polygon.element:
+                if local(points) == "controlPoint":
+                    exterior.append(len(rings.counts))
+                    _ring_words(points, rings, text_limit, source)
         for boundary in polygon.element:
             kind = local(boundary)
             into = exterior if kind in _EXTERIOR else interior if kind in _INTERIOR else None
@@ -491,7 +496,12 @@ def _groups(holders: list[Holder]) -> tuple[list[_Group], np.ndarray, np.ndarray
     faces indexing the batch's vertices)."""
     kept = [(holder, _kept(holder)) for holder in holders]
     polygons = [polygon for _, polygons in kept for polygon in polygons]
-    results = iter(triangulate_many([polygon.rings for polygon in polygons]))
+    tin = [local(polygon.element) == "Tin" for polygon in polygons]
+    rings = iter(triangulate_many([p.rings for p, t in zip(polygons, tin, strict=True) if not t]))
+    results = (
+        _tin_triangles(polygon) if t else next(rings)
+        for polygon, t in zip(polygons, tin, strict=True)
+    )
     pieces: list[tuple[np.ndarray, np.ndarray, bool]] = []
     groups: list[_Group] = []
     vertex_at = face_at = 0
@@ -531,6 +541,27 @@ def _groups(holders: list[Holder]) -> tuple[list[_Group], np.ndarray, np.ndarray
     if flip.any():
         faces[flip] = faces[flip][:, ::-1]
     return groups, vertices, faces
+
+
+def _points_only(tin: etree._Element) -> bool:
+    """Whether a ``Tin`` gives its control points alone, no triangles."""
+    return not any(local(e) == "Triangle" for e in tin.iterdescendants())
+
+
+def _tin_triangles(polygon: Polygon) -> Triangles | None:
+    """The triangles of a ``Tin`` given by its control points (``polygon.rings``): their
+    Delaunay triangulation in plan, without triangles longer than its ``maxLength``."""
+    points = [ring for ring in polygon.rings if len(ring)]
+    if not points:
+        return None
+    limit = next((e.text for e in polygon.element if local(e) == "maxLength"), None)
+    try:
+        max_length = float(limit) if limit is not None else None
+    except ValueError:
+        max_length = None
+    if max_length is not None and not max_length > 0:
+        max_length = None
+    return points_surface(np.concatenate(points), max_length)
 
 
 def _unreadable(
