@@ -247,3 +247,47 @@ def test_a_sequence_is_read_a_batch_of_features_at_a_time(
     before = [key for key in expected if int(key[1:]) <= 25]
     assert skipped == [*before, "line 28", *expected[len(before) :]]
     _assert_same(sequence, document_read)
+
+
+@pytest.mark.parametrize("batch", [1, 64])
+def test_a_sequence_counts_every_mesh_once_as_its_nodes_are_freed(
+    batch: int, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Nodes handed on and freed must not hide the meshes read after them from the limits
+    (their ids are taken again); a template's mesh, shared by its instances, counts once."""
+    monkeypatch.setattr(cityjson, "BATCH", batch)
+    document = polygon_city(seed=9, objects=120)
+    cube = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
+    quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    templates = {
+        "templates": [{"type": "Solid", "lod": "2", "boundaries": [[[q] for q in quads]]}],
+        "vertices-templates": cube,
+    }
+    header = {k: v for k, v in document.items() if k not in ("CityObjects", "vertices")}
+    lines = [json.dumps({**header, "geometry-templates": templates, "vertices": []})]
+    for n, (key, obj) in enumerate(document["CityObjects"].items()):
+        objects = {key: obj}
+        if n % 10 == 0:
+            tree = {"type": "GeometryInstance", "template": 0, "boundaries": [0]}
+            objects[f"tree{n}"] = {"type": "SolitaryVegetationObject", "geometry": [tree]}
+        feature = {
+            "type": "CityJSONFeature",
+            "CityObjects": objects,
+            "vertices": document["vertices"],
+        }
+        lines.append(json.dumps(feature))
+    path = tmp_path / "trees.city.jsonl"
+    path.write_text("\n".join(lines) + "\n")
+    scene = read_scene(path)
+    vertices = faces = 0
+    template_meshes = set()
+    for node in scene.walk():  # each node dropped once seen
+        for mesh in node.lods.values():
+            if node.type == "SolitaryVegetationObject":
+                if template_meshes:
+                    continue
+                template_meshes.add(id(mesh))
+            vertices += mesh.vertex_count
+            faces += mesh.face_count
+    tally = tally_of(scene)
+    assert tally is not None and (tally.vertices, tally.faces) == (vertices, faces)

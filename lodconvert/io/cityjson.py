@@ -103,7 +103,9 @@ class _Context:
     shared: dict[int, tuple[str, Mesh] | None] = field(default_factory=dict)
     """Template index → its (lod, Mesh), read once, or None when it holds no face."""
     counted: set[int] = field(default_factory=set)
-    """Ids of the meshes already counted against the limits (shared ones count once)."""
+    """Ids of the templates' meshes already counted against the limits (each counts once; they
+    live as long as ``shared``, so no other mesh takes their id, as the meshes of objects
+    already handed on, and freed, do)."""
     palette: Palette = DEFAULT_PALETTE
     """Colours of the semantic classes."""
 
@@ -763,10 +765,13 @@ def _checked_node(read: _Read) -> Node | None:
         return None
     if dropped:
         tally.dropped_by_object[key] = dropped
+    templates = {id(e[1]) for e in ctx.shared.values() if e is not None} if read.instances else ()
     for mesh in {id(m): m for n in node.walk() for m in n.lods.values()}.values():
-        if id(mesh) not in ctx.counted:
+        if id(mesh) in templates:
+            if id(mesh) in ctx.counted:
+                continue  # a template's mesh counts once, where it is first used
             ctx.counted.add(id(mesh))
-            tally.count(mesh.vertex_count, mesh.face_count)
+        tally.count(mesh.vertex_count, mesh.face_count)
     return node
 
 
