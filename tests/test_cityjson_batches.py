@@ -291,3 +291,42 @@ def test_a_sequence_counts_every_mesh_once_as_its_nodes_are_freed(
             faces += mesh.face_count
     tally = tally_of(scene)
     assert tally is not None and (tally.vertices, tally.faces) == (vertices, faces)
+
+
+@pytest.mark.parametrize(
+    "surfaces",
+    [
+        [[[0, 1, 2, 3]], [[0, 1, 2], [3, 4, 5, 6]], [], [[]]],
+        [[[0.0, 1.9, True, "3"]]],
+        [[[[0], [1], [2]]], [[0, 1, 2]]],
+        [[[[0], [1], [2]]]],
+        [["0123"]],
+        [[5]],
+        [[{"a": 1}]],
+        [{"a": [0, 1, 2]}],
+        [None, [[0, 1, 2]]],
+        [[None]],
+        [[[2**70, 1, 2]]],
+        [[[float("nan"), 1, 2]]],
+    ],
+)
+def test_rings_read_in_one_go_are_those_read_ring_by_ring(surfaces: list) -> None:
+    """Lists of numbers are read in one go; whatever the boundaries hold, the indices, lengths
+    and errors are those of reading each ring with ``np.asarray`` as before."""
+
+    def one_by_one() -> tuple[list, list, list]:
+        rings = [[np.asarray(r, dtype=np.int64).ravel() for r in s] for s in surfaces]
+        flat = [ring for surface in rings for ring in surface]
+        index = np.concatenate(flat) if flat else np.zeros(0, np.int64)
+        return index.tolist(), [len(r) for r in flat], [len(s) for s in rings]
+
+    try:
+        expected = one_by_one()
+    except (TypeError, ValueError, OverflowError) as exc:
+        with pytest.raises(type(exc)) as raised:
+            cityjson._rings(surfaces)
+        assert str(raised.value) == str(exc)
+        return
+    index, lengths, counts = cityjson._rings(surfaces)
+    assert index.dtype == np.int64
+    assert (index.tolist(), lengths, counts) == expected

@@ -49,11 +49,13 @@ holds one batch of features at a time; a line that is not a feature is reported 
 
 from __future__ import annotations
 
+import gc
 import gzip
 import json
 import re
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
+from itertools import chain, repeat
 from pathlib import Path
 from typing import IO, Any
 
@@ -133,7 +135,14 @@ def _document(path: Path, limits: Limits) -> dict[str, Any]:
             "(raise it with --limit decompressed_bytes=N)",
             str(path),
         )
-    return _cityjson(_parsed(text, str(path)), "CityJSON", str(path))
+    collecting = gc.isenabled()
+    gc.disable()  # JSON makes no cycles; full passes would scan the growing document again
+    try:
+        data = _parsed(text, str(path))
+    finally:
+        if collecting:
+            gc.enable()
+    return _cityjson(data, "CityJSON", str(path))
 
 
 def _parsed(text: str, where: str) -> Any:
@@ -256,20 +265,35 @@ def _material_values(geometry: dict[str, Any], depth: int, count: int) -> list[A
     return _values(theme.get("values"), depth, count)
 
 
-def _classes(geometry: dict[str, Any], depth: int, count: int) -> list[str | None]:
-    """Each surface's semantic class (one of :data:`_CLASSES`, None for any other)."""
+def _classes(geometry: dict[str, Any], depth: int, count: int) -> list[int]:
+    """Each surface's semantic class, as its index in :data:`_CLASSES` (that of None for any
+    other)."""
+    other = _CLASSES.index(None)
     semantics = geometry.get("semantics")
     if not isinstance(semantics, dict):
-        return [None] * count
+        return [other] * count
     kinds = [s.get("type") if isinstance(s, dict) else None for s in semantics.get("surfaces", [])]
-    classes: list[str | None] = []
-    for value in _values(semantics.get("values"), depth, count):
-        kind = kinds[value] if isinstance(value, int) and 0 <= value < len(kinds) else None
-        classes.append(kind if kind in _CLASSES else None)
-    return classes
+    of = {k: _CLASSES.index(kind) if kind in _CLASSES else other for k, kind in enumerate(kinds)}
+    values = _values(semantics.get("values"), depth, count)
+    if set(map(type, values)) <= _INDICES:
+        return list(map(of.get, values, repeat(other, count)))
+    return [of[v] if isinstance(v, int) and 0 <= v < len(kinds) else other for v in values]
 
 
-_CLASS_INDEX = {kind: k for k, kind in enumerate(_CLASSES)}
+def _materials(geometry: dict[str, Any], depth: int, count: int) -> list[Any]:
+    """Each surface's material index in the first theme the geometry lists, or -1; an index
+    is any ``int``, in range or not (those out of range take their class's colour)."""
+    materials = _material_values(geometry, depth, count)
+    types = set(map(type, materials))
+    if types <= {int}:
+        return materials
+    if types <= {type(None)}:
+        return [-1] * count
+    return [m if isinstance(m, int) else -1 for m in materials]
+
+
+_LIST = {list}
+_INDICES = {int, type(None)}
 
 
 def _rings(surfaces: list[Any]) -> tuple[np.ndarray, list[int], list[int]]:
@@ -277,15 +301,15 @@ def _rings(surfaces: list[Any]) -> tuple[np.ndarray, list[int], list[int]]:
     number of rings. Rings that are lists of numbers are read in one go; anything else ring
     by ring as ``np.asarray(ring, dtype=np.int64).ravel()``, which also says what is wrong
     (TypeError, ValueError, OverflowError)."""
-    if all(type(surface) is list for surface in surfaces):
-        rings = [ring for surface in surfaces for ring in surface]
-        if all(type(ring) is list for ring in rings):
+    if set(map(type, surfaces)) <= _LIST:
+        rings = list(chain.from_iterable(surfaces))
+        if set(map(type, rings)) <= _LIST:
             try:
-                index = np.array([i for ring in rings for i in ring], dtype=np.int64)
+                index = np.array(list(chain.from_iterable(rings)), dtype=np.int64)
             except (TypeError, ValueError, OverflowError):
                 index = None  # read ring by ring below, for the error of the ring at fault
             if index is not None and index.ndim == 1:
-                return index, [len(ring) for ring in rings], [len(s) for s in surfaces]
+                return index, list(map(len, rings)), list(map(len, surfaces))
     arrays = [[np.asarray(r, dtype=np.int64).ravel() for r in s] for s in surfaces]
     flat = [ring for surface in arrays for ring in surface]
     index = np.concatenate(flat) if flat else np.zeros(0, np.int64)
@@ -344,11 +368,7 @@ def _read_lod(
                 where,
             )
         classes = _classes(geometry, depth, len(ring_counts))
-        materials = _material_values(geometry, depth, len(ring_counts))
-        keys += [
-            (_CLASS_INDEX[kind_of], material if isinstance(material, int) else -1)
-            for kind_of, material in zip(classes, materials, strict=True)
-        ]
+        keys += zip(classes, _materials(geometry, depth, len(ring_counts)), strict=True)
         indices.append(index)
         lengths += ring_lengths
         counts += ring_counts
@@ -360,7 +380,7 @@ def _read_lod(
         index=np.concatenate(indices) if indices else np.zeros(0, np.int64),
         ring_lengths=np.array(lengths, dtype=np.int64),
         ring_counts=np.array(counts, dtype=np.int64),
-        part_of=np.array([rank[key] for key in keys], dtype=np.int64),
+        part_of=np.fromiter(map(rank.__getitem__, keys), dtype=np.int64, count=len(keys)),
         colors=[_color(_CLASSES[klass], material, ctx, kind) for klass, material in parts],
     )
 
@@ -752,10 +772,12 @@ def _checked_node(read: _Read) -> Node | None:
     try:
         node, dropped = _node(read)
     except InputError as exc:
+        read.problem = None  # its traceback holds the read: no cycle left for the collector
         tally.skipped.append({"id": key, "reason": str(exc)})
         return None
     except _MALFORMED as exc:
         # JSON of an unexpected shape somewhere in the object: leave the object out
+        read.problem = None
         error = InputError(f"has malformed content ({type(exc).__name__}: {exc})", key)
         tally.skipped.append({"id": key, "reason": str(error)})
         return None
