@@ -54,11 +54,14 @@ def triangulate(rings: Sequence[np.ndarray]) -> Triangles:
     return vertices, faces
 
 
-def triangulate_many(polygons: Sequence[Sequence[np.ndarray]]) -> list[Triangles | None]:
+def triangulate_many(
+    polygons: Sequence[Sequence[np.ndarray]], fan: bool = True
+) -> list[Triangles | None]:
     """:func:`triangulate` of each polygon, ``None`` where it is degenerate (also where it has
-    no rings), except that a convex polygon without holes is fanned from its first corner
-    rather than ear-clipped. The polygons are measured and projected together, so a batch of
-    many costs far less per polygon than one at a time."""
+    no rings), except that (with ``fan``) a convex polygon without holes is fanned from its
+    first corner rather than ear-clipped; without ``fan`` every triangle is the one
+    :func:`triangulate` gives. The polygons are measured and projected together, so a batch
+    of many costs far less per polygon than one at a time."""
     every_ring = [ring for rings in polygons for ring in rings]
     if not every_ring:
         return [None] * len(polygons)
@@ -81,7 +84,7 @@ def triangulate_many(polygons: Sequence[Sequence[np.ndarray]]) -> list[Triangles
     fanned = single & (vertex_counts == 3)
     corner = fanned.repeat(vertex_counts)
     candidate = single & (vertex_counts > 3)
-    if candidate.any():
+    if fan and candidate.any():
         at = candidate.repeat(vertex_counts)
         ring = outer[candidate]
         fanned[candidate], corner[at] = _convex_corners(

@@ -108,6 +108,31 @@ def test_many_at_once_gives_what_one_at_a_time_gives(batch: list[list[np.ndarray
         assert np.allclose(got, expected, atol=1e-6 * max(float(np.linalg.norm(expected)), 1.0))
 
 
+@settings(max_examples=200, deadline=None)
+@given(st.lists(polygons(), min_size=1, max_size=8))
+def test_without_fans_many_at_once_gives_exactly_one_at_a_time(
+    batch: list[list[np.ndarray]],
+) -> None:
+    """Without fans the batch is :func:`triangulate` polygon by polygon, to the last bit (the
+    CityJSON reader relies on it to keep its output)."""
+    together = triangulate_many(batch, fan=False)
+    for polygon, result in zip(batch, together, strict=True):
+        try:
+            expected = triangulate(polygon)
+        except DegenerateRing:
+            assert result is None
+            continue
+        assert _same(result, expected)
+
+
+def test_without_fans_a_convex_quad_is_ear_clipped() -> None:
+    quad = _placed(np.array([[0, 0], [10, 0], [12, 8], [1, 9]], dtype=float), 3)
+    (fanned,), (clipped,) = triangulate_many([[quad]]), triangulate_many([[quad]], fan=False)
+    assert fanned is not None and clipped is not None
+    assert np.array_equal(clipped[1], triangulate([quad])[1])
+    assert not np.array_equal(fanned[1], clipped[1])  # the ear clipper starts elsewhere
+
+
 @settings(max_examples=100, deadline=None)
 @given(st.lists(flat_rings(), min_size=1, max_size=6), st.integers(0, 1000))
 def test_ring_normals_are_those_of_one_ring_at_a_time(rings: list[np.ndarray], seed: int) -> None:

@@ -10,8 +10,10 @@ Installations…) are the ``children`` of their parent's node; an object without
 own is a node without geometry whose children carry it. ``types`` keeps only objects of those
 types and the descendants of kept ones (a kept descendant of a dropped object becomes a root).
 
-Geometry: Solid, MultiSolid, CompositeSolid, MultiSurface and CompositeSurface, polygons with
-holes triangulated by :func:`lodconvert.polygons.triangulate` (points and lines are ignored).
+Geometry: Solid, MultiSolid, CompositeSolid, MultiSurface and CompositeSurface (points and
+lines are ignored). Polygons with holes are triangulated :data:`BATCH` objects at a time, in one
+:func:`lodconvert.polygons.triangulate_many` call that ear-clips each as
+:func:`~lodconvert.polygons.triangulate` would (a lone ring of three indices is kept as it is).
 Every LoD of an object is one :class:`Mesh` in ``node.lods`` under the ``lod`` string (``"1.2"``);
 ``node.geometry`` is the highest of them (in numeric order of the label). A mesh has one part
 per semantic class — roof, wall, ground, other (:mod:`lodconvert.semantics`) — and material: the
@@ -30,27 +32,30 @@ the template's frame, with the instance's ``transform``: its ``transformationMat
 by row) moved to its reference point. An object with several instances, or instances beside
 geometry of its own, gets one child node per instance (``<id>-instance<k>``).
 
-Checks (:mod:`.geometry_checks`): degenerate polygons (:class:`DegenerateRing`) and triangles
-without area are dropped and counted; an object with a boundary index out of range, a malformed
-boundary, bad coordinates or an extent the outputs cannot hold is reported (one line naming file
-and object) in the tally's ``skipped`` and left out, the rest convert; so is an object whose
-JSON is not of the shape CityJSON gives it.
+Checks (:mod:`.geometry_checks`): degenerate polygons (those
+:func:`~lodconvert.polygons.triangulate` refuses) and triangles without area are dropped and
+counted; an object with a boundary index out of range, a malformed boundary, bad coordinates or
+an extent the outputs cannot hold is reported (one line naming file and object) in the tally's
+``skipped`` and left out, the rest of its batch converts; so is an object whose JSON is not of
+the shape CityJSON gives it.
 
 CRS: ``metadata.referenceSystem`` in its URL or URN form becomes ``EPSG:<code>`` on the scene
 and every node; none declared leaves it ``None``. A geographic CRS is refused (not supported
 yet). CityJSONSeq is read line by line: the header line (``transform``, ``metadata``,
-``geometry-templates``) first, then one ``CityJSONFeature`` per line, whose nodes are yielded
-as they are read, so memory holds one feature at a time; a line that is not a feature is
-reported and skipped.
+``geometry-templates``) first, then one ``CityJSONFeature`` per line; features are read until
+they hold :data:`BATCH` objects, then triangulated together and their nodes yielded, so memory
+holds one batch of features at a time; a line that is not a feature is reported and skipped.
 """
 
 from __future__ import annotations
 
+import gc
 import gzip
 import json
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
+from itertools import chain, repeat
 from pathlib import Path
 from typing import IO, Any
 
@@ -59,7 +64,7 @@ import numpy as np
 from ..errors import InputError
 from ..limits import DEFAULT_LIMITS, Limits
 from ..model import Mesh, Node, Scene, Surface
-from ..polygons import DegenerateRing, triangulate
+from ..polygons import triangulate_many
 from ..semantics import DEFAULT_PALETTE, Palette
 from . import Format
 from .geometry_checks import (
@@ -67,7 +72,7 @@ from .geometry_checks import (
     attach_tally,
     check_extent,
     checked_vertices,
-    kept_faces,
+    faces_with_area,
 )
 
 _CLASSES = ("RoofSurface", "WallSurface", "GroundSurface", None)
@@ -82,6 +87,9 @@ _SURFACE_DEPTH = {
 """How deep the list of surfaces is nested in each geometry type's ``boundaries``."""
 _EPSG = re.compile(r"EPSG(?:/[^/]*/|:[^:]*:|:)(\d+)\s*$", re.IGNORECASE)
 _VERSIONS = ("1.", "2.")
+BATCH = 64
+"""City objects whose polygons are triangulated together (a CityJSONSeq reader holds the
+features they come in until then)."""
 
 
 @dataclass
@@ -97,7 +105,9 @@ class _Context:
     shared: dict[int, tuple[str, Mesh] | None] = field(default_factory=dict)
     """Template index → its (lod, Mesh), read once, or None when it holds no face."""
     counted: set[int] = field(default_factory=set)
-    """Ids of the meshes already counted against the limits (shared ones count once)."""
+    """Ids of the templates' meshes already counted against the limits (each counts once; they
+    live as long as ``shared``, so no other mesh takes their id, as the meshes of objects
+    already handed on, and freed, do)."""
     palette: Palette = DEFAULT_PALETTE
     """Colours of the semantic classes."""
 
@@ -125,7 +135,14 @@ def _document(path: Path, limits: Limits) -> dict[str, Any]:
             "(raise it with --limit decompressed_bytes=N)",
             str(path),
         )
-    return _cityjson(_parsed(text, str(path)), "CityJSON", str(path))
+    collecting = gc.isenabled()
+    gc.disable()  # JSON makes no cycles; full passes would scan the growing document again
+    try:
+        data = _parsed(text, str(path))
+    finally:
+        if collecting:
+            gc.enable()
+    return _cityjson(data, "CityJSON", str(path))
 
 
 def _parsed(text: str, where: str) -> Any:
@@ -248,70 +265,322 @@ def _material_values(geometry: dict[str, Any], depth: int, count: int) -> list[A
     return _values(theme.get("values"), depth, count)
 
 
-def _classes(geometry: dict[str, Any], depth: int, count: int) -> list[str | None]:
-    """Each surface's semantic class (one of :data:`_CLASSES`, None for any other)."""
+def _classes(geometry: dict[str, Any], depth: int, count: int) -> list[int]:
+    """Each surface's semantic class, as its index in :data:`_CLASSES` (that of None for any
+    other)."""
+    other = _CLASSES.index(None)
     semantics = geometry.get("semantics")
     if not isinstance(semantics, dict):
-        return [None] * count
+        return [other] * count
     kinds = [s.get("type") if isinstance(s, dict) else None for s in semantics.get("surfaces", [])]
-    classes: list[str | None] = []
-    for value in _values(semantics.get("values"), depth, count):
-        kind = kinds[value] if isinstance(value, int) and 0 <= value < len(kinds) else None
-        classes.append(kind if kind in _CLASSES else None)
-    return classes
+    of = {k: _CLASSES.index(kind) if kind in _CLASSES else other for k, kind in enumerate(kinds)}
+    values = _values(semantics.get("values"), depth, count)
+    if set(map(type, values)) <= _INDICES:
+        return list(map(of.get, values, repeat(other, count)))
+    return [of[v] if isinstance(v, int) and 0 <= v < len(kinds) else other for v in values]
 
 
-def _opened(ring: np.ndarray, vertices: np.ndarray) -> np.ndarray:
-    """Ring indices without a repeated closing point and repeated neighbours (by position),
-    as :func:`triangulate` opens rings."""
-    points = vertices[ring]
-    if len(ring) > 1 and np.array_equal(points[0], points[-1]):
-        ring, points = ring[:-1], points[:-1]
-    if len(ring) > 1:
-        ring = ring[np.r_[True, np.any(points[1:] != points[:-1], axis=1)]]
-    return ring
+def _materials(geometry: dict[str, Any], depth: int, count: int) -> list[Any]:
+    """Each surface's material index in the first theme the geometry lists, or -1; an index
+    is any ``int``, in range or not (those out of range take their class's colour)."""
+    materials = _material_values(geometry, depth, count)
+    types = set(map(type, materials))
+    if types <= {int}:
+        return materials
+    if types <= {type(None)}:
+        return [-1] * count
+    return [m if isinstance(m, int) else -1 for m in materials]
+
+
+_LIST = {list}
+_INDICES = {int, type(None)}
+
+
+def _rings(surfaces: list[Any]) -> tuple[np.ndarray, list[int], list[int]]:
+    """Every ring's vertex indices end to end (int64), each ring's length and each surface's
+    number of rings. Rings that are lists of numbers are read in one go; anything else ring
+    by ring as ``np.asarray(ring, dtype=np.int64).ravel()``, which also says what is wrong
+    (TypeError, ValueError, OverflowError)."""
+    if set(map(type, surfaces)) <= _LIST:
+        rings = list(chain.from_iterable(surfaces))
+        if set(map(type, rings)) <= _LIST:
+            try:
+                index = np.array(list(chain.from_iterable(rings)), dtype=np.int64)
+            except (TypeError, ValueError, OverflowError):
+                index = None  # read ring by ring below, for the error of the ring at fault
+            if index is not None and index.ndim == 1:
+                return index, list(map(len, rings)), list(map(len, surfaces))
+    arrays = [[np.asarray(r, dtype=np.int64).ravel() for r in s] for s in surfaces]
+    flat = [ring for surface in arrays for ring in surface]
+    index = np.concatenate(flat) if flat else np.zeros(0, np.int64)
+    return index, [len(ring) for ring in flat], [len(surface) for surface in arrays]
+
+
+@dataclass(eq=False)
+class _Lod:
+    """The polygons of one LoD of an object (or of one template), read and checked, waiting
+    to be triangulated with the rest of a batch (:func:`_triangulate`), which sets ``mesh``
+    and ``dropped``."""
+
+    label: str
+    vertices: np.ndarray
+    """The vertex list ``index`` refers to."""
+    index: np.ndarray
+    """Every ring's vertex indices (int64), end to end."""
+    ring_lengths: np.ndarray
+    ring_counts: np.ndarray
+    """Rings per polygon (the exterior first)."""
+    part_of: np.ndarray
+    """Per polygon, its part: the rank of its (semantic class, material) in sorted order."""
+    colors: list[np.ndarray]
+    """Per part, its sRGB RGBA colour."""
+    mesh: Mesh | None = None
+    """One surface per part with faces, in part order; None when no part has any."""
+    dropped: int = 0
+    """Degenerate polygons and triangles without area."""
+
+
+def _read_lod(
+    label: str,
+    geometries: list[dict[str, Any]],
+    vertices: np.ndarray,
+    ctx: _Context,
+    where: str,
+    kind: str,
+) -> _Lod:
+    """The polygons of ``geometries`` (of one LoD) indexing ``vertices``, each in its part (one
+    per semantic class and material, coloured). Raises :class:`InputError` for bad indices or
+    boundaries."""
+    indices, lengths, counts, keys = [], [], [], []
+    for geometry in geometries:
+        depth = _SURFACE_DEPTH[geometry["type"]]
+        try:
+            index, ring_lengths, ring_counts = _rings(_surfaces(geometry.get("boundaries"), depth))
+        except (TypeError, ValueError, OverflowError) as exc:
+            raise InputError(
+                f"has malformed {geometry['type']} boundaries ({exc})", where
+            ) from None
+        bad = (index < 0) | (index >= len(vertices))
+        if bad.any():
+            raise InputError(
+                f"refers to vertices that do not exist (index {int(index[bad][0])}; "
+                f"{len(vertices):,} vertices, 0 to {len(vertices) - 1:,})",
+                where,
+            )
+        classes = _classes(geometry, depth, len(ring_counts))
+        keys += zip(classes, _materials(geometry, depth, len(ring_counts)), strict=True)
+        indices.append(index)
+        lengths += ring_lengths
+        counts += ring_counts
+    parts = sorted(dict.fromkeys(keys))
+    rank = {key: k for k, key in enumerate(parts)}
+    return _Lod(
+        label=label,
+        vertices=vertices,
+        index=np.concatenate(indices) if indices else np.zeros(0, np.int64),
+        ring_lengths=np.array(lengths, dtype=np.int64),
+        ring_counts=np.array(counts, dtype=np.int64),
+        part_of=np.fromiter(map(rank.__getitem__, keys), dtype=np.int64, count=len(keys)),
+        colors=[_color(_CLASSES[klass], material, ctx, kind) for klass, material in parts],
+    )
+
+
+def _opened(lengths: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Which points of rings (``lengths``, laid end to end) stay once each ring drops a
+    repeated closing point and then repeated neighbours (by position), as
+    :func:`~lodconvert.polygons.triangulate` opens rings."""
+    keep = np.ones(len(points), dtype=bool)
+    if not len(points):
+        return keep
+    ends = lengths.cumsum()
+    longer = lengths > 1
+    last = ends[longer] - 1
+    keep[last[(points[last] == points[(ends - lengths)[longer]]).all(axis=1)]] = False
+    ring = np.arange(len(lengths)).repeat(lengths)
+    keep[1:] &= ~((points[1:] == points[:-1]).all(axis=1) & (ring[1:] == ring[:-1]))
+    return keep
 
 
 @dataclass
-class _Part:
-    """Triangles of one part being gathered: faces indexing the vertex list, and faces of
-    their own vertices (polygons whose triangulation does not map back to the list)."""
+class _Triangles:
+    """A batch's triangles: ``faces`` indexing its vertex list, each of polygon ``polygon``
+    (in polygon order), and ``own`` triangles of polygons with vertices of their own (where
+    triangulating dropped or merged points): polygon, points, faces."""
 
-    indexed: list[np.ndarray] = field(default_factory=list)
-    own: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
+    faces: np.ndarray
+    polygon: np.ndarray
+    own: list[tuple[int, np.ndarray, np.ndarray]]
+    degenerate: np.ndarray
+    """Per polygon, whether it is degenerate (no triangles)."""
 
-    def add_polygon(self, rings: list[np.ndarray], vertices: np.ndarray) -> None:
-        """Triangulate one polygon (exterior, holes) of vertex indices; raises
-        :class:`DegenerateRing`."""
-        if len(rings) == 1 and len(rings[0]) == 3:
-            self.indexed.append(rings[0][None])
-            return
-        if not rings or not len(rings[0]):
-            raise DegenerateRing("a polygon without points")
-        opened = [_opened(ring, vertices) for ring in rings]
-        points, faces = triangulate([vertices[ring] for ring in opened])
-        index = np.concatenate(opened)
-        if len(index) == len(points) and np.array_equal(vertices[index], points):
-            self.indexed.append(index[faces])
-        else:
-            self.own.append((points, faces))
 
-    def surface(self, vertices: np.ndarray, color: np.ndarray, where: str) -> tuple[Surface, int]:
-        """The part as a Surface of its triangles with area, holding only the vertices they
-        use, and how many triangles without area were dropped."""
-        faces = np.concatenate(self.indexed) if self.indexed else np.zeros((0, 3), np.int64)
-        chunks, all_faces = list(_compact(vertices, faces)), []
-        all_faces.append(chunks.pop())
-        offset = len(chunks[0])
-        for points, own in self.own:
-            chunks.append(points)
-            all_faces.append(own + offset)
-            offset += len(points)
-        points = checked_vertices(np.concatenate(chunks), where)
-        kept, dropped = kept_faces(points, np.concatenate(all_faces), where)
-        if dropped:
-            points, kept = _compact(points, kept)
-        return Surface(vertices=points, faces=kept, base_color=color.copy()), dropped
+def _triangles(
+    vertices: np.ndarray, index: np.ndarray, ring_lengths: np.ndarray, ring_counts: np.ndarray
+) -> _Triangles:
+    """Triangulate polygons (``ring_counts`` rings each, of ``ring_lengths`` indices into
+    ``vertices``, laid end to end in ``index``) together, as
+    :func:`~lodconvert.polygons.triangulate` does one at a time: a lone ring of three indices
+    is its own triangle (no ear clipping, no check: a triangle without area is dropped
+    later); a polygon without rings or without points in its exterior is degenerate; the
+    rest are opened, then ear-clipped in one :func:`triangulate_many` call, and their
+    triangles index ``vertices`` where their points are the opened rings' own."""
+    ring_starts = ring_lengths.cumsum() - ring_lengths
+    first_ring = ring_counts.cumsum() - ring_counts
+    has_rings = ring_counts > 0
+    first_length = np.zeros(len(ring_counts), dtype=np.int64)
+    first_length[has_rings] = ring_lengths[first_ring[has_rings]]
+    triangle = (ring_counts == 1) & (first_length == 3)
+    general = ~triangle & (first_length > 0)
+    degenerate = ~triangle & ~general
+    corners = ring_starts[first_ring[triangle]]
+    faces = [index[corners[:, None] + np.arange(3)]]
+    polygon = [np.flatnonzero(triangle)]
+    own: list[tuple[int, np.ndarray, np.ndarray]] = []
+    if general.any():
+        in_general = general.repeat(ring_counts)
+        lengths = ring_lengths[in_general]
+        chosen = index[in_general.repeat(ring_lengths)]
+        points = vertices[chosen]
+        keep = _opened(lengths, points)
+        chosen, points = chosen[keep], points[keep]
+        ring = np.arange(len(lengths)).repeat(lengths)
+        lengths = np.bincount(ring[keep], minlength=len(lengths))
+        counts = ring_counts[general]
+        rings = np.split(points, lengths.cumsum()[:-1])
+        ends = counts.cumsum()
+        results = triangulate_many(
+            [
+                rings[end - count : end]
+                for count, end in zip(counts.tolist(), ends.tolist(), strict=True)
+            ],
+            fan=False,
+        )
+        sizes = np.bincount(
+            np.arange(len(counts)).repeat(counts), weights=lengths, minlength=len(counts)
+        ).astype(np.int64)
+        starts = sizes.cumsum() - sizes
+        ids = np.flatnonzero(general)
+        mapped, clipped, counted = [], [], []
+        for k, result, size, start in zip(
+            ids.tolist(), results, sizes.tolist(), starts.tolist(), strict=True
+        ):
+            if result is None:
+                degenerate[k] = True
+            elif len(result[0]) == size:
+                mapped.append(result[1] + start)
+                clipped.append(k)
+                counted.append(len(result[1]))
+            else:
+                own.append((k, *result))
+        if mapped:
+            faces.append(chosen[np.concatenate(mapped)])
+            polygon.append(np.repeat(clipped, counted))
+    return _Triangles(np.concatenate(faces), np.concatenate(polygon), own, degenerate)
+
+
+def _triangulate(lods: list[_Lod]) -> None:
+    """Triangulate the polygons of ``lods`` (one batch) together and give each LoD its mesh:
+    per part, the triangles of its polygons (in polygon order) that have area, on only the
+    vertices they use (those of the vertex list, in index order, then the points of polygons
+    with points of their own), and how many faces it dropped."""
+    if not lods:
+        return
+    offsets: dict[int, int] = {}
+    lists: list[np.ndarray] = []
+    for lod in lods:
+        if id(lod.vertices) not in offsets:
+            offsets[id(lod.vertices)] = sum(map(len, lists))
+            lists.append(lod.vertices)
+    vertices = lists[0] if len(lists) == 1 else np.concatenate(lists)
+    polygons = [len(lod.ring_counts) for lod in lods]
+    part_counts = np.array([len(lod.colors) for lod in lods], dtype=np.int64)
+    part_starts = part_counts.cumsum() - part_counts
+    parts = int(part_counts.sum())
+    part = np.concatenate([lod.part_of for lod in lods]) + part_starts.repeat(polygons)
+    found = _triangles(
+        vertices,
+        np.concatenate([lod.index + offsets[id(lod.vertices)] for lod in lods]),
+        np.concatenate([lod.ring_lengths for lod in lods]),
+        np.concatenate([lod.ring_counts for lod in lods]),
+    )
+    indexed = _by_part(vertices, found.faces, found.polygon, part, parts)
+    own = _own_by_part(found.own, part)
+    degenerate = np.bincount(
+        np.arange(len(lods)).repeat(polygons)[found.degenerate], minlength=len(lods)
+    )
+    for k, lod in enumerate(lods):
+        surfaces = []
+        lod.dropped = int(degenerate[k])
+        for rank, p in enumerate(range(int(part_starts[k]), int(part_starts[k] + part_counts[k]))):
+            points, faces, keep = indexed(p)
+            if p in own:
+                chunks, all_faces, keeps = [points], [faces], [keep]
+                offset = len(points)
+                for own_points, own_faces, own_keep in own[p]:
+                    chunks.append(own_points)
+                    all_faces.append(own_faces + offset)
+                    keeps.append(own_keep)
+                    offset += len(own_points)
+                points = np.concatenate(chunks)
+                faces, keep = np.concatenate(all_faces), np.concatenate(keeps)
+            lost = len(keep) - int(np.count_nonzero(keep))
+            lod.dropped += lost
+            if lost:
+                points, faces = _compact(points, faces[keep])
+            if len(faces):
+                color = lod.colors[rank].copy()
+                surfaces.append(Surface(vertices=points, faces=faces, base_color=color))
+        lod.mesh = Mesh(surfaces) if surfaces else None
+
+
+def _by_part(
+    vertices: np.ndarray, faces: np.ndarray, polygon: np.ndarray, part_of: np.ndarray, parts: int
+) -> Callable[[int], tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """For ``faces`` indexing ``vertices``, each of a ``polygon`` whose part (one of
+    ``parts``) ``part_of`` gives: per part, the vertices its faces use (in index order), its
+    faces (polygon by polygon) indexing those, and whether each has area."""
+    part = part_of[polygon]
+    order = np.argsort(part * len(part_of) + polygon, kind="stable")
+    faces, part = faces[order], part[order]
+    with_area = faces_with_area(vertices, faces)
+    face_ends = np.bincount(part, minlength=parts).cumsum()
+    used, inverse = np.unique(faces, return_inverse=True)
+    width = max(len(used), 1)
+    pairs, local = np.unique(part.repeat(3) * width + inverse.ravel(), return_inverse=True)
+    used_part = pairs // width
+    used = used[pairs - used_part * width]
+    used_counts = np.bincount(used_part, minlength=parts)
+    used_ends = used_counts.cumsum()
+    local = (local - (used_ends - used_counts)[part.repeat(3)]).reshape(-1, 3)
+
+    def of(p: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        f0, f1 = (int(face_ends[p - 1]) if p else 0), int(face_ends[p])
+        u0, u1 = (int(used_ends[p - 1]) if p else 0), int(used_ends[p])
+        return vertices[used[u0:u1]], local[f0:f1].copy(), with_area[f0:f1]
+
+    return of
+
+
+def _own_by_part(
+    own: list[tuple[int, np.ndarray, np.ndarray]], part: np.ndarray
+) -> dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]]:
+    """Per part, the polygons with points of their own (in polygon order): points, faces and
+    whether each face has area."""
+    if not own:
+        return {}
+    sizes = np.array([len(points) for _, points, _ in own], dtype=np.int64)
+    starts = (sizes.cumsum() - sizes).tolist()
+    with_area = faces_with_area(
+        np.concatenate([points for _, points, _ in own]),
+        np.concatenate([faces + start for (_, _, faces), start in zip(own, starts, strict=True)]),
+    )
+    by_part: dict[int, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {}
+    at = 0
+    for polygon, points, faces in own:
+        keep = with_area[at : at + len(faces)]
+        by_part.setdefault(int(part[polygon]), []).append((points, faces, keep))
+        at += len(faces)
+    return by_part
 
 
 def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -338,41 +607,9 @@ def _mesh(
     """The Mesh of ``geometries`` (of one LoD) indexing ``vertices``, one part per semantic
     class and material, and how many faces were dropped (degenerate polygons, triangles
     without area). Raises :class:`InputError` for bad indices or boundaries."""
-    parts: dict[tuple[int, Any], _Part] = {}
-    dropped = 0
-    for geometry in geometries:
-        depth = _SURFACE_DEPTH[geometry["type"]]
-        try:
-            surfaces = _surfaces(geometry.get("boundaries"), depth)
-            rings = [[np.asarray(r, dtype=np.int64).ravel() for r in s] for s in surfaces]
-        except (TypeError, ValueError, OverflowError) as exc:
-            raise InputError(
-                f"has malformed {geometry['type']} boundaries ({exc})", where
-            ) from None
-        flat = [r for s in rings for r in s]
-        index = np.concatenate(flat) if flat else np.zeros(0, np.int64)
-        bad = (index < 0) | (index >= len(vertices))
-        if bad.any():
-            raise InputError(
-                f"refers to vertices that do not exist (index {int(index[bad][0])}; "
-                f"{len(vertices):,} vertices, 0 to {len(vertices) - 1:,})",
-                where,
-            )
-        classes = _classes(geometry, depth, len(rings))
-        materials = _material_values(geometry, depth, len(rings))
-        for polygon, kind_of, material in zip(rings, classes, materials, strict=True):
-            key = (_CLASSES.index(kind_of), material if isinstance(material, int) else -1)
-            try:
-                parts.setdefault(key, _Part()).add_polygon(polygon, vertices)
-            except DegenerateRing:
-                dropped += 1
-    surfaces = []
-    for (klass, material), part in sorted(parts.items(), key=lambda item: item[0]):
-        surface, lost = part.surface(vertices, _color(_CLASSES[klass], material, ctx, kind), where)
-        dropped += lost
-        if len(surface.faces):
-            surfaces.append(surface)
-    return (Mesh(surfaces) if surfaces else None), dropped
+    lod = _read_lod("", geometries, vertices, ctx, where, kind)
+    _triangulate([lod])
+    return lod.mesh, lod.dropped
 
 
 def _lod_key(label: str) -> tuple[float, ...]:
@@ -454,34 +691,70 @@ def _instance_nodes(node: Node, placed: list[tuple[tuple[str, Mesh], np.ndarray]
         )
 
 
-def _node(key: str, obj: dict[str, Any], ctx: _Context) -> tuple[Node, int]:
-    """The node of CityObject ``key`` (its children not yet attached) with its LoDs and
-    geometry instances, and how many of its faces were dropped. :class:`InputError` (naming
-    ``key``) when the object cannot be converted."""
-    kind = str(obj.get("type", ""))
-    own = obj.get("attributes")
-    attributes = {**(own if isinstance(own, dict) else {}), "id": key, "type": kind}
-    node = Node(id=key, type=kind, attributes=attributes, crs=ctx.crs)
-    by_lod: dict[str, list[dict[str, Any]]] = {}
-    instances = []
-    for geometry in obj.get("geometry") or []:
-        if not isinstance(geometry, dict):
-            raise InputError("has a geometry that is not a JSON object", key)
-        if geometry.get("type") == "GeometryInstance":
-            instances.append(geometry)
-        elif geometry.get("type") in _SURFACE_DEPTH:
-            by_lod.setdefault(_lod_label(geometry.get("lod", "")), []).append(geometry)
+@dataclass(eq=False)
+class _Read:
+    """A CityObject read up to the triangulation of its polygons: its node (children and
+    geometry not yet attached), its LoDs, its geometry instances, and the first problem met
+    reading it. The LoDs are those before the problem: finishing the object checks them
+    first and then raises it, as reading it in one go would have."""
+
+    key: str
+    ctx: _Context
+    node: Node | None = None
+    kind: str = ""
+    lods: list[_Lod] = field(default_factory=list)
+    instances: list[dict[str, Any]] = field(default_factory=list)
+    problem: Exception | None = None
+
+
+_MALFORMED = (TypeError, ValueError, AttributeError, KeyError, IndexError)
+"""What JSON of a shape CityJSON does not give raises somewhere in an object."""
+
+
+def _read_object(key: str, obj: Any, ctx: _Context) -> _Read:
+    """CityObject ``key`` read (not yet triangulated); a problem is kept in the result."""
+    read = _Read(key, ctx)
+    try:
+        if not isinstance(obj, dict):
+            raise InputError("is not a JSON object", key)
+        read.kind = kind = str(obj.get("type", ""))
+        own = obj.get("attributes")
+        attributes = {**(own if isinstance(own, dict) else {}), "id": key, "type": kind}
+        read.node = Node(id=key, type=kind, attributes=attributes, crs=ctx.crs)
+        by_lod: dict[str, list[dict[str, Any]]] = {}
+        for geometry in obj.get("geometry") or []:
+            if not isinstance(geometry, dict):
+                raise InputError("has a geometry that is not a JSON object", key)
+            if geometry.get("type") == "GeometryInstance":
+                read.instances.append(geometry)
+            elif geometry.get("type") in _SURFACE_DEPTH:
+                by_lod.setdefault(_lod_label(geometry.get("lod", "")), []).append(geometry)
+        for label in sorted(by_lod, key=_lod_key):
+            read.lods.append(_read_lod(label, by_lod[label], ctx.vertices, ctx, key, kind))
+    except (InputError, *_MALFORMED) as exc:
+        read.problem = exc
+    return read
+
+
+def _node(read: _Read) -> tuple[Node, int]:
+    """The node of a read and triangulated object with its LoDs and geometry instances, and
+    how many of its faces were dropped. :class:`InputError` (naming the object) when it
+    cannot be converted."""
+    key, ctx, kind = read.key, read.ctx, read.kind
     dropped = 0
-    for label in sorted(by_lod, key=_lod_key):
-        mesh, lost = _mesh(by_lod[label], ctx.vertices, ctx, key, kind)
-        dropped += lost
-        if mesh is not None:
-            check_extent(mesh.bounds, key)
-            node.lods[label] = mesh
+    for lod in read.lods:
+        dropped += lod.dropped
+        if lod.mesh is not None:
+            check_extent(lod.mesh.bounds, key)
+    if read.problem is not None:
+        raise read.problem
+    node = read.node
+    assert node is not None
+    node.lods = {lod.label: lod.mesh for lod in read.lods if lod.mesh is not None}
     if node.lods:
         node.geometry = node.lods[max(node.lods, key=_lod_key)]
     placed = []
-    for geometry in instances:
+    for geometry in read.instances:
         shared = _template(geometry.get("template"), ctx, key, kind)
         if shared is not None:
             transform = _placement(geometry, ctx, key)
@@ -491,19 +764,20 @@ def _node(key: str, obj: dict[str, Any], ctx: _Context) -> tuple[Node, int]:
     return node, dropped
 
 
-def _checked_node(key: str, obj: Any, ctx: _Context) -> Node | None:
+def _checked_node(read: _Read) -> Node | None:
     """:func:`_node`, or None when the object is left out (recorded in the tally: an object
     that cannot be converted, or one whose faces all had no area)."""
+    key, ctx = read.key, read.ctx
     tally = ctx.tally
     try:
-        if not isinstance(obj, dict):
-            raise InputError("is not a JSON object", key)
-        node, dropped = _node(key, obj, ctx)
+        node, dropped = _node(read)
     except InputError as exc:
+        read.problem = None  # its traceback holds the read: no cycle left for the collector
         tally.skipped.append({"id": key, "reason": str(exc)})
         return None
-    except (TypeError, ValueError, AttributeError, KeyError, IndexError) as exc:
+    except _MALFORMED as exc:
         # JSON of an unexpected shape somewhere in the object: leave the object out
+        read.problem = None
         error = InputError(f"has malformed content ({type(exc).__name__}: {exc})", key)
         tally.skipped.append({"id": key, "reason": str(error)})
         return None
@@ -513,11 +787,22 @@ def _checked_node(key: str, obj: Any, ctx: _Context) -> Node | None:
         return None
     if dropped:
         tally.dropped_by_object[key] = dropped
+    templates = {id(e[1]) for e in ctx.shared.values() if e is not None} if read.instances else ()
     for mesh in {id(m): m for n in node.walk() for m in n.lods.values()}.values():
-        if id(mesh) not in ctx.counted:
+        if id(mesh) in templates:
+            if id(mesh) in ctx.counted:
+                continue  # a template's mesh counts once, where it is first used
             ctx.counted.add(id(mesh))
-            tally.count(mesh.vertex_count, mesh.face_count)
+        tally.count(mesh.vertex_count, mesh.face_count)
     return node
+
+
+def _checked_nodes(objects: list[tuple[str, Any, _Context]]) -> Iterator[Node | None]:
+    """:func:`_checked_node` of each object, their polygons triangulated together; each is
+    finished (and recorded in the tally) as it is yielded."""
+    reads = [_read_object(key, obj, ctx) for key, obj, ctx in objects]
+    _triangulate([lod for read in reads for lod in read.lods])
+    return map(_checked_node, reads)
 
 
 def _keys(values: Any) -> list[str]:
@@ -540,32 +825,61 @@ def _children(objects: dict[str, Any]) -> dict[str, list[str]]:
     return {key: list(kids) for key, kids in found.items()}
 
 
+@dataclass
+class _Objects:
+    """The CityObjects of a file or of a CityJSONSeq feature: their child keys and which of
+    them are read (each at most once), in the order their tree is built (children before
+    their parent, parents in file order)."""
+
+    objects: dict[str, Any]
+    types: frozenset[str] | None
+    children: dict[str, list[str]] = field(init=False)
+    order: list[str] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.children = _children(self.objects)
+        order: list[str] = []
+        self.roots(lambda key: order.append(key))
+        self.order = order
+
+    def roots(self, node_of: Callable[[str], Node | None]) -> list[Node]:
+        """The root nodes: each object of a kept type (all, when ``types`` is None, else those
+        types and the descendants of kept objects) that ``node_of`` gives a node with geometry
+        or children, its children below it; kept descendants of objects left out (None) take
+        their place."""
+        objects, types, children = self.objects, self.types, self.children
+        below = {child for kids in children.values() for child in kids}
+        seen: set[str] = set()
+
+        def build(key: str, kept: bool) -> list[Node]:
+            if key in seen:  # a cycle, or a second parent
+                return []
+            seen.add(key)
+            obj = objects[key]
+            kept = kept or types is None or (isinstance(obj, dict) and obj.get("type") in types)
+            kids = [node for child in children[key] for node in build(child, kept)]
+            node = node_of(key) if kept else None
+            if node is None:
+                return kids
+            node.children.extend(kids)
+            return [node] if node.geometry is not None or node.children else []
+
+        return [node for key in objects if key not in below for node in build(key, False)]
+
+
 def _object_nodes(
     objects: dict[str, Any], ctx: _Context, types: frozenset[str] | None
-) -> Iterator[Node]:
-    """The root nodes of ``objects``: each object of a kept type (all, when ``types`` is
-    None, else those types and the descendants of kept objects) with geometry or children,
-    its children below it; kept descendants of objects left out take their place."""
-    children = _children(objects)
-    below = {child for kids in children.values() for child in kids}
-    seen: set[str] = set()
-
-    def build(key: str, kept: bool) -> list[Node]:
-        if key in seen:  # a cycle, or a second parent
-            return []
-        seen.add(key)
-        obj = objects[key]
-        kept = kept or types is None or (isinstance(obj, dict) and obj.get("type") in types)
-        kids = [node for child in children[key] for node in build(child, kept)]
-        node = _checked_node(key, obj, ctx) if kept else None
-        if node is None:
-            return kids
-        node.children.extend(kids)
-        return [node] if node.geometry is not None or node.children else []
-
-    for key in objects:
-        if key not in below:
-            yield from build(key, False)
+) -> list[Node]:
+    """The root nodes of ``objects`` (:meth:`_Objects.roots`), read :data:`BATCH` objects at a
+    time."""
+    tree = _Objects(objects, types)
+    nodes: dict[str, Node | None] = {}
+    for at in range(0, len(tree.order), BATCH):
+        keys = tree.order[at : at + BATCH]
+        nodes.update(
+            zip(keys, _checked_nodes([(key, objects[key], ctx) for key in keys]), strict=True)
+        )
+    return tree.roots(nodes.__getitem__)
 
 
 # --- the readers ----------------------------------------------------------------------------------
@@ -583,7 +897,7 @@ def _read_document(
     tally = InputTally(str(path), limits)
     crs = _scene_crs(_declared(data.get("metadata"), crs), str(path))
     ctx = _context(data, tally, crs, palette)
-    nodes = list(_object_nodes(data.get("CityObjects") or {}, ctx, types))
+    nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
     if not size and not tally.skipped:
         if tally.dropped_faces:
@@ -595,36 +909,79 @@ def _read_document(
     return attach_tally(scene, tally)
 
 
+@dataclass
+class _Feature:
+    """A CityJSONSeq line waiting in a batch: a feature's context and objects, or the problem
+    that has the line skipped."""
+
+    where: str
+    ctx: _Context | None = None
+    tree: _Objects | None = None
+    problem: InputError | None = None
+
+
+def _feature(
+    line: str, where: str, header: dict[str, Any], ctx: _Context, types: frozenset[str] | None
+) -> _Feature:
+    """The ``CityJSONFeature`` of a line, against the header's transform and context."""
+    try:
+        feature = _cityjson(_parsed(line, where), "CityJSONFeature", where)
+        appearance = feature.get("appearance") or {}
+        local = _Context(
+            tally=ctx.tally,
+            vertices=_vertices(feature.get("vertices"), header.get("transform"), where),
+            crs=ctx.crs,
+            materials=list(appearance.get("materials") or ctx.materials),
+            templates=ctx.templates,
+            template_vertices=ctx.template_vertices,
+            shared=ctx.shared,
+            counted=ctx.counted,
+            palette=ctx.palette,
+        )
+    except InputError as exc:
+        return _Feature(where, problem=exc)
+    return _Feature(where, local, _Objects(feature.get("CityObjects") or {}, types))
+
+
 def _feature_nodes(
     handle: IO[str], header: dict[str, Any], ctx: _Context, types: frozenset[str] | None
 ) -> Iterator[Node]:
-    """The nodes of each ``CityJSONFeature`` line of ``handle``, one feature at a time; a
-    line that is not one is recorded as skipped."""
-    tally = ctx.tally
+    """The nodes of each ``CityJSONFeature`` line of ``handle``, a line that is not one
+    recorded as skipped. Lines are read until they hold :data:`BATCH` objects (or are that
+    many), whose polygons are triangulated together; their nodes are then yielded feature by
+    feature, so memory holds one batch of features at a time."""
+    waiting: list[_Feature] = []
+    objects = 0
     with handle:
         for number, line in enumerate(handle, start=2):
             if not line.strip():
                 continue
-            where = f"line {number}"
-            try:
-                feature = _cityjson(_parsed(line, where), "CityJSONFeature", where)
-                appearance = feature.get("appearance") or {}
-                local = _Context(
-                    tally=tally,
-                    vertices=_vertices(feature.get("vertices"), header.get("transform"), where),
-                    crs=ctx.crs,
-                    materials=list(appearance.get("materials") or ctx.materials),
-                    templates=ctx.templates,
-                    template_vertices=ctx.template_vertices,
-                    shared=ctx.shared,
-                    counted=ctx.counted,
-                    palette=ctx.palette,
-                )
-            except InputError as exc:
-                tally.skipped.append({"id": where, "reason": str(exc)})
-                continue
-            tally.count(len(local.vertices), 0, declared=True)
-            yield from _object_nodes(feature.get("CityObjects") or {}, local, types)
+            feature = _feature(line, f"line {number}", header, ctx, types)
+            waiting.append(feature)
+            objects += len(feature.tree.objects) if feature.tree is not None else 0
+            if objects >= BATCH or len(waiting) >= BATCH:
+                yield from _finished_features(waiting, ctx.tally)
+                waiting, objects = [], 0
+        yield from _finished_features(waiting, ctx.tally)
+
+
+def _finished_features(waiting: list[_Feature], tally: InputTally) -> Iterator[Node]:
+    """The root nodes of a batch of features, in line order, their polygons triangulated
+    together; each feature's vertices are counted, and its objects finished, as it comes."""
+    reads = [
+        [_read_object(key, f.tree.objects[key], f.ctx) for key in f.tree.order]
+        if f.ctx is not None and f.tree is not None
+        else []
+        for f in waiting
+    ]
+    _triangulate([lod for each in reads for read in each for lod in read.lods])
+    for feature, each in zip(waiting, reads, strict=True):
+        if feature.ctx is None or feature.tree is None:
+            tally.skipped.append({"id": feature.where, "reason": str(feature.problem)})
+            continue
+        tally.count(len(feature.ctx.vertices), 0, declared=True)
+        nodes = {read.key: _checked_node(read) for read in each}
+        yield from feature.tree.roots(nodes.__getitem__)
 
 
 def _read_sequence(
