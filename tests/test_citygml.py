@@ -19,7 +19,7 @@ from lxml import etree
 
 from lodconvert.io import read_chains, read_scene
 from lodconvert.limits import Limits
-from lodconvert.model import Mesh, Node
+from lodconvert.model import Mesh, Node, Surface
 from lodconvert.pipeline import convert
 from lodconvert.semantics import DEFAULT_CLASS_COLORS, TYPE_COLORS
 from lodconvert.validate import errors_of, validate_file
@@ -478,6 +478,23 @@ def test_document_without_city_objects_is_refused(tmp_path: Path, out_dir: Path)
     path = tmp_path / "empty.gml"
     path.write_text(document())
     refused(path, out_dir, "has no city objects")
+
+
+def test_surface_bounds_from_the_batch_are_those_of_their_faces(tmp_path: Path) -> None:
+    """The reader sets each surface's bounds for a whole batch at once: they must be what
+    :attr:`Surface.bounds` computes (the vertices its faces use), also next to an object
+    whose coordinates were unreadable and a face without area that reaches farther out."""
+    sliver = "0 0 0 10 0 0 40 0 0 0 0 0"  # three points on a line, beyond the box
+    path = tmp_path / "city.gml"
+    bad = building("bad", ["0 0 0 1 0 0 1 x 0 0 0 0"])
+    path.write_text(document(building("a", box()), bad, building("b", [*box(20.0), sliver])))
+    nodes = nodes_of(path) + nodes_of(sample("tum_munich_lod2_v2.zip"))
+    assert [node.id for node in nodes[:2]] == ["a", "b"]
+    assert nodes[1].geometry.bounds[1, 0] == 30.0  # the sliver is left out
+    for node in nodes:
+        for part in node.geometry.parts:
+            fresh = Surface(part.vertices, part.faces).bounds
+            assert np.array_equal(part.bounds, fresh)
 
 
 def test_degenerate_ring_object_is_reported_and_the_rest_convert(

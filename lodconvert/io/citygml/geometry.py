@@ -604,7 +604,8 @@ def triangulate_batch(
         sum(g.faces.stop - g.faces.start for g in groups),
     )
     keep = faces_with_area(vertices, faces)
-    for group in groups:
+    boxes = _group_bounds(groups, vertices, faces[keep])
+    for group, box in zip(groups, boxes, strict=True):
         first = group.vertices.start
         kept = faces[group.faces][keep[group.faces]] - first
         group.holder.dropped += (group.faces.stop - group.faces.start) - len(kept)
@@ -614,5 +615,22 @@ def triangulate_batch(
                 kept,
                 base_color=palette.of(group.semantic or None, group.holder.kind).copy(),
             )
+            surface.derived("bounds", lambda box=box: box)  # what Surface.bounds computes
             group.holder.surfaces.setdefault(group.lod, []).append(surface)
     return broken
+
+
+def _group_bounds(groups: list[_Group], vertices: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """Per group, the (2, 3) bounds of its vertices that the ``kept`` faces use (all at once;
+    infinite for a group whose faces were all dropped)."""
+    if not groups:
+        return np.zeros((0, 2, 3))
+    used = np.zeros(len(vertices) + 1, dtype=bool)  # and a row past the end, for reduceat
+    used[kept.ravel()] = True
+    padded = np.vstack([vertices, np.zeros((1, 3))])
+    low = np.where(used[:, None], padded, np.inf)
+    high = np.where(used[:, None], padded, -np.inf)
+    ends = np.array([(g.vertices.start, g.vertices.stop) for g in groups], dtype=np.int64).ravel()
+    return np.stack(
+        [np.minimum.reduceat(low, ends)[::2], np.maximum.reduceat(high, ends)[::2]], axis=1
+    )
