@@ -171,9 +171,9 @@ class Objects:
 
     def roots(self, node_of: Callable[[str], Node | None]) -> list[Node]:
         """The root nodes: each object of a kept type (all, when ``types`` is None, else those
-        types and the descendants of kept objects) that ``node_of`` gives a node with geometry
-        or children, its children below it; kept descendants of objects left out (None) take
-        their place."""
+        types and the descendants of kept objects; a ``type`` that is not a string is of no
+        type) that ``node_of`` gives a node with geometry or children, its children below it;
+        kept descendants of objects left out (None) take their place."""
         objects, types, children = self.objects, self.types, self.children
         below = {child for kids in children.values() for child in kids}
         seen: set[str] = set()
@@ -182,8 +182,8 @@ class Objects:
             if key in seen:  # a cycle, or a second parent
                 return []
             seen.add(key)
-            obj = objects[key]
-            kept = kept or types is None or (isinstance(obj, dict) and obj.get("type") in types)
+            kind = objects[key].get("type") if isinstance(objects[key], dict) else None
+            kept = kept or types is None or (isinstance(kind, str) and kind in types)
             kids = [node for child in children[key] for node in build(child, kept)]
             node = node_of(key) if kept else None
             if node is None:
