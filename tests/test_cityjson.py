@@ -122,6 +122,25 @@ def test_types_keeps_only_those_types(tmp_path: Path) -> None:
     assert report["totals"]["objects"] == 163
 
 
+def test_types_keeps_no_object_whose_type_is_not_a_string(tmp_path: Path) -> None:
+    """A ``type`` that is a JSON list or object (unhashable) matches no type of ``--types``:
+    the object is left out, its kept children read, and the run goes on."""
+    objects = {
+        "a": surface_object([[0, 1, 2, 3]]),
+        "b": {**surface_object([[0, 1, 2, 3]]), "type": ["Building"], "children": ["c"]},
+        "c": {**surface_object([[0, 1, 2, 3]]), "type": "BuildingPart"},
+        "d": {**surface_object([[0, 1, 2, 3]]), "type": {"Building": 1}},
+    }
+    path = write_json(tmp_path / "types.city.json", city(objects, square()))
+    types = frozenset({"Building", "BuildingPart"})
+    assert [n.id for n in nodes_of(path, types=types)] == ["a", "c"]
+    result = run(path, "-o", tmp_path / "types.glb", "--types", "Building")
+    assert result.returncode == 0 and "Traceback" not in result.stderr, result.stderr
+    only = write_json(tmp_path / "only.city.json", city({"b": objects["b"]}, square()))
+    result = run(only, "-o", tmp_path / "only.glb", "--types", "Building")
+    assert_one_line_error(result, 1, "only.city.json", "no CityObject of type Building")
+
+
 # --- end to end -----------------------------------------------------------------------------------
 
 

@@ -11,7 +11,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lodconvert.io import cityjson, read_scene
+from lodconvert.io import read_scene
+from lodconvert.io.cityjson import document as cityjson_document
+from lodconvert.io.cityjson import geometry
 from lodconvert.io.geometry_checks import faces_with_area, tally_of
 from lodconvert.polygons import DegenerateRing, triangulate
 
@@ -147,7 +149,7 @@ def test_batches_give_what_one_object_at_a_time_gives(
     path = {"delft": delft, "multi_lod": multi_lod}.get(which, lambda: polygons_file)()
     batched = _read(path)
     for size in (1, 5):
-        monkeypatch.setattr(cityjson, "BATCH", size)
+        monkeypatch.setattr(cityjson_document, "BATCH", size)
         _assert_same(_read(path), batched)
 
 
@@ -228,15 +230,15 @@ def test_a_sequence_is_read_a_batch_of_features_at_a_time(
             lines.append("[not a feature")
     path = tmp_path / "polygons.city.jsonl"
     path.write_text("\n".join(lines) + "\n")
-    monkeypatch.setattr(cityjson, "BATCH", 8)
+    monkeypatch.setattr(cityjson_document, "BATCH", 8)
     parsed: list[str] = []
-    real_parsed = cityjson._parsed
+    real_parsed = cityjson_document.parsed
 
     def counting(text: str, where: str):
         parsed.append(where)
         return real_parsed(text, where)
 
-    monkeypatch.setattr(cityjson, "_parsed", counting)
+    monkeypatch.setattr(cityjson_document, "parsed", counting)
     scene = read_scene(path)
     first = next(iter(scene.nodes))
     assert first.id == "b0" and len(parsed) == 1 + 8  # the header, then one batch
@@ -255,7 +257,7 @@ def test_a_sequence_counts_every_mesh_once_as_its_nodes_are_freed(
 ) -> None:
     """Nodes handed on and freed must not hide the meshes read after them from the limits
     (their ids are taken again); a template's mesh, shared by its instances, counts once."""
-    monkeypatch.setattr(cityjson, "BATCH", batch)
+    monkeypatch.setattr(cityjson_document, "BATCH", batch)
     document = polygon_city(seed=9, objects=120)
     cube = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
     quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
@@ -324,9 +326,9 @@ def test_rings_read_in_one_go_are_those_read_ring_by_ring(surfaces: list) -> Non
         expected = one_by_one()
     except (TypeError, ValueError, OverflowError) as exc:
         with pytest.raises(type(exc)) as raised:
-            cityjson._rings(surfaces)
+            geometry._rings(surfaces)
         assert str(raised.value) == str(exc)
         return
-    index, lengths, counts = cityjson._rings(surfaces)
+    index, lengths, counts = geometry._rings(surfaces)
     assert index.dtype == np.int64
     assert (index.tolist(), lengths, counts) == expected

@@ -1,0 +1,98 @@
+"""CityJSON reader: CityJSON 1.1 and 2.0 (``.json``, ``.city.json``) and CityJSONSeq
+(``.city.jsonl``), each also gzip-compressed (``.gz``). CityJSON 1.0 is read the same way (its
+numeric ``lod`` values become labels: ``2`` → ``"2"``); other versions are refused.
+
+Every CityObject with geometry or with children becomes a :class:`Node`: ``id`` is its key (the
+writers make it a valid X3D DEF; the raw key is kept in ``attributes["id"]``), ``type`` its
+CityObject type, ``attributes`` its own ``attributes`` plus ``id`` and ``type`` (which win over
+source attributes of those names). Children (``children``/``parents``: BuildingParts,
+Installations…) are the ``children`` of their parent's node; an object without geometry of its
+own is a node without geometry whose children carry it. ``types`` keeps only objects of those
+types and the descendants of kept ones (a kept descendant of a dropped object becomes a root).
+
+Geometry: Solid, MultiSolid, CompositeSolid, MultiSurface and CompositeSurface (points and
+lines are ignored). Polygons with holes are triangulated :data:`BATCH` objects at a time, in one
+:func:`lodconvert.polygons.triangulate_many` call that ear-clips each as
+:func:`~lodconvert.polygons.triangulate` would (a lone ring of three indices is kept as it is).
+Every LoD of an object is one :class:`Mesh` in ``node.lods`` under the ``lod`` string (``"1.2"``);
+``node.geometry`` is the highest of them (in numeric order of the label). A mesh has one part
+per semantic class — roof, wall, ground, other (:mod:`lodconvert.semantics`) — and material: the
+``diffuseColor`` (and ``transparency``) of ``appearance.materials`` in the first theme each
+geometry lists wins over the class colour. CityJSON materials follow X3D's, whose colours are
+taken as sRGB as X3D browsers draw them, so they become the part's sRGB base colour unchanged.
+Surfaces of no semantic class take their object type's colour where
+:data:`lodconvert.semantics.TYPE_COLORS` has one. Textures are not read.
+
+Vertices: the integer ``vertices`` are scaled and translated by ``transform`` into float64
+coordinates of the file's CRS, kept as they are (no origin is taken off: the pipeline stores
+each chain relative to its own float64 centre). A file without ``transform`` (which CityJSON
+1.1 and 2.0 require) has its vertices taken as given, integers or not. Geometry templates are
+read once per template into one :class:`Mesh` that every ``GeometryInstance`` node shares, in
+the template's frame, with the instance's ``transform``: its ``transformationMatrix`` (4×4, row
+by row) moved to its reference point. An object with several instances, or instances beside
+geometry of its own, gets one child node per instance (``<id>-instance<k>``).
+
+Checks (:mod:`..geometry_checks`): degenerate polygons (those
+:func:`~lodconvert.polygons.triangulate` refuses) and triangles without area are dropped and
+counted; an object with a boundary index out of range, a malformed boundary, bad coordinates or
+an extent the outputs cannot hold is reported (one line naming file and object) in the tally's
+``skipped`` and left out, the rest of its batch converts; so is an object whose JSON is not of
+the shape CityJSON gives it.
+
+CRS: ``metadata.referenceSystem`` in its URL or URN form becomes ``EPSG:<code>`` on the scene
+and every node; none declared leaves it ``None``. A geographic CRS is refused (not supported
+yet). CityJSONSeq is read line by line: the header line (``transform``, ``metadata``,
+``geometry-templates``) first, then one ``CityJSONFeature`` per line; features are read until
+they hold :data:`BATCH` objects, then triangulated together and their nodes yielded, so memory
+holds one batch of features at a time; a line that is not a feature is reported and skipped.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from pathlib import Path
+
+from ...errors import InputError
+from ...limits import DEFAULT_LIMITS, Limits
+from ...model import Scene
+from ...semantics import DEFAULT_PALETTE, Palette
+from .. import Format
+from .document import BATCH, read_document, read_sequence
+
+__all__ = ["BATCH", "FORMAT", "read_cityjson"]
+
+
+def _types(types: Iterable[str] | None) -> frozenset[str] | None:
+    return frozenset(types) if types is not None else None
+
+
+def read_cityjson(
+    path: Path,
+    limits: Limits = DEFAULT_LIMITS,
+    types: Iterable[str] | None = None,
+    colors: Palette = DEFAULT_PALETTE,
+    crs: str | None = None,
+) -> Scene:
+    """Read a CityJSON (``.json``) or CityJSONSeq (``.jsonl``) file, ``.gz`` or not, into a
+    Scene (see the module docstring); :class:`InputError` with a one-line reason when it
+    cannot be. ``types``: keep only CityObjects of these types (and their descendants);
+    ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`); ``crs``
+    replaces the CRS the file declares.
+    The scene carries an :class:`~..geometry_checks.InputTally` of dropped faces and skipped
+    objects."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("no such file" if not path.exists() else "is not a file", str(path))
+    if path.stat().st_size == 0:
+        raise InputError("is empty", str(path))
+    name = path.name.lower().removesuffix(".gz")
+    read = read_sequence if name.endswith(".jsonl") else read_document
+    return read(path, limits, _types(types), colors, crs)
+
+
+FORMAT = Format(
+    name="cityjson",
+    suffixes=(".json", ".jsonl"),
+    read=read_cityjson,
+    read_options=("limits", "types", "colors", "crs"),
+)

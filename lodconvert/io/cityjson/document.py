@@ -1,0 +1,165 @@
+"""The two readers: a ``.json`` document, whose objects are read :data:`BATCH` at a time, and a
+CityJSONSeq file, whose header is read first and whose ``CityJSONFeature`` lines are then read
+in batches of :data:`BATCH` objects, their nodes yielded lazily."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+from ...errors import InputError
+from ...limits import Limits
+from ...model import Node, Scene
+from ...semantics import Palette
+from ..geometry_checks import InputTally, attach_tally
+from .objects import Objects, checked_node, checked_nodes, read_object
+from .source import (
+    Context,
+    cityjson_object,
+    context_of,
+    declared_metadata,
+    load_document,
+    open_text,
+    parsed,
+    scene_crs,
+    vertices_of,
+)
+from .triangulation import triangulate_batch
+
+BATCH = 64
+"""City objects whose polygons are triangulated together (a CityJSONSeq reader holds the
+features they come in until then)."""
+
+
+def _object_nodes(
+    objects: dict[str, Any], ctx: Context, types: frozenset[str] | None
+) -> list[Node]:
+    """The root nodes of ``objects`` (:meth:`~.objects.Objects.roots`), read :data:`BATCH`
+    objects at a time."""
+    tree = Objects(objects, types)
+    nodes: dict[str, Node | None] = {}
+    for at in range(0, len(tree.order), BATCH):
+        keys = tree.order[at : at + BATCH]
+        nodes.update(
+            zip(keys, checked_nodes([(key, objects[key], ctx) for key in keys]), strict=True)
+        )
+    return tree.roots(nodes.__getitem__)
+
+
+def read_document(
+    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
+) -> Scene:
+    """A ``.json`` CityJSON file: every node built before the scene is returned."""
+    data = load_document(path, limits)
+    tally = InputTally(str(path), limits)
+    crs = scene_crs(declared_metadata(data.get("metadata"), crs), str(path))
+    ctx = context_of(data, tally, crs, palette)
+    nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
+    size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
+    if not size and not tally.skipped:
+        if tally.dropped_faces:
+            raise tally.nothing_left()
+        which = f"of type {', '.join(sorted(types))} " if types is not None else ""
+        raise InputError(f"has no CityObject {which}with surfaces", str(path))
+    scene = Scene(source=str(path), nodes=nodes, crs=crs, size=size)
+    scene.attributes["cityjson_version"] = str(data.get("version"))
+    return attach_tally(scene, tally)
+
+
+@dataclass
+class _Feature:
+    """A CityJSONSeq line waiting in a batch: a feature's context and objects, or the problem
+    that has the line skipped."""
+
+    where: str
+    ctx: Context | None = None
+    tree: Objects | None = None
+    problem: InputError | None = None
+
+
+def _feature(
+    line: str, where: str, header: dict[str, Any], ctx: Context, types: frozenset[str] | None
+) -> _Feature:
+    """The ``CityJSONFeature`` of a line, against the header's transform and context."""
+    try:
+        feature = cityjson_object(parsed(line, where), "CityJSONFeature", where)
+        appearance = feature.get("appearance") or {}
+        local = Context(
+            tally=ctx.tally,
+            vertices=vertices_of(feature.get("vertices"), header.get("transform"), where),
+            crs=ctx.crs,
+            materials=list(appearance.get("materials") or ctx.materials),
+            templates=ctx.templates,
+            template_vertices=ctx.template_vertices,
+            shared=ctx.shared,
+            counted=ctx.counted,
+            palette=ctx.palette,
+        )
+    except InputError as exc:
+        return _Feature(where, problem=exc)
+    return _Feature(where, local, Objects(feature.get("CityObjects") or {}, types))
+
+
+def _feature_nodes(
+    handle: IO[str], header: dict[str, Any], ctx: Context, types: frozenset[str] | None
+) -> Iterator[Node]:
+    """The nodes of each ``CityJSONFeature`` line of ``handle``, a line that is not one
+    recorded as skipped. Lines are read until they hold :data:`BATCH` objects (or are that
+    many), whose polygons are triangulated together; their nodes are then yielded feature by
+    feature, so memory holds one batch of features at a time."""
+    waiting: list[_Feature] = []
+    objects = 0
+    with handle:
+        for number, line in enumerate(handle, start=2):
+            if not line.strip():
+                continue
+            feature = _feature(line, f"line {number}", header, ctx, types)
+            waiting.append(feature)
+            objects += len(feature.tree.objects) if feature.tree is not None else 0
+            if objects >= BATCH or len(waiting) >= BATCH:
+                yield from _finished_features(waiting, ctx.tally)
+                waiting, objects = [], 0
+        yield from _finished_features(waiting, ctx.tally)
+
+
+def _finished_features(waiting: list[_Feature], tally: InputTally) -> Iterator[Node]:
+    """The root nodes of a batch of features, in line order, their polygons triangulated
+    together; each feature's vertices are counted, and its objects finished, as it comes."""
+    reads = [
+        [read_object(key, f.tree.objects[key], f.ctx) for key in f.tree.order]
+        if f.ctx is not None and f.tree is not None
+        else []
+        for f in waiting
+    ]
+    triangulate_batch([lod for each in reads for read in each for lod in read.lods])
+    for feature, each in zip(waiting, reads, strict=True):
+        if feature.ctx is None or feature.tree is None:
+            tally.skipped.append({"id": feature.where, "reason": str(feature.problem)})
+            continue
+        tally.count(len(feature.ctx.vertices), 0, declared=True)
+        nodes = {read.key: checked_node(read) for read in each}
+        yield from feature.tree.roots(nodes.__getitem__)
+
+
+def read_sequence(
+    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
+) -> Scene:
+    """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
+    try:
+        handle = open_text(path)
+        first = handle.readline(limits.decompressed_bytes)
+    except (OSError, EOFError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot be read ({exc})", str(path)) from None
+    try:
+        header = cityjson_object(parsed(first, str(path)), "CityJSON", str(path))
+        tally = InputTally(str(path), limits)
+        crs = scene_crs(declared_metadata(header.get("metadata"), crs), str(path))
+        ctx = context_of(header, tally, crs, palette)
+    except InputError:
+        handle.close()
+        raise
+    scene = Scene(source=str(path), nodes=_feature_nodes(handle, header, ctx, types), crs=crs)
+    scene.attributes["cityjson_version"] = str(header.get("version"))
+    return attach_tally(scene, tally)

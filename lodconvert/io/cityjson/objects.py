@@ -1,0 +1,194 @@
+"""CityObjects: each read (up to the triangulation of its polygons) into a :class:`Read`, then
+finished into its node, checked and counted in the tally, or left out and recorded; and the
+tree of a file's (or a feature's) objects, from ``children`` and ``parents``, filtered by
+type."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+from ...errors import InputError
+from ...model import Node
+from ..geometry_checks import check_extent
+from .geometry import SURFACE_DEPTH, Lod, lod_key, lod_label, read_lod
+from .source import Context
+from .templates import instance_nodes, placement, template_mesh, world_bounds
+from .triangulation import triangulate_batch
+
+
+@dataclass(eq=False)
+class Read:
+    """A CityObject read up to the triangulation of its polygons: its node (children and
+    geometry not yet attached), its LoDs, its geometry instances, and the first problem met
+    reading it. The LoDs are those before the problem: finishing the object checks them
+    first and then raises it, as reading it in one go would have."""
+
+    key: str
+    ctx: Context
+    node: Node | None = None
+    kind: str = ""
+    lods: list[Lod] = field(default_factory=list)
+    instances: list[dict[str, Any]] = field(default_factory=list)
+    problem: Exception | None = None
+
+
+_MALFORMED = (TypeError, ValueError, AttributeError, KeyError, IndexError)
+"""What JSON of a shape CityJSON does not give raises somewhere in an object."""
+
+
+def read_object(key: str, obj: Any, ctx: Context) -> Read:
+    """CityObject ``key`` read (not yet triangulated); a problem is kept in the result."""
+    read = Read(key, ctx)
+    try:
+        if not isinstance(obj, dict):
+            raise InputError("is not a JSON object", key)
+        read.kind = kind = str(obj.get("type", ""))
+        own = obj.get("attributes")
+        attributes = {**(own if isinstance(own, dict) else {}), "id": key, "type": kind}
+        read.node = Node(id=key, type=kind, attributes=attributes, crs=ctx.crs)
+        by_lod: dict[str, list[dict[str, Any]]] = {}
+        for geometry in obj.get("geometry") or []:
+            if not isinstance(geometry, dict):
+                raise InputError("has a geometry that is not a JSON object", key)
+            if geometry.get("type") == "GeometryInstance":
+                read.instances.append(geometry)
+            elif geometry.get("type") in SURFACE_DEPTH:
+                by_lod.setdefault(lod_label(geometry.get("lod", "")), []).append(geometry)
+        for label in sorted(by_lod, key=lod_key):
+            read.lods.append(read_lod(label, by_lod[label], ctx.vertices, ctx, key, kind))
+    except (InputError, *_MALFORMED) as exc:
+        read.problem = exc
+    return read
+
+
+def _node(read: Read) -> tuple[Node, int]:
+    """The node of a read and triangulated object with its LoDs and geometry instances, and
+    how many of its faces were dropped. :class:`InputError` (naming the object) when it
+    cannot be converted."""
+    key, ctx, kind = read.key, read.ctx, read.kind
+    dropped = 0
+    for lod in read.lods:
+        dropped += lod.dropped
+        if lod.mesh is not None:
+            check_extent(lod.mesh.bounds, key)
+    if read.problem is not None:
+        raise read.problem
+    node = read.node
+    assert node is not None
+    node.lods = {lod.label: lod.mesh for lod in read.lods if lod.mesh is not None}
+    if node.lods:
+        node.geometry = node.lods[max(node.lods, key=lod_key)]
+    placed = []
+    for geometry in read.instances:
+        shared = template_mesh(geometry.get("template"), ctx, key, kind)
+        if shared is not None:
+            transform = placement(geometry, ctx, key)
+            check_extent(world_bounds(shared[1], transform), key)
+            placed.append((shared, transform))
+    instance_nodes(node, placed)
+    return node, dropped
+
+
+def checked_node(read: Read) -> Node | None:
+    """:func:`_node`, or None when the object is left out (recorded in the tally: an object
+    that cannot be converted, or one whose faces all had no area)."""
+    key, ctx = read.key, read.ctx
+    tally = ctx.tally
+    try:
+        node, dropped = _node(read)
+    except InputError as exc:
+        read.problem = None  # its traceback holds the read: no cycle left for the collector
+        tally.skipped.append({"id": key, "reason": str(exc)})
+        return None
+    except _MALFORMED as exc:
+        # JSON of an unexpected shape somewhere in the object: leave the object out
+        read.problem = None
+        error = InputError(f"has malformed content ({type(exc).__name__}: {exc})", key)
+        tally.skipped.append({"id": key, "reason": str(error)})
+        return None
+    tally.dropped_faces += dropped
+    if dropped and node.geometry is None and not node.children:
+        tally.skip(key, dropped)
+        return None
+    if dropped:
+        tally.dropped_by_object[key] = dropped
+    templates = {id(e[1]) for e in ctx.shared.values() if e is not None} if read.instances else ()
+    for mesh in {id(m): m for n in node.walk() for m in n.lods.values()}.values():
+        if id(mesh) in templates:
+            if id(mesh) in ctx.counted:
+                continue  # a template's mesh counts once, where it is first used
+            ctx.counted.add(id(mesh))
+        tally.count(mesh.vertex_count, mesh.face_count)
+    return node
+
+
+def checked_nodes(objects: list[tuple[str, Any, Context]]) -> Iterator[Node | None]:
+    """:func:`checked_node` of each object, their polygons triangulated together; each is
+    finished (and recorded in the tally) as it is yielded."""
+    reads = [read_object(key, obj, ctx) for key, obj, ctx in objects]
+    triangulate_batch([lod for read in reads for lod in read.lods])
+    return map(checked_node, reads)
+
+
+def _keys(values: Any) -> list[str]:
+    """The strings of a JSON list (``children``, ``parents``); nothing for anything else."""
+    return [v for v in values if isinstance(v, str)] if isinstance(values, list) else []
+
+
+def _children(objects: dict[str, Any]) -> dict[str, list[str]]:
+    """Child keys of every object, from ``children`` and ``parents`` alike, in file order."""
+    found: dict[str, dict[str, None]] = {key: {} for key in objects}
+    for key, obj in objects.items():
+        if not isinstance(obj, dict):
+            continue
+        for child in _keys(obj.get("children")):
+            if child in objects and child != key:
+                found[key][child] = None
+        for parent in _keys(obj.get("parents")):
+            if parent in objects and parent != key:
+                found[parent][key] = None
+    return {key: list(kids) for key, kids in found.items()}
+
+
+@dataclass
+class Objects:
+    """The CityObjects of a file or of a CityJSONSeq feature: their child keys and which of
+    them are read (each at most once), in the order their tree is built (children before
+    their parent, parents in file order)."""
+
+    objects: dict[str, Any]
+    types: frozenset[str] | None
+    children: dict[str, list[str]] = field(init=False)
+    order: list[str] = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.children = _children(self.objects)
+        order: list[str] = []
+        self.roots(lambda key: order.append(key))
+        self.order = order
+
+    def roots(self, node_of: Callable[[str], Node | None]) -> list[Node]:
+        """The root nodes: each object of a kept type (all, when ``types`` is None, else those
+        types and the descendants of kept objects; a ``type`` that is not a string is of no
+        type) that ``node_of`` gives a node with geometry or children, its children below it;
+        kept descendants of objects left out (None) take their place."""
+        objects, types, children = self.objects, self.types, self.children
+        below = {child for kids in children.values() for child in kids}
+        seen: set[str] = set()
+
+        def build(key: str, kept: bool) -> list[Node]:
+            if key in seen:  # a cycle, or a second parent
+                return []
+            seen.add(key)
+            kind = objects[key].get("type") if isinstance(objects[key], dict) else None
+            kept = kept or types is None or (isinstance(kind, str) and kind in types)
+            kids = [node for child in children[key] for node in build(child, kept)]
+            node = node_of(key) if kept else None
+            if node is None:
+                return kids
+            node.children.extend(kids)
+            return [node] if node.geometry is not None or node.children else []
+
+        return [node for key in objects if key not in below for node in build(key, False)]
