@@ -11,16 +11,16 @@ own is a node without geometry whose children carry it. ``types`` keeps only obj
 types and the descendants of kept ones (a kept descendant of a dropped object becomes a root).
 
 Geometry: Solid, MultiSolid, CompositeSolid, MultiSurface and CompositeSurface (points and
-lines are ignored). Polygons with holes are triangulated :data:`BATCH` objects at a time, in one
-:func:`lodconvert.polygons.triangulate_many` call that ear-clips each as
+lines are ignored). Polygons with holes are triangulated :data:`~.document.BATCH` objects at a
+time, in one :func:`lodconvert.polygons.triangulate_many` call that ear-clips each as
 :func:`~lodconvert.polygons.triangulate` would (a lone ring of three indices is kept as it is).
-Every LoD of an object is one :class:`Mesh` in ``node.lods`` under the ``lod`` string (``"1.2"``);
-``node.geometry`` is the highest of them (in numeric order of the label). A mesh has one part
-per semantic class — roof, wall, ground, other (:mod:`lodconvert.semantics`) — and material: the
-``diffuseColor`` (and ``transparency``) of ``appearance.materials`` in the first theme each
-geometry lists wins over the class colour. CityJSON materials follow X3D's, whose colours are
-taken as sRGB as X3D browsers draw them, so they become the part's sRGB base colour unchanged.
-Surfaces of no semantic class take their object type's colour where
+Every LoD of an object is one :class:`Mesh` in ``node.lods`` under the ``lod`` string
+(``"1.2"``); ``node.geometry`` is the highest of them (in numeric order of the label). A mesh
+has one part per semantic class — roof, wall, ground, other (:mod:`lodconvert.semantics`) — and
+material: the ``diffuseColor`` (and ``transparency``) of ``appearance.materials`` in the first
+theme each geometry lists wins over the class colour. CityJSON materials follow X3D's, whose
+colours are taken as sRGB as X3D browsers draw them, so they become the part's sRGB base colour
+unchanged. Surfaces of no semantic class take their object type's colour where
 :data:`lodconvert.semantics.TYPE_COLORS` has one. Textures are not read.
 
 Vertices: the integer ``vertices`` are scaled and translated by ``transform`` into float64
@@ -43,8 +43,9 @@ CRS: ``metadata.referenceSystem`` in its URL or URN form becomes ``EPSG:<code>``
 and every node; none declared leaves it ``None``. A geographic CRS is refused (not supported
 yet). CityJSONSeq is read line by line: the header line (``transform``, ``metadata``,
 ``geometry-templates``) first, then one ``CityJSONFeature`` per line; features are read until
-they hold :data:`BATCH` objects, then triangulated together and their nodes yielded, so memory
-holds one batch of features at a time; a line that is not a feature is reported and skipped.
+they hold :data:`~.document.BATCH` objects, then triangulated together and their nodes yielded,
+so memory holds one batch of features at a time; a line that is not a feature is reported and
+skipped.
 """
 
 from __future__ import annotations
@@ -57,9 +58,9 @@ from ...limits import DEFAULT_LIMITS, Limits
 from ...model import Scene
 from ...semantics import DEFAULT_PALETTE, Palette
 from .. import Format
-from .document import BATCH, read_document, read_sequence
+from .document import read_document, read_sequence
 
-__all__ = ["BATCH", "FORMAT", "read_cityjson"]
+__all__ = ["FORMAT", "read_cityjson"]
 
 
 def _types(types: Iterable[str] | None) -> frozenset[str] | None:
