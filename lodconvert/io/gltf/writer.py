@@ -61,6 +61,8 @@ _COMPONENTS = {
 _DTYPES = {code: dtype for dtype, code in _COMPONENTS.items()}
 _SPOOL_BYTES = 1 << 20
 """How much of each temporary file (the buffer, each JSON array) stays in memory."""
+_PENDING = 256
+"""Elements of a JSON array kept as text before they are written to its file."""
 _BLOCK = 3 << 18
 """Bytes copied at a time (768 KiB, a multiple of 3: base64 blocks join without padding)."""
 
@@ -112,9 +114,10 @@ def _unit16(values: np.ndarray) -> np.ndarray:
 def unit_normals(normals: np.ndarray) -> np.ndarray:
     """Rows scaled to unit length as float32; zero or non-finite rows become (0, 0, 1)."""
     n = np.asarray(normals, dtype=np.float64)
-    length = np.linalg.norm(n, axis=1) if len(n) else np.zeros(0)
+    length = np.sqrt(np.add.reduce(n * n, axis=1))  # as np.linalg.norm(n, axis=1)
     ok = np.isfinite(length) & (length > 0)
-    out = np.tile([0.0, 0.0, 1.0], (len(n), 1))
+    out = np.zeros((len(n), 3))
+    out[:, 2] = 1.0
     out[ok] = n[ok] / length[ok, None]
     return out.astype(np.float32)
 
@@ -122,12 +125,13 @@ def unit_normals(normals: np.ndarray) -> np.ndarray:
 def vertex_normals(surface: Surface) -> np.ndarray:
     """Area-weighted unit vertex normals (n, 3) float32; unused vertices get (0, 0, 1)."""
     tri = surface.vertices[surface.faces]
-    face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 · area
+    a, b = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     corners = surface.faces.ravel()
     n = len(surface.vertices)
-    summed = np.stack(
-        [np.bincount(corners, np.repeat(face_n[:, k], 3), minlength=n) for k in range(3)], axis=1
-    )
+    summed = np.empty((n, 3))
+    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):  # the cross product: 2 · area long
+        face_n = a[:, i] * b[:, j] - a[:, j] * b[:, i]
+        summed[:, k] = np.bincount(corners, np.repeat(face_n, 3), minlength=n)
     return unit_normals(summed)
 
 
@@ -274,7 +278,36 @@ class _Layout:
 
     def text(self, value: Any, depth: int) -> str:
         """``value`` as JSON text that starts at ``depth`` (compact text has no line breaks)."""
-        return self.encode(value).replace("\n", self.newline(depth))
+        if type(value) is dict:
+            flat = self._flat(value, depth)
+            if flat is not None:
+                return flat
+        text = self.encode(value)
+        return text if self.indent is None else text.replace("\n", self.newline(depth))
+
+    def _flat(self, value: dict[str, Any], depth: int) -> str | None:
+        """An object of integers, strings, booleans and lists of numbers (an accessor, a
+        buffer view) laid out without the encoder; ``None`` for any other object."""
+        inner, items = self.newline(depth + 2), self.newline(depth + 1)
+        parts = []
+        for key, item in value.items():
+            kind = type(item)
+            if kind is int:
+                text = int.__repr__(item)
+            elif kind is str and item.isalnum() and item.isascii():
+                text = f'"{item}"'
+            elif kind is bool:
+                text = "true" if item else "false"
+            elif kind is list and item and all(type(v) is float and math.isfinite(v) for v in item):
+                text = "[" + ",".join(inner + float.__repr__(v) for v in item) + items + "]"
+            else:
+                return None
+            if not (type(key) is str and key.isalnum() and key.isascii()):
+                return None
+            parts.append(f'{items}"{key}"{self.colon}{text}')
+        if not parts:
+            return None
+        return "{" + ",".join(parts) + self.newline(depth) + "}"
 
 
 _COMPACT = _Layout(None)
@@ -290,19 +323,28 @@ class _Array:
         self.depth = depth
         self.spool = spool
         self.count = 0
+        self._head = "," + layout.newline(depth + 1)
+        self._pending: list[str] = []
 
     def __len__(self) -> int:
         return self.count
 
     def append(self, item: Any) -> int:
         """Write ``item`` as the next element; its index."""
-        head = ("," if self.count else "") + self.layout.newline(self.depth + 1)
-        self.spool.write((head + self.layout.text(item, self.depth + 1)).encode())
+        text = self.layout.text(item, self.depth + 1)
+        self._pending.append(self._head + text if self.count else self._head[1:] + text)
+        if len(self._pending) >= _PENDING:
+            self._flush()
         self.count += 1
         return self.count - 1
 
+    def _flush(self) -> None:
+        self.spool.write("".join(self._pending).encode())
+        self._pending.clear()
+
     def write_json(self, out: BinaryIO) -> None:
         """Write the array's JSON text to ``out``."""
+        self._flush()
         out.write(b"[")
         _copy(self.spool, out)
         out.write(((self.layout.newline(self.depth) if self.count else "") + "]").encode())
@@ -390,7 +432,7 @@ def _root_node(chain: LodChain, finest: int) -> dict[str, Any]:
     matrix, with the object's attributes (where a GIS user looks for them)."""
     placed = np.eye(4) if chain.transform is None else chain.transform.copy()
     placed[:3, 3] += placed[:3, :3] @ chain.origin
-    moved_only = np.allclose(placed[:3, :3], np.eye(3), rtol=0, atol=0)
+    moved_only = chain.transform is None or np.array_equal(placed[:3, :3], np.eye(3))
     return _object(
         extras={"attributes": _plain(chain.metadata)} if chain.metadata else None,
         translation=[float(v) for v in placed[:3, 3]] if moved_only else None,
@@ -418,6 +460,7 @@ class _Document:
         self._files = contextlib.ExitStack()
         self.blob = self._spool()
         self.blob_length = 0
+        self._blob_pending = bytearray()
         self.accessors = self._array()
         self.buffer_views = self._array()
         self.images = self._array()
@@ -438,6 +481,11 @@ class _Document:
         """A JSON array in a temporary file of its own (``depth`` 1: a top-level member)."""
         return _Array(self._layout, depth, self._spool())
 
+    def flush_blob(self) -> None:
+        """Write what was added to the buffer to its file."""
+        self.blob.write(self._blob_pending)
+        self._blob_pending.clear()
+
     def close(self) -> None:
         """Delete the temporary files."""
         self._files.close()
@@ -449,8 +497,10 @@ class _Document:
     def _buffer_view(self, data: bytes | memoryview, target: int | None = None) -> int:
         """Append ``data`` at the next 4-byte boundary of the buffer as a new buffer view."""
         pad = -self.blob_length % 4
-        self.blob.write(b"\x00" * pad)
-        self.blob.write(data)
+        self._blob_pending += b"\x00" * pad
+        self._blob_pending += data
+        if len(self._blob_pending) >= _SPOOL_BYTES:
+            self.flush_blob()
         start = self.blob_length + pad
         self.blob_length = start + len(data)
         view = _object(buffer=0, byteOffset=start, byteLength=len(data), target=target)
@@ -675,6 +725,7 @@ def _document(chains: Iterable[LodChain], info: OutputInfo, layout: _Layout) -> 
     try:
         for item in chains:
             doc.add(item)
+        doc.flush_blob()
         yield doc
     finally:
         doc.close()
