@@ -61,6 +61,8 @@ _COMPONENTS = {
 _DTYPES = {code: dtype for dtype, code in _COMPONENTS.items()}
 _SPOOL_BYTES = 1 << 20
 """How much of each temporary file (the buffer, each JSON array) stays in memory."""
+_SHARED_MATERIALS = 4096
+"""Distinct untextured mesh materials remembered for sharing (later ones are not shared)."""
 _PENDING = 256
 """Elements of a JSON array kept as text before they are written to its file."""
 _BLOCK = 3 << 18
@@ -472,6 +474,7 @@ class _Document:
         self.scene_nodes = self._array(depth=3)  # at scenes[0].nodes
         self.extensions_used: list[str] = []
         self._point_materials: dict[str, int] = {}
+        self._mesh_materials: dict[tuple[float | str, ...], int] = {}
         self._shared: dict[int, tuple[Level, int]] = {}  # level of an instance → its mesh
 
     def _spool(self) -> IO[bytes]:
@@ -567,14 +570,24 @@ class _Document:
             surface.texture[..., 3] if textured else None,
         )
         base = [float(v) for v in linear_rgba(surface.material_color)]
-        material = _material(base, alpha_mode, double_sided=True, texture=texture)
         attributes = _object(POSITION=position, NORMAL=normal, TEXCOORD_0=texcoord, COLOR_0=color)
         return {
             "attributes": attributes,
             "indices": indices,
             "mode": _TRIANGLES,
-            "material": self.materials.append(material),
+            "material": self._mesh_material(base, alpha_mode, texture),
         }
+
+    def _mesh_material(self, base: list[float], alpha_mode: str, texture: int | None) -> int:
+        """The material of a mesh primitive: one for all primitives of the same colour and
+        alpha mode (a city's few surface colours), its own for a textured one."""
+        key = (*base, alpha_mode)
+        if texture is None and key in self._mesh_materials:
+            return self._mesh_materials[key]
+        index = self.materials.append(_material(base, alpha_mode, True, texture=texture))
+        if texture is None and len(self._mesh_materials) < _SHARED_MATERIALS:
+            self._mesh_materials[key] = index
+        return index
 
     def _point_material(self, alpha_mode: str) -> int:
         """The shared unlit white material of point levels (one per alpha mode)."""
