@@ -61,6 +61,10 @@ _COMPONENTS = {
 _DTYPES = {code: dtype for dtype, code in _COMPONENTS.items()}
 _SPOOL_BYTES = 1 << 20
 """How much of each temporary file (the buffer, each JSON array) stays in memory."""
+_SHARED_MATERIALS = 4096
+"""Distinct untextured mesh materials remembered for sharing (later ones are not shared)."""
+_PENDING = 256
+"""Elements of a JSON array kept as text before they are written to its file."""
 _BLOCK = 3 << 18
 """Bytes copied at a time (768 KiB, a multiple of 3: base64 blocks join without padding)."""
 
@@ -112,9 +116,10 @@ def _unit16(values: np.ndarray) -> np.ndarray:
 def unit_normals(normals: np.ndarray) -> np.ndarray:
     """Rows scaled to unit length as float32; zero or non-finite rows become (0, 0, 1)."""
     n = np.asarray(normals, dtype=np.float64)
-    length = np.linalg.norm(n, axis=1) if len(n) else np.zeros(0)
+    length = np.sqrt(np.add.reduce(n * n, axis=1))  # as np.linalg.norm(n, axis=1)
     ok = np.isfinite(length) & (length > 0)
-    out = np.tile([0.0, 0.0, 1.0], (len(n), 1))
+    out = np.zeros((len(n), 3))
+    out[:, 2] = 1.0
     out[ok] = n[ok] / length[ok, None]
     return out.astype(np.float32)
 
@@ -122,12 +127,13 @@ def unit_normals(normals: np.ndarray) -> np.ndarray:
 def vertex_normals(surface: Surface) -> np.ndarray:
     """Area-weighted unit vertex normals (n, 3) float32; unused vertices get (0, 0, 1)."""
     tri = surface.vertices[surface.faces]
-    face_n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = 2 · area
+    a, b = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     corners = surface.faces.ravel()
     n = len(surface.vertices)
-    summed = np.stack(
-        [np.bincount(corners, np.repeat(face_n[:, k], 3), minlength=n) for k in range(3)], axis=1
-    )
+    summed = np.empty((n, 3))
+    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):  # the cross product: 2 · area long
+        face_n = a[:, i] * b[:, j] - a[:, j] * b[:, i]
+        summed[:, k] = np.bincount(corners, np.repeat(face_n, 3), minlength=n)
     return unit_normals(summed)
 
 
@@ -274,7 +280,36 @@ class _Layout:
 
     def text(self, value: Any, depth: int) -> str:
         """``value`` as JSON text that starts at ``depth`` (compact text has no line breaks)."""
-        return self.encode(value).replace("\n", self.newline(depth))
+        if type(value) is dict:
+            flat = self._flat(value, depth)
+            if flat is not None:
+                return flat
+        text = self.encode(value)
+        return text if self.indent is None else text.replace("\n", self.newline(depth))
+
+    def _flat(self, value: dict[str, Any], depth: int) -> str | None:
+        """An object of integers, strings, booleans and lists of numbers (an accessor, a
+        buffer view) laid out without the encoder; ``None`` for any other object."""
+        inner, items = self.newline(depth + 2), self.newline(depth + 1)
+        parts = []
+        for key, item in value.items():
+            kind = type(item)
+            if kind is int:
+                text = int.__repr__(item)
+            elif kind is str and item.isalnum() and item.isascii():
+                text = f'"{item}"'
+            elif kind is bool:
+                text = "true" if item else "false"
+            elif kind is list and item and all(type(v) is float and math.isfinite(v) for v in item):
+                text = "[" + ",".join(inner + float.__repr__(v) for v in item) + items + "]"
+            else:
+                return None
+            if not (type(key) is str and key.isalnum() and key.isascii()):
+                return None
+            parts.append(f'{items}"{key}"{self.colon}{text}')
+        if not parts:
+            return None
+        return "{" + ",".join(parts) + self.newline(depth) + "}"
 
 
 _COMPACT = _Layout(None)
@@ -290,19 +325,28 @@ class _Array:
         self.depth = depth
         self.spool = spool
         self.count = 0
+        self._head = "," + layout.newline(depth + 1)
+        self._pending: list[str] = []
 
     def __len__(self) -> int:
         return self.count
 
     def append(self, item: Any) -> int:
         """Write ``item`` as the next element; its index."""
-        head = ("," if self.count else "") + self.layout.newline(self.depth + 1)
-        self.spool.write((head + self.layout.text(item, self.depth + 1)).encode())
+        text = self.layout.text(item, self.depth + 1)
+        self._pending.append(self._head + text if self.count else self._head[1:] + text)
+        if len(self._pending) >= _PENDING:
+            self._flush()
         self.count += 1
         return self.count - 1
 
+    def _flush(self) -> None:
+        self.spool.write("".join(self._pending).encode())
+        self._pending.clear()
+
     def write_json(self, out: BinaryIO) -> None:
         """Write the array's JSON text to ``out``."""
+        self._flush()
         out.write(b"[")
         _copy(self.spool, out)
         out.write(((self.layout.newline(self.depth) if self.count else "") + "]").encode())
@@ -390,7 +434,7 @@ def _root_node(chain: LodChain, finest: int) -> dict[str, Any]:
     matrix, with the object's attributes (where a GIS user looks for them)."""
     placed = np.eye(4) if chain.transform is None else chain.transform.copy()
     placed[:3, 3] += placed[:3, :3] @ chain.origin
-    moved_only = np.allclose(placed[:3, :3], np.eye(3), rtol=0, atol=0)
+    moved_only = chain.transform is None or np.array_equal(placed[:3, :3], np.eye(3))
     return _object(
         extras={"attributes": _plain(chain.metadata)} if chain.metadata else None,
         translation=[float(v) for v in placed[:3, 3]] if moved_only else None,
@@ -418,6 +462,7 @@ class _Document:
         self._files = contextlib.ExitStack()
         self.blob = self._spool()
         self.blob_length = 0
+        self._blob_pending = bytearray()
         self.accessors = self._array()
         self.buffer_views = self._array()
         self.images = self._array()
@@ -429,6 +474,7 @@ class _Document:
         self.scene_nodes = self._array(depth=3)  # at scenes[0].nodes
         self.extensions_used: list[str] = []
         self._point_materials: dict[str, int] = {}
+        self._mesh_materials: dict[tuple[float | str, ...], int] = {}
         self._shared: dict[int, tuple[Level, int]] = {}  # level of an instance → its mesh
 
     def _spool(self) -> IO[bytes]:
@@ -437,6 +483,11 @@ class _Document:
     def _array(self, depth: int = 1) -> _Array:
         """A JSON array in a temporary file of its own (``depth`` 1: a top-level member)."""
         return _Array(self._layout, depth, self._spool())
+
+    def flush_blob(self) -> None:
+        """Write what was added to the buffer to its file."""
+        self.blob.write(self._blob_pending)
+        self._blob_pending.clear()
 
     def close(self) -> None:
         """Delete the temporary files."""
@@ -449,8 +500,10 @@ class _Document:
     def _buffer_view(self, data: bytes | memoryview, target: int | None = None) -> int:
         """Append ``data`` at the next 4-byte boundary of the buffer as a new buffer view."""
         pad = -self.blob_length % 4
-        self.blob.write(b"\x00" * pad)
-        self.blob.write(data)
+        self._blob_pending += b"\x00" * pad
+        self._blob_pending += data
+        if len(self._blob_pending) >= _SPOOL_BYTES:
+            self.flush_blob()
         start = self.blob_length + pad
         self.blob_length = start + len(data)
         view = _object(buffer=0, byteOffset=start, byteLength=len(data), target=target)
@@ -517,14 +570,24 @@ class _Document:
             surface.texture[..., 3] if textured else None,
         )
         base = [float(v) for v in linear_rgba(surface.material_color)]
-        material = _material(base, alpha_mode, double_sided=True, texture=texture)
         attributes = _object(POSITION=position, NORMAL=normal, TEXCOORD_0=texcoord, COLOR_0=color)
         return {
             "attributes": attributes,
             "indices": indices,
             "mode": _TRIANGLES,
-            "material": self.materials.append(material),
+            "material": self._mesh_material(base, alpha_mode, texture),
         }
+
+    def _mesh_material(self, base: list[float], alpha_mode: str, texture: int | None) -> int:
+        """The material of a mesh primitive: one for all primitives of the same colour and
+        alpha mode (a city's few surface colours), its own for a textured one."""
+        key = (*base, alpha_mode)
+        if texture is None and key in self._mesh_materials:
+            return self._mesh_materials[key]
+        index = self.materials.append(_material(base, alpha_mode, True, texture=texture))
+        if texture is None and len(self._mesh_materials) < _SHARED_MATERIALS:
+            self._mesh_materials[key] = index
+        return index
 
     def _point_material(self, alpha_mode: str) -> int:
         """The shared unlit white material of point levels (one per alpha mode)."""
@@ -675,6 +738,7 @@ def _document(chains: Iterable[LodChain], info: OutputInfo, layout: _Layout) -> 
     try:
         for item in chains:
             doc.add(item)
+        doc.flush_blob()
         yield doc
     finally:
         doc.close()
