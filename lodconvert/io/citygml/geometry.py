@@ -7,13 +7,12 @@ A polygon belongs to the nearest object or part above it and is read when it lie
 geometry property (``lod2Solid``, ``lod0FootPrint``…, a terrain component's ``tin``) of that
 object, of a thematic surface, opening or installation of it, and not in a property that holds
 no geometry read (appearances, addresses). Parts and interiors (rooms, furniture) are holders
-of their own. Its semantic type is the
-feature holding the geometry property (``WallSurface``; none for the object itself;
-``FootPrint``/``RoofEdge`` for LoD 0), and ``OrientableSurface``s with ``orientation="-"``
-above it reverse it. ``xlink:href`` links to polygons (or to geometries holding them) within
-the object are followed; a polygon that a solid refers to and a thematic surface holds is read
-once, with its semantics, and so is a polygon whose exterior ring repeats another's of the same
-LoD. A solid's interior shells are left out.
+of their own. Its semantic type is the feature holding the geometry property (``WallSurface``;
+none for the object itself; ``FootPrint``/``RoofEdge`` for LoD 0), and ``OrientableSurface``s
+with ``orientation="-"`` above it reverse it. ``xlink:href`` links to polygons (or to
+geometries holding them) within the object are followed; a polygon that a solid refers to and a
+thematic surface holds is read once, with its semantics, and so is a polygon whose exterior
+ring repeats another's of the same LoD. A solid's interior shells are left out.
 
 Triangulating a batch of objects together (:func:`triangulate_batch`) lets the per-polygon work
 run as array operations over thousands of polygons instead of a few dozen.
