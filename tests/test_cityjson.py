@@ -1,6 +1,7 @@
 """The CityJSON reader on the shared samples (10 multi-LoD buildings; Delft, 570 objects) and on
 small hand-written files: LoDs, semantic colours, ids and attributes through to X3D and glTF,
-vertex round trip, CityJSONSeq, templates, bad indices, types filter, refused inputs."""
+vertex round trip, geographic CRSs, CityJSONSeq, templates, bad indices, types filter, refused
+inputs."""
 
 from __future__ import annotations
 
@@ -163,6 +164,25 @@ def _gltf_names(path: Path) -> list[str]:
     return [doc["nodes"][i]["name"] for i in doc["scenes"][0]["nodes"]]
 
 
+def _round_trip_error(out: Path, nodes: dict[str, Node]) -> float:
+    """The largest distance between a vertex of a chain's finest level, as written to ``out``
+    (plus the chain's origin), and the vertices of its source node, both ways; every buffer
+    and coordinate list holds small values."""
+    worst = 0.0
+    for chain in read_chains(out):
+        for level in chain.levels:
+            local = level.mesh.vertices if level.mesh is not None else level.points.positions
+            assert np.abs(local).max() < 1e5, (chain.object_id, level.name)
+        written = chain.levels[0].mesh.vertices + chain.origin
+        source_vertices = nodes[chain.object_id].geometry.vertices
+        worst = max(
+            worst,
+            cKDTree(source_vertices).query(written)[0].max(),
+            cKDTree(written).query(source_vertices)[0].max(),
+        )
+    return worst
+
+
 @pytest.mark.parametrize("suffix", [".x3d", ".glb"])
 @pytest.mark.parametrize("name", ["multi_lod_10bldg.city.json", "delft.city.json"])
 def test_converts_one_object_per_node_with_ids_attributes_and_millimetres(
@@ -185,19 +205,7 @@ def test_converts_one_object_per_node_with_ids_attributes_and_millimetres(
     else:
         assert validate_file(out) == []
         assert _gltf_names(out) == list(nodes)
-    worst = 0.0
-    for chain in read_chains(out):
-        for level in chain.levels:  # what the buffers and coordinate lists hold: small
-            local = level.mesh.vertices if level.mesh is not None else level.points.positions
-            assert np.abs(local).max() < 1e5, (chain.object_id, level.name)
-        written = chain.levels[0].mesh.vertices + chain.origin
-        source_vertices = nodes[chain.object_id].geometry.vertices
-        worst = max(
-            worst,
-            cKDTree(source_vertices).query(written)[0].max(),
-            cKDTree(written).query(source_vertices)[0].max(),
-        )
-    assert worst <= 1e-3
+    assert _round_trip_error(out, nodes) <= 1e-3
 
 
 # --- CityJSONSeq ----------------------------------------------------------------------------------
@@ -368,14 +376,95 @@ def test_other_json_is_refused_in_one_line(text: str, says: str, tmp_path: Path)
     assert says in str(caught.value) and "\n" not in str(caught.value)
 
 
-def test_geographic_crs_is_refused(tmp_path: Path) -> None:
-    document = city(
-        {"a": surface_object([[0, 1, 2, 3]])},
-        square(),
-        metadata={"referenceSystem": "urn:ogc:def:crs:EPSG::4979"},
-    )
-    with pytest.raises(InputError, match=r"geographic CRS .*not supported yet"):
-        read_scene(write_json(tmp_path / "g.json", document))
+def _geographic_delft(tmp_path: Path) -> tuple[Path, np.ndarray]:
+    """Delft with its RD New vertices turned into EPSG:4979 latitude, longitude (degrees, as
+    integers of a 1e-9° ``transform``) and its heights kept; the file and the vertices' float64
+    degrees as the file gives them."""
+    from pyproj import Transformer
+
+    document = json.loads(delft().read_text())
+    rd = np.asarray(document["vertices"], dtype=np.float64) * document["transform"]["scale"]
+    rd += document["transform"]["translate"]
+    lat, lon = Transformer.from_crs("EPSG:28992", "EPSG:4326").transform(rd[:, 0], rd[:, 1])
+    scale = np.array([1e-9, 1e-9, 1e-3])
+    translate = np.floor(np.array([lat.min(), lon.min(), 0.0]))
+    integers = np.round((np.stack([lat, lon, rd[:, 2]], axis=1) - translate) / scale)
+    document["vertices"] = integers.astype(np.int64).tolist()
+    document["transform"] = {"scale": scale.tolist(), "translate": translate.tolist()}
+    document["metadata"] = {"referenceSystem": "https://www.opengis.net/def/crs/EPSG/0/4979"}
+    path = write_json(tmp_path / "delft_4979.city.json", document)
+    return path, integers * scale + translate
+
+
+def _area(mesh) -> float:
+    """Surface area of a mesh."""
+    a, b, c = (mesh.vertices[mesh.faces[:, k]] for k in range(3))
+    return float(np.linalg.norm(np.cross(b - a, c - a), axis=1).sum() / 2)
+
+
+def _projected(degrees: np.ndarray, proj: str) -> np.ndarray:
+    """Latitude, longitude, height onto the local frame ``proj``, by a pipeline of its own."""
+    from pyproj import Transformer
+
+    steps = "+proj=pipeline +step +proj=axisswap +order=2,1 +step +proj=unitconvert "
+    steps += f"+xy_in=deg +xy_out=rad +step {proj.replace(' +units=m +no_defs', '')}"
+    x, y = Transformer.from_pipeline(steps).transform(degrees[:, 0], degrees[:, 1])
+    return np.stack([x, y, degrees[:, 2]], axis=1)
+
+
+def test_geographic_crs_is_projected_to_a_metric_local_frame(
+    tmp_path: Path, schema: etree.XMLSchema
+) -> None:
+    path, degrees = _geographic_delft(tmp_path)
+    scene = read_scene(path)
+    frame = scene.attributes["local_frame"]
+    assert frame["source_crs"] == "EPSG:4979" and "+proj=tmerc" in frame["proj"]
+    assert scene.crs == frame["proj"]
+    lat, lon = frame["center"]
+    assert 51.99 < lat < 52.03 and 4.34 < lon < 4.40  # Delft
+    nodes = {n.id: n for n in scene.walk()}
+    assert {n.crs for n in nodes.values()} == {frame["proj"]}
+    rd = {n.id: n for n in read_scene(delft()).walk()}
+    assert list(nodes) == list(rd)
+    expected = _projected(degrees, frame["proj"])
+    tree = cKDTree(expected)
+    for key, node in nodes.items():
+        vertices = node.geometry.vertices
+        assert tree.query(vertices)[0].max() <= 1e-3, key  # on the frame's own projection
+        assert np.abs(vertices[:, :2]).max() < 1000.0  # metres from the centre of Delft
+        # the same shapes, turned by the grids' convergence (≈0.8° here) and RD's scale (≈0.9999)
+        assert _area(node.geometry) == pytest.approx(_area(rd[key].geometry), rel=1e-3), key
+        assert np.ptp(vertices[:, 2]) == pytest.approx(np.ptp(rd[key].geometry.vertices[:, 2]))
+    for suffix in (".x3d", ".glb"):
+        out = tmp_path / f"delft{suffix}"
+        convert(path, out)
+        if suffix == ".x3d":
+            assert schema.validate(etree.parse(str(out))), schema.error_log
+            assert f'content="{frame["proj"]}"' in out.read_text()
+        else:
+            assert validate_file(out) == []
+        assert _round_trip_error(out, nodes) <= 1e-3
+
+
+def test_geographic_sequence_is_projected_on_its_first_feature(tmp_path: Path) -> None:
+    path, degrees = _geographic_delft(tmp_path)
+    document = json.loads(path.read_text())
+    header = {key: document[key] for key in ("type", "version", "transform", "metadata")}
+    lines = [json.dumps({**header, "CityObjects": {}, "vertices": []})]
+    lines += [json.dumps(f) for f in _features(document)]
+    seq = tmp_path / "delft_4979.city.jsonl"
+    seq.write_text("\n".join(lines) + "\n")
+    scene = read_scene(seq)
+    frame = scene.attributes["local_frame"]
+    assert scene.crs == frame["proj"] and frame["source_crs"] == "EPSG:4979"
+    nodes = list(scene.walk())
+    assert len(nodes) == 570 and {n.crs for n in nodes} == {frame["proj"]}
+    first = json.loads(lines[1])
+    box = np.asarray(first["vertices"]) * header["transform"]["scale"]
+    center = (box.min(axis=0) + box.max(axis=0)) / 2 + header["transform"]["translate"]
+    assert np.allclose(frame["center"], center[:2], atol=1e-6)
+    tree = cKDTree(_projected(degrees, frame["proj"]))
+    assert max(tree.query(n.geometry.vertices)[0].max() for n in nodes) <= 1e-3
 
 
 def test_colors_option_changes_the_class_colours() -> None:

@@ -46,8 +46,8 @@ from ...limits import DEFAULT_LIMITS, Limits
 from ...model import Scene
 from ...semantics import DEFAULT_PALETTE, Palette
 from .. import Format
+from ..crs import Crs, LocalFrame, crs_attributes
 from ..geometry_checks import InputTally, attach_tally
-from .crs import Crs, LocalFrame
 from .document import Document
 from .names import CITYGML_NAMESPACE
 
@@ -95,10 +95,7 @@ def read_citygml(
         raise InputError(f"has no city objects{wanted} with surface geometry", source)
     declared = document.crs or Crs()
     attributes: dict[str, Any] = {"citygml_version": document.version, "citygml": document.stats}
-    if declared.vertical:
-        attributes["vertical_crs"] = declared.vertical
-    if declared.frame is not None:
-        attributes["local_frame"] = declared.frame.record()
+    attributes.update(crs_attributes(declared))
     scene = Scene(
         source=source,
         nodes=chain([first], nodes),

@@ -17,10 +17,10 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh, Node
 from ...semantics import DEFAULT_PALETTE, Palette
+from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
 from ..mesh import object_id
 from .attributes import attributes_of
-from .crs import Crs
 from .geometry import Holder, collect, holders_of, triangulate_batch
 from .names import (
     CITYGML_NAMESPACE,

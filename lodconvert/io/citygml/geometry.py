@@ -32,8 +32,8 @@ from ...errors import InputError
 from ...model import Surface
 from ...polygons import Triangles, points_surface, triangulate_many
 from ...semantics import Palette
+from ..crs import Crs
 from ..geometry_checks import MAX_MAGNITUDE, InputTally, checked_vertices, faces_with_area
-from .crs import Crs
 from .names import (
     GML_NAMESPACES,
     HOLDING_PROPERTIES,

@@ -40,8 +40,13 @@ an extent the outputs cannot hold is reported (one line naming file and object) 
 the shape CityJSON gives it.
 
 CRS: ``metadata.referenceSystem`` in its URL or URN form becomes ``EPSG:<code>`` on the scene
-and every node; none declared leaves it ``None``. A geographic CRS is refused (not supported
-yet). CityJSONSeq is read line by line: the header line (``transform``, ``metadata``,
+and every node; none declared leaves it ``None``. A projected CRS stays as it is. A geographic
+one (EPSG:4326, 4979, 6697…: vertices in the CRS's axis order, latitude and longitude in
+degrees) is projected with ``pyproj``, as CityGML's is (:mod:`lodconvert.io.crs`), onto a
+transverse Mercator centred on the document's vertices (a CityJSONSeq file's: on its first
+feature's), whose PROJ definition becomes the scene's and every node's CRS and whose definition
+the scene's ``local_frame`` attribute keeps; template vertices are taken as metres from their
+reference points. CityJSONSeq is read line by line: the header line (``transform``, ``metadata``,
 ``geometry-templates``) first, then one ``CityJSONFeature`` per line; features are read until
 they hold :data:`~.document.BATCH` objects, then triangulated together and their nodes yielded,
 so memory holds one batch of features at a time; a line that is not a feature is reported and

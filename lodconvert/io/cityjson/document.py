@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 from typing import IO, Any
 
@@ -13,17 +14,17 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Node, Scene
 from ...semantics import Palette
+from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
 from .objects import Objects, checked_node, checked_nodes, read_object
 from .source import (
     Context,
     cityjson_object,
     context_of,
-    declared_metadata,
+    declared_crs,
     load_document,
     open_text,
     parsed,
-    scene_crs,
     vertices_of,
 )
 from .triangulation import triangulate_batch
@@ -54,8 +55,7 @@ def read_document(
     """A ``.json`` CityJSON file: every node built before the scene is returned."""
     data = load_document(path, limits)
     tally = InputTally(str(path), limits)
-    crs = scene_crs(declared_metadata(data.get("metadata"), crs), str(path))
-    ctx = context_of(data, tally, crs, palette)
+    ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs), palette)
     nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
     if not size and not tally.skipped:
@@ -63,7 +63,8 @@ def read_document(
             raise tally.nothing_left()
         which = f"of type {', '.join(sorted(types))} " if types is not None else ""
         raise InputError(f"has no CityObject {which}with surfaces", str(path))
-    scene = Scene(source=str(path), nodes=nodes, crs=crs, size=size)
+    scene = Scene(source=str(path), nodes=nodes, crs=ctx.crs, size=size)
+    scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(data.get("version"))
     return attach_tally(scene, tally)
 
@@ -88,8 +89,10 @@ def _feature(
         appearance = feature.get("appearance") or {}
         local = Context(
             tally=ctx.tally,
-            vertices=vertices_of(feature.get("vertices"), header.get("transform"), where),
-            crs=ctx.crs,
+            vertices=vertices_of(
+                feature.get("vertices"), header.get("transform"), where, ctx.declared
+            ),
+            declared=ctx.declared,
             materials=list(appearance.get("materials") or ctx.materials),
             templates=ctx.templates,
             template_vertices=ctx.template_vertices,
@@ -155,11 +158,15 @@ def read_sequence(
     try:
         header = cityjson_object(parsed(first, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
-        crs = scene_crs(declared_metadata(header.get("metadata"), crs), str(path))
-        ctx = context_of(header, tally, crs, palette)
+        ctx = context_of(header, tally, declared_crs(header.get("metadata"), crs), palette)
     except InputError:
         handle.close()
         raise
-    scene = Scene(source=str(path), nodes=_feature_nodes(handle, header, ctx, types), crs=crs)
+    nodes = _feature_nodes(handle, header, ctx, types)
+    first = next(nodes, None)  # its vertices centre a geographic CRS's local frame
+    scene = Scene(
+        source=str(path), nodes=chain(() if first is None else (first,), nodes), crs=ctx.crs
+    )
+    scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))
     return attach_tally(scene, tally)

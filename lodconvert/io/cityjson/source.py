@@ -7,7 +7,6 @@ from __future__ import annotations
 import gc
 import gzip
 import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
@@ -18,9 +17,9 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh
 from ...semantics import DEFAULT_PALETTE, Palette
+from ..crs import Crs
 from ..geometry_checks import InputTally, checked_vertices
 
-_EPSG = re.compile(r"EPSG(?:/[^/]*/|:[^:]*:|:)(\d+)\s*$", re.IGNORECASE)
 _VERSIONS = ("1.", "2.")
 
 
@@ -30,7 +29,8 @@ class Context:
 
     tally: InputTally
     vertices: np.ndarray
-    crs: str | None
+    declared: Crs | None
+    """The CRS the vertices were given in (None where the file names none)."""
     materials: list[dict[str, Any]] = field(default_factory=list)
     templates: list[dict[str, Any]] = field(default_factory=list)
     template_vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
@@ -42,6 +42,12 @@ class Context:
     already handed on, and freed, do)."""
     palette: Palette = DEFAULT_PALETTE
     """Colours of the semantic classes."""
+
+    @property
+    def crs(self) -> str | None:
+        """The CRS of the metric vertices, as nodes record it: a geographic CRS's local frame
+        (once vertices have set it), else the declared CRS's name."""
+        return self.declared.scene_crs if self.declared is not None else None
 
 
 def open_text(path: Path) -> IO[str]:
@@ -97,39 +103,20 @@ def cityjson_object(data: Any, kind: str, where: str) -> dict[str, Any]:
     return data
 
 
-def declared_metadata(metadata: Any, crs: str | None) -> Any:
-    """The metadata whose reference system is read: ``crs`` given by the user wins."""
-    return {"referenceSystem": crs} if crs is not None else metadata
-
-
-def scene_crs(metadata: Any, where: str) -> str | None:
-    """``metadata.referenceSystem`` as ``EPSG:<code>`` (other forms as given), or None;
-    :class:`InputError` for a geographic CRS."""
+def declared_crs(metadata: Any, override: str | None) -> Crs | None:
+    """The CRS the vertices are given in: ``override`` (the user's ``--crs``) wins over
+    ``metadata.referenceSystem`` (URL or URN of an EPSG code, which becomes ``EPSG:<code>``;
+    other forms are kept as given); None where neither names one."""
     system = metadata.get("referenceSystem") if isinstance(metadata, dict) else None
-    if not system:
-        return None
-    match = _EPSG.search(str(system))
-    if not match:
-        return str(system)
-    crs = f"EPSG:{int(match.group(1))}"
-    from pyproj import CRS
-    from pyproj.exceptions import CRSError
-
-    try:
-        geographic = CRS.from_user_input(crs).is_geographic
-    except CRSError:
-        return crs
-    if geographic:
-        raise InputError(
-            f"has a geographic CRS ({crs}: angles, not metres); geographic CRSs are not "
-            "supported yet",
-            where,
-        )
-    return crs
+    if override is not None:
+        system = override
+    return Crs.of(str(system)) if system else None
 
 
-def vertices_of(values: Any, transform: Any, where: str) -> np.ndarray:
-    """A vertex list in float64 (scaled and translated by ``transform`` where given)."""
+def vertices_of(values: Any, transform: Any, where: str, crs: Crs | None = None) -> np.ndarray:
+    """A vertex list in float64 metres: scaled and translated by ``transform`` where given,
+    then, for a geographic ``crs``, projected onto its local frame (which the first vertices
+    projected centre)."""
     try:
         v = np.asarray(values if values else np.zeros((0, 3)), dtype=np.float64)
         if isinstance(transform, dict):
@@ -138,21 +125,23 @@ def vertices_of(values: Any, transform: Any, where: str) -> np.ndarray:
             )
     except (ValueError, TypeError, KeyError) as exc:
         raise InputError(f"has malformed vertices or transform ({exc})", where) from None
-    return checked_vertices(v.reshape(-1, 3) if v.size == 0 else v, where)
+    v = checked_vertices(v.reshape(-1, 3) if v.size == 0 else v, where)
+    return crs.to_metric(v) if crs is not None else v
 
 
 def context_of(
-    data: dict[str, Any], tally: InputTally, crs: str | None, palette: Palette
+    data: dict[str, Any], tally: InputTally, declared: Crs | None, palette: Palette
 ) -> Context:
-    """The context of a CityJSON document: vertices, materials, templates."""
+    """The context of a CityJSON document: vertices (in metres), materials, templates (whose
+    vertices are offsets in metres from their reference points, never projected)."""
     where = tally.source
     tally.count(len(data.get("vertices") or ()), 0, declared=True)
     appearance = data.get("appearance") or {}
     templates = data.get("geometry-templates") or {}
     return Context(
         tally=tally,
-        vertices=vertices_of(data.get("vertices"), data.get("transform"), where),
-        crs=crs,
+        vertices=vertices_of(data.get("vertices"), data.get("transform"), where, declared),
+        declared=declared,
         materials=list(appearance.get("materials") or []),
         templates=list(templates.get("templates") or []),
         template_vertices=vertices_of(templates.get("vertices-templates"), None, where),

@@ -1,5 +1,5 @@
-"""Coordinate reference systems of CityGML documents: the declared EPSG CRS, and the local
-metric frame that geographic coordinates (latitude, longitude, height) are projected into."""
+"""Coordinate reference systems of city models: the declared EPSG CRS, and the local metric
+frame that geographic coordinates (latitude, longitude, height) are projected into."""
 
 from __future__ import annotations
 
@@ -112,3 +112,14 @@ def _geographic(code: int) -> dict[str, Any] | None:
         "a": horizontal.ellipsoid.semi_major_metre,
         "rf": horizontal.ellipsoid.inverse_flattening,
     }
+
+
+def crs_attributes(crs: Crs | None) -> dict[str, Any]:
+    """What a scene's attributes record of its CRS beyond its name: the vertical CRS and the
+    local frame of a geographic CRS, where there are."""
+    attributes: dict[str, Any] = {}
+    if crs is not None and crs.vertical:
+        attributes["vertical_crs"] = crs.vertical
+    if crs is not None and crs.frame is not None:
+        attributes["local_frame"] = crs.frame.record()
+    return attributes
