@@ -566,5 +566,5 @@ def _finished(
         xs=xs,
         culled=culled,
         dropped=dropped,
-        metadata=dict(obj.attributes),
+        metadata=obj.object_attributes(),
     )

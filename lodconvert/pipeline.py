@@ -166,7 +166,7 @@ class _ObjectBaker:
         try:
             if obj.transform is not None and id(obj.geometry) in self.shared:
                 base = self.shared[id(obj.geometry)]
-                chain = replace(base, object_id=obj.id, metadata=dict(obj.attributes))
+                chain = replace(base, object_id=obj.id, metadata=obj.object_attributes())
             else:
                 opts = replace(self.options, gamma=radius) if radius is not None else self.options
                 chain = bake_chain(

@@ -3,10 +3,11 @@
 A city object's switching distances depend on its neighbours (its plot radius,
 :mod:`.plots`), so every object must have been read before the first is baked. Holding them all
 would make memory grow with the city; a :class:`NodeSpool` instead writes each node (without its
-children, which are spooled in their own turn) to an anonymous temporary file as it is read and
-keeps only its position there, then gives the nodes back in the same order (or any node by its
-index, for grouping them into cells: :mod:`.hlod`). Nodes placed by a
-transform stay in memory: they share their geometry with other nodes, which a file would not.
+children, which are spooled in their own turn where they have geometry; the attributes of its
+parts go with it, :meth:`~.model.Node.object_attributes`) to an anonymous temporary file as it
+is read and keeps only its position there, then gives the nodes back in the same order (or any
+node by its index, for grouping them into cells: :mod:`.hlod`). Nodes placed by a transform
+stay in memory: they share their geometry with other nodes, which a file would not.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ class NodeSpool:
             self._entries.append(node)
             return
         self._entries.append(self._file.tell())
-        pickle.dump(replace(node, children=[]), self._file, protocol=pickle.HIGHEST_PROTOCOL)
+        parked = replace(node, children=[], attributes=node.object_attributes())
+        pickle.dump(parked, self._file, protocol=pickle.HIGHEST_PROTOCOL)
 
     def get(self, index: int) -> Node:
         """Node ``index`` (in the order added), read back from the file."""

@@ -308,6 +308,20 @@ def written_attributes(path: Path) -> dict[str, dict]:
     }
 
 
+@pytest.mark.parametrize("suffix", [".x3d", ".glb"])
+def test_parts_attributes_are_written_with_their_building(suffix: str, tmp_path: Path) -> None:
+    """The room and the furniture merged into the SIG3D LoD4 house's levels keep their
+    attributes in the output, under the house's ``parts``, in document order."""
+    out = tmp_path / f"house{suffix}"
+    convert(sample(SIG3D.format(4)), out, backend="numpy")
+    house = next(v for v in written_attributes(out).values() if v["type"] == "Building")
+    assert house["id"] == "GML_7b1a5a6f-ddad-4c3d-a507-3eb9ee0a8e68"
+    assert house["parts"] == [
+        {"id": "", "type": "Room"},
+        {"id": "", "type": "BuildingFurniture", "name": "Rocking Chair", "function": "1340"},
+    ]
+
+
 @pytest.mark.parametrize("name", ["tum_munich_lod2_v2.zip", "kit_testcases_lod2_100bldg_v3.gml"])
 @pytest.mark.parametrize("suffix", [".x3d", ".glb"])
 def test_districts_convert_one_object_per_building(

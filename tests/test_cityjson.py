@@ -299,22 +299,46 @@ def test_degenerate_and_malformed_objects_are_reported_and_dropped(tmp_path: Pat
     assert "malformed MultiSurface boundaries" in tally.skipped[1]["reason"]
 
 
-def test_polygons_with_holes_and_parts_become_children(tmp_path: Path) -> None:
+def test_polygons_with_holes_and_parts_are_merged_into_their_building(tmp_path: Path) -> None:
+    """A BuildingPart's LoDs join its building's, as a CityGML building's parts do: one object
+    per building, its parts kept as children (attributes, LoDs) without geometry of their own.
+    A 1st-level child (a Building below a Building) stays an object of its own."""
     hole = [[2, 2, 0], [2, 8, 0], [8, 8, 0], [8, 2, 0]]
     objects = {
-        "house": {"type": "Building", "children": ["part"]},
-        "part": {
-            "type": "BuildingPart",
-            "parents": ["house"],
-            **surface_object([[0, 1, 2, 3], [4, 5, 6, 7]]),
+        "house": {
+            **surface_object([[0, 1, 2, 3]]),
+            "children": ["part", "annex"],
+            "attributes": {"measuredHeight": 3.0},
         },
+        "part": {
+            "parents": ["house"],
+            **surface_object([[0, 1, 2, 3], [4, 5, 6, 7]], kind="BuildingPart"),
+            "attributes": {"function": "garage"},
+        },
+        "annex": {"parents": ["house"], **surface_object([[0, 1, 2, 3]])},
     }
-    (root,) = read_scene(write_json(tmp_path / "h.json", city(objects, square() + hole))).nodes
-    assert root.geometry is None and [c.id for c in root.children] == ["part"]
-    mesh = root.children[0].geometry
+    objects["house"]["geometry"][0]["lod"] = "0"
+    path = write_json(tmp_path / "h.json", city(objects, square() + hole))
+    (root,) = read_scene(path).nodes
+    assert [c.id for c in root.children] == ["part", "annex"]
+    part, annex = root.children
+    assert sorted(root.lods) == ["0", "1"] and root.geometry is root.lods["1"]
+    assert part.geometry is None and list(part.lods) == ["1"]
+    assert part.attributes["function"] == "garage"
+    assert annex.geometry is not None and annex.type == "Building"
+    mesh = root.geometry
     edges = mesh.triangles[:, 1:] - mesh.triangles[:, :1]
     area = np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1).sum() / 2
     assert area == pytest.approx(100 - 36)
+    out = tmp_path / "h.glb"
+    report = convert(path, out)
+    assert [o["id"] for o in report["objects"]] == ["house", "annex"]
+    data = out.read_bytes()
+    document = json.loads(data[20 : 20 + int.from_bytes(data[12:16], "little")])
+    (house,) = [n for n in document["nodes"] if n.get("name") == "house"]
+    assert house["extras"]["attributes"]["parts"] == [
+        {"function": "garage", "id": "part", "type": "BuildingPart"}
+    ]
 
 
 def test_template_instances_share_one_mesh(tmp_path: Path) -> None:

@@ -56,6 +56,24 @@ class Node:
         for child in self.children:
             yield from child.walk()
 
+    def parts(self) -> Iterator[Node]:
+        """The descendants without geometry of their own (building parts, rooms… whose LoDs a
+        reader merged into this node's), depth first, not below a child with geometry (an
+        object of its own)."""
+        for child in self.children:
+            if child.geometry is None:
+                yield child
+                yield from child.parts()
+
+    def object_attributes(self) -> dict[str, Any]:
+        """What an output keeps with this node's object: its attributes and, under ``parts``
+        (unless the node has an attribute of that name), those of each of its :meth:`parts`
+        that has any."""
+        parts = [part.attributes for part in self.parts() if part.attributes]
+        if not parts or "parts" in self.attributes:
+            return dict(self.attributes)
+        return {**self.attributes, "parts": parts}
+
 
 @dataclass
 class Scene:

@@ -6,8 +6,12 @@ Every CityObject with geometry or with children becomes a :class:`Node`: ``id`` 
 writers make it a valid X3D DEF; the raw key is kept in ``attributes["id"]``), ``type`` its
 CityObject type, ``attributes`` its own ``attributes`` plus ``id`` and ``type`` (which win over
 source attributes of those names). Children (``children``/``parents``: BuildingParts,
-Installations…) are the ``children`` of their parent's node; an object without geometry of its
-own is a node without geometry whose children carry it. ``types`` keeps only objects of those
+Installations…) are the ``children`` of their parent's node. The LoDs of a 1st-level object's
+parts (children of the 2nd-level types, :data:`~.objects.PART_TYPES`, not placed as geometry
+instances) are merged into its own, as a CityGML building's are: the object is one node with
+geometry, its parts children without geometry that keep their attributes and LoDs (a 3D BAG
+``Building`` with its LoD0 and its ``BuildingPart``'s LoD 1.2–2.2 is one object). Other children
+with geometry stay nodes with geometry of their own. ``types`` keeps only objects of those
 types and the descendants of kept ones (a kept descendant of a dropped object becomes a root).
 
 Geometry: Solid, MultiSolid, CompositeSolid, MultiSurface and CompositeSurface (points and

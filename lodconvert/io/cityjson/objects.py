@@ -1,7 +1,7 @@
 """CityObjects: each read (up to the triangulation of its polygons) into a :class:`Read`, then
 finished into its node, checked and counted in the tally, or left out and recorded; and the
 tree of a file's (or a feature's) objects, from ``children`` and ``parents``, filtered by
-type."""
+type, each object's parts merged into it."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ...errors import InputError
-from ...model import Node
+from ...model import Mesh, Node
 from ..geometry_checks import check_extent
 from .geometry import SURFACE_DEPTH, Lod, lod_key, lod_label, read_lod
 from .source import Context
@@ -33,6 +33,18 @@ class Read:
     instances: list[dict[str, Any]] = field(default_factory=list)
     problem: Exception | None = None
 
+
+PART_TYPES = frozenset(
+    {
+        *(f"Building{p}" for p in ("Part", "Installation", "ConstructiveElement", "Furniture")),
+        *("BuildingStorey", "BuildingRoom", "BuildingUnit"),
+        *(f"Bridge{p}" for p in ("Part", "Installation", "ConstructiveElement", "Furniture")),
+        "BridgeRoom",
+        *(f"Tunnel{p}" for p in ("Part", "Installation", "ConstructiveElement", "Furniture")),
+        "TunnelHollowSpace",
+    }
+)
+"""CityJSON's 2nd-level types: the parts of the 1st-level object they are children of."""
 
 _MALFORMED = (TypeError, ValueError, AttributeError, KeyError, IndexError)
 """What JSON of a shape CityJSON does not give raises somewhere in an object."""
@@ -189,6 +201,33 @@ class Objects:
             if node is None:
                 return kids
             node.children.extend(kids)
+            if node.type not in PART_TYPES and node.transform is None:
+                _absorb_parts(node)
             return [node] if node.geometry is not None or node.children else []
 
         return [node for key in objects if key not in below for node in build(key, False)]
+
+
+def _parts(node: Node) -> Iterator[Node]:
+    """The descendants of ``node`` reached through children of a 2nd-level type."""
+    for child in node.children:
+        if child.type in PART_TYPES:
+            yield child
+            yield from _parts(child)
+
+
+def _absorb_parts(node: Node) -> None:
+    """Merge the LoDs of ``node``'s parts into its own, as a CityGML building absorbs its parts:
+    each LoD label's surfaces become one mesh, the finest its geometry. The parts keep their
+    nodes (attributes, LoDs) as children without geometry of their own; a part placed as a
+    geometry instance stays an object of its own."""
+    parts = [part for part in _parts(node) if part.transform is None and part.lods]
+    if not parts:
+        return
+    merged: dict[str, list] = {}
+    for each in (node, *parts):
+        for label, mesh in each.lods.items():
+            merged.setdefault(label, []).extend(mesh.parts)
+        each.geometry = None
+    node.lods = {label: Mesh(surfaces) for label, surfaces in merged.items()}
+    node.geometry = node.lods[max(node.lods, key=lod_key)]
