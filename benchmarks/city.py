@@ -26,6 +26,13 @@ Targets: ≥ 1,000 LoD2 buildings/s end to end on one core (anchors: cjio's glb 
 objects/s; pg2b3dm 1,400–3,800 features/s from PostGIS), and the peak RSS of the 100× district
 ≤ 2× that of TUM Munich.
 
+Stages of each district, each in a fresh child process on the same core (medians of the
+district's runs): **parse**, lxml's ``iterparse`` of the document with lodconvert's hardened
+parser options, stopping at each ``cityObjectMember`` and freeing it, nothing else done (the
+floor any converter through lxml stands on); **read**, lodconvert's CityGML reader yielding
+every object with its triangulated LoDs (no chains, no output). Conversion minus read is what
+the chains, the writers and the post-write check take.
+
 ``--profile`` instead converts TUM Munich in this process under cProfile (pinned to one core,
 after an unprofiled warm-up on the SIG3D LoD2 house and an unprofiled run) and prints the top
 functions by cumulative and total time; it writes no results file.
@@ -43,6 +50,7 @@ import pstats
 import re
 import resource
 import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -57,10 +65,12 @@ from objects import (
     ROOT,
     Row,
     add_source_options,
+    child_env,
     cpu_call,
     lodconvert_source,
     measure,
     package_dir,
+    pin_prefix,
     preamble,
     run_facts,
     tree_digest,
@@ -343,12 +353,80 @@ def speed_verdict(result: Result) -> str:
     return f"{met} ({result.rate:,.1f} buildings/s; {per_cpu:,.1f} per CPU second)"
 
 
+STAGES = ("parse", "read")
+
+
+def run_stage(stage: str, path: Path) -> dict[str, float]:
+    """One stage of ``path`` in this process: its wall and CPU seconds and the objects seen."""
+    from lxml import etree
+
+    from lodconvert.io import read_scene
+    from lodconvert.io.citygml.source import parser_options
+    from lodconvert.limits import DEFAULT_LIMITS
+
+    def parse() -> int:
+        options = parser_options(DEFAULT_LIMITS)
+        count = 0
+        for _, element in etree.iterparse(
+            str(path), events=("end",), tag="{*}cityObjectMember", **options
+        ):
+            count += len(element)
+            element.clear(keep_tail=False)
+            while element.getprevious() is not None:
+                del element.getparent()[0]
+        return count
+
+    def read() -> int:
+        return sum(1 for _ in read_scene(path).nodes)
+
+    count, wall, cpu = cpu_call(parse if stage == "parse" else read)
+    return {"seconds": wall, "cpu_seconds": cpu, "objects": count}
+
+
+@dataclass
+class StageResult:
+    """A stage's runs on one district: median seconds of the whole child process (spawn to
+    exit, as a conversion's) and of the stage itself within it, objects seen."""
+
+    sample: Sample
+    stage: str
+    runs: int
+    process_seconds: float
+    seconds: float
+    objects: int
+
+
+def measure_stage(
+    sample: Sample, stage: str, runs: int, args: argparse.Namespace
+) -> StageResult | None:
+    """``runs`` runs of a stage on a district, each in a fresh child process pinned like the
+    conversions; None when a run fails."""
+    done: list[tuple[float, float, int]] = []
+    command = [*pin_prefix(), sys.executable, __file__, "--stage", stage, str(sample.path)]
+    for i in range(runs):
+        started = time.perf_counter()
+        child = subprocess.run(
+            command, capture_output=True, text=True, env=child_env(args.pythonpath), check=False
+        )
+        process = time.perf_counter() - started
+        if child.returncode != 0:
+            print(f"  {stage} run {i + 1}/{runs} failed: {child.stderr.strip()[-300:]}")
+            return None
+        inside = json.loads(child.stdout.strip().splitlines()[-1])
+        done.append((process, inside["seconds"], int(inside["objects"])))
+        print(f"  {stage} run {i + 1}/{runs}: {process:.2f} s ({inside['seconds']:.2f} s in it)")
+    process = sorted(d[0] for d in done)[len(done) // 2]
+    inside_s = sorted(d[1] for d in done)[len(done) // 2]
+    return StageResult(sample, stage, runs, process, inside_s, done[0][2])
+
+
 # --- report ---------------------------------------------------------------------------------
 
 
 def results_text(
     found: list[Result],
     districts: list[Result],
+    stages: list[StageResult],
     args: argparse.Namespace,
     command: str,
     load: tuple[float, float],
@@ -410,6 +488,8 @@ def results_text(
         ]
     else:
         lines += [f"(not made: {TUM} is absent)"]
+    if stages:
+        lines += ["", "### Where the time goes", "", *stage_table(stages, districts)]
     lines += ["", "## Targets", ""]
     speed = [r for r in found if r.sample.path == TUM] + districts
     for r in speed:
@@ -427,6 +507,39 @@ def results_text(
     return "\n".join(lines) + "\n"
 
 
+def stage_table(stages: list[StageResult], districts: list[Result]) -> list[str]:
+    """The stages of each district beside its conversions: seconds, buildings/s, and the share
+    of the speed target's time budget (buildings / target) that a stage alone takes."""
+    converted = {(r.sample.factor, r.row.fmt): r for r in districts if r.row.ok}
+    header = ["district", "stage", "runs", "process s", "stage s", "buildings/s"]
+    header += ["of the target's budget"]
+    table = []
+    for result in stages:
+        s = result.sample
+        budget = s.buildings / TARGET_BUILDINGS_PER_S
+        rows = [(result.stage, str(result.runs), f"{result.process_seconds:.2f}", result.seconds)]
+        if result.stage == "read":
+            for fmt in FORMATS:
+                if (r := converted.get((s.factor, fmt))) is not None:
+                    rest = r.row.seconds - result.process_seconds
+                    rows.append((f"{fmt} minus read", "–", "–", rest))
+        for stage, runs, process, seconds in rows:
+            rate = f"{s.buildings / seconds:,.0f}" if seconds > 0 else "–"
+            line = [f"{s.factor}×", stage, runs, process, f"{seconds:.2f}", rate]
+            table.append([*line, f"{seconds / budget:.1f}×"])
+    return [
+        "Each stage in a fresh child process on the same core: parse, lxml's `iterparse` with"
+        " lodconvert's parser options, each `cityObjectMember` freed, nothing else done; read,"
+        " lodconvert's CityGML reader yielding every object triangulated, nothing written."
+        " Process s: spawn to exit (imports included, as a conversion's); stage s: the stage"
+        " alone. \"minus read\" is a conversion's median less the read's process time: the"
+        " chains, the writer and the post-write check. The budget is the time the speed"
+        f" target allows the district (buildings / {TARGET_BUILDINGS_PER_S:,.0f} per s).",
+        "",
+        markdown_table(header, table, 2),
+    ]
+
+
 def factor_list(text: str) -> list[int]:
     """``"10,100"`` → ``[10, 100]``."""
     return [int(c) for c in text.split(",") if c.strip()]
@@ -439,6 +552,7 @@ def benchmark(args: argparse.Namespace, argv: list[str]) -> int:
     digest_start = tree_digest(package_dir(args.pythonpath))
     found: list[Result] = []
     districts: list[Result] = []
+    stages: list[StageResult] = []
     with tempfile.TemporaryDirectory(prefix="lodconvert-city-") as tmp:
         folder = Path(tmp)
         for i, sample in enumerate(samples() if DATA.is_dir() else []):
@@ -460,13 +574,19 @@ def benchmark(args: argparse.Namespace, argv: list[str]) -> int:
                     districts.append(
                         run_sample(sample, fmt, folder / f"d{factor}_{fmt}", runs, args)
                     )
+                for stage in STAGES:
+                    print(f"{factor}× district: {stage}", flush=True)
+                    if (result := measure_stage(sample, stage, runs, args)) is not None:
+                        stages.append(result)
                 gml.unlink()
             del template
     script_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     command, load, elapsed, digests = run_facts(
         __file__, argv, started, load_start, digest_start, args.pythonpath
     )
-    text = results_text(found, districts, args, command, load, elapsed, digests, script_peak)
+    text = results_text(
+        found, districts, stages, args, command, load, elapsed, digests, script_peak
+    )
     write_results(args.out, text)
     return 0
 
@@ -524,8 +644,17 @@ def main(argv: list[str] | None = None) -> int:
         "--profile", action="store_true", help="profile TUM Munich in-process (no results file)"
     )
     parser.add_argument("--profile-top", type=int, default=25, help="functions listed per sort")
+    parser.add_argument(
+        "--stage", nargs=2, metavar=("STAGE", "PATH"),
+        help="run one stage (parse or read) of a CityGML file in this process, print its times",
+    )  # fmt: skip
     add_source_options(parser)
     args = parser.parse_args(argv)
+    if args.stage is not None:
+        if args.stage[0] not in STAGES:
+            parser.error(f"--stage takes one of {', '.join(STAGES)}")
+        print(json.dumps(run_stage(args.stage[0], Path(args.stage[1]))))
+        return 0
     if len(args.factors) != len(args.factor_runs):
         parser.error("--factor-runs needs one number per factor")
     with lodconvert_source(args):
