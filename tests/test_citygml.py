@@ -18,6 +18,7 @@ import pytest
 from lxml import etree
 
 from lodconvert.io import read_chains, read_scene
+from lodconvert.io.geometry_checks import tally_of
 from lodconvert.limits import Limits
 from lodconvert.model import Mesh, Node, Surface
 from lodconvert.pipeline import convert
@@ -269,6 +270,111 @@ def test_objects_without_semantic_surfaces_take_their_type_colour(tmp_path: Path
     (node,) = nodes_of(path)
     assert node.type == "PlantCover"
     assert colors(node.geometry) == {as_tuple(TYPE_COLORS["PlantCover"])}
+
+
+def veg_document(*objects: str) -> str:
+    """:func:`document` with the vegetation namespace declared."""
+    head = HEAD.replace(">", ' xmlns:veg="http://www.opengis.net/citygml/vegetation/2.0">', 1)
+    return document(*objects).replace(HEAD, head)
+
+
+CROWN = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, 0, 3]], dtype=float)
+"""A pyramid: the template of the trees below (its base and four sides)."""
+CROWN_FACES = [[0, 3, 2, 1], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]]
+
+
+def tree_matrix(k: int) -> np.ndarray:
+    """Tree ``k``'s transformation: turned k × 90° about z, scaled 1–3×, raised 0.5 m."""
+    turn = np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1]], dtype=float)
+    matrix = np.eye(4)
+    matrix[:3, :3] = np.linalg.matrix_power(turn, k % 4) * (1 + k % 3)
+    matrix[2, 3] = 0.5
+    return matrix
+
+
+def tree(k: int, reference: tuple[float, ...], crown: str = "#crown", matrix: str = "") -> str:
+    """Tree ``k``: a lod2 implicit representation of the crown (inline for ``crown=""``)."""
+    if crown:
+        geometry = f'<relativeGMLGeometry xlink:href="{crown}"/>'
+    else:
+        members = "".join(
+            "<gml:surfaceMember><gml:Polygon><gml:exterior><gml:LinearRing><gml:posList>"
+            + " ".join(f"{v:g}" for i in [*face, face[0]] for v in CROWN[i])
+            + "</gml:posList></gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember>"
+            for face in CROWN_FACES
+        )
+        geometry = (
+            f'<relativeGMLGeometry><gml:MultiSurface gml:id="crown">{members}'
+            "</gml:MultiSurface></relativeGMLGeometry>"
+        )
+    matrix = matrix or " ".join(f"{v:g}" for v in tree_matrix(k).ravel())
+    point = " ".join(f"{v!r}" for v in reference)
+    return (
+        f'<cityObjectMember><veg:SolitaryVegetationObject gml:id="tree{k}">'
+        "<veg:lod2ImplicitRepresentation><ImplicitGeometry>"
+        f"<transformationMatrix>{matrix}</transformationMatrix>{geometry}"
+        f"<referencePoint><gml:Point><gml:pos>{point}</gml:pos></gml:Point></referencePoint>"
+        "</ImplicitGeometry></veg:lod2ImplicitRepresentation>"
+        "</veg:SolitaryVegetationObject></cityObjectMember>"
+    )
+
+
+def test_implicit_geometry_is_placed_and_shared_across_batches(
+    tmp_path: Path, schema: etree.XMLSchema
+) -> None:
+    """70 trees (more than one batch of objects): the first defines the crown, the others link
+    to it; each is the crown turned and scaled by its matrix at its reference point. A link to
+    a crown defined nowhere and a matrix of 15 values are reported; the rest convert."""
+    references = [(690000.0 + 10 * k, 5336000.0 + 3 * k, 500.0 + k) for k in range(70)]
+    trees = [tree(k, ref, crown="" if k == 0 else "#crown") for k, ref in enumerate(references)]
+    trees.append(tree(70, references[1], crown="#nowhere"))
+    trees.append(tree(71, references[2], matrix=" ".join(["1"] * 15)))
+    path = tmp_path / "trees.gml"
+    path.write_text(veg_document(*trees))
+    scene = read_scene(path)
+    nodes = list(scene.nodes)
+    assert [n.id for n in nodes] == [f"tree{k}" for k in range(70)]
+    for k, node in enumerate(nodes):
+        assert list(node.lods) == ["lod2"] and len(node.geometry.faces) == 6
+        matrix = tree_matrix(k)
+        expected = CROWN @ matrix[:3, :3].T + matrix[:3, 3] + references[k]
+        assert _max_distance(node.geometry.vertices, expected) <= 1e-9
+        assert _max_distance(expected, node.geometry.vertices) <= 1e-9
+        assert colors(node.geometry) == {as_tuple(TYPE_COLORS["SolitaryVegetationObject"])}
+    assert scene.attributes["citygml"]["unresolved_links"] == {"tree70": 1}
+    skipped = {s["id"]: s["reason"] for s in tally_of(scene).skipped}
+    assert "transformationMatrix of 15 values, not 16" in skipped["tree71"]
+    out = tmp_path / "trees.x3d"
+    report = convert(path, out, backend="numpy")
+    assert report["totals"]["objects"] == 70
+    schema.assertValid(etree.parse(str(out)))
+
+
+def test_implicit_geometry_in_a_geographic_crs_is_placed_in_metres(tmp_path: Path) -> None:
+    """With EPSG:4979 the reference point (latitude, longitude, height) is projected onto the
+    local frame and the crown is placed there in metres."""
+    from pyproj import Transformer
+
+    envelope = '<gml:Envelope srsName="http://www.opengis.net/def/crs/EPSG/0/4979"/>'
+    references = [(35.68 + 1e-4 * k, 139.76, 40.0) for k in range(3)]
+    trees = [tree(k, ref, crown="" if k == 0 else "#crown") for k, ref in enumerate(references)]
+    path = tmp_path / "trees.gml"
+    text = veg_document(*trees)
+    at = text.index("<cityObjectMember>")
+    path.write_text(f"{text[:at]}<gml:boundedBy>{envelope}</gml:boundedBy>{text[at:]}")
+    scene = read_scene(path)
+    frame = scene.attributes["local_frame"]
+    to_frame = Transformer.from_pipeline(
+        "+proj=pipeline +step +proj=axisswap +order=2,1 +step +proj=unitconvert +xy_in=deg "
+        f"+xy_out=rad +step {frame['proj'].replace(' +units=m +no_defs', '')}"
+    )
+    for k, node in enumerate(scene.nodes):
+        x, y = to_frame.transform(references[k][0], references[k][1])
+        matrix = tree_matrix(k)
+        expected = CROWN @ matrix[:3, :3].T + matrix[:3, 3] + [x, y, references[k][2]]
+        assert _max_distance(node.geometry.vertices, expected) <= 1e-6
+        assert np.ptp(node.geometry.vertices[:, 2]) == pytest.approx(3 * (1 + k % 3))
+    assert abs(frame["center"][0] - 35.6801) < 1e-3  # centred on the reference points
 
 
 def test_types_option_filters_objects() -> None:

@@ -16,7 +16,9 @@ furniture, interior installations: ``interiorRoom``, 3.0 ``buildingRoom``…) is
 way, as parts, in the LoD it is given at (LoD4 in 1.0 and 2.0). Terrain is read from its
 ``TINRelief`` components (their ``tin`` triangles, at the component's ``lod``; a ``Tin`` of
 control points alone is triangulated in plan); mass points, break lines and raster reliefs
-hold no surfaces.
+hold no surfaces. Implicit geometry (``lodNImplicitRepresentation``: a tree's or a lamp's
+relative geometry, given inline or linked from an object read before) is placed by its
+``ImplicitGeometry``'s matrix and reference point (:mod:`.implicit`).
 
 Geometry stays in the file's coordinates (float64) when its CRS is projected; a geographic CRS
 (latitude, longitude, height: EPSG:6697, 4326, 4979) is projected onto a transverse Mercator

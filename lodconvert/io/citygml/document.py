@@ -22,6 +22,7 @@ from ..geometry_checks import InputTally, check_extent
 from ..mesh import object_id
 from .attributes import attributes_of
 from .geometry import Holder, collect, holders_of, triangulate_batch
+from .implicit import Templates
 from .names import (
     CITYGML_NAMESPACE,
     GML_NAMESPACES,
@@ -53,6 +54,8 @@ class Document:
     gml: str = GML_NAMESPACES[0]
     crs: Crs | None = None
     taken: set[str] = field(default_factory=set)
+    templates: Templates = field(default_factory=Templates)
+    """Relative geometries of implicit geometry, for links from later objects."""
     stats: dict[str, dict[str, int]] = field(
         default_factory=lambda: {"unresolved_links": {}, "degenerate_polygons": {}, "not_read": {}}
     )
@@ -131,7 +134,7 @@ class Document:
             self.crs = Crs.of(srs) if srs else Crs()
         top = holders_of(element)
         node = self._node(top)
-        collect(top, self.gml, self.limits.xml_depth, self.source)
+        collect(top, self.gml, self.limits.xml_depth, self.source, self.templates)
         return node, top
 
     def _node(self, holder: Holder) -> Node:

@@ -12,7 +12,9 @@ none for the object itself; ``FootPrint``/``RoofEdge`` for LoD 0), and ``Orienta
 with ``orientation="-"`` above it reverse it. ``xlink:href`` links to polygons (or to
 geometries holding them) within the object are followed; a polygon that a solid refers to and a
 thematic surface holds is read once, with its semantics, and so is a polygon whose exterior
-ring repeats another's of the same LoD. A solid's interior shells are left out.
+ring repeats another's of the same LoD. A solid's interior shells are left out. Implicit
+geometry (a tree's relative geometry, inline or linked from another object) is placed by its
+``ImplicitGeometry`` (:mod:`.implicit`).
 
 Triangulating a batch of objects together (:func:`triangulate_batch`) lets the per-polygon work
 run as array operations over thousands of polygons instead of a few dozen.
@@ -34,6 +36,7 @@ from ...polygons import Triangles, points_surface, triangulate_many
 from ...semantics import Palette
 from ..crs import Crs
 from ..geometry_checks import MAX_MAGNITUDE, InputTally, checked_vertices, faces_with_area
+from .implicit import Templates, placed, placement
 from .names import (
     GML_NAMESPACES,
     HOLDING_PROPERTIES,
@@ -75,13 +78,15 @@ _INTERIOR = frozenset({"interior", "innerBoundaryIs"})
 @dataclass(eq=False)
 class Polygon:
     """One polygon met in an object: its LoD, semantic type (``""``: none), whether an
-    ``OrientableSurface`` reversed it, its element, and its rings (exterior first; (k, 3)
-    float64 in metres) once the batch's coordinates are read."""
+    ``OrientableSurface`` reversed it, its element, what places it, and its rings (exterior
+    first; (k, 3) float64 in metres) once the batch's coordinates are read."""
 
     lod: str
     semantic: str
     flip: bool
     element: etree._Element
+    implicit: etree._Element | None = None
+    """The ``ImplicitGeometry`` that places it (its rings are read in its frame), or None."""
     rings: list[np.ndarray] = field(default_factory=list)
 
 
@@ -120,13 +125,21 @@ class Holder:
         return self._ids.get(href.removeprefix("#"))
 
     def add_linked(
-        self, element: etree._Element, lod: str, semantic: str, flip: bool, seen: frozenset[str]
+        self,
+        element: etree._Element,
+        place: _Place,
+        seen: frozenset[str],
+        templates: Templates | None = None,
     ) -> None:
-        """Add every polygon under ``element`` (a geometry, or an element linking to one),
-        following ``xlink:href`` within this holder; a solid's interior shells are left out."""
+        """Add every polygon under ``element`` (a geometry, or an element linking to one) as
+        ``place`` says, following ``xlink:href`` within this holder (and, for an implicit
+        geometry, to the relative geometries of ``templates``); a solid's interior shells are
+        left out."""
         href = element.get(XLINK_HREF)
         if href is not None:
             target = self.target(href) if href not in seen else None
+            if target is None and place.implicit is not None and templates is not None:
+                target = templates.get(href) if href not in seen else None
             if target is None:
                 self.unresolved += href not in seen
                 return
@@ -134,16 +147,18 @@ class Holder:
             element = target
         name = local(element)
         if name in POLYGONS or (name == "Tin" and _points_only(element)):
-            self.polygons.append(Polygon(lod, semantic, flip, element))
+            self.polygons.append(
+                Polygon(place.lod, place.semantic, place.flip, element, place.implicit)
+            )
             return
         if name in NOT_SURFACES:
             return
-        if name == "OrientableSurface":
-            flip ^= element.get("orientation") == "-"
+        if name == "OrientableSurface" and element.get("orientation") == "-":
+            place = place._replace(flip=not place.flip)
         for child in element:
             if name == "Solid" and local(child) == "interior":
                 continue
-            self.add_linked(child, lod, semantic, flip, seen)
+            self.add_linked(child, place, seen, templates)
 
 
 def holders_of(element: etree._Element) -> Holder:
@@ -161,13 +176,15 @@ def holders_of(element: etree._Element) -> Holder:
 
 class _Place(NamedTuple):
     """Where a polygon (or a link) lies in an object: the holder it belongs to, its LoD,
-    semantic type, orientation, and its depth below the top-level object."""
+    semantic type, orientation, its depth below the top-level object and the
+    ``ImplicitGeometry`` above it, if any."""
 
     holder: Holder
     lod: str
     semantic: str
     flip: bool
     depth: int
+    implicit: etree._Element | None = None
 
 
 @dataclass
@@ -208,7 +225,8 @@ class _Walker:
                 flip = outer.flip ^ (
                     name == "OrientableSurface" and element.get("orientation") == "-"
                 )
-                found = _Place(outer.holder, outer.lod, outer.semantic, flip, outer.depth + 1)
+                implicit = element if name == "ImplicitGeometry" else outer.implicit
+                found = outer._replace(flip=flip, depth=outer.depth + 1, implicit=implicit)
         self.places[element] = found
         return found
 
@@ -258,11 +276,16 @@ def _relief_lod(component: etree._Element, top: etree._Element) -> str | None:
     return None
 
 
-def collect(top: Holder, gml: str, depth_limit: int, source: str) -> None:
+def collect(
+    top: Holder, gml: str, depth_limit: int, source: str, templates: Templates | None = None
+) -> None:
     """Find the polygons of ``top`` (a top-level object of a document whose GML namespace is
     ``gml``) and of its parts, each put in the holder it belongs to in document order,
-    following links; :class:`InputError` when coordinates would lie deeper than
+    following links (an implicit geometry's also to the relative geometries of ``templates``,
+    where this object's are added); :class:`InputError` when coordinates would lie deeper than
     ``depth_limit``."""
+    if templates is not None:
+        templates.register(top.element)
     walker = _Walker(top, {holder.element: holder for holder in top.walk()})
     items = _ITEMS[gml](top.element)
     polygon_ids: dict[str, etree._Element] = {}
@@ -279,7 +302,8 @@ def collect(top: Holder, gml: str, depth_limit: int, source: str) -> None:
         holder = place.holder
         if href is None:
             deepest = max(deepest, place.depth)
-            holder.polygons.append(Polygon(place.lod, place.semantic, place.flip, item))
+            polygon = Polygon(place.lod, place.semantic, place.flip, item, place.implicit)
+            holder.polygons.append(polygon)
             continue
         target = polygon_ids.get(href.removeprefix("#"))
         direct = walker.place(target) if target is not None else None
@@ -288,7 +312,7 @@ def collect(top: Holder, gml: str, depth_limit: int, source: str) -> None:
             or (not place.semantic and direct.lod == place.lod and direct.semantic)
         ):
             continue  # read where it lies: by its own part, or here with its semantics
-        holder.add_linked(item, place.lod, place.semantic, place.flip, frozenset())
+        holder.add_linked(item, place, frozenset(), templates)
     if OBJECT_DEPTH + deepest + _RING_DEPTH > depth_limit:
         raise InputError(
             f"nests XML elements deeper than the limit of {depth_limit} "
@@ -394,39 +418,95 @@ def _top_rings(
     return polygons, layout, np.concatenate(padded), lengths
 
 
+@dataclass
+class _Read:
+    """An object whose rings were read: its polygons, their rings' layout (as
+    :func:`_top_rings` gives it), and, for its implicit geometry, which points are in a frame
+    of their own (a mask) and the placement of each polygon placed."""
+
+    top: Holder
+    polygons: list[Polygon]
+    layout: list[int]
+    points: np.ndarray
+    lengths: np.ndarray
+    relative: np.ndarray | None = None
+    placements: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+
+
+def _relative_points(read: _Read) -> None:
+    """Mark the points of ``read``'s implicit polygons and parse their placements;
+    :class:`BrokenObject` when one cannot be read."""
+    ring_relative = np.zeros(len(read.lengths), dtype=bool)
+    cursor = 0
+    for polygon in read.polygons:
+        n = read.layout[cursor]
+        if polygon.implicit is not None:
+            ring_relative[read.layout[cursor + 1 : cursor + 1 + n]] = True
+            if id(polygon.implicit) not in read.placements:
+                try:
+                    read.placements[id(polygon.implicit)] = placement(polygon.implicit)
+                except ValueError as exc:
+                    raise BrokenObject(str(exc)) from None
+        cursor += 1 + n
+    read.relative = np.repeat(ring_relative, read.lengths)
+
+
+def _metric(reads: list[_Read], crs: Crs) -> np.ndarray:
+    """The points of ``reads`` in metres (a geographic CRS's frame centred on the first
+    object's own points); the points of implicit polygons are left in their frames, and their
+    reference points are projected into :attr:`_Read.placements`."""
+    points = np.concatenate([read.points for read in reads])
+    if not any(read.placements for read in reads):
+        return crs.to_metric(points, first=len(reads[0].points))
+    relative = np.concatenate(
+        [r.relative if r.relative is not None else np.zeros(len(r.points), bool) for r in reads]
+    )
+    references = [(read, key) for read in reads for key in read.placements]
+    absolute = points[~relative]
+    first = int((~relative[: len(reads[0].points)]).sum()) or None
+    together = np.vstack([absolute, [read.placements[key][1] for read, key in references]])
+    metric = crs.to_metric(together, first=first)
+    points = points.copy()
+    points[~relative] = metric[: len(absolute)]
+    for (read, key), reference in zip(references, metric[len(absolute) :], strict=True):
+        read.placements[key] = (read.placements[key][0], reference)
+    return points
+
+
 def _coordinates(
     tops: list[Holder], crs: Crs, text_limit: int, source: str
 ) -> tuple[list[tuple[Holder, str]], list[Holder]]:
     """Read the rings of every polygon of ``tops`` into ``Polygon.rings`` (in metres, a
-    geographic CRS's frame centred on the first object read); the objects that could not be
-    read (with the reason) and those that were."""
+    geographic CRS's frame centred on the first object read; implicit geometry placed); the
+    objects that could not be read (with the reason) and those that were."""
     broken: list[tuple[Holder, str]] = []
-    read: list[tuple[Holder, list[Polygon], list[int]]] = []
-    points: list[np.ndarray] = []
-    lengths: list[np.ndarray] = []
+    reads: list[_Read] = []
     for top in tops:
         try:
-            polygons, layout, top_points, top_lengths = _top_rings(top, text_limit, source)
+            read = _Read(top, *_top_rings(top, text_limit, source))
+            if any(polygon.implicit is not None for polygon in read.polygons):
+                _relative_points(read)
         except BrokenObject as exc:
             broken.append((top, str(exc)))
             continue
-        read.append((top, polygons, layout))
-        points.append(top_points)
-        lengths.append(top_lengths)
-    if not read:
+        reads.append(read)
+    if not reads:
         return broken, []
-    metric = crs.to_metric(np.concatenate(points), first=len(points[0]))
-    counts = np.concatenate(lengths)
+    metric = _metric(reads, crs)
+    counts = np.concatenate([read.lengths for read in reads])
     pieces = np.split(metric, np.cumsum(counts)[:-1]) if len(counts) else []
     offset = 0
-    for (_, polygons, layout), top_lengths in zip(read, lengths, strict=True):
+    for read in reads:
         cursor = 0
-        for polygon in polygons:
-            n = layout[cursor]
-            polygon.rings = [pieces[offset + i] for i in layout[cursor + 1 : cursor + 1 + n]]
+        for polygon in read.polygons:
+            n = read.layout[cursor]
+            polygon.rings = [pieces[offset + i] for i in read.layout[cursor + 1 : cursor + 1 + n]]
+            if polygon.implicit is not None:
+                matrix, reference = read.placements[id(polygon.implicit)]
+                polygon.rings = [placed(ring, matrix, reference) for ring in polygon.rings]
             cursor += 1 + n
-        offset += len(top_lengths)
-    return broken, [top for top, _, _ in read]
+        offset += len(read.lengths)
+    return broken, [read.top for read in reads]
 
 
 def _dedup_keys(polygons: list[Polygon]) -> list[Any]:

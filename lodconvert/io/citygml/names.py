@@ -12,9 +12,11 @@ CITYGML_NAMESPACE = re.compile(r"http://www\.opengis\.net/citygml/(1\.0|2\.0|3\.
 GML_NAMESPACES = ("http://www.opengis.net/gml", "http://www.opengis.net/gml/3.2")
 XLINK_HREF = "{http://www.w3.org/1999/xlink}href"
 LOD_PROPERTY = re.compile(
-    r"lod([0-4])(Solid|MultiSolid|MultiSurface|CompositeSurface|Surface|Geometry|FootPrint|RoofEdge)"
+    r"lod([0-4])(Solid|MultiSolid|MultiSurface|CompositeSurface|Surface|Geometry|FootPrint|RoofEdge"
+    r"|ImplicitRepresentation)"
 )
-"""Geometry properties read, with their LoD (curves, points and implicit geometry are not)."""
+"""Geometry properties read, with their LoD (curves and points are not; an implicit
+representation's geometry is placed by its ``ImplicitGeometry``: :mod:`.implicit`)."""
 PART_PROPERTIES = frozenset(
     {
         "consistsOfBuildingPart",
