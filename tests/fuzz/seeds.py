@@ -45,7 +45,7 @@ def generated() -> dict[str, tuple[bytes, ...]]:
         ".gltf": (json.dumps(json.loads(gltf["model.gltf"])).encode(),),
         ".json": (_cityjson()[0],),
         ".jsonl": (_cityjson()[1],),
-        ".gml": (_citygml(), _citygml_interior_and_terrain()),
+        ".gml": (_citygml(), _citygml_interior_and_terrain(), _citygml_implicit()),
         ".xml": (_citygml(),),
         ".zip": (_zipped("city.gml", _citygml()),),
     }
@@ -165,6 +165,39 @@ def _citygml_interior_and_terrain() -> bytes:
         "</gml:exterior></gml:Triangle></gml:trianglePatches></gml:TriangulatedSurface>"
         "</dem:tin></dem:TINRelief></dem:reliefComponent></dem:ReliefFeature>"
         "</cityObjectMember></CityModel>"
+    ).encode()
+
+
+def _citygml_implicit() -> bytes:
+    """Two CityGML 2.0 trees of one implicit geometry: the first holds the crown (a triangle)
+    turned and scaled by its matrix, the second links to it from its own reference point."""
+
+    def tree(gml_id: str, geometry: str, matrix: str, point: str) -> str:
+        return (
+            f"<cityObjectMember><veg:SolitaryVegetationObject gml:id='{gml_id}'>"
+            "<veg:lod2ImplicitRepresentation><ImplicitGeometry>"
+            f"<transformationMatrix>{matrix}</transformationMatrix>{geometry}"
+            f"<referencePoint><gml:Point><gml:pos>{point}</gml:pos></gml:Point></referencePoint>"
+            "</ImplicitGeometry></veg:lod2ImplicitRepresentation>"
+            "</veg:SolitaryVegetationObject></cityObjectMember>"
+        )
+
+    crown = (
+        "<relativeGMLGeometry><gml:MultiSurface gml:id='crown'><gml:surfaceMember><gml:Polygon>"
+        "<gml:exterior><gml:LinearRing><gml:posList>0 0 0 2 0 0 1 0 3 0 0 0</gml:posList>"
+        "</gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember></gml:MultiSurface>"
+        "</relativeGMLGeometry>"
+    )
+    link = "<relativeGMLGeometry xlink:href='#crown'/>"
+    turned = "0 -2 0 0 2 0 0 0 0 0 2 0.5 0 0 0 1"
+    return (
+        "<?xml version='1.0' encoding='UTF-8'?>"
+        "<CityModel xmlns='http://www.opengis.net/citygml/2.0' "
+        "xmlns:veg='http://www.opengis.net/citygml/vegetation/2.0' "
+        "xmlns:xlink='http://www.w3.org/1999/xlink' xmlns:gml='http://www.opengis.net/gml'>"
+        + tree("t1", crown, turned, "100 200 10")
+        + tree("t2", link, "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1", "110 200 10")
+        + "</CityModel>"
     ).encode()
 
 
