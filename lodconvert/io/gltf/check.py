@@ -20,7 +20,6 @@ import codecs
 import contextlib
 import itertools
 import json
-import math
 import mmap
 import os
 import struct
@@ -34,6 +33,16 @@ import numpy as np
 from lxml import etree
 
 from ...validate.findings import Findings
+from .rules import (
+    COMPONENT_DTYPES,
+    COMPONENT_SIZES,
+    READ_BUDGET,
+    TRIANGLES,
+    WIDTHS,
+    chain_facts,
+    chain_facts_findings,
+    lod_extras_findings,
+)
 from .stream import (
     LazyArray,
     NotStreamed,
@@ -45,22 +54,10 @@ from .stream import (
 )
 from .writer import GLB_BIN, GLB_JSON, GLB_MAGIC, MSFT_LOD
 
-_COMPONENT_SIZES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
-_COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
-_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-_TRIANGLES = 4
 GLB_HEADER_SIZE = 12
 GLB_CHUNK_HEADER_SIZE = 8
 MAX_JSON_DEPTH = 64
 """Deepest nesting of JSON arrays and objects accepted (lodconvert writes fewer than 10)."""
-READ_BUDGET = 4
-"""Accessor data the value checks read, in multiples of buffer 0's size: accessors that share
-their bytes many times over are not all read."""
-
-
-def _finite(values: Iterable[Any]) -> bool:
-    """Whether every value is a finite JSON number."""
-    return all(isinstance(v, int | float) and math.isfinite(v) for v in values)
 
 
 def _is_uint(value: Any) -> bool:
@@ -375,8 +372,8 @@ class _Gltf:
     def check_accessor(self, index: int, accessor: dict[str, Any]) -> bool:
         """Whether the accessor's data lies inside its view (and can be read)."""
         where = f"accessor {index}"
-        width = _WIDTHS.get(accessor.get("type"))
-        size = _COMPONENT_SIZES.get(accessor.get("componentType"))
+        width = WIDTHS.get(accessor.get("type"))
+        size = COMPONENT_SIZES.get(accessor.get("componentType"))
         count, offset = accessor.get("count"), accessor.get("byteOffset", 0)
         if not (width and size and _is_uint(count) and count > 0 and _is_uint(offset)):
             self.findings.error(
@@ -423,8 +420,8 @@ class _Gltf:
         if "bufferView" not in accessor:
             return None
         view = self.array("bufferViews")[accessor["bufferView"]]
-        dtype = np.dtype(_COMPONENT_DTYPES[accessor["componentType"]])
-        width = _WIDTHS[accessor["type"]]
+        dtype = np.dtype(COMPONENT_DTYPES[accessor["componentType"]])
+        width = WIDTHS[accessor["type"]]
         start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
         stride = view.get("byteStride", dtype.itemsize * width)
         left = self.read_budget
@@ -480,7 +477,7 @@ class _Gltf:
     def check_indices(self, primitive: dict[str, Any], vertices: int | None, where: str) -> None:
         index = primitive["indices"]
         count = self.array("accessors")[index].get("count", 0)
-        if primitive.get("mode", _TRIANGLES) == _TRIANGLES and count % 3:
+        if primitive.get("mode", TRIANGLES) == TRIANGLES and count % 3:
             self.findings.error("INDEX_COUNT", f"{where} has {count} indices, not whole triangles")
         values = self.data(index)
         if (
@@ -517,7 +514,7 @@ class _Gltf:
         roots = {r for scene in self.array("scenes") for r in scene.get("nodes", [])}
         children = {c for node in nodes for c in node.get("children", [])}
         holders = [i for i, node in enumerate(nodes) if MSFT_LOD in node.get("extensions", {})]
-        finest = {i: facts for i, node in enumerate(nodes) if (facts := _chain_facts(node))}
+        finest = {i: facts for i, node in enumerate(nodes) if (facts := chain_facts(node))}
         if not holders and not finest:
             self.findings.error(
                 "NO_LOD_CHAIN",
@@ -567,74 +564,16 @@ class _Gltf:
                     f"{name} MSFT_lod level {self.node_name(lod)} is another node's child",
                 )
         extras = node.get("extras", {}) if isinstance(node.get("extras"), dict) else {}
-        self.report(_lod_extras_findings(name, extras, len(ids)))
+        self.report(lod_extras_findings(name, extras, len(ids)))
 
     def check_chain_facts(self, name: str, facts: dict[str, Any], ids: int) -> None:
-        self.report(_chain_facts_findings(name, facts, ids))
+        self.report(chain_facts_findings(name, facts, ids))
 
     def report(self, findings: Iterable[tuple[str, str, str]]) -> None:
         """Record (severity, code, message) findings as they come (an exception after some
         leaves those recorded)."""
         for severity, code, message in findings:
             getattr(self.findings, severity)(code, message)
-
-
-Found = Iterator[tuple[str, str, str]]
-"""Findings as (severity, code, message)."""
-
-
-def _lod_extras_findings(name: str, extras: dict[str, Any], ids: int) -> Found:
-    """``extras`` of a node with ``ids`` MSFT_lod ids: its screen coverages, one more than the
-    ids and falling, and its ``lodconvert`` facts."""
-    coverage = extras.get("MSFT_screencoverage")
-    if coverage is None:
-        yield "warning", "MSFT_LOD_COVERAGE", f"{name} has no extras.MSFT_screencoverage"
-    elif len(coverage) != ids + 1:
-        yield (
-            "error",
-            "MSFT_LOD_COVERAGE",
-            f"{name} has {len(coverage)} screen coverages for {ids} ids (needs {ids + 1})",
-        )
-    elif not _finite(coverage) or min(coverage) < 0:
-        yield "error", "MSFT_LOD_COVERAGE", f"{name} screen coverages are not all >= 0"
-    elif any(b >= a for a, b in itertools.pairwise(coverage)):
-        yield (
-            "error",
-            "MSFT_LOD_COVERAGE",
-            f"{name} screen coverages do not fall strictly: {coverage}",
-        )
-    facts = extras.get("lodconvert")
-    if isinstance(facts, dict):
-        yield from _chain_facts_findings(name, facts, ids)
-
-
-def _chain_facts_findings(name: str, facts: dict[str, Any], ids: int) -> Found:
-    """``extras.lodconvert`` of a finest node: one level per node, cutoffs as the chain (a LOD
-    parent's near node: one far node, the near level being its members)."""
-    levels, cutoffs = facts.get("levels", []), facts.get("cutoffs", [])
-    if "cell_id" in facts:
-        if ids != 1:
-            yield "error", "LODCONVERT_CELL", f"{name} is a LOD parent with {ids} far nodes, not 1"
-    elif len(levels) != ids + 1:
-        yield (
-            "error",
-            "LODCONVERT_LEVELS",
-            f"{name} extras list {len(levels)} levels for {ids + 1} nodes",
-        )
-    expected = ids + int(bool(facts.get("culled")))
-    if len(cutoffs) != expected or any(b <= a for a, b in itertools.pairwise(cutoffs)):
-        yield (
-            "error",
-            "LODCONVERT_CUTOFFS",
-            f"{name} extras cutoffs {cutoffs} are not {expected} increasing distances",
-        )
-
-
-def _chain_facts(node: dict[str, Any]) -> dict[str, Any] | None:
-    """``extras.lodconvert`` of a chain's finest node (the one that lists the ``levels``)."""
-    extras = node.get("extras")
-    facts = extras.get("lodconvert") if isinstance(extras, dict) else None
-    return facts if isinstance(facts, dict) and "levels" in facts else None
 
 
 def check_gltf(path: Path, findings: Findings, _: etree.XMLSchema | None) -> None:
@@ -765,12 +704,12 @@ class _Accessors(_Facts):
         offset = [item.get("byteOffset", 0) for item in items]
         ctype = [item.get("componentType") for item in items]
         count = [item.get("count") for item in items]
-        width = [_WIDTHS.get(k, 0) if type(k) is str else 0 for k in (i.get("type") for i in items)]
+        width = [WIDTHS.get(k, 0) if type(k) is str else 0 for k in (i.get("type") for i in items)]
         if not (_all_uint(view) and _all_uint(offset) and _all_uint(count) and all(width)):
             return False
         if min(count, default=1) <= 0:
             return False
-        if not all(type(c) is int and c in _COMPONENT_SIZES for c in ctype):
+        if not all(type(c) is int and c in COMPONENT_SIZES for c in ctype):
             return False
         bounds = [-1] * len(items)
         for k, item in enumerate(items):
@@ -792,13 +731,13 @@ class _Accessors(_Facts):
     def take(self, index: int, item: dict[str, Any]) -> bool:
         view, offset = item.get("bufferView"), item.get("byteOffset", 0)
         ctype, count, kind = item.get("componentType"), item.get("count"), item.get("type")
-        width = _WIDTHS.get(kind, 0) if type(kind) is str else 0
+        width = WIDTHS.get(kind, 0) if type(kind) is str else 0
         if not (
             width
             and _uint(view)
             and _uint(offset)
             and type(ctype) is int
-            and ctype in _COMPONENT_SIZES
+            and ctype in COMPONENT_SIZES
             and _uint(count)
             and count > 0
         ):
@@ -869,7 +808,7 @@ class _Meshes(_Facts):
             if type(primitive) is not dict:
                 return False
             attributes = primitive.get("attributes", {})
-            indices, mode = primitive.get("indices", -1), primitive.get("mode", _TRIANGLES)
+            indices, mode = primitive.get("indices", -1), primitive.get("mode", TRIANGLES)
             if type(attributes) is not dict or type(mode) is not int:
                 return False
             if "indices" in primitive and not _uint(indices):
@@ -882,7 +821,7 @@ class _Meshes(_Facts):
                 self.attribute.append(accessor)
             self.position.append(attributes.get("POSITION", -1))
             self.indices.append(indices)
-            self.triangles.append(mode == _TRIANGLES)
+            self.triangles.append(mode == TRIANGLES)
         return True
 
 
@@ -913,12 +852,12 @@ class _Nodes(_Facts):
                 if index in ids or len(set(ids)) < len(ids):
                     return False
                 extras = item.get("extras", {}) if isinstance(item.get("extras"), dict) else {}
-                if any(True for _ in _lod_extras_findings("", extras, len(ids))):
+                if any(True for _ in lod_extras_findings("", extras, len(ids))):
                     return False
                 self.ids.extend(ids)
                 self.holders += 1
-            elif (facts := _chain_facts(item)) is not None:
-                if any(True for _ in _chain_facts_findings("", facts, 0)):
+            elif (facts := chain_facts(item)) is not None:
+                if any(True for _ in chain_facts_findings("", facts, 0)):
                     return False
                 self.chains += 1
         except (AttributeError, KeyError, IndexError, TypeError, ValueError):
@@ -1042,7 +981,7 @@ def _clean(doc: dict[str, Any], blob: Source) -> bool:
     largest = np.zeros(len(count), np.int64)
     wanted = np.union1d(positions, index_accessors)
     for (ctype, width), members in _groups(wanted, acc["ctype"], acc["width"]):
-        dtype = np.dtype(_COMPONENT_DTYPES[ctype])
+        dtype = np.dtype(COMPONENT_DTYPES[ctype])
         low, high = _extrema(members, start, count, stride, dtype, width, blob)
         bounded = np.isin(members, positions)
         at = acc["bounds"][members[bounded]][:, None] + np.arange(width)
@@ -1083,8 +1022,8 @@ def _clean(doc: dict[str, Any], blob: Source) -> bool:
     return not node_facts.holders or MSFT_LOD in used
 
 
-_SIZE_TABLE = np.zeros(max(_COMPONENT_SIZES) + 1, np.int64)
-_SIZE_TABLE[list(_COMPONENT_SIZES)] = list(_COMPONENT_SIZES.values())
+_SIZE_TABLE = np.zeros(max(COMPONENT_SIZES) + 1, np.int64)
+_SIZE_TABLE[list(COMPONENT_SIZES)] = list(COMPONENT_SIZES.values())
 
 
 def _groups(
