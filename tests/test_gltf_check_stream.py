@@ -20,7 +20,7 @@ import pytest
 import trimesh
 
 from lodconvert.io import OutputInfo
-from lodconvert.io.gltf import check, elements, write_glb
+from lodconvert.io.gltf import check, elements, extrema, write_glb
 from lodconvert.io.gltf.stream import NotStreamed, Source, read_object, too_deep, utf8_error
 from lodconvert.model import Level, LodChain, Surface
 from lodconvert.validate.findings import Findings
@@ -187,7 +187,7 @@ def test_large_file_is_checked_in_bounded_memory(
     grows is a few integers per element)."""
     calls = []
     monkeypatch.setattr(elements.ElementChecks, "run", lambda self: calls.append(self))
-    monkeypatch.setattr(check, "_BLOCK", 1 << 16)  # both files read in whole blocks
+    monkeypatch.setattr(extrema, "_BLOCK", 1 << 16)  # both files read in whole blocks
     town = _write(tmp_path / "town.glb", 600)
     peak = _traced_peak(city)
     grown = peak - _traced_peak(town)

@@ -2,7 +2,8 @@
 views and accessors inside what holds them, a primitive's counts, indices and declared bounds,
 every reference inside its array, and the MSFT_lod rules of the scene graph, each broken rule a
 finding of its own. They read the JSON as parsed objects (or element by element, where the
-arrays are too large to hold) and are run where the summary checks find something.
+arrays are too large to hold) and are run where the summary checks (:mod:`.summary`) find
+something.
 """
 
 from __future__ import annotations

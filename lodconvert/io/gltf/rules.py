@@ -1,7 +1,7 @@
-"""What the glTF checks hold a file to, shared by the checks element by element and the summary
-checks: accessors' component types and widths, how much accessor data the value checks read,
-and the rules of a LOD chain's ``extras`` (``MSFT_screencoverage``, and the ``lodconvert``
-levels and cutoffs).
+"""What the glTF checks hold a file to, shared by the checks element by element
+(:mod:`.elements`) and the summary checks (:mod:`.summary`): accessors' component types and
+widths, how much accessor data the value checks read, and the rules of a LOD chain's ``extras``
+(``MSFT_screencoverage``, and the ``lodconvert`` levels and cutoffs).
 """
 
 from __future__ import annotations
