@@ -20,7 +20,7 @@ import pytest
 import trimesh
 
 from lodconvert.io import OutputInfo
-from lodconvert.io.gltf import check, write_glb
+from lodconvert.io.gltf import check, elements, extrema, write_glb
 from lodconvert.io.gltf.stream import NotStreamed, Source, read_object, too_deep, utf8_error
 from lodconvert.model import Level, LodChain, Surface
 from lodconvert.validate.findings import Findings
@@ -186,8 +186,8 @@ def test_large_file_is_checked_in_bounded_memory(
     the JSON takes less memory more than that JSON's size (the windows are the same; what
     grows is a few integers per element)."""
     calls = []
-    monkeypatch.setattr(check._Gltf, "run", lambda self: calls.append(self))
-    monkeypatch.setattr(check, "_BLOCK", 1 << 16)  # both files read in whole blocks
+    monkeypatch.setattr(elements.ElementChecks, "run", lambda self: calls.append(self))
+    monkeypatch.setattr(extrema, "_BLOCK", 1 << 16)  # both files read in whole blocks
     town = _write(tmp_path / "town.glb", 600)
     peak = _traced_peak(city)
     grown = peak - _traced_peak(town)
