@@ -226,7 +226,9 @@ class _Walker:
                     name == "OrientableSurface" and element.get("orientation") == "-"
                 )
                 implicit = element if name == "ImplicitGeometry" else outer.implicit
-                found = outer._replace(flip=flip, depth=outer.depth + 1, implicit=implicit)
+                found = _Place(
+                    outer.holder, outer.lod, outer.semantic, flip, outer.depth + 1, implicit
+                )
         self.places[element] = found
         return found
 
