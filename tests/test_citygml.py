@@ -27,6 +27,7 @@ from lodconvert.validate import errors_of, validate_file
 
 from .conftest import SHARED
 from .test_cli import assert_one_line_error, run
+from .test_gltf import _assert_valid
 
 CITYGML = SHARED / "data" / "citygml"
 ROOF_COLOR, WALL_COLOR, GROUND_COLOR, OTHER_COLOR = (
@@ -320,7 +321,7 @@ def tree(k: int, reference: tuple[float, ...], crown: str = "#crown", matrix: st
 
 
 def test_implicit_geometry_is_placed_and_shared_across_batches(
-    tmp_path: Path, schema: etree.XMLSchema
+    tmp_path: Path, schema: etree.XMLSchema, gltf_validator
 ) -> None:
     """70 trees (more than one batch of objects): the first defines the crown, the others link
     to it; each is the crown turned and scaled by its matrix at its reference point. A link to
@@ -344,10 +345,14 @@ def test_implicit_geometry_is_placed_and_shared_across_batches(
     assert scene.attributes["citygml"]["unresolved_links"] == {"tree70": 1}
     skipped = {s["id"]: s["reason"] for s in tally_of(scene).skipped}
     assert "transformationMatrix of 15 values, not 16" in skipped["tree71"]
-    out = tmp_path / "trees.x3d"
-    report = convert(path, out, backend="numpy")
-    assert report["totals"]["objects"] == 70
-    schema.assertValid(etree.parse(str(out)))
+    for suffix in (".x3d", ".glb"):
+        out = tmp_path / f"trees{suffix}"
+        report = convert(path, out, backend="numpy")
+        assert report["totals"]["objects"] == 70
+        if suffix == ".x3d":
+            schema.assertValid(etree.parse(str(out)))
+        else:
+            _assert_valid(gltf_validator(out))  # the Khronos glTF-Validator
 
 
 def test_implicit_geometry_in_a_geographic_crs_is_placed_in_metres(tmp_path: Path) -> None:

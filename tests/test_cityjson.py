@@ -27,6 +27,7 @@ from lodconvert.validate import validate_file
 
 from .conftest import SHARED
 from .test_cli import assert_one_line_error, run
+from .test_gltf import _assert_valid
 
 CITYJSON = SHARED / "data" / "cityjson"
 
@@ -437,7 +438,7 @@ def _projected(degrees: np.ndarray, proj: str) -> np.ndarray:
 
 
 def test_geographic_crs_is_projected_to_a_metric_local_frame(
-    tmp_path: Path, schema: etree.XMLSchema
+    tmp_path: Path, schema: etree.XMLSchema, gltf_validator
 ) -> None:
     path, degrees = _geographic_delft(tmp_path)
     scene = read_scene(path)
@@ -467,6 +468,7 @@ def test_geographic_crs_is_projected_to_a_metric_local_frame(
             assert f'content="{frame["proj"]}"' in out.read_text()
         else:
             assert validate_file(out) == []
+            _assert_valid(gltf_validator(out))  # the Khronos glTF-Validator
         assert _round_trip_error(out, nodes) <= 1e-3
 
 
