@@ -206,19 +206,26 @@ function addRow(body, name, text = null) {
   if (text !== null) row.insertCell().textContent = text;
 }
 
+/** Whether `value` is a non-empty list of objects (a building's `parts`). */
+const isRecords = (value) => Array.isArray(value) && value.length > 0 && value.every(isRecord);
+
 /**
  * Add `attributes` to `table`: a body with a row per plain attribute (strings as they are,
- * other values as JSON), then a body per nested object, headed by its (dotted) `name`.
+ * other values as JSON), then a body per nested object, headed by its (dotted) `name`, and one
+ * per object of a list of objects, headed by the list's name and its number (`parts 1`…).
  */
 function addAttributes(table, attributes, name = null) {
   const body = table.createTBody();
   if (name !== null) addRow(body, name);
   const entries = Object.entries(attributes);
-  for (const [key, value] of entries.filter(([, v]) => !isRecord(v))) {
+  const nested = ([, v]) => isRecord(v) || isRecords(v);
+  for (const [key, value] of entries.filter((entry) => !nested(entry))) {
     addRow(body, key, typeof value === "string" ? value : JSON.stringify(value));
   }
-  for (const [key, value] of entries.filter(([, v]) => isRecord(v))) {
-    addAttributes(table, value, name === null ? key : `${name}.${key}`);
+  for (const [key, value] of entries.filter(nested)) {
+    const dotted = name === null ? key : `${name}.${key}`;
+    if (isRecord(value)) addAttributes(table, value, dotted);
+    else value.forEach((item, k) => addAttributes(table, item, `${dotted} ${k + 1}`));
   }
 }
 

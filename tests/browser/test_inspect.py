@@ -1,6 +1,7 @@
 """Clicking an object on the viewer page shows its id and attributes, clicking empty space
 clears them: the TUM Munich district (CityGML LoD2) as X3D in X_ITE and as glTF in three.js,
-clicked by inspect.mjs in headless Chromium where the page itself says a roof shows."""
+clicked by inspect.mjs in headless Chromium where the page itself says a roof shows; the SIG3D
+LoD4 house shows the attributes of its parts (its room and the furniture in it)."""
 
 from __future__ import annotations
 
@@ -20,6 +21,8 @@ from .test_viewers import _errors
 pytestmark = pytest.mark.browser
 
 SOURCE = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
+HOUSE = SHARED / "data" / "citygml" / "sig3d_house_lod0-4" / "Building_LOD4-EPSG25832.gml"
+HOUSE_ID = "GML_7b1a5a6f-ddad-4c3d-a507-3eb9ee0a8e68"
 NAMESPACES = {
     "gml": "http://www.opengis.net/gml",
     "bldg": "http://www.opengis.net/citygml/building/2.0",
@@ -45,12 +48,15 @@ def district(site: Path) -> dict[str, Chain]:
     return {s: make_chain(site, SOURCE, f"inspect_tum.{s}") for s in ("x3d", "glb")}
 
 
-def _roof(path: Path) -> tuple[str, list[float]]:
-    """An object of ``path`` and a point on its roof, safe to click: of all upward-facing
-    triangles of the objects' finest levels, the centre of the largest inscribed circle (from
-    above, as the page first shows the district, a roof shows, its edges farthest away)."""
+def _roof(path: Path, object_id: str | None = None) -> tuple[str, list[float]]:
+    """An object of ``path`` (``object_id`` where given) and a point on its roof, safe to
+    click: of all upward-facing triangles of the objects' finest levels, the centre of the
+    largest inscribed circle (from above, as the page first shows the district, a roof shows,
+    its edges farthest away)."""
     best = (0.0, "", [0.0, 0.0, 0.0])
     for chain in read_chains(path):
+        if object_id is not None and chain.object_id != object_id:
+            continue
         corners = chain.levels[0].mesh.vertices[chain.levels[0].mesh.faces]
         sides = np.linalg.norm(corners[:, [1, 2, 0]] - corners[:, [2, 0, 1]], axis=2)
         normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
@@ -93,4 +99,26 @@ def test_clicking_a_building_shows_its_id_and_attributes(
     assert rows["function"] == source["function"] and rows["type"] == "Building", message
     assert sky["selected"] is None and sky["hidden"], message
     assert sky["heading"] is None and sky["rows"] == [], message
+    assert not _errors(out), message
+
+
+@pytest.mark.parametrize("suffix", ["x3d", "glb"])
+def test_clicking_a_house_shows_its_parts(inspect: Drive, site: Path, suffix: str) -> None:
+    """The house's room and furniture, merged into its levels, each show as a group of rows
+    of their own (``parts 1``, ``parts 2``), not as one row of JSON."""
+    if not HOUSE.exists():
+        pytest.skip(f"{HOUSE} is absent (shared test data not checked out)")
+    chain = make_chain(site, HOUSE, f"inspect_house.{suffix}")
+    _, roof = _roof(site / chain.name, HOUSE_ID)
+    out = inspect("clicks", page=chain.page, clicks=[{"point": roof}])
+    (house,) = out["result"]["clicks"]
+    message = f"{out['result']}\n{console_text(out)}"
+    assert house["selected"] == HOUSE_ID and house["heading"] == HOUSE_ID, message
+    rows = house["rows"]
+    assert ["parts 1", None] in rows and ["parts 2", None] in rows, message
+    second = rows[rows.index(["parts 2", None]) :]
+    assert ["type", "BuildingFurniture"] in second and ["name", "Rocking Chair"] in second
+    first = rows[rows.index(["parts 1", None]) : rows.index(["parts 2", None])]
+    assert ["type", "Room"] in first, message
+    assert not any(header == "parts" for header, _ in rows), message
     assert not _errors(out), message
