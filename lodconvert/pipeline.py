@@ -26,6 +26,7 @@ from .chain import ChainOptions, bake_chain, check_geometry
 from .errors import InputError
 from .hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
 from .io import OutputInfo, input_format, output_format
+from .io.crs import checked_crs_option
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
@@ -337,6 +338,8 @@ def convert(
     """
     options = options or ChainOptions()
     options.check()
+    if (read_options or {}).get("crs") is not None:
+        checked_crs_option(read_options["crs"])
     if hlod is not None:
         hlod.check()
     target = output_format(output_path)

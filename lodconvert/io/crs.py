@@ -1,5 +1,6 @@
-"""Coordinate reference systems of city models: the declared EPSG CRS, and the local metric
-frame that geographic coordinates (latitude, longitude, height) are projected into."""
+"""Coordinate reference systems of city models: the declared EPSG CRS, the local metric frame
+that geographic coordinates (latitude, longitude, height) are projected into, and the pyproj
+CRS a name stands for."""
 
 from __future__ import annotations
 
@@ -9,7 +10,14 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import LodConvertError, UsageError
+
 _EPSG = re.compile(r"EPSG(?:/[\d.]+/|:[\d.]*:|:)(\d+)", re.IGNORECASE)
+
+
+class CrsError(LodConvertError):
+    """Coordinates that the CRS they are declared in cannot hold, or that cannot be transformed
+    into the output's CRS: the whole input is wrong, not one object (exit code 1)."""
 
 
 @dataclass(frozen=True)
@@ -58,13 +66,16 @@ class Crs:
     vertical: str | None = None
     geographic: Any = None
     frame: LocalFrame | None = None
+    where: str = ""
+    """The file whose coordinates these are (named by messages)."""
 
     @classmethod
-    def of(cls, srs_name: str) -> Crs:
+    def of(cls, srs_name: str, where: str = "") -> Crs:
         codes = _EPSG.findall(srs_name)
         if not codes:
-            return cls(name=srs_name)
-        crs = cls(name=f"EPSG:{codes[0]}", vertical=f"EPSG:{codes[1]}" if len(codes) > 1 else None)
+            return cls(name=srs_name, where=where)
+        vertical = f"EPSG:{codes[1]}" if len(codes) > 1 else None
+        crs = cls(name=f"EPSG:{codes[0]}", vertical=vertical, where=where)
         crs.geographic = _geographic(int(codes[0]))
         return crs
 
@@ -82,6 +93,13 @@ class Crs:
             lat_axis, lon_axis = self.geographic["axes"]
             centred = points[:first] if first else points
             center = (centred.min(axis=0) + centred.max(axis=0)) / 2.0
+            if abs(center[lat_axis]) > 90.0 or abs(center[lon_axis]) > 180.0:
+                raise CrsError(
+                    f"its coordinates are not latitude and longitude, as {self.name} has them "
+                    f"(the first object lies at {center[lat_axis]:.6g}, {center[lon_axis]:.6g}); "
+                    "the CRS declared or given with --crs is not the one they are in",
+                    self.where or None,
+                )
             self.frame = LocalFrame(
                 self.name or "",
                 float(np.round(center[lat_axis], 6)),
@@ -123,3 +141,29 @@ def crs_attributes(crs: Crs | None) -> dict[str, Any]:
     if crs is not None and crs.frame is not None:
         attributes["local_frame"] = crs.frame.record()
     return attributes
+
+
+def pyproj_crs(name: str, vertical: str | None = None) -> Any:
+    """The pyproj CRS that ``name`` (with the vertical CRS ``vertical``, where given) stands
+    for; raises pyproj's ``CRSError`` where it knows none."""
+    import pyproj
+
+    crs = pyproj.CRS.from_user_input(name)
+    if vertical is None:
+        return crs
+    height = pyproj.CRS.from_user_input(vertical)
+    return pyproj.crs.CompoundCRS(f"{crs.name} + {height.name}", [crs, height])
+
+
+def checked_crs_option(text: str) -> str:
+    """``text``, the CRS a user names (``--crs``), when pyproj knows it; :class:`UsageError`
+    otherwise."""
+    import pyproj
+
+    crs = Crs.of(text)
+    try:
+        pyproj_crs(crs.name or text, crs.vertical)
+    except pyproj.exceptions.CRSError as exc:
+        reason = str(exc).split("proj_create: ")[-1].rstrip(")") or "unknown"
+        raise UsageError(f"{text!r} names no CRS that pyproj knows ({reason})", "crs") from None
+    return text

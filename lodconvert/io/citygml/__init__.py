@@ -84,7 +84,7 @@ def read_citygml(
     tally = InputTally(source, limits)
     document = Document(path, limits, types, tally, colors)
     if crs is not None:
-        document.crs = Crs.of(crs)
+        document.crs = Crs.of(crs, source)
     nodes = document.nodes()
     first = next(nodes, None)
     if first is None and len(tally.skipped) == 1:

@@ -55,7 +55,7 @@ def read_document(
     """A ``.json`` CityJSON file: every node built before the scene is returned."""
     data = load_document(path, limits)
     tally = InputTally(str(path), limits)
-    ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs), palette)
+    ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs, str(path)), palette)
     nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
     if not size and not tally.skipped:
@@ -158,7 +158,9 @@ def read_sequence(
     try:
         header = cityjson_object(parsed(first, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
-        ctx = context_of(header, tally, declared_crs(header.get("metadata"), crs), palette)
+        ctx = context_of(
+            header, tally, declared_crs(header.get("metadata"), crs, str(path)), palette
+        )
     except InputError:
         handle.close()
         raise
