@@ -240,6 +240,7 @@ def merged(scenes: Sequence[Scene]) -> Scene:
             first.geometry = levels[max(levels)][1] if levels else first.geometry
     crs = next((scene.crs for scene in scenes if scene.crs), None)
     whole = Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+    whole.city = any(scene.city for scene in scenes)
     tallies = [tally for scene in scenes if (tally := tally_of(scene)) is not None]
     if tallies:  # complete: every input's nodes have been read
         tally = InputTally(whole.source, tallies[0].limits)
@@ -249,14 +250,6 @@ def merged(scenes: Sequence[Scene]) -> Scene:
             tally.skipped += part.skipped
         attach_tally(whole, tally)
     return whole
-
-
-def _is_city(scene: Scene) -> bool:
-    """Whether ``scene`` holds city objects (nodes with their own LoDs); looks at the first
-    node only, so a lazy scene is not consumed."""
-    nodes = scene.nodes
-    first = nodes[0] if isinstance(nodes, list) and nodes else None
-    return first is not None and bool(first.lods)
 
 
 def _with_plot_radii(scene: Scene, options: ChainOptions) -> Iterator[tuple[Node, float | None]]:
@@ -361,7 +354,7 @@ def convert(
             ]
         )
         timings["read"] = time.perf_counter() - start
-        if scene.crs is None and _is_city(scene):
+        if scene.crs is None and scene.city:
             warn(
                 f"{scene.source}: declares no CRS; its coordinates are written as they are "
                 "(--crs EPSG:… names it)"

@@ -1,7 +1,9 @@
-"""CRS safety: ``--crs`` checked, a geographic CRS on projected coordinates."""
+"""CRS safety: ``--crs`` checked, a geographic CRS on projected coordinates, the missing-CRS
+warning of a streamed CityGML file."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -27,3 +29,15 @@ def test_geographic_crs_on_projected_coordinates_is_one_line(tmp_path: Path) -> 
         assert_one_line_error(result, 1, path.name, "not latitude and longitude", "EPSG:4326")
         assert "proj=" not in result.stderr
     assert not out.exists()
+
+
+def test_a_streamed_citygml_file_without_crs_is_warned_of_alone_and_twice(tmp_path: Path) -> None:
+    text = citygml_sample(SIG3D.format(2)).read_text(encoding="utf-8")
+    bare = [tmp_path / "a.gml", tmp_path / "b.gml"]
+    for path in bare:
+        path.write_text(re.sub(r' srsName="[^"]*"', "", text), encoding="utf-8")
+    for inputs in (bare[:1], bare):
+        result = run(*inputs, "-o", tmp_path / "house.x3d")
+        assert result.returncode == 0, result.stderr
+        assert "b.gml: declares no CRS" in result.stderr or len(inputs) == 1
+        assert "a.gml" in result.stderr and "declares no CRS" in result.stderr

@@ -103,6 +103,7 @@ def read_citygml(
         nodes=chain([first], nodes),
         crs=declared.scene_crs,
         attributes=attributes,
+        city=True,
     )
     return attach_tally(scene, tally)
 

@@ -63,7 +63,7 @@ def read_document(
             raise tally.nothing_left()
         which = f"of type {', '.join(sorted(types))} " if types is not None else ""
         raise InputError(f"has no CityObject {which}with surfaces", str(path))
-    scene = Scene(source=str(path), nodes=nodes, crs=ctx.crs, size=size)
+    scene = Scene(source=str(path), nodes=nodes, crs=ctx.crs, size=size, city=True)
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(data.get("version"))
     return attach_tally(scene, tally)
@@ -167,7 +167,10 @@ def read_sequence(
     nodes = _feature_nodes(handle, header, ctx, types)
     first = next(nodes, None)  # its vertices centre a geographic CRS's local frame
     scene = Scene(
-        source=str(path), nodes=chain(() if first is None else (first,), nodes), crs=ctx.crs
+        source=str(path),
+        nodes=chain(() if first is None else (first,), nodes),
+        crs=ctx.crs,
+        city=True,
     )
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))
