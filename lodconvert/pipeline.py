@@ -33,6 +33,7 @@ from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
 from .ranges import DEFAULT_GAMMA
 from .records import Records, report_text
+from .reproject import in_one_crs
 from .sinks import FileSink, Outputs
 from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
@@ -223,7 +224,8 @@ def merged(scenes: Sequence[Scene]) -> Scene:
     are one object whose LoDs are merged: the first keeps its attributes and children, takes
     the LoD labels it lacks from the later ones, and its geometry is its finest LoD. Other
     objects all stay, in input order (the writers keep their names apart). The first declared
-    CRS is the scene's; a scene of one input is returned as it is."""
+    CRS is the scene's (:func:`~.reproject.in_one_crs` puts every input in it first); a scene
+    of one input is returned as it is."""
     if len(scenes) == 1:
         return scenes[0]
     nodes: list[Node] = []
@@ -347,24 +349,22 @@ def convert(
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
         start = time.perf_counter()
-        scene = merged(
+        one_crs = in_one_crs(
             [
                 source.read_file(path, limits=limits, **(read_options or {}))
                 for source, path in zip(sources, inputs, strict=True)
-            ]
+            ],
+            warn,
         )
+        scene = merged(one_crs.scenes)
         timings["read"] = time.perf_counter() - start
-        if scene.crs is None and scene.city:
-            warn(
-                f"{scene.source}: declares no CRS; its coordinates are written as they are "
-                "(--crs EPSG:… names it)"
-            )
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(backend)
         info = OutputInfo(
             generator=f"lodconvert {__version__}",
             source=" + ".join(Path(path).name for path in inputs),
             crs=scene.crs,
+            vertical=one_crs.record["vertical"] if scene.city else None,
             view=options.view,
             options=options_record(options),
         )
@@ -416,6 +416,7 @@ def convert(
         step("checking", 1, 1)
         named = " + ".join(str(path) for path in inputs)
         report = _report(named, output_path, baker, options, records, skipped, timings, tally)
+        report["crs"] = one_crs.record
         if hlod is not None:
             report["hlod"] = {"kind": hlod.kind, "cells": cells, "draw": draw}
         if also is not None:

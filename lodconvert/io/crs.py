@@ -1,6 +1,6 @@
 """Coordinate reference systems of city models: the declared EPSG CRS, the local metric frame
-that geographic coordinates (latitude, longitude, height) are projected into, and the pyproj
-CRS a name stands for."""
+that geographic coordinates (latitude, longitude, height) are projected into, the pyproj CRS a
+name stands for, and which vertical reference the heights are in."""
 
 from __future__ import annotations
 
@@ -12,7 +12,12 @@ import numpy as np
 
 from ..errors import LodConvertError, UsageError
 
-_EPSG = re.compile(r"EPSG(?:/[\d.]+/|:[\d.]*:|:)(\d+)", re.IGNORECASE)
+_EPSG = re.compile(r"(?:EPSG(?:/[\d.]+/|:[\d.]*:|:)|(?<=\d)\+)(\d+)", re.IGNORECASE)
+"""EPSG codes in a URN, URL or ``EPSG:code`` name (``EPSG:h+v`` names a vertical CRS too)."""
+
+
+NOT_DECLARED = "as in the source, not declared"
+"""The vertical reference of heights whose CRS says none (a 2-D CRS, or no CRS)."""
 
 
 class CrsError(LodConvertError):
@@ -47,14 +52,21 @@ class LocalFrame:
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """``points`` (n, 3) in the source's axis order, in this frame's metres."""
-        import pyproj
-
-        pipeline = pyproj.Transformer.from_pipeline(
-            "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
-            f"+step {self.proj.replace(' +units=m +no_defs', '')}"
+        x, y = frame_pipeline(self.proj).transform(
+            points[:, self.lon_axis], points[:, self.lat_axis]
         )
-        x, y = pipeline.transform(points[:, self.lon_axis], points[:, self.lat_axis])
         return np.stack([x, y, points[:, 2]], axis=1)
+
+
+def frame_pipeline(proj: str) -> Any:
+    """The local frame of PROJ definition ``proj`` (:attr:`LocalFrame.proj`) as a pyproj
+    transformer from longitude, latitude in degrees to its metres east and north."""
+    import pyproj
+
+    return pyproj.Transformer.from_pipeline(
+        "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
+        f"+step {proj.replace(' +units=m +no_defs', '')}"
+    )
 
 
 @dataclass
@@ -167,3 +179,18 @@ def checked_crs_option(text: str) -> str:
         reason = str(exc).split("proj_create: ")[-1].rstrip(")") or "unknown"
         raise UsageError(f"{text!r} names no CRS that pyproj knows ({reason})", "crs") from None
     return text
+
+
+def vertical_reference(crs: Any) -> str:
+    """Which heights a pyproj CRS (or None) holds: its vertical CRS's name and code where it is
+    compound, ``ellipsoidal (<ellipsoid>)`` for a 3-D geographic or projected CRS, else
+    :data:`NOT_DECLARED`."""
+    if crs is None:
+        return NOT_DECLARED
+    if crs.is_compound:
+        height = crs.sub_crs_list[-1]
+        code = height.to_authority()
+        return f"{height.name} ({':'.join(code)})" if code else height.name
+    if len(crs.axis_info) == 3 and crs.ellipsoid is not None:
+        return f"ellipsoidal ({crs.ellipsoid.name})"
+    return NOT_DECLARED
