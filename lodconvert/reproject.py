@@ -209,7 +209,7 @@ def in_one_crs(scenes: Sequence[Scene], warn: Message) -> OneCrs:
             done.append(scene)
             continue
         if target is None:
-            raise _no_way(scene, first, f"pyproj does not know {first.crs}")
+            raise _no_way(scene, first, f"{first.crs} is no CRS pyproj knows")
         source = _georef(scene, first)
         assert source is not None
         try:
@@ -245,10 +245,10 @@ def _georef(scene: Scene, first: Scene) -> Georef | None:
 
     try:
         return Georef.of(scene)
-    except pyproj.exceptions.CRSError:
+    except pyproj.exceptions.CRSError as exc:
         if scene is first:
             return None
-        raise _no_way(scene, first, f"pyproj does not know {scene.crs}") from None
+        raise _no_way(scene, first, str(exc).split("proj_create: ")[-1].rstrip(")")) from None
 
 
 def _no_way(scene: Scene, first: Scene, reason: str) -> CrsError:

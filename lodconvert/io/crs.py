@@ -164,7 +164,13 @@ def pyproj_crs(name: str, vertical: str | None = None) -> Any:
     if vertical is None:
         return crs
     height = pyproj.CRS.from_user_input(vertical)
-    return pyproj.crs.CompoundCRS(f"{crs.name} + {height.name}", [crs, height])
+    try:
+        return pyproj.crs.CompoundCRS(f"{crs.name} + {height.name}", [crs, height])
+    except pyproj.exceptions.CRSError:
+        raise pyproj.exceptions.CRSError(
+            f"proj_create: {name} + {vertical} is no compound CRS: {vertical} is not vertical "
+            f"or {name} has heights of its own"
+        ) from None
 
 
 def checked_crs_option(text: str) -> str:
