@@ -216,6 +216,11 @@ def test_a_streamed_citygml_file_without_crs_is_warned_of_alone_and_twice(tmp_pa
             assert f"{path}: declares no CRS" in result.stderr
         text = out.read_text()
         assert '<meta name="vertical-reference" content="as in the source, not declared"/>' in text
+    result = run(citygml_sample(SIG3D.format(1)), bare[0], "-o", tmp_path / "house.x3d")
+    assert result.returncode == 0, result.stderr
+    assert f"{bare[0]}: declares no CRS; its coordinates are taken to be in EPSG:25832" in (
+        result.stderr
+    )
 
 
 def test_x3d_and_report_name_the_crs_and_its_vertical_reference(tmp_path: Path) -> None:
