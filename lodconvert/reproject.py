@@ -205,7 +205,7 @@ def in_one_crs(scenes: Sequence[Scene], warn: Message) -> OneCrs:
             done.append(scene)
             continue
         assert first is not None
-        if scene.crs == first.crs:
+        if _same_crs(scene, first):
             done.append(scene)
             continue
         if target is None:
@@ -236,6 +236,13 @@ def in_one_crs(scenes: Sequence[Scene], warn: Message) -> OneCrs:
         "reprojected": reprojected,
     }
     return OneCrs(done, record)
+
+
+def _same_crs(scene: Scene, first: Scene) -> bool:
+    """Whether ``scene`` is in ``first``'s CRS: the same name, and the same vertical CRS
+    where both name one apart."""
+    vertical = scene.attributes.get("vertical_crs"), first.attributes.get("vertical_crs")
+    return scene.crs == first.crs and (None in vertical or vertical[0] == vertical[1])
 
 
 def _georef(scene: Scene, first: Scene) -> Georef | None:

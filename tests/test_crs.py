@@ -170,6 +170,19 @@ def test_merged_inputs_land_in_one_crs_with_the_cli(tmp_path: Path) -> None:
     assert extras["crs"] == "EPSG:7415" and extras["vertical_reference"] == "NAP height (EPSG:5709)"
 
 
+def test_another_vertical_crs_is_reprojected_too(tmp_path: Path) -> None:
+    """The SIG3D house in EPSG:25832 with DHHN2016 heights beside it with DHHN92 heights."""
+    text = citygml_sample(SIG3D.format(2)).read_text(encoding="utf-8")
+    other = tmp_path / "dhhn2016.gml"
+    other.write_text(text.replace("EPSG::5783", "EPSG::7837"), encoding="utf-8")
+    first = read_scene(citygml_sample(SIG3D.format(1)))
+    one = in_one_crs([first, read_scene(other)], print)
+    (moved,) = one.record["reprojected"]
+    assert moved["from"] == "EPSG:25832 + EPSG:7837" and moved["to"] == "EPSG:25832 + EPSG:5783"
+    again = in_one_crs([read_scene(citygml_sample(SIG3D.format(1))), first], print)
+    assert again.record["reprojected"] == []  # the same CRS: nothing to do
+
+
 def test_no_transformation_is_one_line_naming_both_files_and_crss(tmp_path: Path) -> None:
     text = citygml_sample(SIG3D.format(2)).read_text(encoding="utf-8")
     unknown = re.sub(r'srsName="[^"]*"', 'srsName="urn:adv:crs:ETRS89_UTM32*DE_DHHN92_NH"', text)

@@ -244,11 +244,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         f"wrote {args.output} ({report['totals']['objects']:,} object(s)"
         + (f", {skipped:,} skipped" if skipped else "")
         + (f", {dropped:,} face(s) without area dropped" if dropped else "")
-        + (
-            f", {len(moved)} input{plural} reprojected into {report['crs']['name']}"
-            if moved
-            else ""
-        )
+        + (f", {len(moved)} input{plural} reprojected into {moved[0]['to']}" if moved else "")
         + f", {report['backend']} backend, {sum(report['timings'].values()):.2f} s)"
         + (f" and {report['page']}" if "page" in report else "")
     )
