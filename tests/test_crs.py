@@ -179,6 +179,9 @@ def test_another_vertical_crs_is_reprojected_too(tmp_path: Path) -> None:
     one = in_one_crs([first, read_scene(other)], print)
     (moved,) = one.record["reprojected"]
     assert moved["from"] == "EPSG:25832 + EPSG:7837" and moved["to"] == "EPSG:25832 + EPSG:5783"
+    streamed = one.scenes[1]
+    assert not isinstance(streamed.nodes, list)  # transformed as the nodes are taken
+    assert {node.crs for node in streamed.walk()} == {"EPSG:25832"}
     again = in_one_crs([read_scene(citygml_sample(SIG3D.format(1))), first], print)
     assert again.record["reprojected"] == []  # the same CRS: nothing to do
 
