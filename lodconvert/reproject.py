@@ -94,17 +94,19 @@ class Reprojection:
             x, y = self.onto.transform(x, y)
         return np.stack([x, y, z], axis=1)
 
-    def placed(self, transform: np.ndarray, origin: np.ndarray | None) -> np.ndarray:
-        """A node's 4×4 placement (after ``origin``) in the target's coordinates: its point
-        moved, its axes turned and scaled by the transformation's local linear part there."""
-        base = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
-        point = base + transform[:3, 3]
+    def placed(
+        self, transform: np.ndarray, origin: np.ndarray, moved_origin: np.ndarray
+    ) -> np.ndarray:
+        """A node's 4×4 placement after ``origin``, in the target's coordinates after
+        ``moved_origin``: its point moved, its axes turned and scaled by the transformation's
+        local linear part there."""
+        point = origin + transform[:3, 3]
         probes = point + np.vstack([np.zeros(3), _STEP * np.eye(3), -_STEP * np.eye(3)])
         moved = self(probes)
         jacobian = (moved[1:4] - moved[4:7]).T / (2 * _STEP)
         placed = np.eye(4)
         placed[:3, :3] = jacobian @ transform[:3, :3]
-        placed[:3, 3] = moved[0] - (self(base[None])[0] if origin is not None else 0.0)
+        placed[:3, 3] = moved[0] - moved_origin
         return placed
 
     def record(self, source: str) -> dict[str, Any]:
@@ -135,7 +137,9 @@ def _reprojected_node(node: Node, reprojection: Reprojection) -> Node:
         each.crs = reprojection.target.name
         origin = None if each.origin is None else reprojection(each.offset[None])[0]
         if each.transform is not None:
-            each.transform = reprojection.placed(np.asarray(each.transform), each.origin)
+            each.transform = reprojection.placed(
+                np.asarray(each.transform), each.offset, np.zeros(3) if origin is None else origin
+            )
             each.origin = origin
             continue
         fresh = {

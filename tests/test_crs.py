@@ -11,14 +11,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 from pyproj import Transformer
 
 from lodconvert.io import read_scene
 from lodconvert.io.crs import CrsError
-from lodconvert.model import Node
+from lodconvert.model import Node, Scene
 from lodconvert.reproject import in_one_crs
 
-from .conftest import ROOT
+from .conftest import ROOT, surface_of
 from .test_citygml import SIG3D
 from .test_citygml import sample as citygml_sample
 from .test_cityjson import delft, write_json
@@ -251,3 +252,24 @@ def test_x3d_and_report_name_the_crs_and_its_vertical_reference(tmp_path: Path) 
     }
     text = out.read_text()
     assert '<meta name="vertical-reference" content="DHHN92 height (EPSG:5783)"/>' in text
+
+
+def test_nodes_placed_by_an_origin_keep_geometry_relative_to_it() -> None:
+    """Geometry relative to a float64 origin, with and without a placement, lands where pyproj
+    puts its world coordinates, and stays small numbers about the moved origin."""
+    box = surface_of(trimesh.creation.box((30.0, 20.0, 10.0)))
+    origin = np.array([594000.0, 5762000.0, 5.0])
+    turn = trimesh.transformations.rotation_matrix(0.3, [0, 0, 1])
+    turn[:3, 3] = [100.0, -50.0, 0.0]
+    nodes = [Node("plain", box, origin=origin), Node("turned", box, origin=origin, transform=turn)]
+    worlds = [origin + box.vertices, origin + box.vertices @ turn[:3, :3].T + turn[:3, 3]]
+    first = Scene("rd", [], "EPSG:28992")
+    one = in_one_crs([first, Scene("utm", nodes, "EPSG:32631")], print)
+    alone = Transformer.from_crs("EPSG:32631", "EPSG:28992", always_xy=True)
+    for node, world in zip(one.scenes[1].walk(), worlds, strict=True):
+        local = node.geometry.vertices
+        if node.transform is not None:
+            local = local @ node.transform[:3, :3].T + node.transform[:3, 3]
+        expected = np.stack(alone.transform(*world.T), axis=1)
+        assert np.abs(node.offset + local - expected).max() <= 1e-3, node.id
+        assert np.abs(node.geometry.vertices).max() < 100.0 and node.crs == "EPSG:28992"
