@@ -26,12 +26,14 @@ from .chain import ChainOptions, bake_chain, check_geometry
 from .errors import InputError
 from .hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
 from .io import OutputInfo, input_format, output_format
+from .io.crs import checked_crs_option
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
 from .ranges import DEFAULT_GAMMA
 from .records import Records, report_text
+from .reproject import in_one_crs
 from .sinks import FileSink, Outputs
 from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
@@ -222,7 +224,8 @@ def merged(scenes: Sequence[Scene]) -> Scene:
     are one object whose LoDs are merged: the first keeps its attributes and children, takes
     the LoD labels it lacks from the later ones, and its geometry is its finest LoD. Other
     objects all stay, in input order (the writers keep their names apart). The first declared
-    CRS is the scene's; a scene of one input is returned as it is."""
+    CRS is the scene's (:func:`~.reproject.in_one_crs` puts every input in it first); a scene
+    of one input is returned as it is."""
     if len(scenes) == 1:
         return scenes[0]
     nodes: list[Node] = []
@@ -239,6 +242,7 @@ def merged(scenes: Sequence[Scene]) -> Scene:
             first.geometry = levels[max(levels)][1] if levels else first.geometry
     crs = next((scene.crs for scene in scenes if scene.crs), None)
     whole = Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+    whole.city = any(scene.city for scene in scenes)
     tallies = [tally for scene in scenes if (tally := tally_of(scene)) is not None]
     if tallies:  # complete: every input's nodes have been read
         tally = InputTally(whole.source, tallies[0].limits)
@@ -248,14 +252,6 @@ def merged(scenes: Sequence[Scene]) -> Scene:
             tally.skipped += part.skipped
         attach_tally(whole, tally)
     return whole
-
-
-def _is_city(scene: Scene) -> bool:
-    """Whether ``scene`` holds city objects (nodes with their own LoDs); looks at the first
-    node only, so a lazy scene is not consumed."""
-    nodes = scene.nodes
-    first = nodes[0] if isinstance(nodes, list) and nodes else None
-    return first is not None and bool(first.lods)
 
 
 def _with_plot_radii(scene: Scene, options: ChainOptions) -> Iterator[tuple[Node, float | None]]:
@@ -337,6 +333,8 @@ def convert(
     """
     options = options or ChainOptions()
     options.check()
+    if (read_options or {}).get("crs") is not None:
+        checked_crs_option(read_options["crs"])
     if hlod is not None:
         hlod.check()
     target = output_format(output_path)
@@ -351,24 +349,22 @@ def convert(
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
         start = time.perf_counter()
-        scene = merged(
+        one_crs = in_one_crs(
             [
                 source.read_file(path, limits=limits, **(read_options or {}))
                 for source, path in zip(sources, inputs, strict=True)
-            ]
+            ],
+            warn,
         )
+        scene = merged(one_crs.scenes)
         timings["read"] = time.perf_counter() - start
-        if scene.crs is None and _is_city(scene):
-            warn(
-                f"{scene.source}: declares no CRS; its coordinates are written as they are "
-                "(--crs EPSG:… names it)"
-            )
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(backend)
         info = OutputInfo(
             generator=f"lodconvert {__version__}",
             source=" + ".join(Path(path).name for path in inputs),
             crs=scene.crs,
+            vertical=one_crs.record["vertical"] if scene.city else None,
             view=options.view,
             options=options_record(options),
         )
@@ -420,6 +416,7 @@ def convert(
         step("checking", 1, 1)
         named = " + ".join(str(path) for path in inputs)
         report = _report(named, output_path, baker, options, records, skipped, timings, tally)
+        report["crs"] = one_crs.record
         if hlod is not None:
             report["hlod"] = {"kind": hlod.kind, "cells": cells, "draw": draw}
         if also is not None:

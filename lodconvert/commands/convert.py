@@ -77,7 +77,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     read.add_argument(
         "--crs",
         metavar="EPSG:CODE",
-        help="city models: the CRS of the coordinates, replacing what the file declares",
+        help="city models: the CRS of every input's coordinates, replacing what the files "
+        "declare (an EPSG code pyproj knows; default: each file's own, the first one's for the "
+        "output, into which the others are reprojected)",
     )
     read.add_argument(
         "--strict",
@@ -232,12 +234,17 @@ def run(args: argparse.Namespace, console: Console) -> int:
         )
     if "hlod" in report:
         console.info(_hlod_line(report["hlod"]))
+    moved = report["crs"]["reprojected"]
+    plural = "s" if len(moved) > 1 else ""
+    for each in moved:
+        console.info(f"{each['input']}: reprojected from {each['from']} into {each['to']}")
     skipped = len(report["skipped"])
     dropped = report["totals"]["dropped_faces"]
     console.summary(
         f"wrote {args.output} ({report['totals']['objects']:,} object(s)"
         + (f", {skipped:,} skipped" if skipped else "")
         + (f", {dropped:,} face(s) without area dropped" if dropped else "")
+        + (f", {len(moved)} input{plural} reprojected into {moved[0]['to']}" if moved else "")
         + f", {report['backend']} backend, {sum(report['timings'].values()):.2f} s)"
         + (f" and {report['page']}" if "page" in report else "")
     )

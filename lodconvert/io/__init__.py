@@ -46,12 +46,13 @@ FORMAT_MODULES = (
 
 @dataclass
 class OutputInfo:
-    """Scene-wide facts a writer records: who wrote it, from what, in which CRS, for which
-    reference view, with which options."""
+    """Scene-wide facts a writer records: who wrote it, from what, in which CRS and vertical
+    reference (a city's; None for a mesh's), for which reference view, with which options."""
 
     generator: str
     source: str
     crs: str | None = None
+    vertical: str | None = None
     view: ReferenceView = REFERENCE_VIEW
     options: dict[str, Any] = field(default_factory=dict)
 

@@ -87,6 +87,9 @@ class Scene:
     size: int | None = None
     """How many nodes with geometry the scene holds, where the reader knows before yielding
     them (for progress)."""
+    city: bool = False
+    """Whether a city model's reader made it: its objects are city objects, with their own
+    LoDs and plots, in the CRS the file declares (or none)."""
 
     def __iter__(self) -> Iterator[Node]:
         return iter(self.nodes)

@@ -113,7 +113,7 @@ class Document:
         name = local(element)
         if name == "boundedBy" and self.crs is None:
             srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
-            self.crs = Crs.of(srs) if srs else None
+            self.crs = Crs.of(srs, self.source) if srs else None
         if name in MEMBERS:
             for child in element:
                 if (collected := self._collected(child)) is not None:
@@ -131,7 +131,7 @@ class Document:
             return None
         if self.crs is None:
             srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
-            self.crs = Crs.of(srs) if srs else Crs()
+            self.crs = Crs.of(srs, self.source) if srs else Crs()
         top = holders_of(element)
         node = self._node(top)
         collect(top, self.gml, self.limits.xml_depth, self.source, self.templates)

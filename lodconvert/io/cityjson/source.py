@@ -103,14 +103,14 @@ def cityjson_object(data: Any, kind: str, where: str) -> dict[str, Any]:
     return data
 
 
-def declared_crs(metadata: Any, override: str | None) -> Crs | None:
-    """The CRS the vertices are given in: ``override`` (the user's ``--crs``) wins over
-    ``metadata.referenceSystem`` (URL or URN of an EPSG code, which becomes ``EPSG:<code>``;
-    other forms are kept as given); None where neither names one."""
+def declared_crs(metadata: Any, override: str | None, where: str) -> Crs | None:
+    """The CRS the vertices of file ``where`` are given in: ``override`` (the user's ``--crs``)
+    wins over ``metadata.referenceSystem`` (URL or URN of an EPSG code, which becomes
+    ``EPSG:<code>``; other forms are kept as given); None where neither names one."""
     system = metadata.get("referenceSystem") if isinstance(metadata, dict) else None
     if override is not None:
         system = override
-    return Crs.of(str(system)) if system else None
+    return Crs.of(str(system), where) if system else None
 
 
 def vertices_of(values: Any, transform: Any, where: str, crs: Crs | None = None) -> np.ndarray:

@@ -253,6 +253,7 @@ def _asset_extras(info: OutputInfo) -> dict[str, Any]:
         {
             "source": info.source,
             "crs": info.crs,
+            **({"vertical_reference": info.vertical} if info.vertical else {}),
             "reference_view": {"height_px": info.view.height_px, "fov_y_deg": info.view.fov_y_deg},
             "screencoverage": COVERAGE_MEANING,
             "options": info.options,

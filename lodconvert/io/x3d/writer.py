@@ -4,7 +4,8 @@
 Layout of a written file (validates against the official x3d-4.0.xsd)::
 
     <X3D profile='Interchange' version='4.0' ...>
-      <head> components Navigation 2, Rendering 4, Shape 5; meta generator, source, crs, ...
+      <head> components Navigation 2, Rendering 4, Shape 5; meta generator, source, crs,
+              vertical-reference, ...
       <Scene>
         <Transform DEF='id' translation='origin (full float64 precision)'>
           <LOD DEF='id_LOD' center=... range='cutoffs' forceTransitions='true'>
@@ -257,6 +258,7 @@ def _head(out: _Out, info: OutputInfo, switching: str) -> None:
         ("generator", info.generator),
         ("source", info.source),
         *([("crs", info.crs)] if info.crs else []),
+        *([("vertical-reference", info.vertical)] if info.vertical else []),
         (
             "reference-view",
             f"{view.height_px} px high viewport, {view.fov_y_deg:g} degree vertical field of "
