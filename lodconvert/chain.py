@@ -40,6 +40,7 @@ from .ranges import (
     check_range_parameters,
     cutoff,
     default_xs,
+    diagonal,
     projected_px,
 )
 from .sourcelods import GROUND_COVERS, SLOTS, prism, source_levels
@@ -422,7 +423,7 @@ def bake_chain(
     origin = (world_bounds[0] + world_bounds[1]) / 2.0
     surface = obj.geometry.translated(-origin)
     bounds = world_bounds - origin
-    alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
+    alpha = diagonal(world_bounds)
     xs = list(opts.exponents)
     cuts = [cutoff(alpha, opts.beta, opts.gamma, x) for x in xs]
     # Distance each level first shows at; a baked finest level is designed for x = 0.
@@ -480,7 +481,7 @@ def _source_chain(
     world_bounds = finest.bounds
     origin = (world_bounds[0] + world_bounds[1]) / 2.0
     bounds = world_bounds - origin
-    alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
+    alpha = diagonal(world_bounds)
     xs = list(opts.exponents)
     cuts = [cutoff(alpha, opts.beta, opts.gamma, x) for x in xs]
     surface = finest.translated(-origin)
@@ -532,7 +533,7 @@ def _lod0_chain(obj: Node, opts: ChainOptions) -> LodChain | None:
         return None
     world_bounds = shape.bounds
     origin = (world_bounds[0] + world_bounds[1]) / 2.0
-    alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
+    alpha = diagonal(world_bounds)
     level = Level(name="LOD1", kind="prism", mesh=shape.translated(-origin))
     dropped = {f"LOD{slot}": "the source has only LoD 0" for slot in SLOTS[:-1]}
     return _finished(obj, opts, [level], [], [], origin, alpha, dropped)
