@@ -43,7 +43,7 @@ from .ranges import (
     diagonal,
     projected_px,
 )
-from .sourcelods import GROUND_COVERS, SLOTS, prism, source_levels
+from .sourcelods import GROUND_COVERS, SLOTS, lod_name, prism, source_levels, unused_levels
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
@@ -460,7 +460,13 @@ def bake_chain(
             kept_cuts.append(cuts[n - 1])
             kept_xs.append(xs[n - 1])
 
-    return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped)
+    unused = unused_levels(obj.lods)
+    if not (opts.keep_mesh and opts.levels == len(SLOTS)):
+        option = "--no-mesh" if not opts.keep_mesh else f"--levels {opts.levels}"
+        for label, mesh in obj.lods.items():
+            if label not in unused and mesh is not obj.geometry:
+                unused[label] = f"{option}: every level is made from the finest geometry"
+    return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped, unused)
 
 
 def _source_chain(
@@ -519,7 +525,14 @@ def _source_chain(
         levels.append(level)
         kept_cuts.append(cuts[index])
         kept_xs.append(xs[index])
-    return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped)
+    unused = unused_levels(obj.lods)
+    if 0 in sources and not any(level.kind == "prism" for level in levels):
+        unused[sources[0][0]] = (
+            f"LOD1 is the source's {lod_name(sources[1][0])}, not a prism of this footprint"
+            if 1 in sources
+            else dropped["LOD1"]
+        )
+    return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped, unused)
 
 
 def _lod0_chain(obj: Node, opts: ChainOptions) -> LodChain | None:
@@ -536,7 +549,8 @@ def _lod0_chain(obj: Node, opts: ChainOptions) -> LodChain | None:
     alpha = diagonal(world_bounds)
     level = Level(name="LOD1", kind="prism", mesh=shape.translated(-origin))
     dropped = {f"LOD{slot}": "the source has only LoD 0" for slot in SLOTS[:-1]}
-    return _finished(obj, opts, [level], [], [], origin, alpha, dropped)
+    unused = unused_levels(obj.lods)
+    return _finished(obj, opts, [level], [], [], origin, alpha, dropped, unused)
 
 
 def _finished(
@@ -548,9 +562,11 @@ def _finished(
     origin: np.ndarray,
     alpha: float,
     dropped: dict[str, str],
+    unused: dict[str, str],
 ) -> LodChain:
     """The chain of ``obj`` from its kept levels and their switch-in cutoffs and exponents,
-    with the cull cutoff added when asked."""
+    with the cull cutoff added when asked; ``unused``: its source LoDs no level is made
+    from."""
     culled = opts.cull is not None
     if culled:
         cuts = [*cuts, cutoff(alpha, opts.beta, opts.gamma, opts.cull)]
@@ -567,5 +583,6 @@ def _finished(
         xs=xs,
         culled=culled,
         dropped=dropped,
+        unused=unused,
         metadata=obj.object_attributes(),
     )

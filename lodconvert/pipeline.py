@@ -109,6 +109,7 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
         "origin": [float(v) for v in chain.origin],
         "levels": levels,
         "dropped": dict(chain.dropped),
+        "unused": dict(chain.unused),
     }
 
 
