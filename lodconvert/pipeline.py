@@ -357,7 +357,7 @@ def convert(
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
         start = time.perf_counter()
-        scene = _read(inputs, sources, limits, read_options)
+        scene = read_inputs(inputs, read_options, limits, sources)
         timings["read"] = time.perf_counter() - start
         if scene.crs is None and _is_city(scene):
             warn(
@@ -396,11 +396,7 @@ def convert(
         )
         target.write_chains(chains, sink, info, **(write_options or {}))
         timings["bake_and_write"] = time.perf_counter() - start
-        tally = tally_of(scene)
-        for entry in tally.skipped if tally is not None else ():
-            if records and not strict:  # with nothing converted, the run's error says it
-                warn(f"{scene.source}: object {entry['reason']} — skipped")
-            skipped.append(entry)
+        tally = _reader_skipped(scene, skipped, warn if records and not strict else _quiet)
         if strict and skipped:
             more = f" (and {len(skipped) - 1} more)" if len(skipped) > 1 else ""
             raise InputError(
@@ -408,7 +404,7 @@ def convert(
                 " + ".join(str(path) for path in inputs),
             )
         if not records:
-            raise _none_converted(skipped, inputs)
+            raise _none_converted(skipped, " + ".join(str(path) for path in inputs))
         step("checking", 0, 1)
         start = time.perf_counter()
         check_written(sink.staged.temp, output_path)
@@ -427,13 +423,15 @@ def convert(
     return report
 
 
-def _read(
+def read_inputs(
     inputs: Sequence[str | Path],
-    sources: Sequence[Any],
-    limits: Limits,
-    read_options: dict[str, Any] | None,
+    read_options: dict[str, Any] | None = None,
+    limits: Limits = DEFAULT_LIMITS,
+    sources: Sequence[Any] | None = None,
 ) -> Scene:
-    """The scene of ``inputs``, each read by its format in ``sources`` (:func:`merged`)."""
+    """The scene of ``inputs`` (one, or several merged: :func:`merged`), each read by its
+    format (in ``sources`` where the caller found them) with the options it takes."""
+    sources = sources or [input_format(path) for path in inputs]
     return merged(
         [
             source.read_file(path, limits=limits, **(read_options or {}))
@@ -442,14 +440,27 @@ def _read(
     )
 
 
-def _none_converted(skipped: list[dict[str, str]], inputs: Sequence[str | Path]) -> InputError:
-    """The error of a run in which no object could be converted (``skipped``: why)."""
+def _reader_skipped(
+    scene: Scene, skipped: list[dict[str, str]], warn: Message
+) -> InputTally | None:
+    """Add the objects the reader of ``scene`` skipped to ``skipped``, each told to ``warn``
+    (with nothing converted, the run's error says it); ``scene``'s tally."""
+    tally = tally_of(scene)
+    for entry in tally.skipped if tally is not None else ():
+        warn(f"{scene.source}: object {entry['reason']} — skipped")
+        skipped.append(entry)
+    return tally
+
+
+def _none_converted(skipped: list[dict[str, str]], source: str) -> InputError:
+    """The error of a run in which no object of ``source`` could be converted (``skipped``:
+    why)."""
     reason = (
         skipped[0]["reason"]
         if len(skipped) == 1
         else f"none of its {len(skipped)} objects could be converted"
     )
-    return InputError(reason, " + ".join(str(path) for path in inputs))
+    return InputError(reason, source)
 
 
 @contextlib.contextmanager
@@ -500,35 +511,25 @@ def _report(
 
 
 def object_ranges(
-    input_path: str | Path | Sequence[str | Path],
-    options: ChainOptions,
-    read_options: dict[str, Any] | None = None,
-    limits: Limits = DEFAULT_LIMITS,
-    warn: Message = _quiet,
+    scene: Scene, options: ChainOptions, warn: Message = _quiet
 ) -> list[dict[str, Any]]:
-    """α, γ, the levels and the cutoffs of every object of ``input_path`` (several inputs: one
-    scene, as :func:`convert` reads them), as convert plans them (:func:`~.chain.plan_chain`),
-    without baking: a level to bake (``to_bake``) is kept, and its cutoff with it, where baking
-    finds it cheaper than the level before and faithful. Objects that cannot be converted are
-    reported through ``warn`` and left out; when none can, :class:`InputError`."""
+    """α, γ, the levels and the cutoffs of every object of ``scene`` (:func:`read_inputs`) as
+    :func:`convert` plans them (:func:`~.chain.plan_chain`), without baking: a level to bake
+    (``to_bake``) is kept, and its cutoff with it, where baking finds it cheaper than the level
+    before and faithful. Objects that cannot be converted are reported through ``warn`` and
+    left out; when none can, :class:`InputError`."""
     options.check()
-    inputs = [input_path] if isinstance(input_path, str | Path) else list(input_path)
-    scene = _read(inputs, [input_format(path) for path in inputs], limits, read_options)
     skipped: list[dict[str, str]] = []
-    plan = _ObjectBaker(scene.source, options, None, _quiet, warn, skipped, limits, False)
+    plan = _ObjectBaker(scene.source, options, None, _quiet, warn, skipped, DEFAULT_LIMITS, False)
     plan.total = _object_count(scene)
     rows = []
     for obj, radius in _with_plot_radii(scene, options):
         planned = plan(obj, radius)
         if planned is not None:
             rows.append(_range_record(planned, options))
-    tally = tally_of(scene)
-    for entry in tally.skipped if tally is not None else ():
-        if rows:
-            warn(f"{scene.source}: object {entry['reason']} — skipped")
-        skipped.append(entry)
+    _reader_skipped(scene, skipped, warn if rows else _quiet)
     if not rows:
-        raise _none_converted(skipped, inputs)
+        raise _none_converted(skipped, scene.source)
     return rows
 
 

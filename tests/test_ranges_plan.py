@@ -110,3 +110,18 @@ def run_json(*args: str | Path) -> tuple[list[dict], object]:
     table = run(*args)
     assert table.returncode == 0, table.stderr
     return json.loads(rows.stdout), table
+
+
+def test_a_broken_object_is_reported_and_the_others_listed(tmp_path: Path) -> None:
+    document = json.loads(present(CITYJSON / "multi_lod_10bldg.city.json").read_text())
+    bad = list(document["CityObjects"])[3]
+    document["CityObjects"][bad]["geometry"][1]["boundaries"][0][0][0][0] = 10**6
+    path = tmp_path / "bad.city.json"
+    path.write_text(json.dumps(document))
+    result = run("ranges", path, "--json")
+    assert result.returncode == 0, result.stderr
+    assert [row["id"] for row in json.loads(result.stdout)] == [
+        key for key in document["CityObjects"] if key != bad
+    ]
+    (warning,) = [w for w in result.stderr.splitlines() if "declares no CRS" not in w]
+    assert bad in warning and "skipped" in warning

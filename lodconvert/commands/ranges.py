@@ -9,7 +9,7 @@ import json
 from ..cli import EXIT_OK, Console, add_range_options, chain_options
 from ..cli.options import add_bake_options, add_read_options, read_options
 from ..limits import DEFAULT_LIMITS
-from ..pipeline import object_ranges
+from ..pipeline import object_ranges, read_inputs
 
 DESCRIPTION = (
     "Print the levels, α (bounding-box diagonal), γ and the cutoffs Y = α·β·γˣ of every object "
@@ -32,13 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Print the table (or JSON) of ranges."""
-    rows = object_ranges(
-        args.input,
-        chain_options(args),
-        read_options(args),
-        DEFAULT_LIMITS.with_text(args.limit),
-        console.warn,
-    )
+    scene = read_inputs(args.input, read_options(args), DEFAULT_LIMITS.with_text(args.limit))
+    rows = object_ranges(scene, chain_options(args), console.warn)
     if args.json:
         print(json.dumps(rows, indent=2))
         return EXIT_OK
