@@ -18,6 +18,7 @@ from lodconvert.pipeline import convert
 from lodconvert.sourcelods import unused_levels
 
 from .conftest import ROOT, SHARED
+from .test_cli import run
 
 MULTI_LOD = SHARED / "data" / "cityjson" / "multi_lod_10bldg.city.json"
 SIG3D = SHARED / "data" / "citygml" / "sig3d_house_lod0-4"
@@ -65,6 +66,14 @@ def test_the_report_names_lod_1_2_beside_the_lod_1_3_that_fills_lod1(tmp_path: P
     for obj in objects:
         assert obj["unused"] == {"1.2": "slot LOD1 taken by LoD 1.3"}
         assert [level["name"] for level in obj["levels"]] == ["LOD2", "LOD1"]
+
+
+def test_the_summary_counts_the_unused_lods(tmp_path: Path) -> None:
+    result = run(present(MULTI_LOD), "-o", tmp_path / "out.glb", "--backend", "numpy")
+    assert result.returncode == 0, result.stderr
+    assert "10 object(s) have source LoDs that no level is made from: LoD 1.2 (10)" in (
+        result.stderr
+    )
 
 
 def test_with_three_levels_every_lod_but_the_finest_is_unused(tmp_path: Path) -> None:

@@ -23,6 +23,7 @@ from ..io import output_format
 from ..io.x3d import SWITCHING_MODES
 from ..limits import DEFAULT_LIMITS
 from ..sinks import FileSink, Outputs
+from ..sourcelods import lod_name
 from . import COMMANDS
 
 DESCRIPTION = (
@@ -182,6 +183,13 @@ def run(args: argparse.Namespace, console: Console) -> int:
         console.info(
             f"{sum(fewer.values()):,} object(s) keep fewer levels ({kept} level(s)): no coarser "
             "level was both cheaper and faithful there, so the finer one stays on (see README)"
+        )
+    unused = Counter(label for obj in objects for label in obj["unused"])
+    if unused:
+        labels = ", ".join(f"{lod_name(label)} ({n:,})" for label, n in sorted(unused.items()))
+        console.info(
+            f"{sum(1 for obj in objects if obj['unused']):,} object(s) have source LoDs that no "
+            f"level is made from: {labels}; --report says why for each"
         )
     if "hlod" in report:
         console.info(_hlod_line(report["hlod"]))
