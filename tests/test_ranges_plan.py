@@ -125,3 +125,38 @@ def test_a_broken_object_is_reported_and_the_others_listed(tmp_path: Path) -> No
     ]
     (warning,) = [w for w in result.stderr.splitlines() if "declares no CRS" not in w]
     assert bad in warning and "skipped" in warning
+
+
+def test_instances_of_one_template_get_the_ranges_convert_gives_them(tmp_path: Path) -> None:
+    """Convert bakes a template's geometry once, for its first instance (γ: that tree's plot
+    radius), and every instance shows that chain; ranges says the same of each."""
+    cube = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
+    faces = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    template = {"type": "Solid", "lod": "2", "boundaries": [[[f] for f in faces]]}
+    scale = [2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 1]
+    instance = {"type": "GeometryInstance", "template": 0, "transformationMatrix": scale}
+    trees = {
+        f"t{i}": {"type": "SolitaryVegetationObject", "geometry": [{**instance, "boundaries": [i]}]}
+        for i in range(3)
+    }
+    path = tmp_path / "trees.city.json"
+    path.write_text(
+        json.dumps(
+            {
+                "type": "CityJSON",
+                "version": "2.0",
+                "CityObjects": trees,
+                "vertices": [[0, 0, 0], [6, 0, 0], [40, 0, 0]],
+                "geometry-templates": {"templates": [template], "vertices-templates": cube},
+            }
+        )
+    )
+    ranges = run("ranges", path, "--json")
+    assert ranges.returncode == 0, ranges.stderr
+    report = tmp_path / "report.json"
+    assert run(path, "-o", tmp_path / "trees.x3d", "--report", report, "-qq").returncode == 0
+    written = [
+        (o["id"], o["gamma"], o["cutoffs"]) for o in json.loads(report.read_text())["objects"]
+    ]
+    assert [(r["id"], r["gamma"], r["cutoffs"]) for r in json.loads(ranges.stdout)] == written
+    assert {gamma for _, gamma, _ in written} == {3.0}  # the first tree's plot radius
