@@ -34,7 +34,7 @@ def zipped(path: Path, members: dict[str, bytes]) -> Path:
     """A zip at ``path`` holding ``members`` (name → bytes), deflated."""
     with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
         for name, data in members.items():
-            archive.writestr(name, data)
+            archive.writestr(zipfile.ZipInfo(name), data, zipfile.ZIP_DEFLATED)
     return path
 
 
@@ -80,12 +80,14 @@ def test_a_cityjsonseq_in_a_zip_reads_as_the_plain_sequence(tmp_path: Path) -> N
     assert not isinstance(read_scene(path).nodes, list)  # still streamed line by line
 
 
-def test_files_beside_the_city_model_and_macos_forks_are_ignored(tmp_path: Path) -> None:
+def test_files_beside_the_city_model_folders_and_macos_forks_are_ignored(tmp_path: Path) -> None:
     data = present(MULTI_LOD).read_bytes()
     members = {
         "LICENSE.txt": b"CC BY 4.0",
         "__MACOSX/._ten.city.json": b"\0",
         "ten.city.json": data,
+        "tiles/": b"",
+        "": b"a member without a name",
     }
     same_nodes(zipped(tmp_path / "ten.zip", members), MULTI_LOD)
 

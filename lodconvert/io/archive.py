@@ -136,8 +136,8 @@ def _member(archive: zipfile.ZipFile, source: str) -> zipfile.ZipInfo:
         parts = PurePosixPath(name).parts
         if name.startswith("/") or ".." in parts or re.match(r"[A-Za-z]:", name):
             raise InputError(f"holds an unsafe member name {info.filename!r}", source)
-        if info.is_dir() or parts[0] == "__MACOSX":
-            continue
+        if not parts or name.endswith("/") or parts[0] == "__MACOSX":
+            continue  # no name, a folder, or macOS resource forks
         if name.lower().endswith(ZIP_MEMBERS):
             members.append(info)
     if len(members) != 1:
