@@ -33,6 +33,7 @@ from typing import Any
 from ..errors import InputError, UsageError
 from ..model import LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
+from .archive import member_name
 
 FORMAT_MODULES = (
     "lodconvert.io.cityjson",
@@ -144,8 +145,11 @@ def _known(role: str) -> str:
 
 
 def input_format(path: str | Path) -> Format:
-    """The format that reads ``path``, or :class:`InputError` naming the known suffixes."""
+    """The format that reads ``path`` — for a ``.zip``, the format of the one city model file
+    it holds (:mod:`.archive`) — or :class:`InputError` naming the known suffixes."""
     suffix = suffix_of(path)
+    if suffix == ".zip" and Path(path).is_file():
+        suffix = suffix_of(member_name(Path(path)))
     entry = _find("read", suffix)
     if entry is None:
         raise InputError(
@@ -180,7 +184,8 @@ def own_format(path: str | Path, role: str = "read_back") -> Format:
 
 
 def read_scene(path: str | Path, **options: Any) -> Scene:
-    """Read any supported input (the registry picks the reader by suffix)."""
+    """Read any supported input (the registry picks the reader by suffix, a ``.zip``'s by
+    the file it holds)."""
     return input_format(path).read_file(path, **options)
 
 

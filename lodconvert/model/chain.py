@@ -96,6 +96,8 @@ class LodChain:
     culled: bool = False
     metadata: dict[str, Any] = field(default_factory=dict)
     dropped: dict[str, str] = field(default_factory=dict)
+    unused: dict[str, str] = field(default_factory=dict)
+    """Source LoDs that no level is made from (label → why; :mod:`~lodconvert.sourcelods`)."""
     transform: np.ndarray | None = None
     """4×4 placement of the chain's frame (an instance of shared geometry): world =
     ``transform · (origin + local)``; ``None`` is the identity. Instances of one geometry share

@@ -151,7 +151,7 @@ def read_sequence(
 ) -> Scene:
     """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
     try:
-        handle = open_text(path)
+        handle = open_text(path, limits)
         first = handle.readline(limits.decompressed_bytes)
     except (OSError, EOFError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot be read ({exc})", str(path)) from None
