@@ -96,11 +96,11 @@ class LodChain:
     culled: bool = False
     metadata: dict[str, Any] = field(default_factory=dict)
     dropped: dict[str, str] = field(default_factory=dict)
+    """Levels the planner left out (name → why): the finer level stays on in their place."""
     transform: np.ndarray | None = None
     """4×4 placement of the chain's frame (an instance of shared geometry): world =
     ``transform · (origin + local)``; ``None`` is the identity. Instances of one geometry share
     one ``levels`` list, which writers store once."""
-    """Levels the planner left out (name → why): the finer level stays on in their place."""
 
 
 @dataclass
