@@ -554,8 +554,9 @@ def _finished(
     if culled:
         cuts = [*cuts, cutoff(alpha, opts.beta, opts.gamma, opts.cull)]
         xs = [*xs, opts.cull]
+    text = obj.written()
     return LodChain(
-        object_id=obj.id,
+        object_id=text.id,
         levels=levels,
         cutoffs=cuts,
         origin=origin,
@@ -566,5 +567,6 @@ def _finished(
         xs=xs,
         culled=culled,
         dropped=dropped,
-        metadata=obj.object_attributes(),
+        metadata=text.attributes,
+        cut=text.cut,
     )

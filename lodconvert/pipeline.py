@@ -111,6 +111,7 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
         "origin": [float(v) for v in chain.origin],
         "levels": levels,
         "dropped": dict(chain.dropped),
+        **({"cut": list(chain.cut)} if chain.cut else {}),
     }
 
 
@@ -168,7 +169,8 @@ class _ObjectBaker:
         try:
             if obj.transform is not None and id(obj.geometry) in self.shared:
                 base = self.shared[id(obj.geometry)]
-                chain = replace(base, object_id=obj.id, metadata=obj.object_attributes())
+                text = obj.written()
+                chain = replace(base, object_id=text.id, metadata=text.attributes, cut=text.cut)
             else:
                 opts = replace(self.options, gamma=radius) if radius is not None else self.options
                 chain = bake_chain(

@@ -101,6 +101,9 @@ class LodChain:
     """4×4 placement of the chain's frame (an instance of shared geometry): world =
     ``transform · (origin + local)``; ``None`` is the identity. Instances of one geometry share
     one ``levels`` list, which writers store once."""
+    cut: tuple[str, ...] = ()
+    """What was cut from the object's id and attributes so that every output holds them
+    (:mod:`.safe_text`), one note per kind of cut."""
 
 
 @dataclass
