@@ -16,6 +16,7 @@ to the same target removes those, and never a staged name whose lock a live run 
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import os
 import re
@@ -26,10 +27,25 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
-from .errors import InputError
+from .errors import InputError, LodConvertError
 
 Check = Callable[[Path], None]
 """Called with a complete staged file (or directory) before the commit; raises to refuse it."""
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO})
+"""Errors of a write that no input or option causes: a full disk, a full quota, a file too
+large for its file system, a read-only or failing device."""
+
+
+@contextlib.contextmanager
+def writing(where: str | Path) -> Iterator[None]:
+    """A failed write in the block (:data:`WRITE_ERRNOS`) as one line naming ``where``
+    (:class:`LodConvertError`: ``out.glb: cannot write: No space left on device``)."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno not in WRITE_ERRNOS:
+            raise
+        raise LodConvertError(f"cannot write: {os.strerror(exc.errno)}", str(where)) from exc
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -107,8 +123,9 @@ class FileSink:
 
     @contextlib.contextmanager
     def open(self) -> Iterator[BinaryIO]:
-        """The staged file, opened for binary writing (flushed to disk when the block ends)."""
-        with self.staged.temp.open("wb") as handle:
+        """The staged file, opened for binary writing (flushed to disk when the block ends);
+        a failed write is one line naming the output (:func:`writing`)."""
+        with writing(self.path), self.staged.temp.open("wb") as handle:
             yield handle
             handle.flush()
             os.fsync(handle.fileno())
@@ -138,9 +155,10 @@ class DirectorySink:
         if relative.is_absolute() or ".." in relative.parts:
             raise ValueError(f"{relative} is not a path inside the output directory")
         target = self.staged.temp / relative
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with target.open("wb") as handle:
-            yield handle
+        with writing(self.path / relative):
+            target.parent.mkdir(parents=True, exist_ok=True)
+            with target.open("wb") as handle:
+                yield handle
 
 
 @dataclass
@@ -202,14 +220,24 @@ class Outputs:
         _clear_dead_runs(target)
         lock = None
         while lock is None:
-            if directory:
-                temp = tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-            else:
-                fd, temp = tempfile.mkstemp(
-                    prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent
-                )
-                os.close(fd)
-            lock = _held(Path(temp))
+            try:
+                if directory:
+                    temp = tempfile.mkdtemp(
+                        prefix=f".{target.name}.", suffix=".tmp", dir=target.parent
+                    )
+                else:
+                    fd, temp = tempfile.mkstemp(
+                        prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent
+                    )
+                    os.close(fd)
+                lock = _held(Path(temp))
+            except OSError as exc:  # /proc, /sys: folders that take no new files
+                folder = str(target.parent)
+                raise InputError(
+                    f"cannot write here: folder {folder!r} takes no new file "
+                    f"({os.strerror(exc.errno or errno.EIO)})",
+                    str(target),
+                ) from exc
         staged = _Staged(target, Path(temp), check, lock)
         self._staged.append(staged)
         return staged

@@ -20,6 +20,7 @@ from dataclasses import replace
 from typing import IO
 
 from .model import Node
+from .sinks import writing
 
 
 class NodeSpool:
@@ -33,14 +34,16 @@ class NodeSpool:
         self._entries: list[Node | int] = []
 
     def add(self, node: Node) -> None:
-        """Park ``node`` (kept in memory when it is placed by a transform)."""
+        """Park ``node`` (kept in memory when it is placed by a transform); a full temporary
+        folder is one line naming it (:func:`~.sinks.writing`)."""
         if node.transform is not None:
             self._entries.append(node)
             return
         self._entries.append(self._file.tell())
         text = node.written()
         parked = replace(node, id=text.id, children=[], attributes=text.attributes, cut=text.cut)
-        pickle.dump(parked, self._file, protocol=pickle.HIGHEST_PROTOCOL)
+        with writing(f"temporary folder {tempfile.gettempdir()}"):
+            pickle.dump(parked, self._file, protocol=pickle.HIGHEST_PROTOCOL)
 
     def get(self, index: int) -> Node:
         """Node ``index`` (in the order added), read back from the file."""
