@@ -36,6 +36,8 @@ attributes (512 Ki)."""
 NOT_XML_CHARS = r"\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff"
 """Characters that XML 1.0 cannot hold and lone surrogates, as a regular-expression class."""
 _NOT_XML = re.compile(f"[{NOT_XML_CHARS}]")
+_JSON_CONTROL = re.compile(r"\\u00[01]")
+"""How ``json.dumps`` writes a control character other than tab, line feed and return."""
 _SCALAR_CHARS = 8
 _SHOWN_PATH_CHARS = 120
 
@@ -166,10 +168,27 @@ def bounded_id(object_id: str) -> tuple[str, str | None]:
     return clean, "id " + " and ".join(done) if done else None
 
 
+def _plainly_within(attributes: dict[str, Any]) -> bool:
+    """Whether ``attributes`` are within every bound, judged from their compact JSON text at C
+    speed (short, few nestings, no character to escape); ``False`` may still be within."""
+    try:
+        text = json.dumps(attributes, ensure_ascii=False, default=str)
+    except (ValueError, RecursionError):
+        return False
+    return (
+        len(text) <= MAX_TEXT_CHARS  # so at most MAX_OBJECT_CHARS // 2 characters counted
+        and text.count("{") + text.count("[") <= MAX_DEPTH
+        and _NOT_XML.search(text) is None
+        and _JSON_CONTROL.search(text) is None
+    )
+
+
 def object_text(object_id: str, attributes: dict[str, Any]) -> ObjectText:
     """``object_id`` and ``attributes`` bounded and cleaned as the module says (text already
     bounded passes unchanged, without notes)."""
     clean_id, id_note = bounded_id(object_id)
+    if not attributes or _plainly_within(attributes):
+        return ObjectText(clean_id, attributes, (id_note,) if id_note else ())
     cuts = _Cuts()
     kept = cuts.value(attributes, "", 0)
     return ObjectText(clean_id, kept, tuple([id_note] if id_note else []) + tuple(cuts.lines()))
