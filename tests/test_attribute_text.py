@@ -30,6 +30,8 @@ from .test_cli import run
 
 BIG = 11_000_000
 """Characters of one attribute: over libxml2's 10 MB attribute value limit."""
+TRICKY_ID = "a\"b\\c&<>'\td é😀"
+"""An id that XML and X3D's MFString escape, written and read back as it is."""
 
 
 def _nested(depth: int) -> dict:
@@ -44,7 +46,8 @@ def _nested(depth: int) -> dict:
 def hostile_city(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]]:
     """The 10-building CityJSON sample with one hostile object after another: an id with
     U+0001, a lone surrogate in a name, an 11 MB description, a value nested 600 deep, and 40
-    values of 64 Ki double quotes (each 9 bytes in X3D: 23 MB in one attribute value)."""
+    values of 64 Ki double quotes (each 9 bytes in X3D: 23 MB in one attribute value); and an
+    id that needs escaping but no cut."""
     data = json.loads(multi_lod().read_text(encoding="utf-8"))
     objects = data["CityObjects"]
     keys = list(objects)
@@ -55,6 +58,7 @@ def hostile_city(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[s
     objects[keys[4]].setdefault("attributes", {}).update(
         {f"q{i}": '"' * MAX_TEXT_CHARS for i in range(40)}
     )
+    objects[TRICKY_ID] = objects.pop(keys[5])
     path = tmp_path_factory.mktemp("hostile") / "hostile.city.json"
     path.write_text(json.dumps(data), encoding="utf-8", errors="surrogatepass")
     return path, ["bad\\u0001id", *keys[1:5]]
@@ -82,7 +86,7 @@ def test_hostile_ids_and_attributes_convert_read_back_and_are_reported(
     assert sum(bool(record.get("cut")) for record in records.values()) == 5
 
     chains = {chain.object_id: chain for chain in read_chains(out, geometry=False)}
-    assert set(chains) == set(records)  # ids read back as the report gives them
+    assert set(chains) == set(records) and TRICKY_ID in chains  # ids read back as reported
     assert chains[ids[0]].metadata["id"] == "bad\\u0001id"
     assert chains[ids[1]].metadata["name"] == "a\\ud800b"
     assert chains[ids[2]].metadata["description"] == "x" * MAX_TEXT_CHARS
