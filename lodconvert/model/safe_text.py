@@ -105,7 +105,7 @@ class _Cuts:
         if isinstance(value, dict):
             kept: dict[str, Any] = {}
             for key, item in value.items():
-                where = f"{path}.{key}" if path else str(key)
+                where = _at(path, f".{key}" if path else str(key))
                 if self.left <= 0:
                     self.leave_out(where)
                     continue
@@ -114,7 +114,7 @@ class _Cuts:
             return kept
         items = []
         for index, item in enumerate(value):
-            where = f"{path}[{index}]"
+            where = _at(path, f"[{index}]")
             if self.left <= 0:
                 self.leave_out(where)
                 continue
@@ -149,6 +149,12 @@ class _Cuts:
                 f"the object's attributes (first {_shown(self.left_out_at)})"
             )
         return notes
+
+
+def _at(path: str, step: str) -> str:
+    """``path`` one step further, kept no longer than a note shows it (a path of long keys
+    would otherwise copy them at every level)."""
+    return (path + step[: _SHOWN_PATH_CHARS + 1])[: _SHOWN_PATH_CHARS + 1]
 
 
 def _shown(path: str) -> str:
