@@ -25,6 +25,7 @@ from lodconvert.model.safe_text import (
 from lodconvert.spool import NodeSpool
 
 from .conftest import ROOT
+from .test_citygml import sample
 from .test_cityjson import multi_lod
 from .test_cli import run
 
@@ -97,6 +98,21 @@ def test_hostile_ids_and_attributes_convert_read_back_and_are_reported(
     assert sum(len(v) for k, v in chains[ids[4]].metadata.items() if k[0] == "q") < MAX_OBJECT_CHARS
     if suffix == ".x3d":  # libxml2's default limits read it (no huge_tree)
         assert etree.parse(str(out), etree.XMLParser(huge_tree=False)).getroot().tag == "X3D"
+
+
+def test_a_citygml_attribute_over_libxml2s_limit_is_cut_and_the_x3d_reads(tmp_path: Path) -> None:
+    text = sample("potsdam_lod1_v1.gml").read_text(encoding="utf-8")
+    first = text.index("<gen:stringAttribute ")
+    value = "y" * BIG
+    big = f'<gen:stringAttribute name="big"><gen:value>{value}</gen:value></gen:stringAttribute>'
+    source = tmp_path / "big.gml"
+    source.write_text(text[:first] + big + text[first:], encoding="utf-8")
+    out, report = tmp_path / "city.x3d", tmp_path / "report.json"
+    result = run(source, "-o", out, "--report", report, "-q")
+    assert result.returncode == 0, result.stderr
+    cut = [record["cut"] for record in json.loads(report.read_text())["objects"] if "cut" in record]
+    assert len(cut) == 1 and f"first 'generic.big': {BIG:,} characters" in cut[0][0]
+    assert etree.parse(str(out), etree.XMLParser(huge_tree=False)).getroot().tag == "X3D"
 
 
 def test_bounded_text_is_bounded_again_without_change() -> None:
