@@ -74,6 +74,11 @@ def _staged_pattern(target: Path) -> re.Pattern[str]:
     return re.compile(rf"\.{re.escape(target.name)}\.[a-z0-9_]{{8}}\.tmp(?:{suffix})?")
 
 
+_NO_LOCKS = frozenset({errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL})
+"""``flock`` errors of file systems without locks: staged names there are left unlocked, and
+another run, failing to lock them too, leaves them alone."""
+
+
 def _held(path: Path) -> int | None:
     """A descriptor of ``path`` holding its exclusive ``flock`` (waiting for it), or ``None``
     when ``path`` no longer names the locked file (another run removed it meanwhile)."""
@@ -81,7 +86,12 @@ def _held(path: Path) -> int | None:
         fd = os.open(path, os.O_RDONLY)
     except FileNotFoundError:
         return None
-    fcntl.flock(fd, fcntl.LOCK_EX)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    except OSError as exc:
+        if exc.errno not in _NO_LOCKS:
+            os.close(fd)
+            raise
     with contextlib.suppress(OSError):
         if os.path.samestat(os.fstat(fd), os.stat(path)):
             return fd
