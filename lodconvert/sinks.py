@@ -31,9 +31,10 @@ from .errors import InputError, LodConvertError
 
 Check = Callable[[Path], None]
 """Called with a complete staged file (or directory) before the commit; raises to refuse it."""
-WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EIO})
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
 """Errors of a write that no input or option causes: a full disk, a full quota, a file too
-large for its file system, a read-only or failing device."""
+large for its file system, a file system turned read-only. (Not EIO: input read lazily while
+an output is written could raise it too.)"""
 
 
 @contextlib.contextmanager
