@@ -49,6 +49,11 @@ def writing(where: str | Path) -> Iterator[None]:
         raise LodConvertError(f"cannot write: {os.strerror(exc.errno)}", str(where)) from exc
 
 
+def writing_temporary() -> contextlib.AbstractContextManager[None]:
+    """:func:`writing` for work files in the temporary folder (``TMPDIR``), naming it."""
+    return writing(f"temporary folder {tempfile.gettempdir()}")
+
+
 def _same_file(a: Path, b: Path) -> bool:
     """Whether ``a`` and ``b`` name one file (same resolved path, or same device and inode)."""
     if a.resolve() == b.resolve():

@@ -20,7 +20,7 @@ from dataclasses import replace
 from typing import IO
 
 from .model import Node
-from .sinks import writing
+from .sinks import writing_temporary
 
 
 class NodeSpool:
@@ -42,7 +42,7 @@ class NodeSpool:
         self._entries.append(self._file.tell())
         text = node.written()
         parked = replace(node, id=text.id, children=[], attributes=text.attributes, cut=text.cut)
-        with writing(f"temporary folder {tempfile.gettempdir()}"):
+        with writing_temporary():
             pickle.dump(parked, self._file, protocol=pickle.HIGHEST_PROTOCOL)
 
     def get(self, index: int) -> Node:
@@ -50,7 +50,8 @@ class NodeSpool:
         entry = self._entries[index]
         if isinstance(entry, Node):
             return entry
-        self._file.seek(entry)
+        with writing_temporary():  # the seek writes what is still buffered
+            self._file.seek(entry)
         return pickle.load(self._file)
 
     def __len__(self) -> int:

@@ -161,13 +161,16 @@ def test_an_output_in_proc_or_sys_is_one_line(target: str) -> None:
     assert not Path(target).exists()
 
 
-def _in_a_small_tmpfs(folder: Path, command: str) -> subprocess.CompletedProcess[str]:
-    """``command`` run by sh with a 256 KiB tmpfs mounted on ``folder``, in a mount namespace
-    of its own (so the mount goes with it), or skip where namespaces or tmpfs are refused."""
+def _in_a_small_tmpfs(
+    folder: Path, command: str, size: str = "256k"
+) -> subprocess.CompletedProcess[str]:
+    """``command`` run by sh with a tmpfs of ``size`` mounted on ``folder``, in a mount
+    namespace of its own (so the mount goes with it), or skip where namespaces or tmpfs are
+    refused."""
     unshare = shutil.which("unshare")
     if unshare is None:
         pytest.skip("no unshare(1)")
-    mount = f"mount -t tmpfs -o size=256k tmpfs {shlex.quote(str(folder))} || exit 99; "
+    mount = f"mount -t tmpfs -o size={size} tmpfs {shlex.quote(str(folder))} || exit 99; "
     script = mount + command
     done = subprocess.run(
         [unshare, "-rm", "sh", "-c", script], capture_output=True, text=True, timeout=300
@@ -191,6 +194,23 @@ def test_a_full_disk_is_one_line_naming_the_output_and_leaves_nothing(
     lines = done.stderr.strip().splitlines()
     assert lines == [f"lodconvert: error: {out}: cannot write: No space left on device"], done
     assert done.stdout.split() == ["exit=1"]  # and the tmpfs holds no file
+
+
+def test_a_full_temporary_folder_is_one_line_naming_it_and_leaves_nothing(tmp_path: Path) -> None:
+    city = ROOT.parent / "shared" / "data" / "cityjson" / "multi_lod_10bldg.city.json"
+    if not city.exists():
+        pytest.skip(f"{city} is absent (shared test data not checked out)")
+    small, out = tmp_path / "small", tmp_path / "out" / "city.glb"
+    small.mkdir()
+    out.parent.mkdir()
+    convert = shlex.join([sys.executable, "-m", "lodconvert", str(city), "-o", str(out), "-qq"])
+    done = _in_a_small_tmpfs(small, f"TMPDIR={shlex.quote(str(small))} {convert}", size="16k")
+    assert done.returncode == 1, done
+    lines = done.stderr.strip().splitlines()
+    assert lines == [
+        f"lodconvert: error: temporary folder {small}: cannot write: No space left on device"
+    ]
+    assert _files(out.parent) == []
 
 
 def test_a_full_temporary_folder_while_objects_wait_on_disk_is_one_line(
