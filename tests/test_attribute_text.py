@@ -47,8 +47,8 @@ def _nested(depth: int) -> dict:
 def hostile_city(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[str]]:
     """The 10-building CityJSON sample with one hostile object after another: an id with
     U+0001, a lone surrogate in a name, an 11 MB description, a value nested 600 deep, and 40
-    values of 64 Ki double quotes (each 9 bytes in X3D: 23 MB in one attribute value); and an
-    id that needs escaping but no cut."""
+    values of 64 Ki double quotes (each 9 bytes in X3D: 23 MB in one attribute value), 1.5
+    million empty strings (16 bytes each in X3D); and an id that needs escaping but no cut."""
     data = json.loads(multi_lod().read_text(encoding="utf-8"))
     objects = data["CityObjects"]
     keys = list(objects)
@@ -59,10 +59,11 @@ def hostile_city(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[s
     objects[keys[4]].setdefault("attributes", {}).update(
         {f"q{i}": '"' * MAX_TEXT_CHARS for i in range(40)}
     )
+    objects[keys[6]].setdefault("attributes", {})["empties"] = [""] * 1_500_000
     objects[TRICKY_ID] = objects.pop(keys[5])
     path = tmp_path_factory.mktemp("hostile") / "hostile.city.json"
     path.write_text(json.dumps(data), encoding="utf-8", errors="surrogatepass")
-    return path, ["bad\\u0001id", *keys[1:5]]
+    return path, ["bad\\u0001id", *keys[1:5], keys[6]]
 
 
 @pytest.mark.parametrize("suffix", [".x3d", ".glb"])
@@ -83,8 +84,8 @@ def test_hostile_ids_and_attributes_convert_read_back_and_are_reported(
     assert "written as \\uXXXX (first in 'name')" in cut[ids[1]]
     assert f"first 'description': {BIG:,} characters" in cut[ids[2]]
     assert f"nested over {MAX_DEPTH} levels deep written as JSON text" in cut[ids[3]]
-    assert "left out beyond" in cut[ids[4]]
-    assert sum(bool(record.get("cut")) for record in records.values()) == 5
+    assert "left out beyond" in cut[ids[4]] and "left out beyond" in cut[ids[5]]
+    assert sum(bool(record.get("cut")) for record in records.values()) == 6
 
     chains = {chain.object_id: chain for chain in read_chains(out, geometry=False)}
     assert set(chains) == set(records) and TRICKY_ID in chains  # ids read back as reported

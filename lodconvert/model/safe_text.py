@@ -15,8 +15,8 @@ is written or parked on disk:
 
 Each kind of cut is noted in one line (the report lists them per object, ``cut``). With these
 bounds an object's attributes, written as one X3D attribute value with every character escaped
-(at most 9 bytes each), stay far below the 10 MB that libxml2 reads by default
-(``XML_MAX_TEXT_LENGTH``).
+(at most 9 bytes each, :data:`MAX_OBJECT_CHARS`), stay far below the 10 MB that libxml2 reads
+by default (``XML_MAX_TEXT_LENGTH``).
 """
 
 from __future__ import annotations
@@ -31,14 +31,15 @@ MAX_TEXT_CHARS = 65_536
 MAX_DEPTH = 32
 """Deepest nesting of lists and mappings in an object's attributes kept as it is."""
 MAX_OBJECT_CHARS = 524_288
-"""Characters of text (names, values, 8 for a number or a nesting) kept of one object's
-attributes (512 Ki)."""
+"""Characters of text kept of one object's attributes (512 Ki): names and values with 2 for
+their quotes, 8 for a number or a nesting. Written in X3D, each takes at most 9 bytes."""
 NOT_XML_CHARS = r"\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff"
 """Characters that XML 1.0 cannot hold and lone surrogates, as a regular-expression class."""
 _NOT_XML = re.compile(f"[{NOT_XML_CHARS}]")
 _JSON_CONTROL = re.compile(r"\\u00[01]")
 """How ``json.dumps`` writes a control character other than tab, line feed and return."""
 _SCALAR_CHARS = 8
+_QUOTES = 2
 _SHOWN_PATH_CHARS = 120
 
 
@@ -79,13 +80,13 @@ class _Cuts:
         if clean is not text:
             self.escaped += (len(clean) - len(text)) // 5
             self.escaped_at = self.escaped_at or path
-        keep = min(MAX_TEXT_CHARS, max(self.left, 0))
+        keep = min(MAX_TEXT_CHARS, max(self.left - _QUOTES, 0))
         if len(clean) > keep:
             if not self.long:
                 self.long_at, self.first_length = path, len(clean)
             self.long += 1
             clean = clean[:keep]
-        self.left -= len(clean)
+        self.left -= len(clean) + _QUOTES
         return clean
 
     def value(self, value: Any, path: str, depth: int) -> Any:
