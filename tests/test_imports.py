@@ -1,5 +1,7 @@
-"""Every module of the package imports on its own in a fresh interpreter: no import cycle hides
-behind the order in which other modules happen to be imported first."""
+"""Every module of the package imports on its own, as in a fresh interpreter: no import cycle
+hides behind the order in which other modules happen to be imported first. Each is imported in
+a child forked from an interpreter that has loaded what the package imports from elsewhere but
+none of the package's own modules."""
 
 from __future__ import annotations
 
