@@ -434,6 +434,8 @@ class ChainPlan:
     dropped: dict[str, str] = field(default_factory=dict)
     unused: dict[str, str] = field(default_factory=dict)
     metadata: dict[str, object] = field(default_factory=dict)
+    cut: tuple[str, ...] = ()
+    """What was cut from the id and attributes (:mod:`~lodconvert.model.safe_text`)."""
     transform: np.ndarray | None = None
 
     @property
@@ -491,8 +493,9 @@ def _plan(
     """The plan of ``obj`` of ``levels`` in ``frame`` (:func:`_framed`)."""
     origin, alpha, surface, bounds = frame
     assert opts.gamma is not None
+    text = obj.written()
     return ChainPlan(
-        object_id=obj.id,
+        object_id=text.id,
         levels=levels,
         origin=origin,
         alpha=alpha,
@@ -503,7 +506,8 @@ def _plan(
         bounds=bounds,
         dropped=dropped,
         unused=unused,
-        metadata=obj.object_attributes(),
+        metadata=text.attributes,
+        cut=text.cut,
     )
 
 
@@ -667,4 +671,5 @@ def bake_plan(
         dropped=dict(sorted(dropped.items(), key=lambda item: LEVEL_NAMES.index(item[0]))),
         unused=plan.unused,
         metadata=plan.metadata,
+        cut=plan.cut,
     )

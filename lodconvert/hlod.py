@@ -65,9 +65,9 @@ designed (:mod:`.chain`)."""
 MIN_CELL_F = 0.95
 """Least silhouette F of a far level against its members where it switches in."""
 SEAM_MARGIN = 1e-9
+"""Relative margin that keeps a far level's switch strictly beyond its members'."""
 ADMISSION_ROUNDS = 4
 """Times a cell's admitted members (and so its centre) are found again."""
-"""Relative margin that keeps a far level's switch strictly beyond its members'."""
 
 Member = LodChain | CellChain
 Warn = Callable[[str], None]

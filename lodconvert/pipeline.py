@@ -111,6 +111,7 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
         "levels": levels,
         "dropped": dict(chain.dropped),
         "unused": dict(chain.unused),
+        **({"cut": list(chain.cut)} if chain.cut else {}),
     }
 
 
@@ -174,7 +175,8 @@ class _ObjectBaker:
         try:
             if obj.transform is not None and id(obj.geometry) in self.shared:
                 base = self.shared[id(obj.geometry)]
-                chain = replace(base, object_id=obj.id, metadata=obj.object_attributes())
+                text = obj.written()
+                chain = replace(base, object_id=text.id, metadata=text.attributes, cut=text.cut)
             else:
                 opts = replace(self.options, gamma=radius) if radius is not None else self.options
                 chain = plan_chain(obj, opts) if self.backend is None else bake_chain(

@@ -100,17 +100,6 @@ def streamed(writers: dict[str, StreamWriter]) -> Callable[..., None]:
     return write
 
 
-def imported_on_call(module: str, name: str) -> Callable[..., Any]:
-    """``module.name``, imported when first called (checks import the validation vocabulary,
-    which imports the registry)."""
-
-    def call(*args: Any, **kwargs: Any) -> Any:
-        return getattr(importlib.import_module(module), name)(*args, **kwargs)
-
-    call.__doc__ = f"{module}.{name}, imported on the first call."
-    return call
-
-
 def _taken(options: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
     return {k: v for k, v in options.items() if k in names and v is not None}
 
