@@ -26,6 +26,7 @@ from .chain import ChainOptions, bake_chain, check_geometry
 from .errors import InputError
 from .hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
 from .io import OutputInfo, input_format, output_format
+from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
@@ -347,6 +348,7 @@ def convert(
     skipped: list[dict[str, str]] = []
     cells: list[dict[str, Any]] = []
     draw: dict[str, dict[str, int]] = {"without": {}, "with": {}}
+    frames: list[SceneFrame | None] = []  # the writers' scene frame, from the first item
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
@@ -377,6 +379,8 @@ def convert(
             tally = tally_of(scene)
             dropped = tally.dropped_by_object if tally is not None else {}
             for item in items:
+                if not frames:
+                    frames.append(scene_frame(info.crs, item))
                 objects = item.objects() if isinstance(item, CellChain) else [item]
                 for chain in objects:
                     records.append(
@@ -420,6 +424,7 @@ def convert(
         step("checking", 1, 1)
         named = " + ".join(str(path) for path in inputs)
         report = _report(named, output_path, baker, options, records, skipped, timings, tally)
+        report["frame"] = frames[0].record() if frames[0] is not None else None
         if hlod is not None:
             report["hlod"] = {"kind": hlod.kind, "cells": cells, "draw": draw}
         if also is not None:
