@@ -5,7 +5,7 @@
 //
 //   node tests/browser/drive.mjs SCENARIO BASE_URL PARAMS_JSON
 //
-// SCENARIO: x_ite, x3dom, babylon, three or viewer (PARAMS: see each below).
+// SCENARIO: x_ite, x3dom, babylon, three, three_upright or viewer (PARAMS: see each below).
 
 import { doing, evaluate, openTestPage, openViewer, run, waitFor } from "./harness.mjs";
 
@@ -104,6 +104,13 @@ const scenarios = {
       [`${base}/${params.file}`, params.node],
     );
     return { ...result, ...(await pixels(page, "canvas")) };
+  },
+
+  /** three.js, plainly: load params.file and draw its scene from straight above (+Y). */
+  async three_upright(page, { base, params }) {
+    await openTestPage(page, base, "three_upright", "three.js");
+    return evaluate(page, `three.js loading ${params.file}`,
+      (url) => window.harness.fromAbove(url), `${base}/${params.file}`);
   },
 
   /**
