@@ -265,3 +265,20 @@ def test_lod_parents_far_levels_follow_the_frame(tmp_path: Path) -> None:
     centres = {s: np.array([cell["center"] for cell in found]) for s, found in cells.items()}
     assert np.abs(centres[".glb"]).max() > 1e6  # in the source CRS
     np.testing.assert_allclose(centres[".x3d"], centres[".glb"], rtol=0, atol=1e-6)
+
+
+def test_a_framed_gltf_is_laid_out_as_json_dumps_lays_it_out(tmp_path: Path) -> None:
+    """The frame node is written after the streamed nodes, its children streamed too: the
+    .gltf text is still exactly json.dumps(indent=1) of its document."""
+    box = trimesh.creation.box()
+    chains = [
+        lodconvert.bake(Node(f"box{i}", geometry=Surface(box.vertices + FAR + i, box.faces)))
+        for i in range(3)
+    ]
+    out = tmp_path / "boxes.gltf"
+    lodconvert.write(chains, out, crs="EPSG:25832")
+    text = out.read_text()
+    doc = json.loads(text)
+    assert text == json.dumps(doc, indent=1) + "\n"
+    (root,) = doc["scenes"][0]["nodes"]
+    assert root == len(doc["nodes"]) - 1 and doc["nodes"][root]["children"] == [0, 2, 4]

@@ -41,7 +41,7 @@ class SceneFrame:
         if not largest < MAX_OFFSET:
             raise LodConvertError(
                 f"{what} lies {largest / 1000:.0f} km from the scene origin "
-                f"{format_origin(self.origin)}: glTF and X3D offsets stay within "
+                f"{_metres(self.origin)}: glTF node offsets stay within "
                 f"{MAX_OFFSET / 1000:.0f} km of it (float32 precision); convert such a region "
                 "in parts"
             )
@@ -56,13 +56,9 @@ class SceneFrame:
             "meaning": MEANING,
         }
 
-    def source(self, scene: np.ndarray) -> np.ndarray:
-        """Scene coordinates (…, 3) back in the source's CRS."""
-        return self.origin + np.asarray(scene, dtype=np.float64) @ ROTATION
 
-
-def format_origin(origin: np.ndarray) -> str:
-    return "(" + ", ".join(f"{v:.0f}" for v in origin) + ")"
+def _metres(point: np.ndarray) -> str:
+    return "(" + ", ".join(f"{v:.0f}" for v in point) + ")"
 
 
 def item_origin(item: LodChain | CellChain) -> np.ndarray:
