@@ -29,10 +29,12 @@ def tum_glb(site: Path) -> str:
     return "upright_tum.glb"
 
 
-def test_three_shows_a_city_glb_upright_with_its_roofs_on_top(tum_glb: str, drive: Drive) -> None:
+def test_three_shows_a_city_glb_upright_with_its_roofs_on_top(
+    tum_glb: str, drive: Drive, measure
+) -> None:
     out = drive("three_upright", file=tum_glb)
     seen = out["result"]
-    message = f"{ {k: v for k, v in seen.items()} }\n{console_text(out)}"
+    message = f"{seen}\n{console_text(out)}"
     size = np.subtract(seen["max"], seen["min"])
     # Up (+Y) spans the buildings' heights (tens of metres), the ground plane the district's
     # hundreds; every value stays small enough for float32 (no millions in the world box).
@@ -42,3 +44,9 @@ def test_three_shows_a_city_glb_upright_with_its_roofs_on_top(tum_glb: str, driv
     assert seen["drawn"] > 0.1 * seen["pixels"], message
     assert seen["red"] > 0.5 * seen["drawn"], message
     assert not _errors(out), message
+    measure(
+        "three.js, TUM Munich glb from above",
+        f"world box {size[0]:.0f} × {size[1]:.0f} (up) × {size[2]:.0f} m; "
+        f"{seen['drawn'] / seen['pixels']:.0%} of the view drawn, "
+        f"{seen['red'] / seen['drawn']:.0%} of it roof red",
+    )
