@@ -42,13 +42,17 @@ async function pixels(page, selector, background = null) {
 }
 
 const scenarios = {
-  /** X_ITE: load params.file, then per stop place the viewer and read params.lod's level. */
+  /**
+   * X_ITE: load params.file (with params.start, screenshot the view it starts with: the file's
+   * own Viewpoint), then per stop place the viewer and read params.lod's level.
+   */
   async x_ite(page, { base, params }) {
     await openTestPage(page, base, "x_ite", "X_ITE");
     const firstFrameMs = await evaluate(page, `X_ITE loading ${params.file}`,
       ([url, lods]) => window.harness.load(url, lods),
       [`${base}/${params.file}`, params.lod ? [params.lod] : []],
     );
+    const start = params.start ? await pixels(page, "x3d-canvas") : null;
     const stops = [];
     for (const stop of params.stops ?? []) {
       const [x, y, z] = params.center;
@@ -59,7 +63,7 @@ const scenarios = {
         ([lod, level]) => window.harness.settle(lod, level), [params.lod, stop.level]);
       stops.push({ distance: stop.distance, level, ...(await pixels(page, "x3d-canvas")) });
     }
-    return { firstFrameMs, stops };
+    return { firstFrameMs, start, stops };
   },
 
   /** X3DOM: load params.file in an Inline, wait until it is drawn, collect X3DOM's log. */
