@@ -26,6 +26,7 @@ from lodconvert.io.frame import ROTATION
 from lodconvert.io.x3d.viewpoint import PITCH_DEG
 from lodconvert.model import Node, Surface
 from lodconvert.pipeline import convert, iter_chains
+from lodconvert.validate import validate_file
 from lodconvert.viewer.config import page_config
 
 from .conftest import SAMPLE, SHARED
@@ -282,3 +283,21 @@ def test_a_framed_gltf_is_laid_out_as_json_dumps_lays_it_out(tmp_path: Path) -> 
     assert text == json.dumps(doc, indent=1) + "\n"
     (root,) = doc["scenes"][0]["nodes"]
     assert root == len(doc["nodes"]) - 1 and doc["nodes"][root]["children"] == [0, 2, 4]
+
+
+@pytest.mark.parametrize("tamper", ["matrix", "origin"])
+def test_validate_reports_a_broken_scene_frame(tmp_path: Path, tamper: str) -> None:
+    box = trimesh.creation.box()
+    chain = lodconvert.bake(Node("box", geometry=Surface(box.vertices + FAR, box.faces)))
+    out = tmp_path / "box.gltf"
+    lodconvert.write([chain], out, crs="EPSG:25832")
+    assert validate_file(out) == []
+    doc = json.loads(out.read_text())
+    if tamper == "matrix":  # turned the other way: roofs down
+        (root,) = doc["scenes"][0]["nodes"]
+        doc["nodes"][root]["matrix"][6], doc["nodes"][root]["matrix"][9] = 1.0, -1.0
+    else:
+        doc["asset"]["extras"]["lodconvert"]["frame"]["origin"] = [1.0, 2.0]
+    out.write_text(json.dumps(doc, indent=1))
+    findings = validate_file(out)
+    assert [f.code for f in findings] == ["SCENE_FRAME"], findings
