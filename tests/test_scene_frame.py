@@ -75,7 +75,10 @@ def _source_vertices() -> dict[str, np.ndarray]:
     }
 
 
-def test_city_glb_is_y_up_about_one_scene_origin_with_small_values(tum: dict[str, Path]) -> None:
+def test_city_glb_is_y_up_about_one_scene_origin_with_small_values(
+    tum: dict[str, Path], gltf_validator
+) -> None:
+    assert gltf_validator(tum[".glb"])["issues"]["numErrors"] == 0  # the Khronos validator
     doc, _ = _glb(tum[".glb"])
     meta = doc["asset"]["extras"]["lodconvert"]
     frame = meta["frame"]
