@@ -27,6 +27,7 @@ from .errors import InputError
 from .hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
 from .io import OutputInfo, input_format, output_format
 from .io.crs import checked_crs_option
+from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
@@ -351,6 +352,7 @@ def convert(
     skipped: list[dict[str, str]] = []
     cells: list[dict[str, Any]] = []
     draw: dict[str, dict[str, int]] = {"without": {}, "with": {}}
+    frames: list[SceneFrame | None] = []  # the writers' scene frame, from the first item
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
@@ -372,6 +374,8 @@ def convert(
             tally = tally_of(scene)
             dropped = tally.dropped_by_object if tally is not None else {}
             for item in items:
+                if not frames:
+                    frames.append(scene_frame(info.crs, item))
                 objects = item.objects() if isinstance(item, CellChain) else [item]
                 for chain in objects:
                     records.append(
@@ -407,6 +411,7 @@ def convert(
         named = " + ".join(str(path) for path in inputs)
         report = _report(named, output_path, baker, options, records, skipped, timings, tally)
         report["crs"] = crs_record
+        report["frame"] = frames[0].record() if frames[0] is not None else None
         if hlod is not None:
             report["hlod"] = {"kind": hlod.kind, "cells": cells, "draw": draw}
         if also is not None:

@@ -15,6 +15,9 @@ whichever of these it offers —
   ``cutoffs``, ``culled``, ``members``: object or finer cell ids, ``facts``: what the planner
   measured), its ``center`` in scene coordinates, ``far``: its far level's declared facts, and
   under the format's name where its nodes lie in the file (used by the viewer page);
+- ``read_frame(path) -> SceneFrame | None``: the scene frame of our own files (where a CRS
+  turned them y-up about a scene origin, :mod:`lodconvert.io.frame`), or ``None``; read-back
+  origins and centres are in the source's coordinates, the file's scene in the frame's;
 - ``check(path, findings, options)``: the structural checks ``validate`` runs, and every
   conversion runs on its staged output before committing it.
 
@@ -68,6 +71,7 @@ class Format:
     write: Callable[..., None] | None = None
     read_back: Callable[..., list[LodChain]] | None = None
     read_cells: Callable[..., list[dict[str, Any]]] | None = None
+    read_frame: Callable[..., Any] | None = None
     check: Callable[..., None] | None = None
     read_options: tuple[str, ...] = ()
     write_options: tuple[str, ...] = ()

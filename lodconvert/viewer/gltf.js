@@ -109,11 +109,18 @@ function makeLod(center, levels, cutoffs, culled) {
   return lod;
 }
 
+/** A node's geometry, in its object's source axes, turned into the scene's (see `rotation`). */
+function turn(node) {
+  const [a, b, c] = rotation;
+  node.quaternion.setFromRotationMatrix(new THREE.Matrix4().set(...a, 0, ...b, 0, ...c, 0, 0, 0, 0, 1));
+}
+
 async function buildLod(gltf, object) {
   const levels = [];
   for (const [k, index] of [object.node, ...object.ids].entries()) {
     const level = await gltf.parser.getDependency("node", index);
-    level.position.set(...object.local_center).negate(); // geometry is relative to the origin
+    turn(level);
+    level.position.set(...turned(object.local_center)).negate(); // geometry is relative to the origin
     sizePoints(level, object.points[k]);
     levels.push(level);
   }
@@ -128,7 +135,9 @@ async function buildCellLod(gltf, cell, members) {
   sizePoints(far, cell.points);
   const lod = makeLod(cell.center, [near, far], cell.cutoffs, cell.culled);
   near.position.copy(lod.position).negate(); // the members stay where they are
-  far.position.sub(new THREE.Vector3(...cell.center)); // from the cell's origin (scene units)
+  turn(far);
+  far.position.set(...turned(far.position.toArray())); // from the cell's origin (scene units)
+  far.position.sub(new THREE.Vector3(...cell.center));
   return lod;
 }
 
@@ -176,7 +185,7 @@ const backend = {
     controls = new OrbitControls(camera, renderer.domElement);
     controls.addEventListener("change", render);
     window.addEventListener("resize", () => resize(host));
-    camera.position.set(0, 0, 1);
+    camera.position.set(...viewDirection);
     resize(host);
   },
   async setDistance(distance) {

@@ -27,10 +27,18 @@ const CLICK_SLOP_PX = 4;
 const most = (values) => values.reduce((a, b) => Math.max(a, b), -Infinity);
 const least = (values) => values.reduce((a, b) => Math.min(a, b), Infinity);
 const centers = config.objects.map((o) => o.center);
-/** The viewer looks at the middle of the objects' centres from `distance` along +z. */
+/** The viewer looks at the middle of the objects' centres from `distance` along `viewDirection`. */
 const focus = [0, 1, 2].map((k) => {
   const values = centers.map((c) => c[k]);
   return (least(values) + most(values)) / 2;
+});
+/** Where the viewer stands from the focus: a unit vector (+z, tilted up for a y-up city). */
+const viewDirection = config.view.direction;
+/** The file's scene frame rotation, rows: an object's source axes → the scene's. */
+const rotation = config.rotation;
+/** `v` turned by the rotation (transposed: back into source axes). */
+const turned = (v, transposed = false) => rotation.map((row, i) => {
+  return row.reduce((sum, _, k) => sum + (transposed ? rotation[k][i] : row[k]) * v[k], 0);
 });
 /** Distance between the points `a` and `b`. */
 const distanceBetween = (a, b) => Math.hypot(...a.map((v, k) => v - b[k]));

@@ -92,12 +92,12 @@ function followBoxes(scene, object, index) {
     const grown = (scale) => 2 * (scale - 1) * object.cutoffs[k];
     scalings.push((scale) => { sensor.size = vector(size.map((v) => v + grown(scale))); });
   });
-  const origin = object.center.map((c, k) => c - object.local_center[k]); // of its Transform
   const holds = (sensor, local) => ["x", "y", "z"].every((axis, k) => {
     return Math.abs(local[k] - sensor.center[axis]) < sensor.size[axis] / 2;
   });
-  levelsAt[index] = (position) => {
-    const local = position.map((v, k) => v - origin[k]);
+  levelsAt[index] = (position) => { // in the object's Transform (its source axes)
+    const local = turned(position.map((v, k) => v - object.center[k]), true)
+      .map((v, k) => v + object.local_center[k]);
     const inside = sensors.findIndex((sensor) => holds(sensor, local));
     return inside < 0 ? sensors.length : inside;
   };
@@ -191,8 +191,10 @@ const backend = {
   /** Resolves once every LOD drawn shows its level at the new place, and the sensor said so. */
   async setDistance(distance) {
     const move = ++target;
-    const position = [focus[0], focus[1], focus[2] + distance];
+    const position = focus.map((v, k) => v + distance * viewDirection[k]);
     viewpoint.position = vector(position);
+    const pitch = Math.atan2(viewDirection[1], viewDirection[2]); // looking down at the focus
+    viewpoint.orientation = new X3D.SFRotation(1, 0, 0, -pitch);
     viewpoint.set_bind = true;
     for (let frame = 0; frame < SETTLE_FRAMES && move === target; frame++) {
       await nextFrame();

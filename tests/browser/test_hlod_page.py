@@ -61,21 +61,24 @@ def district(site: Path) -> dict[str, Chain]:
 
 
 def _viewer(config: dict[str, Any], distance: float) -> np.ndarray:
-    """Where the page puts the viewer for ``distance``: that far along +z from the middle of
-    the objects' centres."""
+    """Where the page puts the viewer for ``distance``: that far along its view direction from
+    the middle of the objects' centres (in the file's scene coordinates)."""
     centres = np.array([o["center"] for o in config["objects"]])
-    return (centres.min(axis=0) + centres.max(axis=0)) / 2 + [0.0, 0.0, distance]
+    middle = (centres.min(axis=0) + centres.max(axis=0)) / 2
+    return middle + distance * np.asarray(config["view"]["direction"])
 
 
 def _switch_heights(config: dict[str, Any], scale: float = 1.0) -> list[float]:
-    """Per cell, how far along the viewer's line (+z from the middle of the objects' centres) it
-    merges at LOD scale ``scale``: where its distance reaches its scaled cutoff (0 where it does
-    all along)."""
+    """Per cell, how far along the viewer's line (the view direction from the middle of the
+    objects' centres) it merges at LOD scale ``scale``: where its distance reaches its scaled
+    cutoff (0 where it does all along)."""
     heights = []
+    direction = np.asarray(config["view"]["direction"])
     for cell in config["cells"]:
-        x, y, z = np.asarray(cell["center"]) - _viewer(config, 0.0)
-        cutoff, off = scale * cell["cutoffs"][0], math.hypot(x, y)
-        heights.append(z + math.sqrt(cutoff**2 - off**2) if cutoff > off else 0.0)
+        offset = np.asarray(cell["center"]) - _viewer(config, 0.0)
+        along = float(offset @ direction)
+        cutoff, off = scale * cell["cutoffs"][0], float(np.linalg.norm(offset - along * direction))
+        heights.append(along + math.sqrt(cutoff**2 - off**2) if cutoff > off else 0.0)
     return heights
 
 

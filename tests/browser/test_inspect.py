@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 from lxml import etree
 
-from lodconvert.io import read_chains
+from lodconvert.io import own_format, read_chains
+from lodconvert.io.frame import ROTATION
 
 from ..conftest import SHARED
 from .conftest import Chain, Drive, Driver, console_text, make_chain
@@ -50,9 +51,10 @@ def district(site: Path) -> dict[str, Chain]:
 
 def _roof(path: Path, object_id: str | None = None) -> tuple[str, list[float]]:
     """An object of ``path`` (``object_id`` where given) and a point on its roof, safe to
-    click: of all upward-facing triangles of the objects' finest levels, the centre of the
-    largest inscribed circle (from above, as the page first shows the district, a roof shows,
-    its edges farthest away)."""
+    click, in the file's scene coordinates (where the page draws): of all upward-facing
+    triangles of the objects' finest levels, the centre of the largest inscribed circle (from
+    above the horizon, as the page first shows the district, a roof shows, its edges farthest
+    away)."""
     best = (0.0, "", [0.0, 0.0, 0.0])
     for chain in read_chains(path):
         if object_id is not None and chain.object_id != object_id:
@@ -67,7 +69,9 @@ def _roof(path: Path, object_id: str | None = None) -> tuple[str, list[float]]:
         if radii[k] > best[0]:
             centre = (sides[k] @ corners[k]) / sides[k].sum()
             best = (radii[k], chain.object_id, (chain.origin + centre).tolist())
-    return best[1], best[2]
+    frame = own_format(path).read_frame(path)
+    point = best[2] if frame is None else (ROTATION @ (best[2] - frame.origin)).tolist()
+    return best[1], point
 
 
 def _source_attributes(gml_id: str) -> dict[str, str]:

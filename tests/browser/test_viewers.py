@@ -306,6 +306,8 @@ def test_x_ite_shows_a_district_and_a_building_switches_at_its_cutoffs(
     """TUM Munich (290 CityGML LoD2 buildings) in X_ITE: the district is drawn, and its first
     building shows its LoD2 nearer than its cutoff and its LOD1 prism beyond."""
     from lodconvert.io import read_chains
+    from lodconvert.io.frame import ROTATION
+    from lodconvert.io.x3d import read_frame
 
     from ..conftest import SHARED
 
@@ -318,11 +320,13 @@ def test_x_ite_shows_a_district_and_a_building_switches_at_its_cutoffs(
         c for c in read_chains(site / chain.name, geometry=False) if c.object_id == chain.obj["id"]
     ]
     stops = chain.stops()
+    frame = read_frame(site / chain.name)  # the district is y-up about its scene origin
+    assert frame is not None
     out = drive(
         "x_ite",
         file=chain.name,
         lod=written.metadata["x3d"]["lod"],
-        center=chain.obj["origin"],
+        center=(ROTATION @ (np.asarray(chain.obj["origin"]) - frame.origin)).tolist(),
         stops=stops,
     )
     seen = out["result"]["stops"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from .. import Format, streamed
 from .check import check_gltf
-from .reader import GltfLevel, GltfObject, read_back, read_cells, read_lod_gltf
+from .reader import GltfLevel, GltfObject, read_back, read_cells, read_frame, read_lod_gltf
 from .writer import (
     GLB_BIN,
     GLB_JSON,
@@ -25,6 +25,7 @@ FORMAT = Format(
     write=streamed({".glb": write_glb, ".gltf": write_gltf}),
     read_back=read_back,
     read_cells=read_cells,
+    read_frame=read_frame,
     check=check_gltf,
 )
 
@@ -40,6 +41,7 @@ __all__ = [
     "linear_rgba",
     "read_back",
     "read_cells",
+    "read_frame",
     "read_lod_gltf",
     "srgb_rgba",
     "write_glb",

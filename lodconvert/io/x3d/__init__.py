@@ -5,7 +5,14 @@ from __future__ import annotations
 
 from .. import Format, streamed
 from .check import check_x3d
-from .reader import X3DLevel, read_back, read_cells, read_x3d_points, x3d_read_errors
+from .reader import (
+    X3DLevel,
+    read_back,
+    read_cells,
+    read_frame,
+    read_x3d_points,
+    x3d_read_errors,
+)
 from .writer import (
     METADATA_SET,
     SWITCHING_MODES,
@@ -21,6 +28,7 @@ FORMAT = Format(
     write=streamed({".x3d": write_x3d}),
     read_back=read_back,
     read_cells=read_cells,
+    read_frame=read_frame,
     check=check_x3d,
     write_options=("switching",),
 )
@@ -34,6 +42,7 @@ __all__ = [
     "prism_boxes",
     "read_back",
     "read_cells",
+    "read_frame",
     "read_x3d_points",
     "vertex_colors",
     "write_x3d",
