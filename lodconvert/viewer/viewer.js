@@ -142,7 +142,11 @@ function derive() {
 }
 
 const brief = (value) => (value === null ? "…" : value.toPrecision(4));
-const cutoffText = (entry) => scaled(entry.cutoffs).map(brief).join(" | ");
+/** The cutoffs of `entry` (object or cell) at the LOD scale; an object of one level has none. */
+function cutoffText(entry) {
+  if (entry.cutoffs.length === 0) return "no cutoff";
+  return `cutoffs ${scaled(entry.cutoffs).map(brief).join(" | ")}`;
+}
 
 /** Lines of the first `max` of `lines`, and one more counting the others as `what`. */
 function listed(lines, max, what) {
@@ -153,14 +157,12 @@ function listed(lines, max, what) {
 
 function objectLine(o, i) {
   const shown = o.cell === null ? o.level ?? "…" : `${state.cells[o.cell].state} with ${o.cell}`;
-  const cutoffs = cutoffText(config.objects[i]);
-  return `${o.id}: ${shown} at distance ${brief(o.distance)} (cutoffs ${cutoffs})`;
+  return `${o.id}: ${shown} at distance ${brief(o.distance)} (${cutoffText(config.objects[i])})`;
 }
 
 function cellLine(cell) {
   const { state: shown, distance } = state.cells[cell.id];
-  const cutoffs = cutoffText(cell);
-  return `${cell.id} (${cell.kind}): ${shown} at distance ${brief(distance)} (cutoffs ${cutoffs})`;
+  return `${cell.id} (${cell.kind}): ${shown} at distance ${brief(distance)} (${cutoffText(cell)})`;
 }
 
 let readoutPending = false;

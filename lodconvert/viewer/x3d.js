@@ -68,7 +68,8 @@ const prismNodes = (scene, object, role) =>
 
 /**
  * Follow the level that object `index`, prism-switched, shows: that of its first Switch at its
- * near choice (0), else its coarsest (or nothing, culled).
+ * near choice (0), else its coarsest (or nothing, culled); an object of one level has no
+ * Switch, nothing to follow, and shows that level.
  */
 function followSwitches(scene, object, index) {
   const switches = prismNodes(scene, object, "Switch");
@@ -78,6 +79,7 @@ function followSwitches(scene, object, index) {
     report(index);
   };
   for (const node of switches) watch(node, "whichChoice", read);
+  if (switches.length === 0) read(); // a single level has no Switch: it always shows
 }
 
 /**
