@@ -3,17 +3,20 @@
 // shown), merged (its far level shown), culled, or hidden inside a coarser cell that is not
 // open; the distance slider, the LOD scale (a factor on every cutoff the page switches at, from
 // ?lodscale= in the URL or its field), the panel that shows the id and attributes of a clicked
-// object, and window.lodconvertViewer (state for tests and curious users, setDistance,
-// setLodScale and screenPoint). The format part after it (gltf.js or x3d.js) defines a backend
-// { load(host), setDistance(d), setLodScale(s), pick(event), screenPoint(point) } and calls
-// start(backend); it reports the levels and distances of objects through update() and of
-// cells through updateCell(). An object or cell inside a cell that is not open is not drawn by
-// its own LOD, whose level the page then ignores (a viewer need not update it).
+// object, the alert box over the view (what failed to load: the viewer library, imported here
+// first, or the model), and window.lodconvertViewer (state for tests and curious users,
+// setDistance, setLodScale and screenPoint). The format part after it (gltf.js or x3d.js)
+// defines a backend { load(host), setDistance(d), setLodScale(s), pick(event),
+// screenPoint(point) } and calls start(backend); it reports the levels and distances of objects
+// through update() and of cells through updateCell(). An object or cell inside a cell that is
+// not open is not drawn by its own LOD, whose level the page then ignores (a viewer need not
+// update it).
 
 const config = JSON.parse(document.getElementById("lodconvert-config").textContent);
 const readout = document.getElementById("readout");
 const slider = document.getElementById("distance");
 const status = document.getElementById("status");
+const problem = document.getElementById("problem");
 const inspect = document.getElementById("inspect");
 const cellReadout = document.getElementById("cells");
 const lodScaleField = document.getElementById("lodscale");
@@ -258,10 +261,79 @@ function watchClicks(backend, view) {
   });
 }
 
+/** Show `text` in the page's alert box, over the view (null: hide it). */
+function alertBox(text) {
+  problem.textContent = text ?? "";
+  problem.hidden = text === null;
+}
+
+/** Show `error` (an Error or a message) in the alert box, as the page's error. */
 function fail(error) {
   state.error = String(error?.message ?? error);
-  status.textContent = state.error;
+  alertBox(state.error);
   console.error(error);
+}
+
+/** A failure to load what the page shows, its message naming what failed for the user. */
+class LoadFailure extends Error {}
+
+/** The file name of the asset the page shows. */
+const assetName = () => decodeURIComponent(config.asset.split("/").pop());
+
+/** How to give the page a viewer library it can reach. */
+function localLibraryHint() {
+  const { package: name, version } = config.library;
+  return `Re-run lodconvert with --viewer-lib DIR, DIR a local copy of the npm package ` +
+    `${name}@${version} (npm install ${name}@${version} puts one in node_modules/${name}) ` +
+    `inside this page's folder, or serve both: lodconvert view ${assetName()} --serve ` +
+    "--viewer-lib DIR";
+}
+
+/** Seconds the viewer library may take to load before the page says where it waits. */
+const SLOW_LIBRARY_S = 10;
+
+/**
+ * Import the modules of the viewer library the page's import map names (the backend imports
+ * them again from the cache): the readout says which one it waits for and, after
+ * SLOW_LIBRARY_S, the alert box how to do without it; one that fails to load throws a
+ * LoadFailure naming its URL.
+ */
+async function importLibrary() {
+  const { imports } = JSON.parse(document.querySelector('script[type="importmap"]').textContent);
+  const modules = Object.entries(imports).filter(([name]) => !name.endsWith("/"));
+  for (const [name, relative] of modules) {
+    const url = new URL(relative, location.href);
+    const where = url.origin === location.origin ? "" : " (offline, or its host blocked?)";
+    readout.textContent = `loading the viewer library ${url} …`;
+    const slow = setTimeout(() => {
+      alertBox(`Still waiting for the viewer library ${url}${where}. ${localLibraryHint()}.`);
+    }, SLOW_LIBRARY_S * 1000);
+    try {
+      await import(name);
+    } catch (error) {
+      const message = `Could not load the viewer library ${url}${where}: ${error.message}.`;
+      throw new LoadFailure(`${message} ${localLibraryHint()}.`);
+    } finally {
+      clearTimeout(slow);
+    }
+  }
+  alertBox(null);
+  readout.textContent = `loading ${assetName()} …`;
+}
+
+/**
+ * The message for `error`, thrown while loading the model with the library in place: the
+ * model's URL and why it could not be fetched, when it cannot.
+ */
+async function loadFailure(error) {
+  if (error instanceof LoadFailure) return error.message;
+  const url = new URL(config.asset, location.href);
+  const response = await fetch(url, { method: "HEAD", cache: "no-store" }).catch(() => null);
+  const text = String(error?.message ?? error);
+  if (response?.ok) return `Could not show the model ${url}: ${text}`;
+  const why = response ? `HTTP ${response.status} ${response.statusText}`.trim() : "unreachable";
+  return `Could not load the model ${url} (${why}): it must lie where it was when the page ` +
+    `was written, in the folder served (lodconvert view ${assetName()} --serve).`;
 }
 
 /** Two animation frames: whatever was changed before has been drawn. */
@@ -326,6 +398,7 @@ async function start(backend) {
     const view = document.getElementById("view");
     applyLodScale(urlLodScale());
     cellReadout.hidden = cells.length === 0;
+    await importLibrary();
     await backend.load(view);
     if (lodScale !== 1) backend.setLodScale(lodScale);
     watchClicks(backend, view);
@@ -345,6 +418,6 @@ async function start(backend) {
     state.loadMs = performance.now() - started;
     state.ready = true;
   } catch (error) {
-    fail(error);
+    fail(await loadFailure(error));
   }
 }

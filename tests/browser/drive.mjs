@@ -5,7 +5,7 @@
 //
 //   node tests/browser/drive.mjs SCENARIO BASE_URL PARAMS_JSON
 //
-// SCENARIO: x_ite, x3dom, babylon, three or viewer (PARAMS: see each below).
+// SCENARIO: x_ite, x3dom, babylon, three, viewer or alert (PARAMS: see each below).
 
 import { doing, evaluate, openTestPage, openViewer, run, waitFor } from "./harness.mjs";
 
@@ -142,6 +142,26 @@ const scenarios = {
     }
     const loadMs = await evaluate(page, "reading its load time", () => lodconvertViewer.loadMs);
     return { loadMs, stops };
+  },
+
+  /**
+   * lodconvert's viewer page params.page, expected to alert: once it is ready, has an error or
+   * shows its alert box, that error and the box (text, and whether it shows: visible, sized).
+   */
+  async alert(page, { base, params }) {
+    doing(`loading the viewer page ${params.page}`);
+    await page.goto(`${base}/${params.page}`);
+    await waitFor(page, "the viewer page alerting", () => {
+      const viewer = window.lodconvertViewer;
+      return viewer?.ready || viewer?.error || document.getElementById("problem")?.hidden === false;
+    });
+    return evaluate(page, "reading its alert box", () => {
+      const box = document.getElementById("problem");
+      const { width, height } = box?.getBoundingClientRect() ?? { width: 0, height: 0 };
+      const { ready, error } = window.lodconvertViewer;
+      const shown = Boolean(box?.checkVisibility()) && width > 0 && height > 0;
+      return { ready, error, shown, text: box?.textContent ?? null };
+    });
   },
 };
 

@@ -10,6 +10,7 @@ import itertools
 import math
 import os
 import shutil
+import socket
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ import trimesh
 from lodconvert.io import OutputInfo
 from lodconvert.io.x3d import write_x3d
 from lodconvert.model import Level, LodChain, Surface
-from lodconvert.viewer import LIBRARIES
+from lodconvert.viewer import LIBRARIES, write_page
 
 from ..conftest import stanford
 from ..test_viewer import view_served
@@ -148,6 +149,74 @@ def test_viewer_page_slider_reaches_beyond_every_objects_last_cutoff(
         assert shown["level"] == "nothing (culled)", message
     assert seen["foreground"] == 0, message
     assert not _errors(out), message
+
+
+def _closed_port() -> int:
+    """A port of 127.0.0.1 that nothing listens on (free a moment ago)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.parametrize("suffix", ["glb", "x3d"])
+def test_viewer_page_names_an_unreachable_library(
+    knot: dict[str, Chain], site: Path, drive: Drive, suffix: str
+) -> None:
+    """Offline, the CDN cannot be reached (here: a library URL on a port nothing listens on):
+    over the view the page names the module that failed and says to re-run with
+    ``--viewer-lib DIR``, a local copy of the npm package it names."""
+    chain = knot[suffix]
+    library = LIBRARIES["x3d" if suffix == "x3d" else "gltf"]
+    base = f"http://127.0.0.1:{_closed_port()}/lib"
+    page = write_page(site / chain.name, site / f"offline_{chain.page}", library=base)
+    out = drive("alert", page=page.name)
+    result = out["result"]
+    message = f"{result}\n{console_text(out)}"
+    module = next(path for name, path in library.imports if not name.endswith("/"))
+    assert not result["ready"] and result["shown"], message
+    assert f"Could not load the viewer library {base}/{module}" in result["text"], message
+    assert "Re-run lodconvert with --viewer-lib DIR" in result["text"], message
+    assert f"npm package {library.package}@{library.version}" in result["text"], message
+    assert f"lodconvert view {chain.name} --serve --viewer-lib DIR" in result["text"], message
+
+
+def test_viewer_page_says_where_it_waits_for_a_library(
+    knot: dict[str, Chain], site: Path, drive: Drive
+) -> None:
+    """A library host that takes the connection and never answers (as behind a firewall that
+    drops packets): after a while the page says which module it still waits for and how to
+    do without the CDN, and has no error."""
+    chain = knot["glb"]
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        base = f"http://127.0.0.1:{silent.getsockname()[1]}/lib"
+        page = write_page(site / chain.name, site / f"waiting_{chain.page}", library=base)
+        out = drive("alert", page=page.name)
+    result = out["result"]
+    message = f"{result}\n{console_text(out)}"
+    assert not result["ready"] and not result["error"] and result["shown"], message
+    assert f"Still waiting for the viewer library {base}/build/three.module.js" in result["text"]
+    assert "Re-run lodconvert with --viewer-lib DIR" in result["text"], message
+
+
+@pytest.mark.parametrize("suffix", ["glb", "x3d"])
+def test_viewer_page_names_a_missing_model(
+    knot: dict[str, Chain], site: Path, drive: Drive, suffix: str
+) -> None:
+    """The output moved away after its page was written: over the view the page names its URL
+    and the HTTP status it got."""
+    asset = site / f"moved_knot.{suffix}"
+    shutil.copyfile(site / knot[suffix].name, asset)
+    package = LIBRARIES["x3d" if suffix == "x3d" else "gltf"].package
+    page = write_page(asset, library=str(site / "node_modules" / package))
+    asset.unlink()
+    out = drive("alert", page=page.name)
+    result = out["result"]
+    message = f"{result}\n{console_text(out)}"
+    assert not result["ready"] and result["shown"], message
+    assert "Could not load the model http://127.0.0.1:" in result["text"], message
+    assert f"/{asset.name} (HTTP 404 " in result["text"], message
 
 
 BRIGHTNESS_STEP = 5.0
