@@ -6,7 +6,7 @@
 // object, the alert box over the view (what failed to load: the viewer library, imported here
 // first, or the model), and window.lodconvertViewer (state for tests and curious users,
 // setDistance, setLodScale and screenPoint). The format part after it (gltf.js or x3d.js)
-// defines a backend { load(host), setDistance(d), setLodScale(s), pick(event),
+// defines a backend { load(host), setDistance(d), setLodScale(s), pick(event), highlight(index),
 // screenPoint(point) } and calls start(backend); it reports the levels and distances of objects
 // through update() and of cells through updateCell(). An object or cell inside a cell that is
 // not open is not drawn by its own LOD, whose level the page then ignores (a viewer need not
@@ -249,14 +249,19 @@ function select(index) {
   inspect.append(heading, table);
 }
 
-/** Clicks on the view select the object under the pointer (or nothing); drags do not. */
+/**
+ * Clicks on the view select the object under the pointer (or nothing): its attributes show in
+ * the panel, and the backend highlights it in place of the one before; drags do not.
+ */
 function watchClicks(backend, view) {
   let pressed = null;
   view.addEventListener("pointerdown", (event) => { pressed = [event.clientX, event.clientY]; });
   view.addEventListener("click", (event) => {
     if (pressed === null) return;
     if (Math.hypot(event.clientX - pressed[0], event.clientY - pressed[1]) > CLICK_SLOP_PX) return;
-    select(backend.pick(event));
+    const index = backend.pick(event);
+    select(index);
+    backend.highlight(index);
     state.clicks += 1;
   });
 }

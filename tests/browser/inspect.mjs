@@ -5,12 +5,13 @@
 //
 //   node tests/browser/inspect.mjs clicks BASE_URL PARAMS_JSON
 //
-// PARAMS: {page, clicks: [{point} or {at}]}: the page is clicked, in turn, where the world point
-// `point` shows (the page's lodconvertViewer.screenPoint) or at `at`, fractions of the view's
-// width and height, with the viewer where the page first puts it. The readout panel is hidden
-// first: it covers part of the view, and a click on it is not one on the view. Result per click:
-// the pixel clicked, the object selected, and the inspect panel (hidden, its heading and its rows
-// as [header, cell or null]). Every wait is on page state.
+// PARAMS: {page, clicks: [{point} or {at}], probes: [point]}: the page is clicked, in turn,
+// where the world point `point` shows (the page's lodconvertViewer.screenPoint) or at `at`,
+// fractions of the view's width and height, with the viewer where the page first puts it. The
+// readout panel is hidden first: it covers part of the view, and a click on it is not one on the
+// view. Result: the colour (RGB) where each probe shows before the clicks, and per click the
+// pixel clicked, the object selected, the inspect panel (hidden, its heading and its rows as
+// [header, cell or null]) and the probes' colours after it. Every wait is on page state.
 
 import { doing, evaluate, openViewer, run, waitFor } from "./harness.mjs";
 
@@ -54,19 +55,48 @@ const panel = () => {
   };
 };
 
+/**
+ * The colour (mean RGB of the 3 × 3 pixels around it) of the view at each of `pixels` (CSS),
+ * once what changed has been drawn; the inspect panel is hidden meanwhile.
+ */
+async function coloursAt(page, pixels) {
+  const inspect = (shown) => { document.getElementById("inspect").style.visibility = shown; };
+  await evaluate(page, "hiding the inspect panel", inspect, "hidden");
+  await evaluate(page, "drawing two frames", () => new Promise((done) => {
+    requestAnimationFrame(() => requestAnimationFrame(done));
+  }));
+  doing("taking a screenshot");
+  const png = await page.screenshot();
+  await evaluate(page, "showing the inspect panel", inspect, "");
+  return evaluate(page, "reading the screenshot", async ({ data, pixels }) => {
+    const bytes = Uint8Array.from(atob(data), (c) => c.charCodeAt(0));
+    const bitmap = await createImageBitmap(new Blob([bytes], { type: "image/png" }));
+    const context = new OffscreenCanvas(bitmap.width, bitmap.height).getContext("2d");
+    context.drawImage(bitmap, 0, 0);
+    return pixels.map(({ x, y }) => {
+      const rgba = context.getImageData(Math.round(x) - 1, Math.round(y) - 1, 3, 3).data;
+      return [0, 1, 2].map((k) => rgba.filter((_, i) => i % 4 === k).reduce((a, b) => a + b) / 9);
+    });
+  }, { data: png.toString("base64"), pixels });
+}
+
 /** The one scenario: open params.page and make params.clicks. */
 async function clicks(page, { base, params }) {
   await openViewer(page, base, params.page);
   await evaluate(page, "hiding the readout panel", () => {
     document.getElementById("panel").style.visibility = "hidden";
   });
+  const probes = [];
+  for (const point of params.probes ?? []) probes.push(await pixelOf(page, { point }));
+  const before = await coloursAt(page, probes);
   const seen = [];
   for (const click of params.clicks) {
     const pixel = await pixelOf(page, click);
     await clickView(page, pixel);
-    seen.push({ pixel, ...(await evaluate(page, "reading the inspect panel", panel)) });
+    const shown = await evaluate(page, "reading the inspect panel", panel);
+    seen.push({ pixel, ...shown, probes: await coloursAt(page, probes) });
   }
-  return { clicks: seen };
+  return { probes: before, clicks: seen };
 }
 
 run({ clicks });

@@ -1,5 +1,6 @@
-"""Clicking an object on the viewer page shows its id and attributes, clicking empty space
-clears them: the TUM Munich district (CityGML LoD2) as X3D in X_ITE and as glTF in three.js,
+"""Clicking an object on the viewer page shows its id and attributes and highlights it (its roof
+changes colour until another building or empty space is clicked), clicking empty space clears
+both: the TUM Munich district (CityGML LoD2) as X3D in X_ITE and as glTF in three.js,
 clicked by inspect.mjs in headless Chromium where the page itself says a roof shows; the SIG3D
 LoD4 house shows the attributes of its parts (its room and the furniture in it)."""
 
@@ -48,14 +49,16 @@ def district(site: Path) -> dict[str, Chain]:
     return {s: make_chain(site, SOURCE, f"inspect_tum.{s}") for s in ("x3d", "glb")}
 
 
-def _roof(path: Path, object_id: str | None = None) -> tuple[str, list[float]]:
-    """An object of ``path`` (``object_id`` where given) and a point on its roof, safe to
-    click: of all upward-facing triangles of the objects' finest levels, the centre of the
-    largest inscribed circle (from above, as the page first shows the district, a roof shows,
-    its edges farthest away)."""
+def _roof(
+    path: Path, object_id: str | None = None, skip: str | None = None
+) -> tuple[str, list[float]]:
+    """An object of ``path`` (``object_id`` where given, not ``skip``) and a point on its
+    roof, safe to click: of all upward-facing triangles of the objects' finest levels, the
+    centre of the largest inscribed circle (from above, as the page first shows the district, a
+    roof shows, its edges farthest away)."""
     best = (0.0, "", [0.0, 0.0, 0.0])
     for chain in read_chains(path):
-        if object_id is not None and chain.object_id != object_id:
+        if (object_id is not None and chain.object_id != object_id) or chain.object_id == skip:
             continue
         corners = chain.levels[0].mesh.vertices[chain.levels[0].mesh.faces]
         sides = np.linalg.norm(corners[:, [1, 2, 0]] - corners[:, [2, 0, 1]], axis=2)
@@ -99,6 +102,40 @@ def test_clicking_a_building_shows_its_id_and_attributes(
     assert rows["function"] == source["function"] and rows["type"] == "Building", message
     assert sky["selected"] is None and sky["hidden"], message
     assert sky["heading"] is None and sky["rows"] == [], message
+    assert not _errors(out), message
+
+
+TINTED = 40.0
+"""How much (in a channel, 0-255) a highlighted roof's colour differs at least from before."""
+UNCHANGED = 6.0
+"""How much at most a roof's colour may differ from before when it is not highlighted."""
+
+
+def _change(colour: list[float], before: list[float]) -> float:
+    return max(abs(a - b) for a, b in zip(colour, before, strict=True))
+
+
+@pytest.mark.parametrize("suffix", ["x3d", "glb"])
+def test_clicking_a_building_highlights_it_until_another_is_clicked(
+    district: dict[str, Chain], inspect: Drive, site: Path, suffix: str
+) -> None:
+    """Clicking a building tints its roof and no other; clicking a second building moves the
+    tint there (the first shows its own colour again), clicking empty space clears it."""
+    path = site / district["x3d"].name
+    first, roof = _roof(path)
+    second, other = _roof(path, skip=first)
+    clicks = [{"point": roof}, {"point": other}, {"at": SKY}]
+    out = inspect("clicks", page=district[suffix].page, clicks=clicks, probes=[roof, other])
+    result = out["result"]
+    message = f"{result['probes']} then {[c['probes'] for c in result['clicks']]}"
+    message += f"\n{console_text(out)}"
+    assert [c["selected"] for c in result["clicks"]] == [first, second, None], message
+    before = result["probes"]
+    expected = [[True, False], [False, True], [False, False]]  # per click: each roof tinted?
+    for click, tints in zip(result["clicks"], expected, strict=True):
+        for colour, was, tinted in zip(click["probes"], before, tints, strict=True):
+            change = _change(colour, was)
+            assert change >= TINTED if tinted else change <= UNCHANGED, message
     assert not _errors(out), message
 
 
