@@ -7,10 +7,11 @@ one viewer library — three.js for glTF (the levels of each ``MSFT_lod`` chain 
 and ``PointProperties``). The library comes from a public CDN unless a URL or a local copy of the
 npm package is given; when it (or the output) cannot be loaded, a box over the view names the URL
 that failed and, for the library, how to give the page a local copy (``--viewer-lib``). An
-on-screen readout shows each object's active level and distance and, for a file with LOD
-parents, each cell's state (open, merged: showing its far level, culled, or hidden inside a
-coarser cell that is not open) and how many are merged; a LOD scale (the page's
-field, or ``?lodscale=`` in its URL) multiplies every cutoff the page switches at. Clicking an
+on-screen readout (in a panel that folds to its heading) shows each object's active level and
+distance and, for a file with LOD parents, each cell's state (open, merged: showing its far
+level, culled, or hidden inside a coarser cell that is not open) and how many are merged; a LOD
+scale (the page's field, or ``?lodscale=`` in its URL) multiplies every cutoff the page switches
+at. Clicking an
 object shows its id and attributes (``chain.metadata`` as read back: a city object's type,
 name, function, measured height, address, generic attributes…) and highlights its levels,
 clicking empty space clears both; ``window.lodconvertViewer`` exposes the same state

@@ -285,13 +285,13 @@ class LoadFailure extends Error {}
 /** The file name of the asset the page shows. */
 const assetName = () => decodeURIComponent(config.asset.split("/").pop());
 
-/** How to give the page a viewer library it can reach. */
+/** How to give the page a viewer library it can reach (lines of the alert box). */
 function localLibraryHint() {
   const { package: name, version } = config.library;
-  return `Re-run lodconvert with --viewer-lib DIR, DIR a local copy of the npm package ` +
+  return "Re-run lodconvert with --viewer-lib DIR, DIR a local copy of the npm package " +
     `${name}@${version} (npm install ${name}@${version} puts one in node_modules/${name}) ` +
-    `inside this page's folder, or serve both: lodconvert view ${assetName()} --serve ` +
-    "--viewer-lib DIR";
+    "inside this page's folder, or serve both:\n" +
+    `lodconvert view ${assetName()} --serve --viewer-lib DIR`;
 }
 
 /** Seconds the viewer library may take to load before the page says where it waits. */
@@ -311,13 +311,14 @@ async function importLibrary() {
     const where = url.origin === location.origin ? "" : " (offline, or its host blocked?)";
     readout.textContent = `loading the viewer library ${url} …`;
     const slow = setTimeout(() => {
-      alertBox(`Still waiting for the viewer library ${url}${where}. ${localLibraryHint()}.`);
+      alertBox(`Still waiting for the viewer library\n${url}${where}\n\n${localLibraryHint()}`);
     }, SLOW_LIBRARY_S * 1000);
     try {
       await import(name);
     } catch (error) {
-      const message = `Could not load the viewer library ${url}${where}: ${error.message}.`;
-      throw new LoadFailure(`${message} ${localLibraryHint()}.`);
+      console.error(error);
+      const failed = `Could not load the viewer library\n${url}${where}`;
+      throw new LoadFailure(`${failed}\n\n${localLibraryHint()}`);
     } finally {
       clearTimeout(slow);
     }
@@ -327,18 +328,18 @@ async function importLibrary() {
 }
 
 /**
- * The message for `error`, thrown while loading the model with the library in place: the
- * model's URL and why it could not be fetched, when it cannot.
+ * The message for `error`, thrown while loading the library or the model: the model's URL and
+ * why it could not be fetched, when it cannot.
  */
 async function loadFailure(error) {
   if (error instanceof LoadFailure) return error.message;
   const url = new URL(config.asset, location.href);
   const response = await fetch(url, { method: "HEAD", cache: "no-store" }).catch(() => null);
   const text = String(error?.message ?? error);
-  if (response?.ok) return `Could not show the model ${url}: ${text}`;
+  if (response?.ok) return `Could not show the model\n${url}\n${text}`;
   const why = response ? `HTTP ${response.status} ${response.statusText}`.trim() : "unreachable";
-  return `Could not load the model ${url} (${why}): it must lie where it was when the page ` +
-    `was written, in the folder served (lodconvert view ${assetName()} --serve).`;
+  return `Could not load the model\n${url} (${why})\n\nIt must lie where it was when the ` +
+    `page was written, in the folder served:\nlodconvert view ${assetName()} --serve`;
 }
 
 /** Two animation frames: whatever was changed before has been drawn. */
@@ -423,6 +424,7 @@ async function start(backend) {
     state.loadMs = performance.now() - started;
     state.ready = true;
   } catch (error) {
+    readout.textContent = "not shown: see the message over the view";
     fail(await loadFailure(error));
   }
 }

@@ -151,6 +151,28 @@ def test_viewer_page_slider_reaches_beyond_every_objects_last_cutoff(
     assert not _errors(out), message
 
 
+def test_viewer_page_panel_folds_by_its_heading(knot: dict[str, Chain], drive: Drive) -> None:
+    """A click on the readout panel's heading folds it to that line: the view shows where the
+    readout was. Another click unfolds it, its readout current (the viewer moved meanwhile)."""
+    chain = knot["glb"]
+    stop = chain.stops()[1]
+    out = drive("panel", page=chain.page, distance=stop["distance"])
+    first, folded, unfolded = (out["result"][k] for k in ("first", "folded", "unfolded"))
+    message = f"{out['result']}\n{console_text(out)}"
+    assert first["open"] and first["readoutShown"] and not first["view"], message
+    assert not folded["open"] and not folded["readoutShown"] and folded["view"], message
+    assert unfolded["open"] and unfolded["readoutShown"] and not unfolded["view"], message
+    assert unfolded["height"] > 2 * folded["height"], message
+    level = chain.level_names()[stop["level"]]
+    assert f"{chain.obj['id']}: {level} at distance" in unfolded["readout"], message
+    assert not _errors(out), message
+
+
+def _words(text: str) -> str:
+    """``text`` with its line breaks and runs of spaces as single spaces."""
+    return " ".join(text.split())
+
+
 def _closed_port() -> int:
     """A port of 127.0.0.1 that nothing listens on (free a moment ago)."""
     with socket.socket() as sock:
@@ -171,13 +193,13 @@ def test_viewer_page_names_an_unreachable_library(
     page = write_page(site / chain.name, site / f"offline_{chain.page}", library=base)
     out = drive("alert", page=page.name)
     result = out["result"]
-    message = f"{result}\n{console_text(out)}"
+    message, text = f"{result}\n{console_text(out)}", _words(result["text"])
     module = next(path for name, path in library.imports if not name.endswith("/"))
     assert not result["ready"] and result["shown"], message
-    assert f"Could not load the viewer library {base}/{module}" in result["text"], message
-    assert "Re-run lodconvert with --viewer-lib DIR" in result["text"], message
-    assert f"npm package {library.package}@{library.version}" in result["text"], message
-    assert f"lodconvert view {chain.name} --serve --viewer-lib DIR" in result["text"], message
+    assert f"Could not load the viewer library {base}/{module}" in text, message
+    assert "Re-run lodconvert with --viewer-lib DIR" in text, message
+    assert f"npm package {library.package}@{library.version}" in text, message
+    assert f"lodconvert view {chain.name} --serve --viewer-lib DIR" in text, message
 
 
 def test_viewer_page_says_where_it_waits_for_a_library(
@@ -194,10 +216,10 @@ def test_viewer_page_says_where_it_waits_for_a_library(
         page = write_page(site / chain.name, site / f"waiting_{chain.page}", library=base)
         out = drive("alert", page=page.name)
     result = out["result"]
-    message = f"{result}\n{console_text(out)}"
+    message, text = f"{result}\n{console_text(out)}", _words(result["text"])
     assert not result["ready"] and not result["error"] and result["shown"], message
-    assert f"Still waiting for the viewer library {base}/build/three.module.js" in result["text"]
-    assert "Re-run lodconvert with --viewer-lib DIR" in result["text"], message
+    assert f"Still waiting for the viewer library {base}/build/three.module.js" in text, message
+    assert "Re-run lodconvert with --viewer-lib DIR" in text, message
 
 
 @pytest.mark.parametrize("suffix", ["glb", "x3d"])
@@ -213,10 +235,10 @@ def test_viewer_page_names_a_missing_model(
     asset.unlink()
     out = drive("alert", page=page.name)
     result = out["result"]
-    message = f"{result}\n{console_text(out)}"
+    message, text = f"{result}\n{console_text(out)}", _words(result["text"])
     assert not result["ready"] and result["shown"], message
-    assert "Could not load the model http://127.0.0.1:" in result["text"], message
-    assert f"/{asset.name} (HTTP 404 " in result["text"], message
+    assert "Could not load the model http://127.0.0.1:" in text, message
+    assert f"/{asset.name} (HTTP 404 " in text, message
 
 
 BRIGHTNESS_STEP = 5.0
