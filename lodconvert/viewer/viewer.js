@@ -234,7 +234,10 @@ function addAttributes(table, attributes, name = null) {
   }
 }
 
-/** Show the id and attributes of object `index` in the panel; null empties and hides it. */
+/**
+ * Show the id and attributes of object `index` in the panel, with a button that deselects it;
+ * null empties and hides it.
+ */
 function select(index) {
   const object = index === null ? null : config.objects[index];
   state.selected = object?.id ?? null;
@@ -246,23 +249,32 @@ function select(index) {
   const table = document.createElement("table");
   const { id, ...others } = object.attributes; // the id is the heading already
   addAttributes(table, id === object.id ? others : object.attributes);
-  inspect.append(heading, table);
+  const close = document.createElement("button");
+  Object.assign(close, { type: "button", className: "close", textContent: "×" });
+  close.title = "Deselect";
+  inspect.append(close, heading, table);
 }
 
 /**
  * Clicks on the view select the object under the pointer (or nothing): its attributes show in
- * the panel, and the backend highlights it in place of the one before; drags do not.
+ * the panel, and the backend highlights it in place of the one before; drags do not. The
+ * panel's close button selects nothing.
  */
 function watchClicks(backend, view) {
+  const choose = (index) => {
+    select(index);
+    backend.highlight(index);
+  };
   let pressed = null;
   view.addEventListener("pointerdown", (event) => { pressed = [event.clientX, event.clientY]; });
   view.addEventListener("click", (event) => {
     if (pressed === null) return;
     if (Math.hypot(event.clientX - pressed[0], event.clientY - pressed[1]) > CLICK_SLOP_PX) return;
-    const index = backend.pick(event);
-    select(index);
-    backend.highlight(index);
+    choose(backend.pick(event));
     state.clicks += 1;
+  });
+  inspect.addEventListener("click", (event) => {
+    if (event.target.closest("button.close")) choose(null);
   });
 }
 

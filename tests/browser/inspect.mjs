@@ -5,9 +5,10 @@
 //
 //   node tests/browser/inspect.mjs clicks BASE_URL PARAMS_JSON
 //
-// PARAMS: {page, clicks: [{point} or {at}], probes: [point]}: the page is clicked, in turn,
-// where the world point `point` shows (the page's lodconvertViewer.screenPoint) or at `at`,
-// fractions of the view's width and height, with the viewer where the page first puts it. The
+// PARAMS: {page, clicks: [{point} or {at} or {close}], probes: [point]}: the page is clicked, in
+// turn, where the world point `point` shows (the page's lodconvertViewer.screenPoint), at `at`,
+// fractions of the view's width and height, with the viewer where the page first puts it, or on
+// the inspect panel's close button (`close`: true; the pixel is null then). The
 // readout panel is hidden first: it covers part of the view, and a click on it is not one on the
 // view. Result: the colour (RGB) where each probe shows before the clicks, and per click the
 // pixel clicked, the object selected, the inspect panel (hidden, its heading and its rows as
@@ -41,6 +42,13 @@ async function clickView(page, { x, y }) {
   await page.mouse.click(x, y);
   const handled = (n) => window.lodconvertViewer.clicks > n;
   await waitFor(page, "the page handling the click", handled, before);
+}
+
+/** Click the inspect panel's close button; resolves once the page selects nothing. */
+async function closePanel(page) {
+  doing("clicking the inspect panel's close button");
+  await page.locator("#inspect button.close").click();
+  await waitFor(page, "the page deselecting", () => window.lodconvertViewer.selected === null);
 }
 
 /** What the inspect panel shows. */
@@ -91,8 +99,9 @@ async function clicks(page, { base, params }) {
   const before = await coloursAt(page, probes);
   const seen = [];
   for (const click of params.clicks) {
-    const pixel = await pixelOf(page, click);
-    await clickView(page, pixel);
+    const pixel = click.close ? null : await pixelOf(page, click);
+    if (pixel === null) await closePanel(page);
+    else await clickView(page, pixel);
     const shown = await evaluate(page, "reading the inspect panel", panel);
     seen.push({ pixel, ...shown, probes: await coloursAt(page, probes) });
   }

@@ -120,18 +120,22 @@ def test_clicking_a_building_highlights_it_until_another_is_clicked(
     district: dict[str, Chain], inspect: Drive, site: Path, suffix: str
 ) -> None:
     """Clicking a building tints its roof and no other; clicking a second building moves the
-    tint there (the first shows its own colour again), clicking empty space clears it."""
+    tint there (the first shows its own colour again); the inspect panel's close button clears
+    it, and so does clicking empty space."""
     path = site / district["x3d"].name
     first, roof = _roof(path)
     second, other = _roof(path, skip=first)
-    clicks = [{"point": roof}, {"point": other}, {"at": SKY}]
+    clicks = [{"point": roof}, {"point": other}, {"close": True}, {"point": roof}, {"at": SKY}]
     out = inspect("clicks", page=district[suffix].page, clicks=clicks, probes=[roof, other])
     result = out["result"]
     message = f"{result['probes']} then {[c['probes'] for c in result['clicks']]}"
     message += f"\n{console_text(out)}"
-    assert [c["selected"] for c in result["clicks"]] == [first, second, None], message
+    selected = [c["selected"] for c in result["clicks"]]
+    assert selected == [first, second, None, first, None], message
+    assert [c["hidden"] for c in result["clicks"]] == [False, False, True, False, True], message
     before = result["probes"]
-    expected = [[True, False], [False, True], [False, False]]  # per click: each roof tinted?
+    # per click: is each roof tinted?
+    expected = [[True, False], [False, True], [False, False], [True, False], [False, False]]
     for click, tints in zip(result["clicks"], expected, strict=True):
         for colour, was, tinted in zip(click["probes"], before, tints, strict=True):
             change = _change(colour, was)
