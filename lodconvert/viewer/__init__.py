@@ -11,12 +11,12 @@ on-screen readout (in a panel that folds to its heading) shows each object's act
 distance and, for a file with LOD parents, each cell's state (open, merged: showing its far
 level, culled, or hidden inside a coarser cell that is not open) and how many are merged; a LOD
 scale (the page's field, or ``?lodscale=`` in its URL) multiplies every cutoff the page switches
-at. Clicking an
-object shows its id and attributes (``chain.metadata`` as read back: a city object's type,
-name, function, measured height, address, generic attributes…) and highlights its levels,
-clicking empty space clears both; ``window.lodconvertViewer`` exposes the same state
-(``objects``, ``cells``, ``merged``, ``lodScale``), ``setDistance(d)``, ``setLodScale(s)`` and
-``screenPoint([x, y, z])`` (where a world point shows on the page).
+at. Clicking an object shows its id and attributes (``chain.metadata`` as read back: a city
+object's type, name, function, measured height, address, generic attributes…) and highlights
+its levels, clicking empty space (or the attributes' close button) clears both;
+``window.lodconvertViewer`` exposes the same state (``objects``, ``cells``, ``merged``,
+``lodScale``), ``setDistance(d)``, ``setLodScale(s)`` and ``screenPoint([x, y, z])`` (where a
+world point shows on the page).
 
 Browsers do not let a page opened from a file fetch its neighbours, so the page must be served:
 :func:`serve` (``lodconvert view OUT --serve``) serves a folder on 127.0.0.1. A local library
