@@ -151,7 +151,8 @@ def test_page_uses_the_cdn_by_default(outputs: dict[str, Path], suffix: str, pac
     assert all(url.startswith(f"{CDN}{package}@{library.version}/") for url in imports.values())
     config = _embedded(text, "lodconvert-config")
     assert config["asset"] == f"./knot.{suffix}"
-    assert config == {**page_config(outputs[suffix]), "asset": f"./knot.{suffix}"}
+    named = {"package": package, "version": library.version}  # for the page's messages
+    assert config == {**page_config(outputs[suffix]), "asset": f"./knot.{suffix}", "library": named}
     assert "<title>knot." in text and "lodconvertViewer" in text
 
 

@@ -4,7 +4,8 @@ by hlod.mjs in headless Chromium: near the district no cell is merged, farther s
 slider's far end all are, and the page says so (its state and its cells readout); every cell
 shows the state of its distance and every object in an open cell (or in none) the level of its
 own; a LOD scale from the URL or the page's field multiplies the cutoffs. A prism-switched
-file's page shows its object's level, read from the Switches. Every wait is on page state."""
+file's page shows its object's level, read from the Switches (an object of one level has
+none: that level). Every wait is on page state."""
 
 from __future__ import annotations
 
@@ -187,4 +188,27 @@ def test_prism_page_shows_the_objects_level_from_its_switches(site: Path, hlod: 
     assert scaled["distance"] == pytest.approx(stops[-1]["distance"]), message
     expected = names[_box_level(larger, _viewer(config, scaled["distance"]))]
     assert scaled["objects"][0]["level"] == expected != names[-1], message
+    assert not _errors(out), message
+
+
+def test_prism_page_shows_the_level_of_single_level_objects(site: Path, hlod: Drive) -> None:
+    """Potsdam's LoD1 buildings, one level each (no cutoff, so no Switch), with prism
+    switching: near and at the slider's far end every object shows LOD1, and each line of the
+    readout says so at the distance of the move, with no cutoff (it said '…' for ever)."""
+    source = SHARED / "data" / "citygml" / "potsdam_lod1_v1.gml"
+    if not source.exists():
+        pytest.skip(f"{source} is absent (shared test data not checked out)")
+    chain = _make(site, source, "prism_potsdam.x3d", write_options={"switching": "prism"})
+    assert {len(obj["levels"]) for obj in chain.report["objects"]} == {1}
+    out = hlod("stops", page=chain.page, stops=[{"key": "Home"}, {"key": "End"}])
+    _, near, far = out["result"]["stops"]
+    message = f"{[near['readout'], far['readout']]}\n{console_text(out)}"
+    for at in (near, far):
+        assert {obj["level"] for obj in at["objects"]} == {"LOD1"}, message
+        lines = at["readout"].splitlines()[:LISTED]
+        for obj, line in zip(at["objects"][:LISTED], lines, strict=True):
+            start, distance = line.removesuffix(" (no cutoff)").rsplit(" ", 1)
+            assert start == f"{obj['id']}: LOD1 at distance", message
+            assert float(distance) == pytest.approx(obj["distance"], rel=1e-3), message
+    assert far["objects"][0]["distance"] > 10 * near["objects"][0]["distance"], message
     assert not _errors(out), message
