@@ -30,6 +30,7 @@ from .errors import InputError, UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
 from .plan import POINT_COST, least_point_cost, level_cost, silhouette_estimate
+from .prisms import prism
 from .ranges import (
     DEFAULT_BETA,
     DEFAULT_GAMMA,
@@ -42,7 +43,7 @@ from .ranges import (
     default_xs,
     projected_px,
 )
-from .sourcelods import GROUND_COVERS, SLOTS, prism, source_levels
+from .sourcelods import GROUND_COVERS, SLOTS, source_levels
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)

@@ -13,8 +13,9 @@ from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.model import Mesh, Node, Surface
 from lodconvert.polygons import triangulate
+from lodconvert.prisms import footprint, prism
 from lodconvert.ranges import cutoff
-from lodconvert.sourcelods import footprint, lod_rank, prism, source_levels
+from lodconvert.sourcelods import lod_rank, source_levels
 
 
 def block(width: float, depth: float, height: float, x: float = 0.0, y: float = 0.0) -> Mesh:
