@@ -29,8 +29,14 @@ from .bake import Backend, Grid, bake_points
 from .errors import InputError, UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
-from .plan import POINT_COST, least_point_cost, level_cost, silhouette_estimate
-from .prisms import prism
+from .plan import (
+    POINT_COST,
+    least_point_cost,
+    level_cost,
+    mesh_silhouette_estimate,
+    silhouette_estimate,
+)
+from .prisms import FOOTPRINT_TOLERANCE_PX, LOW_F, MIN_PRISM_F, MORE_TRIANGLES, prism
 from .ranges import (
     DEFAULT_BETA,
     DEFAULT_GAMMA,
@@ -498,12 +504,7 @@ def _source_chain(
         elif slot == 1 and obj.type in GROUND_COVERS:
             level = f"a {obj.type} covers the ground: no prism"
         elif slot == 1:
-            shape = prism(obj.lods, finest, obj.attributes)
-            level = (
-                Level(name=name, kind="prism", mesh=shape.translated(-origin))
-                if shape is not None
-                else "no footprint with area to extrude"
-            )
+            level = _prism_level(obj, finest, origin, surface, levels[-1], cuts[index], opts)
         elif level_cost(levels[-1]) <= _least_cost(surface, opts):
             level = "no point level could be both cheaper and faithful"
         else:
@@ -520,6 +521,40 @@ def _source_chain(
         kept_cuts.append(cuts[index])
         kept_xs.append(xs[index])
     return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped)
+
+
+def _prism_level(
+    obj: Node,
+    finest: Mesh,
+    origin: np.ndarray,
+    surface: Mesh,
+    previous: Level,
+    distance: float,
+    opts: ChainOptions,
+) -> Level | str:
+    """The LOD1 prism of ``obj`` (its footprint simplified within
+    :data:`~.prisms.FOOTPRINT_TOLERANCE_PX` pixels at ``distance``, where it switches in), or
+    why it is left out: no footprint, no fewer triangles than ``previous`` (for a point level
+    before it: no lower draw cost), or a silhouette F against ``surface`` (the finest level)
+    below :data:`~.prisms.MIN_PRISM_F` at ``distance``."""
+    pixel = distance / opts.view.focal_px
+    shape = prism(obj.lods, finest, obj.attributes, FOOTPRINT_TOLERANCE_PX * pixel)
+    if shape is None:
+        return "no footprint with area to extrude"
+    level = Level(name="LOD1", kind="prism", mesh=shape.translated(-origin))
+    if previous.mesh is not None and shape.face_count >= previous.mesh.face_count:
+        return (
+            f"{MORE_TRIANGLES} {previous.name}: the prism has {shape.face_count:,} "
+            f"triangles, {previous.name} {previous.mesh.face_count:,}"
+        )
+    if previous.mesh is None and level_cost(level) >= level_cost(previous):
+        return f"{MORE_TRIANGLES} {previous.name}: the prism costs no less to draw"
+    assert level.mesh is not None
+    f = mesh_silhouette_estimate(surface, level.mesh, distance, opts.view).f
+    if f < MIN_PRISM_F:
+        return f"{LOW_F} {f:.3f} where it switches in, below {MIN_PRISM_F}"
+    level.silhouette_f = f
+    return level
 
 
 def _lod0_chain(obj: Node, opts: ChainOptions) -> LodChain | None:

@@ -84,6 +84,12 @@ class SilhouetteEstimate:
         """Both at least :data:`MIN_SILHOUETTE`."""
         return self.precision >= MIN_SILHOUETTE and self.recall >= MIN_SILHOUETTE
 
+    @property
+    def f(self) -> float:
+        """Silhouette F: the harmonic mean of precision and recall."""
+        p, r = self.precision, self.recall
+        return 2 * p * r / (p + r) if p + r > 0 else 0.0
+
 
 def _source_masks(
     mesh: Mesh, pixel: float, bounds: np.ndarray | None = None

@@ -1,10 +1,17 @@
 """The LOD1 prism of a city object that has no LoD 1 of its own.
 
 A derived **prism** is the object's footprint — its lod0 surfaces, else the outline of its
-finest geometry seen from above — extruded from the lowest point to the object's height
-(``measuredHeight`` where the source gives a plausible one). Only objects that stand on the
-ground get one (:data:`~.sourcelods.GROUND_COVERS` get none). Coordinates are z-up, as in
-CityGML and CityJSON.
+finest geometry seen from above — simplified (shapely, topology kept) within a tolerance the
+caller derives from the pixel size where the prism switches in, and extruded from the lowest
+point to a high percentile of the roof's heights (:data:`ROOF_PERCENTILE`, over the roof's
+area seen from above), as 3D BAG's LoD1.2 blocks take a percentile of the roof points' heights
+rather than the highest (an object with nothing but LoD 0 has no roof: ``measuredHeight``
+where plausible). Its top takes
+the roof's colour and its walls the walls' (the finest geometry's own, so source materials win
+over class colours as they do there). It has no floor: from a viewer's side of the ground the
+underside of a building is never seen. Only objects that stand on the ground get one
+(:data:`~.sourcelods.GROUND_COVERS` get none). Coordinates are z-up, as in CityGML and
+CityJSON.
 """
 
 from __future__ import annotations
@@ -26,6 +33,19 @@ neighbours are dropped (the seams of a union of triangles)."""
 STEEP = 0.5
 """A triangle whose ground projection is less than this fraction of its area (one steeper than
 60°: a wall) is a sliver seen from above."""
+ROOF_PERCENTILE = 90.0
+"""The prism's top: this percentile of the roof's heights. Of 50, 70, 80, 90 and 100 it keeps
+the most prisms at silhouette F ≥ :data:`MIN_PRISM_F` on TUM Munich, and the lightest
+(``benchmarks/results/city_levels.md``)."""
+FOOTPRINT_TOLERANCE_PX = 0.5
+"""The footprint's simplification tolerance, in pixels of the reference view where the prism
+switches in."""
+MIN_PRISM_F = 0.95
+"""Least silhouette F of a prism against the finest level where it switches in."""
+MORE_TRIANGLES = "no fewer triangles than"
+"""How a prism left out for costing as much as the level before it is reported."""
+LOW_F = "silhouette F"
+"""How a prism left out for looking unlike the object is reported."""
 
 
 class FootprintPart(NamedTuple):
@@ -242,11 +262,21 @@ def footprint(lods: dict[str, Mesh], finest: Mesh) -> list[FootprintPart]:
     return parts if parts is not None else _outline(shapely.union_all(_closed(tri)), extent)
 
 
-def prism_height(finest: Mesh, attributes: dict[str, object]) -> tuple[float, float]:
-    """Base and top height of the prism: the lowest point, and the base plus
-    ``measuredHeight`` when that is a plausible number (positive, at most twice the geometry's
-    own height), else the highest point."""
+def prism_height(
+    lods: dict[str, Mesh], finest: Mesh, attributes: dict[str, object]
+) -> tuple[float, float]:
+    """Base and top height of the prism: the lowest point, and the :data:`ROOF_PERCENTILE` th
+    percentile of the roof heights where the object has a solid LoD (1 or finer) with a roof;
+    else the base plus ``measuredHeight`` when that is a plausible number (positive, at most
+    twice the geometry's own height), else the highest point."""
     low, high = float(finest.bounds[0, 2]), float(finest.bounds[1, 2])
+    if source_levels(lods).keys() - {0}:
+        roof = _roofs(finest)
+        if roof.any():
+            tri = finest.triangles[roof]
+            top = _percentile(tri[:, :, 2], np.abs(_doubled_areas(tri)), ROOF_PERCENTILE / 100)
+            if top > low:
+                return low, top
     measured = attributes.get("measuredHeight")
     try:
         value = float(measured)  # type: ignore[arg-type]
@@ -257,47 +287,146 @@ def prism_height(finest: Mesh, attributes: dict[str, object]) -> tuple[float, fl
     return low, high
 
 
-def _extruded(part: FootprintPart, base: float, top: float) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices and faces of ``part`` extruded from ``base`` to ``top``: its roof, its floor
-    (the roof turned over) and its walls, each with vertices of their own, facing outward."""
-    n = len(part.points)
+def _normals(mesh: Mesh) -> np.ndarray:
+    """The faces' normals (m, 3), as long as twice their areas, turned outward where the mesh
+    encloses a volume (its faces' majority then faces inward otherwise)."""
+
+    def compute() -> np.ndarray:
+        tri = mesh.triangles - mesh.bounds.mean(axis=0)
+        across = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        return -across if float(np.einsum("ij,ij->", tri[:, 0], across)) < 0 else across
+
+    return mesh.derived("outward-normals", compute)
+
+
+def _roofs(mesh: Mesh) -> np.ndarray:
+    """Which faces of ``mesh`` are roofs: facing up, less steep than :data:`STEEP` allows."""
+    normals = _normals(mesh)
+    return normals[:, 2] > STEEP * np.linalg.norm(normals, axis=1)
+
+
+def _walls(mesh: Mesh) -> np.ndarray:
+    """Which faces of ``mesh`` are walls: steeper than :data:`STEEP` allows."""
+    normals = _normals(mesh)
+    return np.abs(normals[:, 2]) < STEEP * np.linalg.norm(normals, axis=1)
+
+
+def _percentile(heights: np.ndarray, weights: np.ndarray, share: float) -> float:
+    """The height below which ``share`` of the area of triangles with corner ``heights``
+    ((m, 3)) and areas ``weights`` lies, heights varying linearly across each triangle."""
+    z = np.sort(heights, axis=1)
+    a, b, c = z[:, 0], z[:, 1], z[:, 2]
+    lo, hi = float(a.min()), float(c.max())
+    total = float(weights.sum())
+    if total <= 0 or hi <= lo:
+        return hi
+
+    def below(t: float) -> float:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rising = (t - a) ** 2 / ((b - a) * (c - a))
+            falling = 1 - (c - t) ** 2 / ((c - a) * (c - b))
+        part = np.where(t >= c, 1.0, np.where(t <= a, 0.0, np.where(t <= b, rising, falling)))
+        return float(weights @ part) / total
+
+    for _ in range(60):
+        middle = (lo + hi) / 2
+        lo, hi = (middle, hi) if below(middle) < share else (lo, middle)
+    return hi
+
+
+def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The prism's roof and wall colours (RGBA): the mean colour of ``finest``'s roofs and of
+    its walls, over their areas (grey where it has none)."""
+    everything = np.arange(finest.face_count)
+    centres = finest.triangles.mean(axis=1)
+    areas = np.linalg.norm(_normals(finest), axis=1)
+    colors = []
+    for faces in (everything[_roofs(finest)], everything[_walls(finest)]):
+        weights = areas[faces]
+        if weights.sum() <= 0:
+            colors.append(GREY.copy())
+            continue
+        seen = finest.colors_at(faces, centres[faces]).astype(np.float64)
+        colors.append(np.rint(weights @ seen / weights.sum()).astype(np.uint8))
+    return colors[0], colors[1]
+
+
+def simplified(parts: list[FootprintPart], tolerance: float) -> list[FootprintPart]:
+    """The footprint ``parts`` simplified within ``tolerance`` (shapely, topology kept),
+    without the polygons and holes smaller than a ``tolerance`` square; ``parts`` themselves
+    where that removes no corner."""
+    import shapely
+
+    if tolerance <= 0 or not parts:
+        return parts
+    outline = shapely.MultiPolygon([shapely.Polygon(p.rings[0], p.rings[1:]) for p in parts])
+    simple = shapely.simplify(outline, tolerance, preserve_topology=True)
+    least = tolerance * tolerance
+    kept = [
+        shapely.Polygon(polygon.exterior, [h for h in polygon.interiors if _area(h) >= least])
+        for polygon in getattr(simple, "geoms", [simple])
+        if isinstance(polygon, shapely.Polygon) and polygon.area >= least
+    ]
+    if not kept:
+        return parts
+    result = shapely.MultiPolygon(kept)
+    if shapely.get_num_coordinates(result) >= shapely.get_num_coordinates(outline):
+        return parts
+    return _polygons(result)
+
+
+def _area(ring: Any) -> float:
+    """The area a shapely ``ring`` bounds."""
+    return abs(_doubled_area(np.asarray(ring.coords)[:-1])) / 2
+
+
+def _extruded(part: FootprintPart, base: float, top: float) -> tuple[Surface, Surface]:
+    """``part`` extruded from ``base`` to ``top``: its top (facing up) and its walls (facing
+    outward), no floor. Exterior rings run clockwise and holes counter-clockwise seen from
+    above, so the solid lies to the right of every ring."""
+    roof = Surface(
+        np.column_stack([part.points, np.full(len(part.points), top)]),
+        part.triangles[:, ::-1].copy(),
+    )
     sizes = [len(ring) for ring in part.rings]
     wall = np.concatenate(part.rings)
     k = len(wall)
-    plan = np.concatenate([part.points, part.points, wall, wall])
-    vertices = np.column_stack([plan, np.repeat([top, base, base, top], [n, n, k, k])])
+    vertices = np.column_stack([np.concatenate([wall, wall]), np.repeat([base, top], k)])
     i = np.arange(k)
     j = i + 1
     ends = np.cumsum(sizes)
     j[ends - 1] = ends - sizes  # each ring closes on its first corner
-    walls = np.stack([i, j, j + k, i, j + k, i + k], axis=1).reshape(-1, 3) + 2 * n
-    faces = np.concatenate([part.triangles, part.triangles[:, ::-1] + n, walls])
-    return vertices, faces if _encloses(vertices, faces) else faces[:, ::-1]
+    faces = np.stack([i, j + k, j, i, i + k, j + k], axis=1).reshape(-1, 3)
+    return roof, Surface(vertices, faces)
 
 
-def _encloses(vertices: np.ndarray, faces: np.ndarray) -> bool:
-    """Whether the closed ``faces`` face outward: the volume they enclose is positive (measured
-    about the first vertex, so that georeferenced coordinates keep their precision)."""
-    local = (vertices - vertices[0])[faces]  # (m, 3 corners, 3)
-    a, b, c = local[:, 0].T, local[:, 1].T, local[:, 2].T
-    across = b[1] * c[2] - b[2] * c[1], b[2] * c[0] - b[0] * c[2], b[0] * c[1] - b[1] * c[0]
-    return float((a[0] @ across[0]) + (a[1] @ across[1]) + (a[2] @ across[2])) >= 0.0
-
-
-def prism(lods: dict[str, Mesh], finest: Mesh, attributes: dict[str, object]) -> Mesh | None:
-    """The LOD1 prism of a city object (``None`` when it has no footprint with area)."""
-    base, top = prism_height(finest, attributes)
+def prism(
+    lods: dict[str, Mesh], finest: Mesh, attributes: dict[str, object], tolerance: float = 0.0
+) -> Mesh | None:
+    """The LOD1 prism of a city object, its footprint simplified within ``tolerance`` (scene
+    units; see :func:`simplified`): a roof part and a walls part (``None`` when it has no
+    footprint with area)."""
+    base, top = prism_height(lods, finest, attributes)
     if not top > base:
         return None
-    vertices: list[np.ndarray] = []
-    faces: list[np.ndarray] = []
-    count = 0
-    for part in footprint(lods, finest):
-        corners, triangles = _extruded(part, base, top)
-        vertices.append(corners)
-        faces.append(triangles + count)
-        count += len(corners)
-    if not faces:
+    parts = simplified(footprint(lods, finest), tolerance)
+    if not parts:
         return None
-    surface = Surface(np.concatenate(vertices), np.concatenate(faces), base_color=GREY.copy())
-    return Mesh([surface])
+    extruded = [_extruded(part, base, top) for part in parts]
+    roof_color, wall_color = prism_colors(finest)
+    return Mesh(
+        [
+            _joined([roof for roof, _ in extruded], roof_color),
+            _joined([walls for _, walls in extruded], wall_color),
+        ]
+    )
+
+
+def _joined(surfaces: list[Surface], color: np.ndarray) -> Surface:
+    """``surfaces`` as one of ``color``."""
+    offsets = np.cumsum([0] + [len(s.vertices) for s in surfaces[:-1]])
+    return Surface(
+        np.concatenate([s.vertices for s in surfaces]),
+        np.concatenate([s.faces + o for s, o in zip(surfaces, offsets, strict=True)]),
+        base_color=color,
+    )
