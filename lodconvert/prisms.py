@@ -6,9 +6,9 @@ caller derives from the pixel size where the prism switches in, and extruded fro
 point to a high percentile of the roof's heights (:data:`ROOF_PERCENTILE`, over the roof's
 area seen from above), as 3D BAG's LoD1.2 blocks take a percentile of the roof points' heights
 rather than the highest (an object with nothing but LoD 0 has no roof: ``measuredHeight``
-where plausible). Its top takes
-the roof's colour and its walls the walls' (the finest geometry's own, so source materials win
-over class colours as they do there). It has no floor: from a viewer's side of the ground the
+where plausible). Its top takes the roof's colour and its walls the walls' (the finest
+geometry's own, so source materials win over class colours as they do there), as vertex
+colours of one part: one draw call. It has no floor: from a viewer's side of the ground the
 underside of a building is never seen. Only objects that stand on the ground get one
 (:data:`~.sourcelods.GROUND_COVERS` get none). Coordinates are z-up, as in CityGML and
 CityJSON.
@@ -404,8 +404,8 @@ def prism(
     lods: dict[str, Mesh], finest: Mesh, attributes: dict[str, object], tolerance: float = 0.0
 ) -> Mesh | None:
     """The LOD1 prism of a city object, its footprint simplified within ``tolerance`` (scene
-    units; see :func:`simplified`): a roof part and a walls part (``None`` when it has no
-    footprint with area)."""
+    units; see :func:`simplified`), its tops first, then its walls: one part (one draw call),
+    coloured per vertex (``None`` when it has no footprint with area)."""
     base, top = prism_height(lods, finest, attributes)
     if not top > base:
         return None
@@ -414,19 +414,20 @@ def prism(
         return None
     extruded = [_extruded(part, base, top) for part in parts]
     roof_color, wall_color = prism_colors(finest)
+    surfaces = [roof for roof, _ in extruded] + [walls for _, walls in extruded]
+    colors = [roof_color] * len(extruded) + [wall_color] * len(extruded)
+    offsets = np.cumsum([0] + [len(s.vertices) for s in surfaces[:-1]])
     return Mesh(
         [
-            _joined([roof for roof, _ in extruded], roof_color),
-            _joined([walls for _, walls in extruded], wall_color),
+            Surface(
+                np.concatenate([s.vertices for s in surfaces]),
+                np.concatenate([s.faces + o for s, o in zip(surfaces, offsets, strict=True)]),
+                vertex_colors=np.concatenate(
+                    [
+                        np.tile(c, (len(s.vertices), 1))
+                        for s, c in zip(surfaces, colors, strict=True)
+                    ]
+                ),
+            )
         ]
-    )
-
-
-def _joined(surfaces: list[Surface], color: np.ndarray) -> Surface:
-    """``surfaces`` as one of ``color``."""
-    offsets = np.cumsum([0] + [len(s.vertices) for s in surfaces[:-1]])
-    return Surface(
-        np.concatenate([s.vertices for s in surfaces]),
-        np.concatenate([s.faces + o for s, o in zip(surfaces, offsets, strict=True)]),
-        base_color=color,
     )

@@ -97,11 +97,13 @@ def test_no_footprint_means_no_prism() -> None:
 
 
 def with_floor(shape: Mesh) -> Mesh:
-    """A prism (its top, then its walls) closed by its top turned over at its base."""
-    top = shape.parts[0]
-    floor = top.vertices.copy()
+    """A prism closed by its top faces turned over at its base."""
+    surface = shape.single
+    assert surface is not None  # one part: one draw call
+    up = surface.face_normals(np.arange(len(surface.faces)))[:, 2] > 0.5
+    floor = surface.vertices.copy()
     floor[:, 2] = shape.bounds[0, 2]
-    return Mesh([*shape.parts, Surface(floor, top.faces[:, ::-1])])
+    return Mesh([surface, Surface(floor, surface.faces[up][:, ::-1])])
 
 
 def closed_and_wound_alike(mesh: Mesh) -> bool:
