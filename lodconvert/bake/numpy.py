@@ -133,6 +133,35 @@ def _extremes(
     return picked[0], picked[1]
 
 
+def _candidate_chunks(
+    table: dict[str, np.ndarray], grid: Grid, axis: int, memory_bytes: int
+) -> Iterator[tuple[np.ndarray, ...]]:
+    """The (face row, pixel) pairs whose pixel centre a face covers, with their depths
+    (:func:`_candidates`), a quarter of ``memory_bytes`` worth of candidates at a time."""
+    u, v = grid.plane_axes(axis)
+    rows_n, cols_n = grid.image_shape(axis)
+    centre = table["centre"]
+    iu0, nu = _pixel_range(table["umin"], table["umax"], grid.lo[u] - centre[u], grid.pitch, cols_n)
+    iv0, nv = _pixel_range(table["vmin"], table["vmax"], grid.lo[v] - centre[v], grid.pitch, rows_n)
+    count = nu * nv
+    live = np.flatnonzero(count)
+    count = count[live]
+    cum = np.cumsum(count)
+    chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
+    start = 0
+    while start < len(live):
+        base = cum[start - 1] if start else 0
+        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
+        c = count[start:stop]
+        rows = np.repeat(live[start:stop], c)
+        offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
+        width = nu[rows]
+        yield _candidates(
+            table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis
+        )
+        start = stop
+
+
 def rasterize_axis(
     table: dict[str, np.ndarray],
     grid: Grid,
@@ -144,29 +173,10 @@ def rasterize_axis(
     Candidates are tested in chunks of a quarter of ``memory_bytes``; each chunk's hits are
     folded into the nearest so far (ties go to the lower face from the low side, the higher
     from the high side, whatever the chunking)."""
-    u, v = grid.plane_axes(axis)
     rows_n, cols_n = grid.image_shape(axis)
-    centre = table["centre"]
-    iu0, nu = _pixel_range(table["umin"], table["umax"], grid.lo[u] - centre[u], grid.pitch, cols_n)
-    iv0, nv = _pixel_range(table["vmin"], table["vmax"], grid.lo[v] - centre[v], grid.pitch, rows_n)
-    count = nu * nv
-    live = np.flatnonzero(count)
-    count = count[live]
-    cum = np.cumsum(count)
-    chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
     empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float64), table["face"][:0])
     low = high = empty
-    start = 0
-    while start < len(live):
-        base = cum[start - 1] if start else 0
-        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
-        c = count[start:stop]
-        rows = np.repeat(live[start:stop], c)
-        offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
-        width = nu[rows]
-        rows, iu, iv, depth = _candidates(
-            table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis
-        )
+    for rows, iu, iv, depth in _candidate_chunks(table, grid, axis, memory_bytes):
         key = (grid.slab_of(axis, depth) * rows_n + iv) * cols_n + iu
         low, high = _extremes(
             tuple(
@@ -177,7 +187,6 @@ def rasterize_axis(
                 for p in zip(high, (key, depth, table["face_last"][rows]), strict=True)
             ),
         )
-        start = stop
     return [
         SlabHits(
             axis=axis,
@@ -190,3 +199,16 @@ def rasterize_axis(
         )
         for sign, (key, depth, face) in ((1, low), (-1, high))
     ]
+
+
+def coverage(
+    surface: Mesh, grid: Grid, axis: int, memory_bytes: int = DEFAULT_LIMITS.memory_bytes
+) -> np.ndarray:
+    """The pixels of ``grid``'s image along ``axis`` ((rows, cols) bool) whose rays hit
+    ``surface`` anywhere: the silhouette, without the depths and slabs that
+    :func:`rasterize_axis` sorts out."""
+    table = surface.derived(f"numpy-axis-{axis}", lambda: face_table(surface, axis))
+    mask = np.zeros(grid.image_shape(axis), dtype=bool)
+    for _, iu, iv, _ in _candidate_chunks(table, grid, axis, memory_bytes):
+        mask[iv, iu] = True
+    return mask
