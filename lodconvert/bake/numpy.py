@@ -93,6 +93,27 @@ def _pixel_range(lo: np.ndarray, hi: np.ndarray, origin: float, pitch: float, n:
     return first, np.maximum(last - first + 1, 0)
 
 
+def _inside(
+    table: dict[str, np.ndarray],
+    rows: np.ndarray,
+    iu: np.ndarray,
+    iv: np.ndarray,
+    grid: Grid,
+    axis: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Which (face row, pixel) candidates have their pixel centre inside the face, and the
+    centres' coordinates relative to the table's centre."""
+    u, v = grid.plane_axes(axis)
+    centre = table["centre"]
+    x = (grid.lo[u] - centre[u]) + (iu + 0.5) * grid.pitch
+    y = (grid.lo[v] - centre[v]) + (iv + 0.5) * grid.pitch
+    b0c = table["b0"][rows]
+    b1c = table["b1"][rows]
+    b0 = b0c[:, 0] * x + b0c[:, 1] * y + b0c[:, 2]
+    b1 = b1c[:, 0] * x + b1c[:, 1] * y + b1c[:, 2]
+    return (b0 >= -EPS) & (b1 >= -EPS) & (b0 + b1 <= 1.0 + EPS), x, y
+
+
 def _candidates(
     table: dict[str, np.ndarray],
     rows: np.ndarray,
@@ -103,18 +124,10 @@ def _candidates(
 ) -> tuple[np.ndarray, ...]:
     """Keep the (face row, pixel) candidates whose pixel centre is inside the face; return
     them with their depth."""
-    u, v = grid.plane_axes(axis)
-    centre = table["centre"]
-    x = (grid.lo[u] - centre[u]) + (iu + 0.5) * grid.pitch
-    y = (grid.lo[v] - centre[v]) + (iv + 0.5) * grid.pitch
-    b0c = table["b0"][rows]
-    b1c = table["b1"][rows]
-    b0 = b0c[:, 0] * x + b0c[:, 1] * y + b0c[:, 2]
-    b1 = b1c[:, 0] * x + b1c[:, 1] * y + b1c[:, 2]
-    inside = (b0 >= -EPS) & (b1 >= -EPS) & (b0 + b1 <= 1.0 + EPS)
+    inside, x, y = _inside(table, rows, iu, iv, grid, axis)
     rows, iu, iv, x, y = rows[inside], iu[inside], iv[inside], x[inside], y[inside]
     pl = table["plane"][rows]
-    return rows, iu, iv, pl[:, 0] * x + pl[:, 1] * y + pl[:, 2] + centre[axis]
+    return rows, iu, iv, pl[:, 0] * x + pl[:, 1] * y + pl[:, 2] + table["centre"][axis]
 
 
 def _extremes(
@@ -135,9 +148,9 @@ def _extremes(
 
 def _candidate_chunks(
     table: dict[str, np.ndarray], grid: Grid, axis: int, memory_bytes: int
-) -> Iterator[tuple[np.ndarray, ...]]:
-    """The (face row, pixel) pairs whose pixel centre a face covers, with their depths
-    (:func:`_candidates`), a quarter of ``memory_bytes`` worth of candidates at a time."""
+) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """The (face row, pixel) pairs whose pixel lies in a face's projected bounds: ``rows``,
+    ``iu`` and ``iv``, a quarter of ``memory_bytes`` worth of candidates at a time."""
     u, v = grid.plane_axes(axis)
     rows_n, cols_n = grid.image_shape(axis)
     centre = table["centre"]
@@ -156,9 +169,7 @@ def _candidate_chunks(
         rows = np.repeat(live[start:stop], c)
         offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
         width = nu[rows]
-        yield _candidates(
-            table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis
-        )
+        yield rows, iu0[rows] + offset % width, iv0[rows] + offset // width
         start = stop
 
 
@@ -176,7 +187,8 @@ def rasterize_axis(
     rows_n, cols_n = grid.image_shape(axis)
     empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float64), table["face"][:0])
     low = high = empty
-    for rows, iu, iv, depth in _candidate_chunks(table, grid, axis, memory_bytes):
+    for chunk in _candidate_chunks(table, grid, axis, memory_bytes):
+        rows, iu, iv, depth = _candidates(table, *chunk, grid, axis)
         key = (grid.slab_of(axis, depth) * rows_n + iv) * cols_n + iu
         low, high = _extremes(
             tuple(
@@ -209,6 +221,7 @@ def coverage(
     :func:`rasterize_axis` sorts out."""
     table = surface.derived(f"numpy-axis-{axis}", lambda: face_table(surface, axis))
     mask = np.zeros(grid.image_shape(axis), dtype=bool)
-    for _, iu, iv, _ in _candidate_chunks(table, grid, axis, memory_bytes):
-        mask[iv, iu] = True
+    for rows, iu, iv in _candidate_chunks(table, grid, axis, memory_bytes):
+        inside = _inside(table, rows, iu, iv, grid, axis)[0]
+        mask[iv[inside], iu[inside]] = True
     return mask
