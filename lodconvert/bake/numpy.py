@@ -62,9 +62,8 @@ def face_table(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
     pu, pv, w = tri[:, :, u] - centre[u], tri[:, :, v] - centre[v], tri[:, :, axis] - centre[axis]
     ax, bx, cx = pu[:, 0], pu[:, 1], pu[:, 2]
     ay, by, cy = pv[:, 0], pv[:, 1], pv[:, 2]
-    area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-    extent = float(np.ptp(surface.bounds, axis=0).max())
-    idx = np.flatnonzero(np.abs(area) > 1e-15 * extent * extent)
+    area = _projected_area(pu, pv)
+    idx = np.flatnonzero(_not_edge_on(area, surface))
     ax, ay, bx, by, cx, cy, area = (a[idx] for a in (ax, ay, bx, by, cx, cy, area))
     inv = (1.0 / area)[:, None]
     b0 = np.stack([by - cy, cx - bx, bx * cy - by * cx], axis=1) * inv
@@ -86,32 +85,36 @@ def face_table(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
     }
 
 
+def _projected_area(pu: np.ndarray, pv: np.ndarray) -> np.ndarray:
+    """Twice the signed areas of triangles with corners ``pu``, ``pv`` ((m, 3) each)."""
+    return (pu[:, 1] - pu[:, 0]) * (pv[:, 2] - pv[:, 0]) - (pv[:, 1] - pv[:, 0]) * (
+        pu[:, 2] - pu[:, 0]
+    )
+
+
+def _not_edge_on(area: np.ndarray, surface: Mesh) -> np.ndarray:
+    """Which faces of ``surface`` (``area``: twice their projected areas) are not seen edge-on:
+    they cover pixels."""
+    extent = float(np.ptp(surface.bounds, axis=0).max())
+    return np.abs(area) > 1e-15 * extent * extent
+
+
+def _projection(surface: Mesh, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The corners of ``surface``'s faces not seen edge-on along ``axis``, projected: u and v
+    ((m, 3) each) relative to ``centre``, the bounding box's centre (returned third)."""
+    u, v = Grid.plane_axes(axis)
+    centre = surface.bounds.mean(axis=0)
+    tri = surface.triangles
+    pu, pv = tri[:, :, u] - centre[u], tri[:, :, v] - centre[v]
+    seen = _not_edge_on(_projected_area(pu, pv), surface)
+    return pu[seen], pv[seen], centre
+
+
 def _pixel_range(lo: np.ndarray, hi: np.ndarray, origin: float, pitch: float, n: int):
     """First pixel and pixel count whose centres fall in [lo, hi] (world), clipped to 0..n-1."""
     first = np.maximum(np.ceil((lo - origin) / pitch - 0.5 - EPS), 0).astype(np.int64)
     last = np.minimum(np.floor((hi - origin) / pitch - 0.5 + EPS), n - 1).astype(np.int64)
     return first, np.maximum(last - first + 1, 0)
-
-
-def _inside(
-    table: dict[str, np.ndarray],
-    rows: np.ndarray,
-    iu: np.ndarray,
-    iv: np.ndarray,
-    grid: Grid,
-    axis: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Which (face row, pixel) candidates have their pixel centre inside the face, and the
-    centres' coordinates relative to the table's centre."""
-    u, v = grid.plane_axes(axis)
-    centre = table["centre"]
-    x = (grid.lo[u] - centre[u]) + (iu + 0.5) * grid.pitch
-    y = (grid.lo[v] - centre[v]) + (iv + 0.5) * grid.pitch
-    b0c = table["b0"][rows]
-    b1c = table["b1"][rows]
-    b0 = b0c[:, 0] * x + b0c[:, 1] * y + b0c[:, 2]
-    b1 = b1c[:, 0] * x + b1c[:, 1] * y + b1c[:, 2]
-    return (b0 >= -EPS) & (b1 >= -EPS) & (b0 + b1 <= 1.0 + EPS), x, y
 
 
 def _candidates(
@@ -124,10 +127,18 @@ def _candidates(
 ) -> tuple[np.ndarray, ...]:
     """Keep the (face row, pixel) candidates whose pixel centre is inside the face; return
     them with their depth."""
-    inside, x, y = _inside(table, rows, iu, iv, grid, axis)
+    u, v = grid.plane_axes(axis)
+    centre = table["centre"]
+    x = (grid.lo[u] - centre[u]) + (iu + 0.5) * grid.pitch
+    y = (grid.lo[v] - centre[v]) + (iv + 0.5) * grid.pitch
+    b0c = table["b0"][rows]
+    b1c = table["b1"][rows]
+    b0 = b0c[:, 0] * x + b0c[:, 1] * y + b0c[:, 2]
+    b1 = b1c[:, 0] * x + b1c[:, 1] * y + b1c[:, 2]
+    inside = (b0 >= -EPS) & (b1 >= -EPS) & (b0 + b1 <= 1.0 + EPS)
     rows, iu, iv, x, y = rows[inside], iu[inside], iv[inside], x[inside], y[inside]
     pl = table["plane"][rows]
-    return rows, iu, iv, pl[:, 0] * x + pl[:, 1] * y + pl[:, 2] + table["centre"][axis]
+    return rows, iu, iv, pl[:, 0] * x + pl[:, 1] * y + pl[:, 2] + centre[axis]
 
 
 def _extremes(
@@ -146,33 +157,6 @@ def _extremes(
     return picked[0], picked[1]
 
 
-def _candidate_chunks(
-    table: dict[str, np.ndarray], grid: Grid, axis: int, memory_bytes: int
-) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """The (face row, pixel) pairs whose pixel lies in a face's projected bounds: ``rows``,
-    ``iu`` and ``iv``, a quarter of ``memory_bytes`` worth of candidates at a time."""
-    u, v = grid.plane_axes(axis)
-    rows_n, cols_n = grid.image_shape(axis)
-    centre = table["centre"]
-    iu0, nu = _pixel_range(table["umin"], table["umax"], grid.lo[u] - centre[u], grid.pitch, cols_n)
-    iv0, nv = _pixel_range(table["vmin"], table["vmax"], grid.lo[v] - centre[v], grid.pitch, rows_n)
-    count = nu * nv
-    live = np.flatnonzero(count)
-    count = count[live]
-    cum = np.cumsum(count)
-    chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
-    start = 0
-    while start < len(live):
-        base = cum[start - 1] if start else 0
-        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
-        c = count[start:stop]
-        rows = np.repeat(live[start:stop], c)
-        offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
-        width = nu[rows]
-        yield rows, iu0[rows] + offset % width, iv0[rows] + offset // width
-        start = stop
-
-
 def rasterize_axis(
     table: dict[str, np.ndarray],
     grid: Grid,
@@ -184,11 +168,29 @@ def rasterize_axis(
     Candidates are tested in chunks of a quarter of ``memory_bytes``; each chunk's hits are
     folded into the nearest so far (ties go to the lower face from the low side, the higher
     from the high side, whatever the chunking)."""
+    u, v = grid.plane_axes(axis)
     rows_n, cols_n = grid.image_shape(axis)
+    centre = table["centre"]
+    iu0, nu = _pixel_range(table["umin"], table["umax"], grid.lo[u] - centre[u], grid.pitch, cols_n)
+    iv0, nv = _pixel_range(table["vmin"], table["vmax"], grid.lo[v] - centre[v], grid.pitch, rows_n)
+    count = nu * nv
+    live = np.flatnonzero(count)
+    count = count[live]
+    cum = np.cumsum(count)
+    chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
     empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float64), table["face"][:0])
     low = high = empty
-    for chunk in _candidate_chunks(table, grid, axis, memory_bytes):
-        rows, iu, iv, depth = _candidates(table, *chunk, grid, axis)
+    start = 0
+    while start < len(live):
+        base = cum[start - 1] if start else 0
+        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
+        c = count[start:stop]
+        rows = np.repeat(live[start:stop], c)
+        offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
+        width = nu[rows]
+        rows, iu, iv, depth = _candidates(
+            table, rows, iu0[rows] + offset % width, iv0[rows] + offset // width, grid, axis
+        )
         key = (grid.slab_of(axis, depth) * rows_n + iv) * cols_n + iu
         low, high = _extremes(
             tuple(
@@ -199,6 +201,7 @@ def rasterize_axis(
                 for p in zip(high, (key, depth, table["face_last"][rows]), strict=True)
             ),
         )
+        start = stop
     return [
         SlabHits(
             axis=axis,
@@ -216,12 +219,43 @@ def rasterize_axis(
 def coverage(
     surface: Mesh, grid: Grid, axis: int, memory_bytes: int = DEFAULT_LIMITS.memory_bytes
 ) -> np.ndarray:
-    """The pixels of ``grid``'s image along ``axis`` ((rows, cols) bool) whose rays hit
-    ``surface`` anywhere: the silhouette, without the depths and slabs that
-    :func:`rasterize_axis` sorts out."""
-    table = surface.derived(f"numpy-axis-{axis}", lambda: face_table(surface, axis))
-    mask = np.zeros(grid.image_shape(axis), dtype=bool)
-    for rows, iu, iv in _candidate_chunks(table, grid, axis, memory_bytes):
-        inside = _inside(table, rows, iu, iv, grid, axis)[0]
-        mask[iv[inside], iu[inside]] = True
-    return mask
+    """The silhouette of ``surface`` along ``axis``: the pixels of ``grid``'s image ((rows,
+    cols) bool) whose rays :func:`rasterize_axis` finds a hit on, without depths. Each face
+    covers, in each pixel row its projection crosses, the span of pixel centres between its
+    edges there (edges inclusive, faces seen edge-on left out); a quarter of ``memory_bytes``
+    worth of spans at a time."""
+    pu, pv, centre = surface.derived(f"numpy-projection-{axis}", lambda: _projection(surface, axis))
+    u, v = grid.plane_axes(axis)
+    rows_n, cols_n = grid.image_shape(axis)
+    origin_u, origin_v = grid.lo[u] - centre[u], grid.lo[v] - centre[v]
+    iv0, nv = _pixel_range(pv.min(axis=1), pv.max(axis=1), origin_v, grid.pitch, rows_n)
+    live = np.flatnonzero(nv)
+    count = nv[live]
+    cum = np.cumsum(count)
+    chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
+    edges = np.zeros(rows_n * (cols_n + 1), dtype=np.int64)
+    start = 0
+    while start < len(live):
+        base = cum[start - 1] if start else 0
+        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
+        c = count[start:stop]
+        faces = np.repeat(live[start:stop], c)
+        iv = iv0[faces] + np.arange(len(faces)) - np.repeat(np.cumsum(c) - c, c)
+        y = origin_v + (iv + 0.5) * grid.pitch
+        low, high = np.full(len(faces), np.inf), np.full(len(faces), -np.inf)
+        for k in range(3):
+            ay, by = pv[faces, k], pv[faces, (k + 1) % 3]
+            ax, bx = pu[faces, k], pu[faces, (k + 1) % 3]
+            crosses = (np.minimum(ay, by) <= y) & (y <= np.maximum(ay, by))
+            rise = np.where(ay != by, by - ay, 1.0)
+            x = ax + np.clip((y - ay) / rise, 0.0, 1.0) * (bx - ax)
+            low = np.where(crosses, np.minimum(low, x), low)
+            high = np.where(crosses, np.maximum(high, x), high)
+        found = low <= high
+        first, n = _pixel_range(low[found], high[found], origin_u, grid.pitch, cols_n)
+        spans = n > 0
+        row = iv[found][spans] * (cols_n + 1)
+        edges += np.bincount(row + first[spans], minlength=len(edges))
+        edges -= np.bincount(row + first[spans] + n[spans], minlength=len(edges))
+        start = stop
+    return edges.reshape(rows_n, cols_n + 1).cumsum(axis=1)[:, :cols_n] > 0
