@@ -313,24 +313,22 @@ def _walls(mesh: Mesh) -> np.ndarray:
 
 def _percentile(heights: np.ndarray, weights: np.ndarray, share: float) -> float:
     """The height below which ``share`` of the area of triangles with corner ``heights``
-    ((m, 3)) and areas ``weights`` lies, heights varying linearly across each triangle."""
+    ((m, 3)) and areas ``weights`` lies, heights varying linearly across each triangle: the
+    bracket around it narrowed by 64 probes at a time, to 65⁻⁴ of the heights' range."""
     z = np.sort(heights, axis=1)
     a, b, c = z[:, 0], z[:, 1], z[:, 2]
     lo, hi = float(a.min()), float(c.max())
     total = float(weights.sum())
     if total <= 0 or hi <= lo:
         return hi
-
-    def below(t: float) -> float:
+    for _ in range(4):
+        t = np.linspace(lo, hi, 66)[1:-1, None]
         with np.errstate(divide="ignore", invalid="ignore"):
             rising = (t - a) ** 2 / ((b - a) * (c - a))
             falling = 1 - (c - t) ** 2 / ((c - a) * (c - b))
         part = np.where(t >= c, 1.0, np.where(t <= a, 0.0, np.where(t <= b, rising, falling)))
-        return float(weights @ part) / total
-
-    for _ in range(32):  # to 2⁻³² of the roof's height range: far below float32's precision
-        middle = (lo + hi) / 2
-        lo, hi = (middle, hi) if below(middle) < share else (lo, middle)
+        i = int(np.searchsorted(part @ weights / total, share))
+        lo, hi = (float(t[i - 1, 0]) if i else lo), (float(t[i, 0]) if i < len(t) else hi)
     return hi
 
 
