@@ -288,8 +288,8 @@ def prism_height(
 
 
 def _normals(mesh: Mesh) -> np.ndarray:
-    """The faces' normals (m, 3), as long as twice their areas, turned outward where the mesh
-    encloses a volume (its faces' majority then faces inward otherwise)."""
+    """The faces' normals (m, 3), as long as twice their areas; all turned over where the faces
+    enclose a negative volume (wound inward), so that roofs face up."""
 
     def compute() -> np.ndarray:
         tri = mesh.triangles - mesh.bounds.mean(axis=0)
