@@ -33,6 +33,7 @@ from typing import Any
 from ..errors import InputError, UsageError
 from ..model import LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
+from .archive import member_name
 
 FORMAT_MODULES = (
     "lodconvert.io.cityjson",
@@ -46,12 +47,13 @@ FORMAT_MODULES = (
 
 @dataclass
 class OutputInfo:
-    """Scene-wide facts a writer records: who wrote it, from what, in which CRS, for which
-    reference view, with which options."""
+    """Scene-wide facts a writer records: who wrote it, from what, in which CRS and vertical
+    reference (a city's; None for a mesh's), for which reference view, with which options."""
 
     generator: str
     source: str
     crs: str | None = None
+    vertical: str | None = None
     view: ReferenceView = REFERENCE_VIEW
     options: dict[str, Any] = field(default_factory=dict)
 
@@ -98,17 +100,6 @@ def streamed(writers: dict[str, StreamWriter]) -> Callable[..., None]:
     return write
 
 
-def imported_on_call(module: str, name: str) -> Callable[..., Any]:
-    """``module.name``, imported when first called (checks import the validation vocabulary,
-    which imports the registry)."""
-
-    def call(*args: Any, **kwargs: Any) -> Any:
-        return getattr(importlib.import_module(module), name)(*args, **kwargs)
-
-    call.__doc__ = f"{module}.{name}, imported on the first call."
-    return call
-
-
 def _taken(options: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
     return {k: v for k, v in options.items() if k in names and v is not None}
 
@@ -143,8 +134,11 @@ def _known(role: str) -> str:
 
 
 def input_format(path: str | Path) -> Format:
-    """The format that reads ``path``, or :class:`InputError` naming the known suffixes."""
+    """The format that reads ``path`` — for a ``.zip``, the format of the one city model file
+    it holds (:mod:`.archive`) — or :class:`InputError` naming the known suffixes."""
     suffix = suffix_of(path)
+    if suffix == ".zip" and Path(path).is_file():
+        suffix = suffix_of(member_name(Path(path)))
     entry = _find("read", suffix)
     if entry is None:
         raise InputError(
@@ -179,7 +173,8 @@ def own_format(path: str | Path, role: str = "read_back") -> Format:
 
 
 def read_scene(path: str | Path, **options: Any) -> Scene:
-    """Read any supported input (the registry picks the reader by suffix)."""
+    """Read any supported input (the registry picks the reader by suffix, a ``.zip``'s by
+    the file it holds)."""
     return input_format(path).read_file(path, **options)
 
 

@@ -55,7 +55,7 @@ def read_document(
     """A ``.json`` CityJSON file: every node built before the scene is returned."""
     data = load_document(path, limits)
     tally = InputTally(str(path), limits)
-    ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs), palette)
+    ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs, str(path)), palette)
     nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
     if not size and not tally.skipped:
@@ -63,7 +63,7 @@ def read_document(
             raise tally.nothing_left()
         which = f"of type {', '.join(sorted(types))} " if types is not None else ""
         raise InputError(f"has no CityObject {which}with surfaces", str(path))
-    scene = Scene(source=str(path), nodes=nodes, crs=ctx.crs, size=size)
+    scene = Scene(source=str(path), nodes=nodes, crs=ctx.crs, size=size, city=True)
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(data.get("version"))
     return attach_tally(scene, tally)
@@ -151,21 +151,26 @@ def read_sequence(
 ) -> Scene:
     """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
     try:
-        handle = open_text(path)
+        handle = open_text(path, limits)
         first = handle.readline(limits.decompressed_bytes)
     except (OSError, EOFError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot be read ({exc})", str(path)) from None
     try:
         header = cityjson_object(parsed(first, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
-        ctx = context_of(header, tally, declared_crs(header.get("metadata"), crs), palette)
+        ctx = context_of(
+            header, tally, declared_crs(header.get("metadata"), crs, str(path)), palette
+        )
     except InputError:
         handle.close()
         raise
     nodes = _feature_nodes(handle, header, ctx, types)
     first = next(nodes, None)  # its vertices centre a geographic CRS's local frame
     scene = Scene(
-        source=str(path), nodes=chain(() if first is None else (first,), nodes), crs=ctx.crs
+        source=str(path),
+        nodes=chain(() if first is None else (first,), nodes),
+        crs=ctx.crs,
+        city=True,
     )
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))

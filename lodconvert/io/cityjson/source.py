@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import gc
 import gzip
+import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,6 +18,7 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh
 from ...semantics import DEFAULT_PALETTE, Palette
+from ..archive import open_member
 from ..crs import Crs
 from ..geometry_checks import InputTally, checked_vertices
 
@@ -50,9 +52,13 @@ class Context:
         return self.declared.scene_crs if self.declared is not None else None
 
 
-def open_text(path: Path) -> IO[str]:
-    """``path`` opened as UTF-8 text, through gzip when it ends in ``.gz``."""
-    if path.name.lower().endswith(".gz"):
+def open_text(path: Path, limits: Limits) -> IO[str]:
+    """``path`` opened as UTF-8 text, through gzip when it ends in ``.gz``; of a ``.zip``, the
+    one file it holds, capped at ``limits.decompressed_bytes`` (:mod:`..archive`)."""
+    name = path.name.lower()
+    if name.endswith(".zip"):
+        return io.TextIOWrapper(io.BufferedReader(open_member(path, limits)), encoding="utf-8")
+    if name.endswith(".gz"):
         return gzip.open(path, "rt", encoding="utf-8")
     return path.open(encoding="utf-8")
 
@@ -60,7 +66,7 @@ def open_text(path: Path) -> IO[str]:
 def load_document(path: Path, limits: Limits) -> dict[str, Any]:
     """The JSON object of a ``.json`` file; :class:`InputError` unless it is CityJSON."""
     try:
-        with open_text(path) as handle:
+        with open_text(path, limits) as handle:
             text = handle.read(limits.decompressed_bytes + 1)
     except (OSError, EOFError, UnicodeDecodeError) as exc:
         raise InputError(f"cannot be read ({exc})", str(path)) from None
@@ -103,14 +109,14 @@ def cityjson_object(data: Any, kind: str, where: str) -> dict[str, Any]:
     return data
 
 
-def declared_crs(metadata: Any, override: str | None) -> Crs | None:
-    """The CRS the vertices are given in: ``override`` (the user's ``--crs``) wins over
-    ``metadata.referenceSystem`` (URL or URN of an EPSG code, which becomes ``EPSG:<code>``;
-    other forms are kept as given); None where neither names one."""
+def declared_crs(metadata: Any, override: str | None, where: str) -> Crs | None:
+    """The CRS the vertices of file ``where`` are given in: ``override`` (the user's ``--crs``)
+    wins over ``metadata.referenceSystem`` (URL or URN of an EPSG code, which becomes
+    ``EPSG:<code>``; other forms are kept as given); None where neither names one."""
     system = metadata.get("referenceSystem") if isinstance(metadata, dict) else None
     if override is not None:
         system = override
-    return Crs.of(str(system)) if system else None
+    return Crs.of(str(system), where) if system else None
 
 
 def vertices_of(values: Any, transform: Any, where: str, crs: Crs | None = None) -> np.ndarray:

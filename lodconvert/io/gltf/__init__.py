@@ -4,7 +4,8 @@ registry entry each for ``.glb`` and ``.gltf``."""
 
 from __future__ import annotations
 
-from .. import Format, imported_on_call, streamed
+from .. import Format, streamed
+from .check import check_gltf
 from .reader import GltfLevel, GltfObject, read_back, read_cells, read_lod_gltf
 from .writer import (
     GLB_BIN,
@@ -24,7 +25,7 @@ FORMAT = Format(
     write=streamed({".glb": write_glb, ".gltf": write_gltf}),
     read_back=read_back,
     read_cells=read_cells,
-    check=imported_on_call("lodconvert.io.gltf.check", "check_gltf"),
+    check=check_gltf,
 )
 
 __all__ = [

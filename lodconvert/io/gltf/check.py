@@ -33,7 +33,7 @@ from typing import Any, BinaryIO
 
 from lxml import etree
 
-from ...validate.findings import Findings
+from ..findings import Findings
 from .elements import ElementChecks
 from .stream import (
     LazyArray,

@@ -38,6 +38,7 @@ from PIL import Image as PILImage
 from ...errors import LodConvertError
 from ...model import CellChain, Level, LodChain, PointCloud, Surface
 from ...ranges import ReferenceView, screen_coverage
+from ...sinks import writing_temporary
 from .. import OutputInfo
 
 MSFT_LOD = "MSFT_lod"
@@ -253,6 +254,7 @@ def _asset_extras(info: OutputInfo) -> dict[str, Any]:
         {
             "source": info.source,
             "crs": info.crs,
+            **({"vertical_reference": info.vertical} if info.vertical else {}),
             "reference_view": {"height_px": info.view.height_px, "fov_y_deg": info.view.fov_y_deg},
             "screencoverage": COVERAGE_MEANING,
             "options": info.options,
@@ -736,9 +738,10 @@ def _document(chains: Iterable[LodChain], info: OutputInfo, layout: _Layout) -> 
     """A document holding ``chains``; its temporary files are deleted when the block ends."""
     doc = _Document(info, layout)
     try:
-        for item in chains:
-            doc.add(item)
-        doc.flush_blob()
+        with writing_temporary():
+            for item in chains:
+                doc.add(item)
+            doc.flush_blob()
         yield doc
     finally:
         doc.close()
@@ -761,7 +764,8 @@ def write_glb(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) ->
         _document(chains, info, _COMPACT) as doc,
         tempfile.SpooledTemporaryFile(_SPOOL_BYTES) as text,
     ):
-        _write_json(doc.json_value(data_uri=False), text, _COMPACT)
+        with writing_temporary():
+            _write_json(doc.json_value(data_uri=False), text, _COMPACT)
         chunks = [(GLB_JSON, text, text.tell(), b" ")]
         if doc.blob_length:
             chunks.append((GLB_BIN, doc.blob, doc.blob_length, b"\x00"))

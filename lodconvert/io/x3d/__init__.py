@@ -3,7 +3,8 @@ structural checks (:mod:`.check`), declared as one registry entry."""
 
 from __future__ import annotations
 
-from .. import Format, imported_on_call, streamed
+from .. import Format, streamed
+from .check import check_x3d
 from .reader import X3DLevel, read_back, read_cells, read_x3d_points, x3d_read_errors
 from .writer import (
     METADATA_SET,
@@ -20,7 +21,7 @@ FORMAT = Format(
     write=streamed({".x3d": write_x3d}),
     read_back=read_back,
     read_cells=read_cells,
-    check=imported_on_call("lodconvert.io.x3d.check", "check_x3d"),
+    check=check_x3d,
     write_options=("switching",),
 )
 

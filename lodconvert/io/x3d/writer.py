@@ -4,7 +4,8 @@
 Layout of a written file (validates against the official x3d-4.0.xsd)::
 
     <X3D profile='Interchange' version='4.0' ...>
-      <head> components Navigation 2, Rendering 4, Shape 5; meta generator, source, crs, ...
+      <head> components Navigation 2, Rendering 4, Shape 5; meta generator, source, crs,
+              vertical-reference, ...
       <Scene>
         <Transform DEF='id' translation='origin (full float64 precision)'>
           <LOD DEF='id_LOD' center=... range='cutoffs' forceTransitions='true'>
@@ -101,6 +102,7 @@ from PIL import Image as PILImage
 
 from ...errors import UsageError
 from ...model import CellChain, Level, LodChain, Mesh, Surface
+from ...model.safe_text import NOT_XML_CHARS, xml_text
 from .. import OutputInfo
 from ..numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
 
@@ -147,12 +149,6 @@ Metadata = tuple[str, str, str]
 
 
 _DECLARATION = "<?xml version='1.0' encoding='UTF-8'?>"
-_NOT_XML_CHARS = r"\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff"
-"""Characters that XML 1.0 forbids, which lxml refuses (a lone surrogate fails UTF-8 encoding)."""
-_NOT_XML = re.compile(f"[{_NOT_XML_CHARS}]")
-_NOT_XML_ERROR = (
-    "All strings must be XML compatible: Unicode or ASCII, no NULL bytes or control characters"
-)
 _ENTITIES = (
     ("&", "&amp;"),
     ("<", "&lt;"),
@@ -163,16 +159,16 @@ _ENTITIES = (
     ("\r", "&#13;"),
 )
 """What libxml2 escapes in a double-quoted attribute value, ``&`` first."""
-_TO_ESCAPE = re.compile(f'[&<>"\\t\\n\\r{_NOT_XML_CHARS}]')
+_TO_ESCAPE = re.compile(f'[&<>"\\t\\n\\r{NOT_XML_CHARS}]')
 
 
 def _escape(value: str) -> str:
     """``value`` as double-quoted XML attribute text, escaped as libxml2 (lxml) writes it; a
-    character XML forbids raises :class:`ValueError`, as lxml does."""
+    character XML cannot hold (which lxml refuses) or a lone surrogate is written as
+    ``\\uXXXX`` first (:func:`~lodconvert.model.safe_text.xml_text`)."""
     if _TO_ESCAPE.search(value) is None:
         return value
-    if _NOT_XML.search(value):
-        raise ValueError(_NOT_XML_ERROR)
+    value = xml_text(value)
     for char, entity in _ENTITIES:
         if char in value:
             value = value.replace(char, entity)
@@ -257,6 +253,7 @@ def _head(out: _Out, info: OutputInfo, switching: str) -> None:
         ("generator", info.generator),
         ("source", info.source),
         *([("crs", info.crs)] if info.crs else []),
+        *([("vertical-reference", info.vertical)] if info.vertical else []),
         (
             "reference-view",
             f"{view.height_px} px high viewport, {view.fov_y_deg:g} degree vertical field of "
