@@ -282,7 +282,7 @@ def test_out_of_range_index_skips_that_object_only(tmp_path: Path) -> None:
 
 
 def test_degenerate_and_malformed_objects_are_reported_and_dropped(tmp_path: Path) -> None:
-    line = [[[4, 5, 6]]]  # three points on a line
+    line = [[4, 5, 6]]  # three points on a line
     vertices = [*square(), [0, 0, 5], [1, 0, 5], [2, 0, 5]]
     malformed = surface_object([["x"]])
     malformed["geometry"][0]["semantics"] = [1]

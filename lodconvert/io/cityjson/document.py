@@ -5,10 +5,11 @@ in batches of :data:`BATCH` objects, their nodes yielded lazily."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import closing
 from dataclasses import dataclass
 from itertools import chain
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from ...errors import InputError
 from ...limits import Limits
@@ -17,17 +18,19 @@ from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
 from .objects import Objects, checked_node, checked_nodes, read_object
+from .sequence import sequence_lines
 from .source import (
     Context,
     cityjson_object,
     context_of,
     declared_crs,
     load_document,
-    open_text,
+    materials_of,
     parsed,
-    vertices_of,
+    unreadable,
 )
 from .triangulation import triangulate_batch
+from .vertices import vertices_of
 
 BATCH = 64
 """City objects whose polygons are triangulated together (a CityJSONSeq reader holds the
@@ -53,8 +56,8 @@ def read_document(
     path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
 ) -> Scene:
     """A ``.json`` CityJSON file: every node built before the scene is returned."""
-    data = load_document(path, limits)
     tally = InputTally(str(path), limits)
+    data = load_document(path, limits, tally)
     ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs), palette)
     nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
@@ -81,19 +84,22 @@ class _Feature:
 
 
 def _feature(
-    line: str, where: str, header: dict[str, Any], ctx: Context, types: frozenset[str] | None
+    line: bytes, where: str, header: dict[str, Any], ctx: Context, types: frozenset[str] | None
 ) -> _Feature:
     """The ``CityJSONFeature`` of a line, against the header's transform and context."""
     try:
-        feature = cityjson_object(parsed(line, where), "CityJSONFeature", where)
-        appearance = feature.get("appearance") or {}
+        try:
+            text = line.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise InputError(f"is not UTF-8 text ({exc})", where) from None
+        feature = cityjson_object(parsed(text, where), "CityJSONFeature", where)
         local = Context(
             tally=ctx.tally,
             vertices=vertices_of(
                 feature.get("vertices"), header.get("transform"), where, ctx.declared
             ),
             declared=ctx.declared,
-            materials=list(appearance.get("materials") or ctx.materials),
+            materials=materials_of(feature, where) or ctx.materials,
             templates=ctx.templates,
             template_vertices=ctx.template_vertices,
             shared=ctx.shared,
@@ -106,24 +112,27 @@ def _feature(
 
 
 def _feature_nodes(
-    handle: IO[str], header: dict[str, Any], ctx: Context, types: frozenset[str] | None
+    lines: Iterator[tuple[int, bytes]],
+    header: dict[str, Any],
+    ctx: Context,
+    types: frozenset[str] | None,
 ) -> Iterator[Node]:
-    """The nodes of each ``CityJSONFeature`` line of ``handle``, a line that is not one
-    recorded as skipped. Lines are read until they hold :data:`BATCH` objects (or are that
-    many), whose polygons are triangulated together; their nodes are then yielded feature by
-    feature, so memory holds one batch of features at a time."""
+    """The nodes of each ``CityJSONFeature`` line, a line that is not one recorded as
+    skipped. Lines are read until they hold :data:`BATCH` objects (or are that many, or
+    ``sequence_line_bytes`` of text), whose polygons are triangulated together; their nodes
+    are then yielded feature by feature, so memory holds one batch of features at a time."""
     waiting: list[_Feature] = []
-    objects = 0
-    with handle:
-        for number, line in enumerate(handle, start=2):
-            if not line.strip():
-                continue
+    objects = held = 0
+    with closing(lines):
+        for number, line in lines:
             feature = _feature(line, f"line {number}", header, ctx, types)
             waiting.append(feature)
             objects += len(feature.tree.objects) if feature.tree is not None else 0
-            if objects >= BATCH or len(waiting) >= BATCH:
+            held += len(line)
+            full = held >= ctx.tally.limits.sequence_line_bytes
+            if objects >= BATCH or len(waiting) >= BATCH or full:
                 yield from _finished_features(waiting, ctx.tally)
-                waiting, objects = [], 0
+                waiting, objects, held = [], 0, 0
         yield from _finished_features(waiting, ctx.tally)
 
 
@@ -150,22 +159,25 @@ def read_sequence(
     path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
 ) -> Scene:
     """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
+    lines = sequence_lines(path, limits)
     try:
-        handle = open_text(path)
-        first = handle.readline(limits.decompressed_bytes)
-    except (OSError, EOFError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot be read ({exc})", str(path)) from None
-    try:
-        header = cityjson_object(parsed(first, str(path)), "CityJSON", str(path))
+        _, first = next(lines, (1, b""))
+        try:
+            text = first.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise unreadable(path, exc) from None
+        header = cityjson_object(parsed(text, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
         ctx = context_of(header, tally, declared_crs(header.get("metadata"), crs), palette)
     except InputError:
-        handle.close()
+        lines.close()
         raise
-    nodes = _feature_nodes(handle, header, ctx, types)
-    first = next(nodes, None)  # its vertices centre a geographic CRS's local frame
+    nodes = _feature_nodes(lines, header, ctx, types)
+    first_node = next(nodes, None)  # its vertices centre a geographic CRS's local frame
     scene = Scene(
-        source=str(path), nodes=chain(() if first is None else (first,), nodes), crs=ctx.crs
+        source=str(path),
+        nodes=chain(() if first_node is None else (first_node,), nodes),
+        crs=ctx.crs,
     )
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))
