@@ -17,7 +17,7 @@ from ...model import Node, Scene
 from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
-from .objects import Objects, checked_node, checked_nodes, read_object
+from .objects import Objects, checked_node, checked_nodes
 from .sequence import sequence_lines
 from .source import (
     Context,
@@ -46,9 +46,7 @@ def _object_nodes(
     nodes: dict[str, Node | None] = {}
     for at in range(0, len(tree.order), BATCH):
         keys = tree.order[at : at + BATCH]
-        nodes.update(
-            zip(keys, checked_nodes([(key, objects[key], ctx) for key in keys]), strict=True)
-        )
+        nodes.update(zip(keys, checked_nodes([tree.read(key, ctx) for key in keys]), strict=True))
     return tree.roots(nodes.__getitem__)
 
 
@@ -140,7 +138,7 @@ def _finished_features(waiting: list[_Feature], tally: InputTally) -> Iterator[N
     """The root nodes of a batch of features, in line order, their polygons triangulated
     together; each feature's vertices are counted, and its objects finished, as it comes."""
     reads = [
-        [read_object(key, f.tree.objects[key], f.ctx) for key in f.tree.order]
+        [f.tree.read(key, f.ctx) for key in f.tree.order]
         if f.ctx is not None and f.tree is not None
         else []
         for f in waiting
