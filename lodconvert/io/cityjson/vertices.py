@@ -1,11 +1,11 @@
-"""The vertices of CityJSON: parsed from the JSON text without a Python object per number,
-checked row by row, scaled and translated by the file's ``transform``.
+"""The vertices of CityJSON: parsed from the JSON text a chunk at a time (a whole file's never
+held as Python numbers), checked row by row, scaled and translated by the file's ``transform``.
 
 A document's (or a CityJSONSeq line's) top-level object is parsed key by key
-(:func:`top_level`): its ``vertices``, when they are rows of three JSON numbers, are matched by
-a regular expression and read by numpy in chunks of text straight into an (n, 3) float64 array
-(24 bytes a vertex, where ``json`` takes some 200); any other value, and vertices of any other
-shape, are parsed by ``json``. Vertex lists so parsed are read row by row
+(:func:`top_level`): its ``vertices``, when they are rows of three JSON numbers, are parsed a
+chunk of text at a time into an (n, 3) float64 array (24 bytes a vertex, where a list of
+lists of Python numbers takes some 200); any other value, and vertices of any other shape,
+are parsed by ``json`` whole. Vertex lists so parsed are read row by row
 (:func:`vertex_rows`): a row that is not three numbers (a string, a boolean, two numbers) or
 whose numbers overflow float64 becomes a row of NaN, which makes every object using it
 skipped with the vertex named (:func:`check_used`), as a non-finite coordinate does.
@@ -25,14 +25,13 @@ from ..crs import Crs
 from ..geometry_checks import MAX_MAGNITUDE, InputTally, check_magnitude
 from .jsonkind import json_kind
 
-_NUMBER = r"-?(?:0|[1-9]\d*)(?:\.\d+)?(?:[eE][+-]?\d+)?"
-_ROW = rf"\[\s*{_NUMBER}\s*,\s*{_NUMBER}\s*,\s*{_NUMBER}\s*\]"
-_ROWS = re.compile(rf"\[\s*(?:{_ROW}(?:\s*,\s*{_ROW})*+\s*)?\]")
-"""A JSON array of rows of three JSON numbers (possessive: no backtracking state kept)."""
 _SPACE = re.compile(r"[ \t\n\r]*")
-_BRACKETS = str.maketrans("[]", "  ")
-_TEXT_CHUNK = 1 << 23
-"""Characters of vertex text numpy reads at once (bounds the copy the reading makes)."""
+_EMPTY = re.compile(r"\[[ \t\n\r]*\]")
+_CLOSE = re.compile(r"\][ \t\n\r]*\]")
+_COMMA = re.compile(r"[ \t\n\r]*,")
+_NOT_NUMBERS = re.compile(r"[^-+.0-9eE\[\], \t\n\r]")
+_TEXT_CHUNK = 1 << 20
+"""Characters of vertex text parsed at once (bounds the Python objects parsing makes)."""
 _DECODER = json.JSONDecoder()
 _NUMBERS = {int, float}
 
@@ -57,9 +56,9 @@ def top_level(text: str, tally: InputTally | None = None) -> Any:
             if not text.startswith(":", at):
                 raise json.JSONDecodeError("Expecting ':' delimiter", text, at)
             at = _SPACE.match(text, at + 1).end()
-            rows = _ROWS.match(text, at) if key == "vertices" else None
+            rows = _vertex_array(text, at, tally) if key == "vertices" else None
             if rows is not None:
-                data[key], at = _vertex_text(text, at, rows.end(), tally), rows.end()
+                data[key], at = rows
             else:
                 data[key], at = _DECODER.raw_decode(text, at)
             at = _SPACE.match(text, at).end()
@@ -75,24 +74,43 @@ def top_level(text: str, tally: InputTally | None = None) -> Any:
     return data
 
 
-def _vertex_text(text: str, start: int, end: int, tally: InputTally | None) -> np.ndarray:
-    """The rows of three numbers of ``text[start:end]`` (a match of :data:`_ROWS`) as an
-    (n, 3) float64 array, read :data:`_TEXT_CHUNK` characters at a time."""
-    rows = text.count("[", start, end) - 1
+def _vertex_array(text: str, start: int, tally: InputTally | None) -> tuple[np.ndarray, int] | None:
+    """The JSON array at ``text[start]`` as an (n, 3) float64 array and the index past it,
+    parsed :data:`_TEXT_CHUNK` characters of rows at a time; None unless it is an array of
+    rows of three JSON numbers within float64 (then ``json`` parses it whole)."""
+    if empty := _EMPTY.match(text, start):
+        return np.zeros((0, 3)), empty.end()
+    close = _CLOSE.search(text, start)
+    if close is None:
+        return None
+    last = close.start() + 1  # past the last row: the first "]]" ends rows of numbers
+    rows = text.count("[", start, last) - 1
     if tally is not None:
         tally.count(rows, 0, declared=True)
     out = np.empty((rows, 3), dtype=np.float64)
-    filled, at, stop = 0, start + 1, end - 1
-    while at < stop:
-        cut = text.find("]", at + _TEXT_CHUNK) + 1 if at + _TEXT_CHUNK < stop else stop
-        piece = text[at : min(cut, stop)].translate(_BRACKETS).lstrip(" \t\n\r,")
-        values = np.fromstring(piece, dtype=np.float64, sep=",") if piece.strip() else ()
-        count = len(values) // 3
-        out[filled : filled + count] = np.reshape(values, (count, 3))
-        filled, at = filled + count, min(cut, stop)
-    if filled != rows:
-        raise ValueError(f"{filled:,} of {rows:,} vertices read")
-    return out
+    filled, at = 0, start + 1
+    while at < last:
+        cut = text.find("]", at + _TEXT_CHUNK) + 1 if at + _TEXT_CHUNK < last else last
+        if filled:
+            comma = _COMMA.match(text, at, cut)
+            if comma is None:
+                return None
+            at = comma.end()
+        piece = text[at:cut]
+        if _NOT_NUMBERS.search(piece):
+            return None
+        try:
+            values = np.array(json.loads(f"[{piece}]"))
+        except ValueError:
+            return None
+        count = len(values)
+        if values.ndim != 2 or values.shape[1] != 3 or values.dtype.kind not in "if":
+            return None
+        if filled + count > rows:
+            return None
+        out[filled : filled + count] = values
+        filled, at = filled + count, cut
+    return (out, close.end()) if filled == rows else None
 
 
 def vertex_rows(values: Any, where: str) -> np.ndarray:
