@@ -11,7 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from lodconvert.errors import InputError
 from lodconvert.io import read_scene
+from lodconvert.limits import Limits
 
 from .fuzz.cases import CASES, SQUARE, city, city_object, sequence, zeros_gz
 from .fuzz.seeds import _cityjson
@@ -157,3 +159,10 @@ def test_a_deep_chain_is_cut_and_a_cycle_kept(tmp_path: Path) -> None:
     result = run(_case("cycle.city.json", tmp_path), "-o", tmp_path / "y.glb", "--report", report)
     assert result.returncode == 0, result.stderr
     assert sorted(o["id"] for o in json.loads(report.read_text())["objects"]) == ["a", "b"]
+
+
+def test_a_plain_file_over_the_limit_is_refused_by_its_size(tmp_path: Path) -> None:
+    src = tmp_path / "house.city.json"
+    src.write_bytes(_cityjson()[0])
+    with pytest.raises(InputError, match="is larger than the limit of 100 bytes"):
+        read_scene(src, limits=Limits(decompressed_bytes=100))

@@ -63,9 +63,9 @@ def open_binary(path: Path) -> IO[bytes]:
 
 def too_large(path: Path, limit: int) -> InputError:
     """The error for a file (inflated, for ``.gz``) past ``limit`` bytes."""
-    verb = "inflates" if path.name.lower().endswith(".gz") else "is larger than"
+    what = "inflates past" if path.name.lower().endswith(".gz") else "is larger than"
     return InputError(
-        f"{verb} past the limit of {limit:,} bytes (decompressed_bytes; "
+        f"{what} the limit of {limit:,} bytes (decompressed_bytes; "
         "raise it with --limit decompressed_bytes=N)",
         str(path),
     )
@@ -81,6 +81,8 @@ def read_bytes(path: Path, limit: int) -> bytearray:
     buffer that grows with them: :class:`InputError` as soon as they pass ``limit``."""
     buffer = bytearray()
     try:
+        if not path.name.lower().endswith(".gz") and path.stat().st_size > limit:
+            raise too_large(path, limit)
         with open_binary(path) as stream:
             while chunk := stream.read(CHUNK):
                 if len(buffer) + len(chunk) > limit:
