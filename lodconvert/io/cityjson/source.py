@@ -114,9 +114,9 @@ def load_document(path: Path, limits: Limits, tally: InputTally) -> dict[str, An
 
 def parsed(text: str, where: str, tally: InputTally | None = None) -> Any:
     """``text`` parsed as JSON; :class:`InputError` saying it is not CityJSON otherwise. A
-    top-level ``vertices`` of rows of three numbers is read straight from the text into an
-    (n, 3) float64 array (:func:`~.vertices.vertex_array`: no Python object per number),
-    its rows counted against ``tally``'s limits before it is allocated."""
+    top-level ``vertices`` of rows of three numbers is parsed a chunk of text at a time into
+    an (n, 3) float64 array (:func:`~.vertices.top_level`), its rows counted against
+    ``tally``'s limits before it is allocated."""
     try:
         return top_level(text, tally)
     except (ValueError, RecursionError) as exc:
