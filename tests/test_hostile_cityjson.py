@@ -47,9 +47,13 @@ def test_a_small_cityjson_file_converts_under_a_2gib_address_space(tmp_path: Pat
     assert (tmp_path / "house.glb").exists()
 
 
-def test_vertices_take_the_memory_of_an_array(tmp_path: Path, small_peak: int) -> None:
-    # as JSON lists of Python numbers, 1M vertices took some 235 MB; as float64, 24 MB
+@pytest.mark.parametrize("bad", [None, float("nan"), "x"])
+def test_vertices_take_the_memory_of_an_array(tmp_path: Path, small_peak: int, bad) -> None:
+    # as JSON lists of Python numbers, 1M vertices took some 235 MB; as float64, 24 MB (and
+    # so they do with a row that is not three numbers among them)
     vertices = [[k % 1000, k * 7 % 1000, k % 800] for k in range(1_000_000)]
+    if bad is not None:
+        vertices[500_000] = [bad, 0, 0]
     src = tmp_path / "many.city.json"
     src.write_bytes(city({"a": city_object()}, SQUARE + vertices))
     result = run_cli(src, "-o", tmp_path / "many.glb", budget=4 * GB)
@@ -86,7 +90,7 @@ def test_blank_lines_of_a_sequence_take_time_linear_in_their_bytes(tmp_path: Pat
         src = tmp_path / f"blank{n}.city.jsonl.gz"
         src.write_bytes(zeros_gz(n * MB, sequence(), b"\n"))
         seconds.append(min(_read_seconds(src) for _ in range(2)))
-    assert seconds[1] < 8 * seconds[0] + 0.5, seconds
+    assert seconds[1] < 8 * seconds[0], seconds
 
 
 def test_a_ply_gz_padded_with_newlines_converts_in_little_memory(tmp_path: Path) -> None:

@@ -76,8 +76,9 @@ def top_level(text: str, tally: InputTally | None = None) -> Any:
 
 def _vertex_array(text: str, start: int, tally: InputTally | None) -> tuple[np.ndarray, int] | None:
     """The JSON array at ``text[start]`` as an (n, 3) float64 array and the index past it,
-    parsed :data:`_TEXT_CHUNK` characters of rows at a time; None unless it is an array of
-    rows of three JSON numbers within float64 (then ``json`` parses it whole)."""
+    parsed :data:`_TEXT_CHUNK` characters of rows at a time (a row that is not three numbers
+    within float64 a row of NaN, see :func:`vertex_rows`); None unless it is an array of
+    arrays that are no deeper (then ``json`` parses it whole)."""
     if empty := _EMPTY.match(text, start):
         return np.zeros((0, 3)), empty.end()
     close = _CLOSE.search(text, start)
@@ -97,20 +98,30 @@ def _vertex_array(text: str, start: int, tally: InputTally | None) -> tuple[np.n
                 return None
             at = comma.end()
         piece = text[at:cut]
-        if _NOT_NUMBERS.search(piece):
-            return None
         try:
-            values = np.array(json.loads(f"[{piece}]"))
+            parsed = json.loads(f"[{piece}]")
         except ValueError:
             return None
+        values = None if _NOT_NUMBERS.search(piece) else _numbers(parsed)
+        if values is None:
+            values = vertex_rows(parsed, "")  # a row that is not three numbers is NaN
         count = len(values)
-        if values.ndim != 2 or values.shape[1] != 3 or values.dtype.kind not in "if":
-            return None
         if filled + count > rows:
             return None
         out[filled : filled + count] = values
         filled, at = filled + count, cut
     return (out, close.end()) if filled == rows else None
+
+
+def _numbers(rows: list[Any]) -> np.ndarray | None:
+    """``rows`` as an (n, 3) float64 array when each is three JSON numbers within float64."""
+    try:
+        values = np.array(rows)
+    except ValueError:  # rows of different lengths
+        return None
+    if values.ndim != 2 or values.shape[1:] != (3,) or values.dtype.kind not in "if":
+        return None
+    return values.astype(np.float64, copy=False)
 
 
 def vertex_rows(values: Any, where: str) -> np.ndarray:
