@@ -1,6 +1,7 @@
-"""The lines of a CityJSONSeq file, read in chunks: runs of white space (blank lines) are
-skipped at the speed of a regular expression, a ``.gz`` stops once it inflates past
-``decompressed_bytes``, and a line stops once it passes ``sequence_line_bytes``."""
+"""The lines of a CityJSONSeq file, read in chunks: blank lines are skipped without a Python
+step per line (a chunk of nothing but white space at once, shorter runs by a regular
+expression), a ``.gz`` stops once it inflates past ``decompressed_bytes``, and a line once it
+passes ``sequence_line_bytes``."""
 
 from __future__ import annotations
 
@@ -31,6 +32,9 @@ def sequence_lines(path: Path, limits: Limits) -> Iterator[tuple[int, bytes]]:
                 read += len(chunk)
                 if inflates and read > limits.decompressed_bytes:
                     raise too_large(path, limits.decompressed_bytes)
+                if not pending and chunk.isspace():  # blank lines, skipped at C speed
+                    number += chunk.count(b"\n")
+                    continue
                 pending += chunk
                 at = 0
                 while True:
