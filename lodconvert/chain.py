@@ -20,7 +20,7 @@ from __future__ import annotations
 import itertools
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -40,9 +40,10 @@ from .ranges import (
     check_range_parameters,
     cutoff,
     default_xs,
+    diagonal,
     projected_px,
 )
-from .sourcelods import GROUND_COVERS, SLOTS, prism, source_levels
+from .sourcelods import GROUND_COVERS, SLOTS, lod_name, prism, source_levels, unused_levels
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
@@ -397,101 +398,172 @@ def _least_cost(surface: Mesh, opts: ChainOptions) -> float:
     return least_point_cost(surface) if not opts.resolutions else 0.0
 
 
-def bake_chain(
-    obj: Node,
-    opts: ChainOptions,
-    backend: Backend,
-    progress: Progress | None = None,
-    warn: Progress | None = None,
-    limits: Limits = DEFAULT_LIMITS,
-) -> LodChain:
-    """Bake ``obj`` into a chain (levels relative to its bounding-box centre), within
-    ``limits`` (grid cells per level, working memory)."""
+NO_POINTS_PAY = "no point level could be both cheaper and faithful"
+
+
+@dataclass(frozen=True)
+class PlannedLevel:
+    """One level of a plan: its ``name``, the exponent ``x`` of the cutoff where it switches in
+    (``None`` for the nearest level), and the ``level`` itself where planning made it (the mesh,
+    a source LoD, a prism), or ``None`` for points still to bake: baked level ``index`` of the
+    per-level options."""
+
+    name: str
+    x: float | None
+    level: Level | None = None
+    index: int = 0
+
+
+@dataclass
+class ChainPlan:
+    """An object's chain before any point is baked: which levels it gets and where they switch
+    (Y = α·β·γˣ, α the diagonal of the box of the geometry the chain is made from, ``origin``
+    its centre). A level to bake is kept when baking finds it cheaper than the level before
+    and faithful (:func:`bake_plan`); else the finer level stays on to the next cutoff."""
+
+    object_id: str
+    levels: list[PlannedLevel]
+    origin: np.ndarray
+    alpha: float
+    beta: float
+    gamma: float
+    cull: float | None
+    surface: Mesh
+    """The geometry points are baked from, relative to ``origin``."""
+    bounds: np.ndarray
+    dropped: dict[str, str] = field(default_factory=dict)
+    unused: dict[str, str] = field(default_factory=dict)
+    metadata: dict[str, object] = field(default_factory=dict)
+    cut: tuple[str, ...] = ()
+    """What was cut from the id and attributes (:mod:`~lodconvert.model.safe_text`)."""
+    transform: np.ndarray | None = None
+
+    @property
+    def xs(self) -> list[float]:
+        """The exponents of the planned levels' switch-in cutoffs, and the cull's."""
+        xs = [level.x for level in self.levels if level.x is not None]
+        return xs + ([self.cull] if self.cull is not None else [])
+
+    @property
+    def cutoffs(self) -> list[float]:
+        """The cutoffs of the planned levels (and the cull), nearest first."""
+        return [cutoff(self.alpha, self.beta, self.gamma, x) for x in self.xs]
+
+
+def _points_may_pay(levels: Sequence[Level | None], floor: float) -> bool:
+    """Whether a point level after ``levels`` (those kept so far, ``None`` for one still to
+    bake) may be cheaper than the last of them: unless that one costs no more than ``floor``
+    (:func:`_least_cost`)."""
+    return not levels or levels[-1] is None or level_cost(levels[-1]) > floor
+
+
+def _framed(mesh: Mesh) -> tuple[np.ndarray, float, Mesh, np.ndarray]:
+    """The chain frame of ``mesh``: its bounding-box centre, α, and it and its bounds relative
+    to that centre."""
+    world = mesh.bounds
+    origin = (world[0] + world[1]) / 2.0
+    return origin, diagonal(world), mesh.translated(-origin), world - origin
+
+
+def plan_chain(obj: Node, opts: ChainOptions) -> ChainPlan:
+    """The plan of ``obj``'s chain (``opts.gamma`` ``None``: the default γ); nothing is
+    baked. ``lodconvert ranges`` prints it, :func:`bake_chain` bakes it."""
     opts.check()
     check_geometry(obj)
     if opts.gamma is None:
         opts = replace(opts, gamma=DEFAULT_GAMMA)
     sources = source_levels(obj.lods)
     if opts.keep_mesh and opts.levels == len(SLOTS) and any(k in SLOTS for k in sources):
-        return _source_chain(obj, sources, opts, backend, progress, warn, limits)
+        return _source_plan(obj, sources, opts)
     if opts.keep_mesh and opts.levels == len(SLOTS) and 0 in sources:
-        only_prism = _lod0_chain(obj, opts)
+        only_prism = _lod0_plan(obj, opts)
         if only_prism is not None:
             return only_prism
-    world_bounds = obj.geometry.bounds
-    origin = (world_bounds[0] + world_bounds[1]) / 2.0
-    surface = obj.geometry.translated(-origin)
-    bounds = world_bounds - origin
-    alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
+    return _mesh_plan(obj, opts)
+
+
+def _plan(
+    obj: Node,
+    opts: ChainOptions,
+    levels: list[PlannedLevel],
+    frame: tuple[np.ndarray, float, Mesh, np.ndarray],
+    dropped: dict[str, str],
+    unused: dict[str, str],
+) -> ChainPlan:
+    """The plan of ``obj`` of ``levels`` in ``frame`` (:func:`_framed`)."""
+    origin, alpha, surface, bounds = frame
+    assert opts.gamma is not None
+    text = obj.written()
+    return ChainPlan(
+        object_id=text.id,
+        levels=levels,
+        origin=origin,
+        alpha=alpha,
+        beta=opts.beta,
+        gamma=opts.gamma,
+        cull=opts.cull,
+        surface=surface,
+        bounds=bounds,
+        dropped=dropped,
+        unused=unused,
+        metadata=text.attributes,
+        cut=text.cut,
+    )
+
+
+def _mesh_plan(obj: Node, opts: ChainOptions) -> ChainPlan:
+    """A mesh's chain: the mesh (unless ``--no-mesh``) and points baked from it."""
+    frame = _framed(obj.geometry)
+    alpha, surface = frame[1], frame[2]
+    assert opts.gamma is not None
     xs = list(opts.exponents)
-    cuts = [cutoff(alpha, opts.beta, opts.gamma, x) for x in xs]
     # Distance each level first shows at; a baked finest level is designed for x = 0.
-    design = [cutoff(alpha, opts.beta, opts.gamma, 0.0), *cuts]
+    design = [cutoff(alpha, opts.beta, opts.gamma, x) for x in [0.0, *xs]]
     if not (design[0] > 0 and all(b > a for a, b in itertools.pairwise(design))):
         raise InputError(
             f"is too small (diagonal {alpha:.3g}) for switching distances that increase", obj.id
         )
-
-    levels: list[Level] = []
-    kept_cuts: list[float] = []
-    kept_xs: list[float] = []
+    levels: list[PlannedLevel] = []
     dropped: dict[str, str] = {}
     if opts.keep_mesh:
-        levels.append(Level(name=LEVEL_NAMES[0], kind="mesh", mesh=surface))
+        levels.append(
+            PlannedLevel(
+                LEVEL_NAMES[0], None, Level(name=LEVEL_NAMES[0], kind="mesh", mesh=surface)
+            )
+        )
     floor = _least_cost(surface, opts)
     for i in range(opts.pcd_levels):
         n = i + 1 if opts.keep_mesh else i
-        name = LEVEL_NAMES[n]
-        previous = levels[-1] if levels else None
-        if previous is not None and level_cost(previous) <= floor:
-            dropped[name] = "no point level could be both cheaper and faithful"
+        if not _points_may_pay([planned.level for planned in levels], floor):
+            dropped[LEVEL_NAMES[n]] = NO_POINTS_PAY
             continue
-        if progress:
-            progress(f"{obj.id}: baking {name}")
-        level = _point_level(
-            surface, bounds, name, i, design[n], previous, opts, backend, obj.id, warn, limits
-        )
-        if isinstance(level, str):
-            dropped[name] = level
-            continue
-        levels.append(level)
-        if n > 0:
-            kept_cuts.append(cuts[n - 1])
-            kept_xs.append(xs[n - 1])
-
-    return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped)
+        levels.append(PlannedLevel(LEVEL_NAMES[n], xs[n - 1] if n > 0 else None, index=i))
+    unused = unused_levels(obj.lods)
+    if not (opts.keep_mesh and opts.levels == len(SLOTS)):
+        option = "--no-mesh" if not opts.keep_mesh else f"--levels {opts.levels}"
+        for label, mesh in obj.lods.items():
+            if label not in unused and mesh is not obj.geometry:
+                unused[label] = f"{option}: every level is made from the finest geometry"
+    return _plan(obj, opts, levels, frame, dropped, unused)
 
 
-def _source_chain(
-    obj: Node,
-    sources: dict[int, tuple[str, Mesh]],
-    opts: ChainOptions,
-    backend: Backend,
-    progress: Progress | None,
-    warn: Progress | None,
-    limits: Limits,
-) -> LodChain:
+def _source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOptions) -> ChainPlan:
     """The CityGML-style chain of a city object with its own LoDs (:mod:`.sourcelods`): its
     finest source LoD covers every slot up to its own; each coarser slot is the source's LoD
     there, else (LOD1) a prism from its footprint, else (LOD3, LOD2) baked points where they
     pay; a slot with none of these leaves the finer level on."""
     finest_slot = max(k for k in sources if k in SLOTS)
     finest = sources[finest_slot][1]
-    world_bounds = finest.bounds
-    origin = (world_bounds[0] + world_bounds[1]) / 2.0
-    bounds = world_bounds - origin
-    alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
+    frame = _framed(finest)
+    origin, surface = frame[0], frame[2]
     xs = list(opts.exponents)
-    cuts = [cutoff(alpha, opts.beta, opts.gamma, x) for x in xs]
-    surface = finest.translated(-origin)
-    levels = [Level(name=f"LOD{finest_slot}", kind="source", mesh=surface)]
-    kept_cuts: list[float] = []
-    kept_xs: list[float] = []
+    name = f"LOD{finest_slot}"
+    levels = [PlannedLevel(name, None, Level(name=name, kind="source", mesh=surface))]
     dropped: dict[str, str] = {}
     for slot in range(finest_slot - 1, 0, -1):
         index = SLOTS.index(slot) - 1  # LOD3 → 0 … LOD1 → 2: its cutoff and exponent
         name = f"LOD{slot}"
-        level: Level | str
+        level: Level | str | None = None
         if slot in sources:
             level = Level(name=name, kind="source", mesh=sources[slot][1].translated(-origin))
         elif slot == 1 and obj.type in GROUND_COVERS:
@@ -503,25 +575,23 @@ def _source_chain(
                 if shape is not None
                 else "no footprint with area to extrude"
             )
-        elif level_cost(levels[-1]) <= _least_cost(surface, opts):
-            level = "no point level could be both cheaper and faithful"
-        else:
-            if progress:
-                progress(f"{obj.id}: baking {name}")
-            level = _point_level(
-                surface, bounds, name, index, cuts[index], levels[-1], opts, backend, obj.id,
-                warn, limits,
-            )  # fmt: skip
+        elif not _points_may_pay([p.level for p in levels], _least_cost(surface, opts)):
+            level = NO_POINTS_PAY
         if isinstance(level, str):
             dropped[name] = level
             continue
-        levels.append(level)
-        kept_cuts.append(cuts[index])
-        kept_xs.append(xs[index])
-    return _finished(obj, opts, levels, kept_cuts, kept_xs, origin, alpha, dropped)
+        levels.append(PlannedLevel(name, xs[index], level, index))
+    unused = unused_levels(obj.lods)
+    if 0 in sources and not any(p.level and p.level.kind == "prism" for p in levels):
+        unused[sources[0][0]] = (
+            f"LOD1 is the source's {lod_name(sources[1][0])}, not a prism of this footprint"
+            if 1 in sources
+            else dropped["LOD1"]
+        )
+    return _plan(obj, opts, levels, frame, dropped, unused)
 
 
-def _lod0_chain(obj: Node, opts: ChainOptions) -> LodChain | None:
+def _lod0_plan(obj: Node, opts: ChainOptions) -> ChainPlan | None:
     """The chain of a city object whose only source LoD is 0 (footprints, roof edges): its
     LOD1 prism, the height of which only ``measuredHeight`` can give (None without one, or for
     a ground cover: then its LoD 0 surfaces are its geometry, as a mesh's)."""
@@ -530,41 +600,76 @@ def _lod0_chain(obj: Node, opts: ChainOptions) -> LodChain | None:
     shape = prism(obj.lods, obj.geometry, obj.attributes)
     if shape is None:
         return None
-    world_bounds = shape.bounds
-    origin = (world_bounds[0] + world_bounds[1]) / 2.0
-    alpha = float(np.linalg.norm(world_bounds[1] - world_bounds[0]))
-    level = Level(name="LOD1", kind="prism", mesh=shape.translated(-origin))
+    frame = _framed(shape)
+    level = Level(name="LOD1", kind="prism", mesh=frame[2])
     dropped = {f"LOD{slot}": "the source has only LoD 0" for slot in SLOTS[:-1]}
-    return _finished(obj, opts, [level], [], [], origin, alpha, dropped)
+    return _plan(
+        obj, opts, [PlannedLevel("LOD1", None, level)], frame, dropped, unused_levels(obj.lods)
+    )
 
 
-def _finished(
+def bake_chain(
     obj: Node,
     opts: ChainOptions,
-    levels: list[Level],
-    cuts: list[float],
-    xs: list[float],
-    origin: np.ndarray,
-    alpha: float,
-    dropped: dict[str, str],
+    backend: Backend,
+    progress: Progress | None = None,
+    warn: Progress | None = None,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> LodChain:
-    """The chain of ``obj`` from its kept levels and their switch-in cutoffs and exponents,
-    with the cull cutoff added when asked."""
-    culled = opts.cull is not None
-    if culled:
-        cuts = [*cuts, cutoff(alpha, opts.beta, opts.gamma, opts.cull)]
-        xs = [*xs, opts.cull]
+    """Plan and bake ``obj``'s chain (levels relative to its bounding-box centre), within
+    ``limits`` (grid cells per level, working memory)."""
+    return bake_plan(plan_chain(obj, opts), opts, backend, progress, warn, limits)
+
+
+def bake_plan(
+    plan: ChainPlan,
+    opts: ChainOptions,
+    backend: Backend,
+    progress: Progress | None = None,
+    warn: Progress | None = None,
+    limits: Limits = DEFAULT_LIMITS,
+) -> LodChain:
+    """The chain of ``plan``: its levels to bake baked, and kept where they pay (cheaper than
+    the level before and faithful, :func:`_point_level`); one that does not is dropped with
+    its cutoff."""
+    levels: list[Level] = []
+    xs: list[float] = []
+    dropped = dict(plan.dropped)
+    for planned in plan.levels:
+        level: Level | str | None = planned.level
+        if level is None and not _points_may_pay(levels, _least_cost(plan.surface, opts)):
+            level = NO_POINTS_PAY
+        elif level is None:
+            if progress:
+                progress(f"{plan.object_id}: baking {planned.name}")
+            design = cutoff(
+                plan.alpha, plan.beta, plan.gamma, 0.0 if planned.x is None else planned.x
+            )
+            level = _point_level(
+                plan.surface, plan.bounds, planned.name, planned.index, design,
+                levels[-1] if levels else None, opts, backend, plan.object_id, warn, limits,
+            )  # fmt: skip
+        if isinstance(level, str):
+            dropped[planned.name] = level
+            continue
+        levels.append(level)
+        if planned.x is not None:
+            xs.append(planned.x)
+    if plan.cull is not None:
+        xs.append(plan.cull)
     return LodChain(
-        object_id=obj.id,
+        object_id=plan.object_id,
         levels=levels,
-        cutoffs=cuts,
-        origin=origin,
+        cutoffs=[cutoff(plan.alpha, plan.beta, plan.gamma, x) for x in xs],
+        origin=plan.origin,
         center=np.zeros(3),
-        alpha=alpha,
-        beta=opts.beta,
-        gamma=opts.gamma,
+        alpha=plan.alpha,
+        beta=plan.beta,
+        gamma=plan.gamma,
         xs=xs,
-        culled=culled,
-        dropped=dropped,
-        metadata=obj.object_attributes(),
+        culled=plan.cull is not None,
+        dropped=dict(sorted(dropped.items(), key=lambda item: LEVEL_NAMES.index(item[0]))),
+        unused=plan.unused,
+        metadata=plan.metadata,
+        cut=plan.cut,
     )

@@ -52,7 +52,7 @@ from .errors import UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import WHITE, CellChain, Level, LodChain, Mesh, Surface
 from .plan import level_cost, mesh_silhouette_estimate, silhouette_estimate
-from .ranges import cutoff
+from .ranges import cutoff, diagonal
 
 KINDS = ("auto", "points", "mesh")
 AUTO_OBJECTS = 64
@@ -65,9 +65,9 @@ designed (:mod:`.chain`)."""
 MIN_CELL_F = 0.95
 """Least silhouette F of a far level against its members where it switches in."""
 SEAM_MARGIN = 1e-9
+"""Relative margin that keeps a far level's switch strictly beyond its members'."""
 ADMISSION_ROUNDS = 4
 """Times a cell's admitted members (and so its centre) are found again."""
-"""Relative margin that keeps a far level's switch strictly beyond its members'."""
 
 Member = LodChain | CellChain
 Warn = Callable[[str], None]
@@ -187,7 +187,7 @@ def bake_cell(
     finest = _merged([_finest_mesh(chain) for chain in objects])
     world = finest.bounds
     origin = (world[0] + world[1]) / 2.0
-    alpha = float(np.linalg.norm(world[1] - world[0]))
+    alpha = diagonal(world)
     seam = max(_reach(m, origin) for m in members)
     switch = max(cutoff(alpha, options.beta, gamma, CELL_EXPONENT), seam * (1 + SEAM_MARGIN))
     source = finest.translated(-origin)
@@ -343,7 +343,7 @@ def _admitted(members: list[Member], options: ChainOptions, gamma: float) -> lis
     for _ in range(ADMISSION_ROUNDS):
         boxes = np.stack([bounds[id(m)] for m in admitted])
         low, high = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
-        origin, alpha = (low + high) / 2.0, float(np.linalg.norm(high - low))
+        origin, alpha = (low + high) / 2.0, diagonal(np.stack([low, high]))
         limit = cutoff(alpha, options.beta, gamma, CELL_EXPONENT)
         kept = [m for m in members if _reach(m, origin) <= limit]
         if not kept:  # none would let it switch in time: a cell of the nearest-switching one

@@ -22,16 +22,18 @@ import numpy as np
 
 from . import __version__
 from .bake import Backend, get_backend
-from .chain import ChainOptions, bake_chain, check_geometry
+from .chain import ChainOptions, ChainPlan, bake_chain, plan_chain
 from .errors import InputError
 from .hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
 from .io import OutputInfo, input_format, output_format
+from .io.crs import checked_crs_option
+from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
-from .ranges import DEFAULT_GAMMA
 from .records import Records, report_text
+from .reproject import in_one_crs
 from .sinks import FileSink, Outputs
 from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
@@ -109,6 +111,8 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
         "origin": [float(v) for v in chain.origin],
         "levels": levels,
         "dropped": dict(chain.dropped),
+        "unused": dict(chain.unused),
+        **({"cut": list(chain.cut)} if chain.cut else {}),
     }
 
 
@@ -129,11 +133,8 @@ def iter_chains(
     ``step`` hears how many are done. With ``hlod``, the objects come grouped in LOD parents
     (:mod:`.hlod`): one :class:`CellChain` per cell of the coarsest tier, in grid order, each
     followed by the members it left out (objects or finer cells, drawn on their own)."""
-    total = scene.size if scene.size is not None else None
-    if total is None and isinstance(scene.nodes, list):
-        total = sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
     bake = _ObjectBaker(scene.source, options, backend, progress, warn, skipped, limits, strict)
-    bake.step, bake.total = step, total
+    bake.step, bake.total = step, _object_count(scene)
     if hlod is not None:
         yield from _cell_chains(scene, options, hlod, bake)
         return
@@ -143,14 +144,21 @@ def iter_chains(
             yield chain
 
 
+def _object_count(scene: Scene) -> int | None:
+    """How many objects with geometry ``scene`` holds (``None``: unknown before reading)."""
+    if scene.size is not None or not isinstance(scene.nodes, list):
+        return scene.size
+    return sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
+
+
 @dataclass
 class _ObjectBaker:
-    """Bakes one object at a time: geometry placed by several nodes once, objects with bad
-    geometry reported and left out (``None``)."""
+    """Bakes one object at a time (without a ``backend``: plans it, bakes nothing): geometry
+    placed by several nodes once, objects with bad geometry reported and left out (``None``)."""
 
     source: str
     options: ChainOptions
-    backend: Backend
+    backend: Backend | None
     progress: Message
     warn: Message
     skipped: list[dict[str, str]] | None
@@ -159,17 +167,20 @@ class _ObjectBaker:
     step: Step = _no_step
     total: int | None = None
     done: int = 0
-    shared: dict[int, LodChain] = field(default_factory=dict)
+    shared: dict[int, Any] = field(default_factory=dict)
 
-    def __call__(self, obj: Node, radius: float | None) -> LodChain | None:
-        """The chain of ``obj`` (γ = ``radius`` where given), or None when it is skipped."""
+    def __call__(self, obj: Node, radius: float | None) -> Any:
+        """The chain of ``obj`` (its plan without a backend; γ = ``radius`` where given), or
+        None when it is skipped."""
+        chain: LodChain | ChainPlan
         try:
             if obj.transform is not None and id(obj.geometry) in self.shared:
                 base = self.shared[id(obj.geometry)]
-                chain = replace(base, object_id=obj.id, metadata=obj.object_attributes())
+                text = obj.written()
+                chain = replace(base, object_id=text.id, metadata=text.attributes, cut=text.cut)
             else:
                 opts = replace(self.options, gamma=radius) if radius is not None else self.options
-                chain = bake_chain(
+                chain = plan_chain(obj, opts) if self.backend is None else bake_chain(
                     obj, opts, self.backend, progress=self.progress, warn=self.warn,
                     limits=self.limits,
                 )  # fmt: skip
@@ -222,7 +233,8 @@ def merged(scenes: Sequence[Scene]) -> Scene:
     are one object whose LoDs are merged: the first keeps its attributes and children, takes
     the LoD labels it lacks from the later ones, and its geometry is its finest LoD. Other
     objects all stay, in input order (the writers keep their names apart). The first declared
-    CRS is the scene's; a scene of one input is returned as it is."""
+    CRS is the scene's (:func:`~.reproject.in_one_crs` puts every input in it first); a scene
+    of one input is returned as it is."""
     if len(scenes) == 1:
         return scenes[0]
     nodes: list[Node] = []
@@ -239,6 +251,7 @@ def merged(scenes: Sequence[Scene]) -> Scene:
             first.geometry = levels[max(levels)][1] if levels else first.geometry
     crs = next((scene.crs for scene in scenes if scene.crs), None)
     whole = Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+    whole.city = any(scene.city for scene in scenes)
     tallies = [tally for scene in scenes if (tally := tally_of(scene)) is not None]
     if tallies:  # complete: every input's nodes have been read
         tally = InputTally(whole.source, tallies[0].limits)
@@ -248,14 +261,6 @@ def merged(scenes: Sequence[Scene]) -> Scene:
             tally.skipped += part.skipped
         attach_tally(whole, tally)
     return whole
-
-
-def _is_city(scene: Scene) -> bool:
-    """Whether ``scene`` holds city objects (nodes with their own LoDs); looks at the first
-    node only, so a lazy scene is not consumed."""
-    nodes = scene.nodes
-    first = nodes[0] if isinstance(nodes, list) and nodes else None
-    return first is not None and bool(first.lods)
 
 
 def _with_plot_radii(scene: Scene, options: ChainOptions) -> Iterator[tuple[Node, float | None]]:
@@ -347,28 +352,20 @@ def convert(
     skipped: list[dict[str, str]] = []
     cells: list[dict[str, Any]] = []
     draw: dict[str, dict[str, int]] = {"without": {}, "with": {}}
+    frames: list[SceneFrame | None] = []  # the writers' scene frame, from the first item
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = outputs.file(output_path)
         report_sink = outputs.file(report_path) if report_path is not None else None
         start = time.perf_counter()
-        scene = merged(
-            [
-                source.read_file(path, limits=limits, **(read_options or {}))
-                for source, path in zip(sources, inputs, strict=True)
-            ]
-        )
+        scene, crs_record = read_inputs(inputs, read_options, limits, sources, warn)
         timings["read"] = time.perf_counter() - start
-        if scene.crs is None and _is_city(scene):
-            warn(
-                f"{scene.source}: declares no CRS; its coordinates are written as they are "
-                "(--crs EPSG:… names it)"
-            )
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(backend)
         info = OutputInfo(
             generator=f"lodconvert {__version__}",
             source=" + ".join(Path(path).name for path in inputs),
             crs=scene.crs,
+            vertical=crs_record["vertical"] if scene.city else None,
             view=options.view,
             options=options_record(options),
         )
@@ -377,6 +374,8 @@ def convert(
             tally = tally_of(scene)
             dropped = tally.dropped_by_object if tally is not None else {}
             for item in items:
+                if not frames:
+                    frames.append(scene_frame(info.crs, item))
                 objects = item.objects() if isinstance(item, CellChain) else [item]
                 for chain in objects:
                     records.append(
@@ -395,11 +394,7 @@ def convert(
         )
         target.write_chains(chains, sink, info, **(write_options or {}))
         timings["bake_and_write"] = time.perf_counter() - start
-        tally = tally_of(scene)
-        for entry in tally.skipped if tally is not None else ():
-            if records and not strict:  # with nothing converted, the run's error says it
-                warn(f"{scene.source}: object {entry['reason']} — skipped")
-            skipped.append(entry)
+        tally = _reader_skipped(scene, skipped, warn if records and not strict else _quiet)
         if strict and skipped:
             more = f" (and {len(skipped) - 1} more)" if len(skipped) > 1 else ""
             raise InputError(
@@ -407,12 +402,7 @@ def convert(
                 " + ".join(str(path) for path in inputs),
             )
         if not records:
-            reason = (
-                skipped[0]["reason"]
-                if len(skipped) == 1
-                else f"none of its {len(skipped)} objects could be converted"
-            )
-            raise InputError(reason, " + ".join(str(path) for path in inputs))
+            raise _none_converted(skipped, " + ".join(str(path) for path in inputs))
         step("checking", 0, 1)
         start = time.perf_counter()
         check_written(sink.staged.temp, output_path)
@@ -420,6 +410,8 @@ def convert(
         step("checking", 1, 1)
         named = " + ".join(str(path) for path in inputs)
         report = _report(named, output_path, baker, options, records, skipped, timings, tally)
+        report["crs"] = crs_record
+        report["frame"] = frames[0].record() if frames[0] is not None else None
         if hlod is not None:
             report["hlod"] = {"kind": hlod.kind, "cells": cells, "draw": draw}
         if also is not None:
@@ -429,6 +421,52 @@ def convert(
                 for piece in report_text(report):
                     stream.write(piece.encode())
     return report
+
+
+def read_inputs(
+    inputs: Sequence[str | Path],
+    read_options: dict[str, Any] | None = None,
+    limits: Limits = DEFAULT_LIMITS,
+    sources: Sequence[Any] | None = None,
+    warn: Message = _quiet,
+) -> tuple[Scene, dict[str, Any]]:
+    """The scene of ``inputs`` (one, or several in one CRS and merged: :func:`merged`), each
+    read by its format (in ``sources`` where the caller found them) with the options it takes,
+    and the report's ``crs`` (:func:`~.reproject.in_one_crs`)."""
+    if (read_options or {}).get("crs") is not None:
+        checked_crs_option(read_options["crs"])
+    sources = sources or [input_format(path) for path in inputs]
+    one_crs = in_one_crs(
+        [
+            source.read_file(path, limits=limits, **(read_options or {}))
+            for source, path in zip(sources, inputs, strict=True)
+        ],
+        warn,
+    )
+    return merged(one_crs.scenes), one_crs.record
+
+
+def _reader_skipped(
+    scene: Scene, skipped: list[dict[str, str]], warn: Message
+) -> InputTally | None:
+    """Add the objects the reader of ``scene`` skipped to ``skipped``, each told to ``warn``
+    (with nothing converted, the run's error says it); ``scene``'s tally."""
+    tally = tally_of(scene)
+    for entry in tally.skipped if tally is not None else ():
+        warn(f"{scene.source}: object {entry['reason']} — skipped")
+        skipped.append(entry)
+    return tally
+
+
+def _none_converted(skipped: list[dict[str, str]], source: str) -> InputError:
+    """The error of a run in which no object of ``source`` could be converted (``skipped``:
+    why)."""
+    reason = (
+        skipped[0]["reason"]
+        if len(skipped) == 1
+        else f"none of its {len(skipped)} objects could be converted"
+    )
+    return InputError(reason, source)
 
 
 @contextlib.contextmanager
@@ -478,27 +516,47 @@ def _report(
     }
 
 
-def object_ranges(scene: Scene, options: ChainOptions) -> list[dict[str, Any]]:
-    """α, γ and cutoffs of every object of a scene, without baking."""
-    from .ranges import cutoffs
-
+def object_ranges(
+    scene: Scene, options: ChainOptions, warn: Message = _quiet
+) -> list[dict[str, Any]]:
+    """α, γ, the levels and the cutoffs of every object of ``scene`` (:func:`read_inputs`) as
+    :func:`convert` plans them (:func:`~.chain.plan_chain`), without baking: a level to bake
+    (``to_bake``) is kept, and its cutoff with it, where baking finds it cheaper than the level
+    before and faithful. Objects that cannot be converted are reported through ``warn`` and
+    left out; when none can, :class:`InputError`."""
     options.check()
+    skipped: list[dict[str, str]] = []
+    plan = _ObjectBaker(scene.source, options, None, _quiet, warn, skipped, DEFAULT_LIMITS, False)
+    plan.total = _object_count(scene)
     rows = []
     for obj, radius in _with_plot_radii(scene, options):
-        check_geometry(obj)
-        bounds = obj.geometry.bounds
-        alpha = float(np.linalg.norm(bounds[1] - bounds[0]))
-        default = options.gamma if options.gamma is not None else DEFAULT_GAMMA
-        gamma = radius if radius is not None else default
-        xs = list(options.exponents) + ([options.cull] if options.cull is not None else [])
-        rows.append(
-            {
-                "id": obj.id,
-                "alpha": alpha,
-                "beta": options.beta,
-                "gamma": gamma,
-                "xs": xs,
-                "cutoffs": cutoffs(alpha, options.beta, gamma, xs),
-            }
-        )
+        planned = plan(obj, radius)
+        if planned is not None:
+            rows.append(_range_record(planned, options))
+    _reader_skipped(scene, skipped, warn if rows else _quiet)
+    if not rows:
+        raise _none_converted(skipped, scene.source)
     return rows
+
+
+def _range_record(plan: ChainPlan, options: ChainOptions) -> dict[str, Any]:
+    """What ``lodconvert ranges`` says of one object's plan."""
+    levels = []
+    for planned in plan.levels:
+        entry: dict[str, Any] = {"name": planned.name}
+        if planned.level is not None:
+            entry["kind"] = planned.level.kind
+        else:
+            entry.update(kind=options.level_kind(planned.index), to_bake=True)
+        levels.append(entry)
+    return {
+        "id": plan.object_id,
+        "alpha": plan.alpha,
+        "beta": plan.beta,
+        "gamma": plan.gamma,
+        "xs": plan.xs,
+        "cutoffs": plan.cutoffs,
+        "levels": levels,
+        "dropped": dict(plan.dropped),
+        "unused": dict(plan.unused),
+    }

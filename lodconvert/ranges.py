@@ -14,6 +14,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from .errors import UsageError
 
 DEFAULT_BETA = 3.0
@@ -135,6 +137,13 @@ def cutoffs(
     if not math.isfinite(alpha) or alpha <= 0:
         raise UsageError(f"(the object's diagonal α) must be positive, got {alpha:g}", "alpha")
     return [cutoff(alpha, beta, gamma, x) for x in xs]
+
+
+def diagonal(bounds: np.ndarray) -> float:
+    """α of an object: the diagonal of its bounding box ``bounds`` ((2, 3): lowest and highest
+    corner) — the box of the geometry its chain is made from (its finest level; a LoD 0
+    object's prism), or of all its members' for a LOD parent. Every α is computed here."""
+    return float(np.linalg.norm(bounds[1] - bounds[0]))
 
 
 def screen_coverage(alpha: float, distance: float, view: ReferenceView = REFERENCE_VIEW) -> float:

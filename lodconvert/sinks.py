@@ -6,12 +6,20 @@ directory of tiles) form one :class:`Outputs`. Each target is checked before any
 twice). Everything is written to temporary names in the target folders; :meth:`Outputs.commit`
 renames them all into place, and puts back what it replaced if a rename fails. A run that fails
 at any step, or is interrupted, leaves no new file and every existing output untouched.
+
+A run holds an exclusive ``flock`` on each file or directory it stages until it has committed
+or discarded it. A run killed before that (SIGKILL, the out-of-memory killer, a power cut) leaves
+its staged names behind, unlocked, since the kernel drops a dead process's locks: the next run
+to the same target removes those, and never a staged name whose lock a live run holds.
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
 import os
+import re
 import shutil
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
@@ -19,10 +27,31 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
-from .errors import InputError
+from .errors import InputError, LodConvertError
 
 Check = Callable[[Path], None]
 """Called with a complete staged file (or directory) before the commit; raises to refuse it."""
+WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
+"""Errors of a write that no input or option causes: a full disk, a full quota, a file too
+large for its file system, a file system turned read-only. (Not EIO: input read lazily while
+an output is written could raise it too.)"""
+
+
+@contextlib.contextmanager
+def writing(where: str | Path) -> Iterator[None]:
+    """A failed write in the block (:data:`WRITE_ERRNOS`) as one line naming ``where``
+    (:class:`LodConvertError`: ``out.glb: cannot write: No space left on device``)."""
+    try:
+        yield
+    except OSError as exc:
+        if exc.errno not in WRITE_ERRNOS:
+            raise
+        raise LodConvertError(f"cannot write: {os.strerror(exc.errno)}", str(where)) from exc
+
+
+def writing_temporary() -> contextlib.AbstractContextManager[None]:
+    """:func:`writing` for work files in the temporary folder (``TMPDIR``), naming it."""
+    return writing(f"temporary folder {tempfile.gettempdir()}")
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -40,6 +69,63 @@ class _Staged:
     target: Path
     temp: Path
     check: Check | None = None
+    lock: int | None = None
+    """A descriptor of ``temp`` holding its ``flock`` while this run lives."""
+
+
+def _staged_pattern(target: Path) -> re.Pattern[str]:
+    """Names that :meth:`Outputs.file` and :meth:`Outputs.directory` stage ``target`` under:
+    ``.name.`` + the 8 characters of :mod:`tempfile` + ``.tmp`` (+ the suffix, for a file)."""
+    suffix = re.escape(target.suffix)
+    return re.compile(rf"\.{re.escape(target.name)}\.[a-z0-9_]{{8}}\.tmp(?:{suffix})?")
+
+
+_NO_LOCKS = frozenset({errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL})
+"""``flock`` errors of file systems without locks: staged names there are left unlocked, and
+another run, failing to lock them too, leaves them alone."""
+
+
+def _held(path: Path) -> int | None:
+    """A descriptor of ``path`` holding its exclusive ``flock`` (waiting for it), or ``None``
+    when ``path`` no longer names the locked file (another run removed it meanwhile)."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+    except OSError as exc:
+        if exc.errno not in _NO_LOCKS:
+            os.close(fd)
+            raise
+    with contextlib.suppress(OSError):
+        if os.path.samestat(os.fstat(fd), os.stat(path)):
+            return fd
+    os.close(fd)
+    return None
+
+
+def _clear_dead_runs(target: Path) -> None:
+    """Remove what runs that are no longer alive staged for ``target``: its staged names in its
+    folder that no process holds locked."""
+    pattern = _staged_pattern(target)
+    try:
+        names = [name for name in os.listdir(target.parent) if pattern.fullmatch(name)]
+    except OSError:
+        return
+    for name in names:
+        path = target.parent / name
+        try:
+            fd = os.open(path, os.O_RDONLY)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:  # locked by a live run (or locks unsupported here): leave it
+            os.close(fd)
+            continue
+        _remove(path)
+        os.close(fd)
 
 
 @dataclass
@@ -53,8 +139,9 @@ class FileSink:
 
     @contextlib.contextmanager
     def open(self) -> Iterator[BinaryIO]:
-        """The staged file, opened for binary writing (flushed to disk when the block ends)."""
-        with self.staged.temp.open("wb") as handle:
+        """The staged file, opened for binary writing (flushed to disk when the block ends);
+        a failed write is one line naming the output (:func:`writing`)."""
+        with writing(self.path), self.staged.temp.open("wb") as handle:
             yield handle
             handle.flush()
             os.fsync(handle.fileno())
@@ -84,9 +171,10 @@ class DirectorySink:
         if relative.is_absolute() or ".." in relative.parts:
             raise ValueError(f"{relative} is not a path inside the output directory")
         target = self.staged.temp / relative
-        target.parent.mkdir(parents=True, exist_ok=True)
-        with target.open("wb") as handle:
-            yield handle
+        with writing(self.path / relative):
+            target.parent.mkdir(parents=True, exist_ok=True)
+            with target.open("wb") as handle:
+                yield handle
 
 
 @dataclass
@@ -129,24 +217,46 @@ class Outputs:
         return path
 
     def file(self, path: str | Path, check: Check | None = None) -> FileSink:
-        """Stage the output file ``path`` (checked first, see :meth:`target`)."""
+        """Stage the output file ``path`` (checked first, see :meth:`target`; what dead runs
+        staged for it is removed)."""
         target = self.target(path)
-        # ``.name.XXXX.tmp.suffix``: hidden, marked as temporary, and still of its format
-        fd, temp = tempfile.mkstemp(
-            prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent
-        )
-        os.close(fd)
-        staged = _Staged(target, Path(temp), check)
-        self._staged.append(staged)
+        staged = self._stage(target, check, directory=False)
         return FileSink(self, target, staged)
 
     def directory(self, path: str | Path, check: Check | None = None) -> DirectorySink:
         """Stage the output directory ``path`` (replacing an existing one on commit)."""
         target = self.target(path, directory=True)
-        temp = tempfile.mkdtemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-        staged = _Staged(target, Path(temp), check)
-        self._staged.append(staged)
+        staged = self._stage(target, check, directory=True)
         return DirectorySink(self, target, staged)
+
+    def _stage(self, target: Path, check: Check | None, directory: bool) -> _Staged:
+        """A locked staged name beside ``target``: ``.name.XXXX.tmp.suffix`` for a file
+        (hidden, marked as temporary, and still of its format), ``.name.XXXX.tmp`` for a
+        directory."""
+        _clear_dead_runs(target)
+        lock = None
+        while lock is None:
+            try:
+                if directory:
+                    temp = tempfile.mkdtemp(
+                        prefix=f".{target.name}.", suffix=".tmp", dir=target.parent
+                    )
+                else:
+                    fd, temp = tempfile.mkstemp(
+                        prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent
+                    )
+                    os.close(fd)
+                lock = _held(Path(temp))
+            except OSError as exc:  # /proc, /sys: folders that take no new files
+                folder = str(target.parent)
+                raise InputError(
+                    f"cannot write here: folder {folder!r} takes no new file "
+                    f"({os.strerror(exc.errno or errno.EIO)})",
+                    str(target),
+                ) from exc
+        staged = _Staged(target, Path(temp), check, lock)
+        self._staged.append(staged)
+        return staged
 
     def commit(self) -> list[Path]:
         """Check every staged output, then rename all into place; on any failure nothing is
@@ -181,13 +291,20 @@ class Outputs:
             if backup is not None:
                 _remove(backup)
         written = [staged.target for staged in self._staged]
-        self._staged.clear()
+        self._release()
         return written
 
     def discard(self) -> None:
         """Remove everything staged; targets stay as they were."""
         for staged in self._staged:
             _remove(staged.temp)
+        self._release()
+
+    def _release(self) -> None:
+        """Drop the locks of what was staged (committed or removed by now)."""
+        for staged in self._staged:
+            if staged.lock is not None:
+                os.close(staged.lock)
         self._staged.clear()
 
 

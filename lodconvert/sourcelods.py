@@ -41,14 +41,39 @@ def lod_rank(label: str) -> tuple[int, int] | None:
 def source_levels(lods: dict[str, Mesh]) -> dict[int, tuple[str, Mesh]]:
     """Slot LoD (0–4) → (label, geometry) of the source LoDs that have faces, the highest label
     of each slot."""
-    best: dict[int, tuple[tuple[int, int], str, Mesh]] = {}
-    for label, mesh in lods.items():
-        rank = lod_rank(label)
-        if rank is None or rank[0] > 4 or mesh.face_count == 0:
+    return _sorted(lods)[0]
+
+
+def unused_levels(lods: dict[str, Mesh]) -> dict[str, str]:
+    """Label → why, of the source LoDs that :func:`source_levels` puts in no slot: a lower
+    label of a slot (``"1.2"``: ``"slot LOD1 taken by LoD 1.3"``), a label that names no LoD
+    0–4, or a LoD without faces."""
+    return _sorted(lods)[1]
+
+
+def _sorted(lods: dict[str, Mesh]) -> tuple[dict[int, tuple[str, Mesh]], dict[str, str]]:
+    """:func:`source_levels` and :func:`unused_levels` of ``lods``."""
+    ranks = {label: lod_rank(label) for label in lods}
+    best: dict[int, tuple[tuple[int, int], str]] = {}
+    for label, rank in ranks.items():
+        if rank is None or rank[0] > 4 or not lods[label].face_count:
             continue
         if rank[0] not in best or rank > best[rank[0]][0]:
-            best[rank[0]] = (rank, label, mesh)
-    return {slot: (label, mesh) for slot, (_, label, mesh) in best.items()}
+            best[rank[0]] = (rank, label)
+    unused: dict[str, str] = {}
+    for label, rank in ranks.items():
+        if rank is None or rank[0] > 4:
+            unused[label] = "names no LoD 0–4"
+        elif not lods[label].face_count:
+            unused[label] = "has no faces"
+        elif best[rank[0]][1] != label:
+            unused[label] = f"slot LOD{rank[0]} taken by {lod_name(best[rank[0]][1])}"
+    return {slot: (label, lods[label]) for slot, (_, label) in best.items()}, unused
+
+
+def lod_name(label: str) -> str:
+    """A source LoD label as messages name it: ``"1.3"`` → ``"LoD 1.3"``, ``"lod2"`` as it is."""
+    return f"LoD {label}" if label[:1].isdigit() else label
 
 
 GROUND_COVERS = frozenset(

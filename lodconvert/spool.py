@@ -3,11 +3,12 @@
 A city object's switching distances depend on its neighbours (its plot radius,
 :mod:`.plots`), so every object must have been read before the first is baked. Holding them all
 would make memory grow with the city; a :class:`NodeSpool` instead writes each node (without its
-children, which are spooled in their own turn where they have geometry; the attributes of its
-parts go with it, :meth:`~.model.Node.object_attributes`) to an anonymous temporary file as it
-is read and keeps only its position there, then gives the nodes back in the same order (or any
-node by its index, for grouping them into cells: :mod:`.hlod`). Nodes placed by a transform
-stay in memory: they share their geometry with other nodes, which a file would not.
+children, which are spooled in their own turn where they have geometry; its id and the
+attributes of it and its parts go with it as outputs keep them, :meth:`~.model.Node.written`,
+so no input nests them too deep to pickle) to an anonymous temporary file as it is read and
+keeps only its position there, then gives the nodes back in the same order (or any node by its
+index, for grouping them into cells: :mod:`.hlod`). Nodes placed by a transform stay in memory:
+they share their geometry with other nodes, which a file would not.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from dataclasses import replace
 from typing import IO
 
 from .model import Node
+from .sinks import writing_temporary
 
 
 class NodeSpool:
@@ -32,20 +34,24 @@ class NodeSpool:
         self._entries: list[Node | int] = []
 
     def add(self, node: Node) -> None:
-        """Park ``node`` (kept in memory when it is placed by a transform)."""
+        """Park ``node`` (kept in memory when it is placed by a transform); a full temporary
+        folder is one line naming it (:func:`~.sinks.writing`)."""
         if node.transform is not None:
             self._entries.append(node)
             return
         self._entries.append(self._file.tell())
-        parked = replace(node, children=[], attributes=node.object_attributes())
-        pickle.dump(parked, self._file, protocol=pickle.HIGHEST_PROTOCOL)
+        text = node.written()
+        parked = replace(node, id=text.id, children=[], attributes=text.attributes, cut=text.cut)
+        with writing_temporary():
+            pickle.dump(parked, self._file, protocol=pickle.HIGHEST_PROTOCOL)
 
     def get(self, index: int) -> Node:
         """Node ``index`` (in the order added), read back from the file."""
         entry = self._entries[index]
         if isinstance(entry, Node):
             return entry
-        self._file.seek(entry)
+        with writing_temporary():  # the seek writes what is still buffered
+            self._file.seek(entry)
         return pickle.load(self._file)
 
     def __len__(self) -> int:

@@ -6,3 +6,4 @@ mkdir -p out
 .venv/bin/lodconvert samples/torus_knot.ply -o out/torus_knot.x3d --report out/torus_knot.x3d.json
 .venv/bin/lodconvert samples/torus_knot.ply -o out/torus_knot.glb --report out/torus_knot.glb.json
 ls -l out/
+echo "lodconvert is in .venv, not on PATH: run .venv/bin/lodconvert, or 'source .venv/bin/activate' first"

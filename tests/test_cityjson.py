@@ -162,7 +162,11 @@ def _gltf_names(path: Path) -> list[str]:
     data = path.read_bytes()
     length = int.from_bytes(data[12:16], "little")
     doc = json.loads(data[20 : 20 + length])
-    return [doc["nodes"][i]["name"] for i in doc["scenes"][0]["nodes"]]
+    roots = doc["scenes"][0]["nodes"]
+    if "frame" in doc["asset"]["extras"]["lodconvert"]:  # the objects in the y-up frame node
+        (frame,) = roots
+        roots = doc["nodes"][frame]["children"]
+    return [doc["nodes"][i]["name"] for i in roots]
 
 
 def _round_trip_error(out: Path, nodes: dict[str, Node]) -> float:

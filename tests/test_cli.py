@@ -6,6 +6,7 @@ import contextlib
 import gzip
 import io
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -15,7 +16,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from lodconvert.cli import main
+from lodconvert.cli import command_parser, main
+from lodconvert.commands import MAIN_COMMAND
 
 from .conftest import ROOT, SAMPLE, degenerate_meshes
 
@@ -204,3 +206,18 @@ def test_several_objects_stay_several_and_a_broken_one_is_skipped(work: Path) ->
     assert set(ids) == {"near", "far"}
     assert ids["far"]["origin"] == pytest.approx([300000.0, 5000000.0, 50.0])
     assert [s["id"] for s in data["skipped"]] == ["broken"]
+
+
+def _readme_options_table() -> str:
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    section = readme.split("\n## Options\n", 1)[1]
+    return "\n".join(line for line in section.split("\n\n")[0].splitlines() if line.startswith("|"))
+
+
+def test_readme_options_table_lists_every_option_of_the_main_command() -> None:
+    table = _readme_options_table()
+    first_cells = "\n".join(row.split(" | ")[0] for row in table.splitlines())
+    listed_flags = set(re.findall(r"(?<![\w-])--?[a-z][a-z0-9-]*", first_cells))
+    flags = {s for a in command_parser(MAIN_COMMAND)._actions for s in a.option_strings}
+    assert {"--crs", "--strict", "--limit"} <= flags
+    assert sorted(flags - listed_flags) == []

@@ -32,7 +32,6 @@ EXPECTED_ISSUES = {"UNSUPPORTED_EXTENSION", "UNUSED_OBJECT"}
 INFO = OutputInfo(
     generator="lodconvert tests",
     source="fixture.ply",
-    crs="EPSG:25832",
     options={"levels": 4, "resolutions": (32, 16, 8)},
 )
 WRITE = {".glb": write_glb, ".gltf": write_gltf}
@@ -293,7 +292,8 @@ def test_switching_extras(tmp_path, sphere_chain):
     asset = doc["asset"]
     assert asset["generator"] == INFO.generator
     meta = asset["extras"]["lodconvert"]
-    assert meta["source"] == "fixture.ply" and meta["crs"] == "EPSG:25832"
+    assert meta["source"] == "fixture.ply" and meta["crs"] is None
+    assert "frame" not in meta  # a mesh without a CRS keeps its axes
     assert meta["reference_view"] == {"height_px": 1080, "fov_y_deg": 45.0}
     assert meta["options"] == {"levels": 4, "resolutions": [32, 16, 8]}
     ((_, finest, ids),) = _lod_nodes(doc)

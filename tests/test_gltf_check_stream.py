@@ -20,10 +20,10 @@ import pytest
 import trimesh
 
 from lodconvert.io import OutputInfo
+from lodconvert.io.findings import Findings
 from lodconvert.io.gltf import check, elements, extrema, write_glb
 from lodconvert.io.gltf.stream import NotStreamed, Source, read_object, too_deep, utf8_error
 from lodconvert.model import Level, LodChain, Surface
-from lodconvert.validate.findings import Findings
 
 INFO = OutputInfo(generator="lodconvert tests", source="check", crs="EPSG:25832")
 _BRACKETS = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"|([\[{])|[\]}]')

@@ -64,8 +64,9 @@ def _copies(chain: LodChain, count: int) -> Iterator[LodChain]:
 
 
 def _instances(chain: LodChain) -> list[LodChain]:
-    """Two placements of one geometry, which the writer stores once."""
-    turned = trimesh.transformations.rotation_matrix(0.5, [0, 0, 1])
+    """Two placements of one geometry, which the writer stores once (turned in place: a
+    georeferenced instance stays near the data)."""
+    turned = trimesh.transformations.rotation_matrix(0.5, [0, 0, 1], point=chain.origin)
     return [
         replace(chain, object_id="twin0", transform=np.eye(4)),
         replace(chain, object_id="twin1", transform=turned),

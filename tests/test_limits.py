@@ -60,6 +60,7 @@ def test_a_repeated_triangle_bakes_in_little_memory(tmp_path: Path, times: int) 
     assert peak < PEAK_LIMIT_BYTES
 
 
+@pytest.mark.slow
 def test_overlapping_distinct_faces_cost_time_not_memory(tmp_path: Path) -> None:
     """2,000 triangles, each a hair apart (no two alike), over the same pixels."""
     lines = ["v 0 0 0", "v 1 0 0", "v 0 1 0"]
@@ -75,6 +76,7 @@ def test_overlapping_distinct_faces_cost_time_not_memory(tmp_path: Path) -> None
     assert peak < 1 << 30
 
 
+@pytest.mark.slow
 def test_a_fine_grid_on_a_small_sphere_stays_within_memory(tmp_path: Path) -> None:
     source = tmp_path / "sphere.obj"
     trimesh.creation.icosphere(1).export(source)

@@ -2,16 +2,22 @@
 
 from __future__ import annotations
 
+import errno
 import os
+import shlex
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 import lodconvert
+from lodconvert import spool
 from lodconvert.errors import InputError
 from lodconvert.sinks import Outputs
 
-from .conftest import SAMPLE
+from .conftest import ROOT, SAMPLE
 from .test_cli import assert_one_line_error, run
 
 FAST = ("--resolution", "24,12,6")
@@ -144,3 +150,79 @@ def test_a_command_name_is_a_command_even_when_a_file_has_that_name(
     assert result.returncode == 0 and "torus_knot" in result.stdout
     result = run("./ranges", "-o", "x.glb")
     assert result.returncode == 1 and "unknown input format" in result.stderr
+
+
+@pytest.mark.parametrize("target", ["/proc/out.x3d", "/sys/out.glb", "/proc/self/fd/out.x3d"])
+def test_an_output_in_proc_or_sys_is_one_line(target: str) -> None:
+    if not Path(target).parent.is_dir():
+        pytest.skip(f"no {Path(target).parent} here")
+    result = run(SAMPLE, "-o", target, *FAST)
+    assert_one_line_error(result, 1, target, "cannot write here")
+    assert not Path(target).exists()
+
+
+def _in_a_small_tmpfs(
+    folder: Path, command: str, size: str = "256k"
+) -> subprocess.CompletedProcess[str]:
+    """``command`` run by sh with a tmpfs of ``size`` mounted on ``folder``, in a mount
+    namespace of its own (so the mount goes with it), or skip where namespaces or tmpfs are
+    refused."""
+    unshare = shutil.which("unshare")
+    if unshare is None:
+        pytest.skip("no unshare(1)")
+    mount = f"mount -t tmpfs -o size={size} tmpfs {shlex.quote(str(folder))} || exit 99; "
+    script = mount + command
+    done = subprocess.run(
+        [unshare, "-rm", "sh", "-c", script], capture_output=True, text=True, timeout=300
+    )
+    if done.returncode == 99 or "unshare failed" in done.stderr:
+        pytest.skip(f"cannot mount a tmpfs here: {done.stderr.strip()}")
+    return done
+
+
+@pytest.mark.parametrize("suffix", [".x3d", ".glb"])
+def test_a_full_disk_is_one_line_naming_the_output_and_leaves_nothing(
+    tmp_path: Path, suffix: str
+) -> None:
+    small = tmp_path / "small"
+    small.mkdir()
+    out, report = small / f"out{suffix}", small / "report.json"
+    convert = shlex.join(
+        [sys.executable, "-m", "lodconvert", str(SAMPLE), "-o", str(out), "--report", str(report)]
+    )
+    done = _in_a_small_tmpfs(small, f"{convert}; echo exit=$?; ls -A {shlex.quote(str(small))}")
+    lines = done.stderr.strip().splitlines()
+    assert lines == [f"lodconvert: error: {out}: cannot write: No space left on device"], done
+    assert done.stdout.split() == ["exit=1"]  # and the tmpfs holds no file
+
+
+def test_a_full_temporary_folder_is_one_line_naming_it_and_leaves_nothing(tmp_path: Path) -> None:
+    city = ROOT.parent / "shared" / "data" / "cityjson" / "multi_lod_10bldg.city.json"
+    if not city.exists():
+        pytest.skip(f"{city} is absent (shared test data not checked out)")
+    small, out = tmp_path / "small", tmp_path / "out" / "city.glb"
+    small.mkdir()
+    out.parent.mkdir()
+    convert = shlex.join([sys.executable, "-m", "lodconvert", str(city), "-o", str(out), "-qq"])
+    done = _in_a_small_tmpfs(small, f"TMPDIR={shlex.quote(str(small))} {convert}", size="16k")
+    assert done.returncode == 1, done
+    lines = done.stderr.strip().splitlines()
+    assert lines == [
+        f"lodconvert: error: temporary folder {small}: cannot write: No space left on device"
+    ]
+    assert _files(out.parent) == []
+
+
+def test_a_full_temporary_folder_while_objects_wait_on_disk_is_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    def full(*args: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(spool.pickle, "dump", full)
+    city = ROOT.parent / "shared" / "data" / "cityjson" / "multi_lod_10bldg.city.json"
+    if not city.exists():
+        pytest.skip(f"{city} is absent (shared test data not checked out)")
+    result = run(city, "-o", tmp_path / "city.glb", "-qq")
+    assert_one_line_error(result, 1, "temporary folder", "No space left on device")
+    assert _files(tmp_path) == []

@@ -25,12 +25,12 @@ from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.cli import main
 from lodconvert.errors import LodConvertError
 from lodconvert.io import OutputInfo, gltf, streamed
+from lodconvert.io.findings import Findings
 from lodconvert.io.gltf.check import MAX_JSON_DEPTH, check_gltf
 from lodconvert.io.x3d import write_x3d
 from lodconvert.io.x3d.check import check_x3d
 from lodconvert.model import LodChain, Node
 from lodconvert.validate import Finding, errors_of, validate_file
-from lodconvert.validate.findings import Findings
 
 from .conftest import SAMPLE, X3D_SCHEMAS, require, surface_of
 from .test_cli import assert_one_line_error, run

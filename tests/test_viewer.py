@@ -82,7 +82,10 @@ def test_x3d_and_gltf_configs_describe_the_same_chain(outputs: dict[str, Path]) 
             "px": level.extras["point_size_px"],
             "distance": level.extras["design_distance"],
         }
-    assert glb["view"] == {"height_px": 1080, "fov_y_deg": 45.0} == x3d["view"]
+    # a mesh: its own axes, viewed first from +z
+    view = {"height_px": 1080, "fov_y_deg": 45.0, "direction": [0.0, 0.0, 1.0]}
+    assert glb["view"] == view == x3d["view"]
+    assert glb["rotation"] == np.eye(3).tolist() == x3d["rotation"]
 
 
 def test_config_reads_chain_metadata_inside_the_lod_too(
@@ -148,7 +151,8 @@ def test_page_uses_the_cdn_by_default(outputs: dict[str, Path], suffix: str, pac
     assert all(url.startswith(f"{CDN}{package}@{library.version}/") for url in imports.values())
     config = _embedded(text, "lodconvert-config")
     assert config["asset"] == f"./knot.{suffix}"
-    assert config == {**page_config(outputs[suffix]), "asset": f"./knot.{suffix}"}
+    named = {"package": package, "version": library.version}  # for the page's messages
+    assert config == {**page_config(outputs[suffix]), "asset": f"./knot.{suffix}", "library": named}
     assert "<title>knot." in text and "lodconvertViewer" in text
 
 

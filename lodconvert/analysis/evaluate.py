@@ -37,7 +37,7 @@ import numpy as np
 
 from ..errors import InputError, LodConvertError, UsageError
 from ..model import Level, LodChain, Node, Surface
-from ..ranges import REFERENCE_VIEW, ReferenceView, cutoff
+from ..ranges import REFERENCE_VIEW, ReferenceView, cutoff, diagonal
 from .render import fibonacci_directions
 from .silhouette import Geometry, SilhouetteRenderer
 
@@ -389,11 +389,11 @@ def match_references(
             raise InputError(f"has no object {chain.object_id!r}, which {out_name} holds", ref_name)
         lo, hi = obj.geometry.bounds
         shift = float(np.linalg.norm((lo + hi) / 2.0 - chain.origin)) / chain.alpha
-        diagonal = float(np.linalg.norm(hi - lo))
-        if shift > BOUNDS_TOLERANCE or abs(diagonal - chain.alpha) > BOUNDS_TOLERANCE * chain.alpha:
+        across = diagonal(obj.geometry.bounds)
+        if shift > BOUNDS_TOLERANCE or abs(across - chain.alpha) > BOUNDS_TOLERANCE * chain.alpha:
             raise InputError(
                 f"does not match {out_name}: object {chain.object_id!r} is centred "
-                f"{shift:.3g} diagonals away and {diagonal:.6g} across, against {chain.alpha:.6g} "
+                f"{shift:.3g} diagonals away and {across:.6g} across, against {chain.alpha:.6g} "
                 f"in {out_name} (was it converted from this file?)",
                 ref_name,
             )

@@ -97,8 +97,8 @@ def _report_traceback(args: argparse.Namespace) -> None:
         traceback.print_exc()
 
 
-def run_command(name: str, argv: Sequence[str]) -> int:
-    """Parse ``argv`` for command ``name`` and run it."""
+def command_parser(name: str) -> Parser:
+    """The argument parser of command ``name``, with every option it takes."""
     module = importlib.import_module(COMMANDS[name])
     prog = "lodconvert" if name == MAIN_COMMAND else f"lodconvert {name}"
     parser = Parser(
@@ -106,7 +106,13 @@ def run_command(name: str, argv: Sequence[str]) -> int:
     )
     module.add_arguments(parser)
     parser.add_argument("--debug", action="store_true", help="show tracebacks")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def run_command(name: str, argv: Sequence[str]) -> int:
+    """Parse ``argv`` for command ``name`` and run it."""
+    module = importlib.import_module(COMMANDS[name])
+    args = command_parser(name).parse_args(argv)
     console = Console(quiet=getattr(args, "quiet", 0) or 0, verbose=getattr(args, "verbose", False))
     return _guarded(args, console, lambda: module.run(args, console))
 
@@ -155,6 +161,7 @@ __all__ = [
     "Parser",
     "add_range_options",
     "chain_options",
+    "command_parser",
     "main",
     "parse_list",
 ]

@@ -1,15 +1,17 @@
-"""Argument parsing shared by the commands: the parser class, list values, the range options,
-and the mapping from the library's option fields to the flags that set them."""
+"""Argument parsing shared by the commands: the parser class, list values, the reading, baking
+and range options, and the mapping from the library's option fields to the flags that set them."""
 
 from __future__ import annotations
 
 import argparse
 import math
-from typing import NoReturn
+from typing import Any, NoReturn
 
+from ..bake.filters import FILTERS
 from ..chain import MAX_LEVELS, ChainOptions
 from ..errors import UsageError
 from ..ranges import DEFAULT_BETA, DEFAULT_GAMMA
+from ..semantics import DEFAULT_PALETTE
 
 EXIT_OK, EXIT_ERROR, EXIT_USAGE = 0, 1, 2
 
@@ -45,6 +47,73 @@ def parse_list(text: str, kind: type, flag: str) -> tuple:
     if not values:
         raise UsageError(f"{flag} expects at least one value")
     return values
+
+
+def add_read_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """``--limit`` and the reading options ``--merge-groups``, ``--types``, ``--colors`` and
+    ``--crs``; returns their group."""
+    parser.add_argument(
+        "--limit",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="raise (or lower) a limit, e.g. decompressed_bytes=8G (see the README's table)",
+    )
+    read = parser.add_argument_group("reading")
+    read.add_argument(
+        "--merge-groups",
+        action="store_true",
+        help="read an OBJ file's objects and groups as one object",
+    )
+    read.add_argument(
+        "--types",
+        metavar="TYPE,..",
+        help="city models: only these object types (e.g. Building,Bridge)",
+    )
+    read.add_argument(
+        "--colors",
+        metavar="CLASS=#RRGGBB,..",
+        help="city models: colours of the surface classes roof, wall, ground, other "
+        "(source materials win; defaults in the README)",
+    )
+    read.add_argument(
+        "--crs",
+        metavar="EPSG:CODE",
+        help="city models: the CRS of every input's coordinates, replacing what the files "
+        "declare (an EPSG code pyproj knows; default: each file's own, the first one's for the "
+        "output, into which the others are reprojected)",
+    )
+    return read
+
+
+def read_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The readers' options of :func:`add_read_options`' arguments (raises UsageError)."""
+    return {
+        "merge_groups": args.merge_groups or None,
+        "types": frozenset(parse_list(args.types, str, "--types")) if args.types else None,
+        "colors": DEFAULT_PALETTE.with_text(args.colors) if args.colors else None,
+        "crs": args.crs,
+    }
+
+
+def add_bake_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """The per-level baking options and ``--no-mesh``; returns their group."""
+    bake = parser.add_argument_group("baking (one value per point level, finest first)")
+    bake.add_argument("--resolution", metavar="T3,..", help="grid cells along the longest side")
+    bake.add_argument(
+        "--slices", metavar="T1,..", help="slabs along the longest side (default = T3)"
+    )
+    bake.add_argument("--point-size", metavar="T2,..", help="point size in pixels at switch-in")
+    bake.add_argument(
+        "--filter", choices=FILTERS, default="median", help="hole filter (default median)"
+    )
+    bake.add_argument(
+        "--level-kind",
+        metavar="KIND,..",
+        help="pcd (points, default) or qem (source decimated to the same count), per level or all",
+    )
+    bake.add_argument("--no-mesh", action="store_true", help="bake the finest level too")
+    return bake
 
 
 def add_range_options(parser: argparse.ArgumentParser) -> None:

@@ -7,22 +7,23 @@ from collections import Counter
 from typing import Any
 
 from ..bake import BACKENDS
-from ..bake.filters import FILTERS
 from ..cli.console import Console
 from ..cli.options import (
     EXIT_OK,
+    add_bake_options,
     add_range_options,
+    add_read_options,
     add_viewer_lib_option,
     chain_options,
-    parse_list,
+    read_options,
 )
 from ..errors import UsageError
 from ..hlod import KINDS, HlodOptions, parse_sizes
 from ..io import output_format
 from ..io.x3d import SWITCHING_MODES
 from ..limits import DEFAULT_LIMITS
-from ..semantics import DEFAULT_PALETTE
 from ..sinks import FileSink, Outputs
+from ..sourcelods import lod_name
 from . import COMMANDS
 
 DESCRIPTION = (
@@ -50,56 +51,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("-o", "--output", required=True, help="output .x3d, .glb or .gltf")
     parser.add_argument("--version", action="version", version=f"lodconvert {__version__}")
-    parser.add_argument(
-        "--limit",
-        action="append",
-        default=[],
-        metavar="NAME=VALUE",
-        help="raise (or lower) a limit, e.g. decompressed_bytes=8G (see the README's table)",
-    )
-    read = parser.add_argument_group("reading")
-    read.add_argument(
-        "--merge-groups",
-        action="store_true",
-        help="read an OBJ file's objects and groups as one object",
-    )
-    read.add_argument(
-        "--types",
-        metavar="TYPE,..",
-        help="city models: convert only these object types (e.g. Building,Bridge)",
-    )
-    read.add_argument(
-        "--colors",
-        metavar="CLASS=#RRGGBB,..",
-        help="city models: colours of the surface classes roof, wall, ground, other "
-        "(source materials win; defaults in the README)",
-    )
-    read.add_argument(
-        "--crs",
-        metavar="EPSG:CODE",
-        help="city models: the CRS of the coordinates, replacing what the file declares",
-    )
+    read = add_read_options(parser)
     read.add_argument(
         "--strict",
         action="store_true",
         help="fail (exit 1, nothing written) when any object is skipped as broken",
     )
-    bake = parser.add_argument_group("baking (one value per point level, finest first)")
-    bake.add_argument("--resolution", metavar="T3,..", help="grid cells along the longest side")
-    bake.add_argument(
-        "--slices", metavar="T1,..", help="slabs along the longest side (default = T3)"
-    )
-    bake.add_argument("--point-size", metavar="T2,..", help="point size in pixels at switch-in")
-    bake.add_argument(
-        "--filter", choices=FILTERS, default="median", help="hole filter (default median)"
-    )
+    bake = add_bake_options(parser)
     bake.add_argument("--backend", choices=BACKENDS, default="auto", help="baker (default auto)")
-    bake.add_argument(
-        "--level-kind",
-        metavar="KIND,..",
-        help="pcd (points, default) or qem (source decimated to the same count), per level or all",
-    )
-    bake.add_argument("--no-mesh", action="store_true", help="bake the finest level too")
     add_range_options(parser)
     group = parser.add_argument_group("LOD parents (cities)")
     group.add_argument(
@@ -205,12 +164,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         step=console.step,
         warn=console.warn,
         report_path=args.report,
-        read_options={
-            "merge_groups": args.merge_groups or None,
-            "types": frozenset(parse_list(args.types, str, "--types")) if args.types else None,
-            "colors": DEFAULT_PALETTE.with_text(args.colors) if args.colors else None,
-            "crs": args.crs,
-        },
+        read_options=read_options(args),
         strict=args.strict,
         hlod=hlod,
         write_options={"switching": args.switching},
@@ -230,14 +184,26 @@ def run(args: argparse.Namespace, console: Console) -> int:
             f"{sum(fewer.values()):,} object(s) keep fewer levels ({kept} level(s)): no coarser "
             "level was both cheaper and faithful there, so the finer one stays on (see README)"
         )
+    unused = Counter(label for obj in objects for label in obj["unused"])
+    if unused:
+        labels = ", ".join(f"{lod_name(label)} ({n:,})" for label, n in sorted(unused.items()))
+        console.info(
+            f"{sum(1 for obj in objects if obj['unused']):,} object(s) have source LoDs that no "
+            f"level is made from: {labels}; --report says why for each"
+        )
     if "hlod" in report:
         console.info(_hlod_line(report["hlod"]))
+    moved = report["crs"]["reprojected"]
+    plural = "s" if len(moved) > 1 else ""
+    for each in moved:
+        console.info(f"{each['input']}: reprojected from {each['from']} into {each['to']}")
     skipped = len(report["skipped"])
     dropped = report["totals"]["dropped_faces"]
     console.summary(
         f"wrote {args.output} ({report['totals']['objects']:,} object(s)"
         + (f", {skipped:,} skipped" if skipped else "")
         + (f", {dropped:,} face(s) without area dropped" if dropped else "")
+        + (f", {len(moved)} input{plural} reprojected into {moved[0]['to']}" if moved else "")
         + f", {report['backend']} backend, {sum(report['timings'].values()):.2f} s)"
         + (f" and {report['page']}" if "page" in report else "")
     )

@@ -15,6 +15,9 @@ whichever of these it offers —
   ``cutoffs``, ``culled``, ``members``: object or finer cell ids, ``facts``: what the planner
   measured), its ``center`` in scene coordinates, ``far``: its far level's declared facts, and
   under the format's name where its nodes lie in the file (used by the viewer page);
+- ``read_frame(path) -> SceneFrame | None``: the scene frame of our own files (where a CRS
+  turned them y-up about a scene origin, :mod:`lodconvert.io.frame`), or ``None``; read-back
+  origins and centres are in the source's coordinates, the file's scene in the frame's;
 - ``check(path, findings, options)``: the structural checks ``validate`` runs, and every
   conversion runs on its staged output before committing it.
 
@@ -33,6 +36,7 @@ from typing import Any
 from ..errors import InputError, UsageError
 from ..model import LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
+from .archive import member_name
 
 FORMAT_MODULES = (
     "lodconvert.io.cityjson",
@@ -46,12 +50,13 @@ FORMAT_MODULES = (
 
 @dataclass
 class OutputInfo:
-    """Scene-wide facts a writer records: who wrote it, from what, in which CRS, for which
-    reference view, with which options."""
+    """Scene-wide facts a writer records: who wrote it, from what, in which CRS and vertical
+    reference (a city's; None for a mesh's), for which reference view, with which options."""
 
     generator: str
     source: str
     crs: str | None = None
+    vertical: str | None = None
     view: ReferenceView = REFERENCE_VIEW
     options: dict[str, Any] = field(default_factory=dict)
 
@@ -66,6 +71,7 @@ class Format:
     write: Callable[..., None] | None = None
     read_back: Callable[..., list[LodChain]] | None = None
     read_cells: Callable[..., list[dict[str, Any]]] | None = None
+    read_frame: Callable[..., Any] | None = None
     check: Callable[..., None] | None = None
     read_options: tuple[str, ...] = ()
     write_options: tuple[str, ...] = ()
@@ -96,17 +102,6 @@ def streamed(writers: dict[str, StreamWriter]) -> Callable[..., None]:
             writers[sink.path.suffix.lower()](chains, handle, info, **options)
 
     return write
-
-
-def imported_on_call(module: str, name: str) -> Callable[..., Any]:
-    """``module.name``, imported when first called (checks import the validation vocabulary,
-    which imports the registry)."""
-
-    def call(*args: Any, **kwargs: Any) -> Any:
-        return getattr(importlib.import_module(module), name)(*args, **kwargs)
-
-    call.__doc__ = f"{module}.{name}, imported on the first call."
-    return call
 
 
 def _taken(options: dict[str, Any], names: tuple[str, ...]) -> dict[str, Any]:
@@ -143,8 +138,11 @@ def _known(role: str) -> str:
 
 
 def input_format(path: str | Path) -> Format:
-    """The format that reads ``path``, or :class:`InputError` naming the known suffixes."""
+    """The format that reads ``path`` — for a ``.zip``, the format of the one city model file
+    it holds (:mod:`.archive`) — or :class:`InputError` naming the known suffixes."""
     suffix = suffix_of(path)
+    if suffix == ".zip" and Path(path).is_file():
+        suffix = suffix_of(member_name(Path(path)))
     entry = _find("read", suffix)
     if entry is None:
         raise InputError(
@@ -179,7 +177,8 @@ def own_format(path: str | Path, role: str = "read_back") -> Format:
 
 
 def read_scene(path: str | Path, **options: Any) -> Scene:
-    """Read any supported input (the registry picks the reader by suffix)."""
+    """Read any supported input (the registry picks the reader by suffix, a ``.zip``'s by
+    the file it holds)."""
     return input_format(path).read_file(path, **options)
 
 

@@ -1,5 +1,6 @@
-"""Coordinate reference systems of city models: the declared EPSG CRS, and the local metric
-frame that geographic coordinates (latitude, longitude, height) are projected into."""
+"""Coordinate reference systems of city models: the declared EPSG CRS, the local metric frame
+that geographic coordinates (latitude, longitude, height) are projected into, the pyproj CRS a
+name stands for, and which vertical reference the heights are in."""
 
 from __future__ import annotations
 
@@ -9,7 +10,19 @@ from typing import Any
 
 import numpy as np
 
-_EPSG = re.compile(r"EPSG(?:/[\d.]+/|:[\d.]*:|:)(\d+)", re.IGNORECASE)
+from ..errors import LodConvertError, UsageError
+
+_EPSG = re.compile(r"(?:EPSG(?:/[\d.]+/|:[\d.]*:|:)|(?<=\d)\+)(\d+)", re.IGNORECASE)
+"""EPSG codes in a URN, URL or ``EPSG:code`` name (``EPSG:h+v`` names a vertical CRS too)."""
+
+
+NOT_DECLARED = "as in the source, not declared"
+"""The vertical reference of heights whose CRS says none (a 2-D CRS, or no CRS)."""
+
+
+class CrsError(LodConvertError):
+    """Coordinates that the CRS they are declared in cannot hold, or that cannot be transformed
+    into the output's CRS: the whole input is wrong, not one object (exit code 1)."""
 
 
 @dataclass(frozen=True)
@@ -39,14 +52,21 @@ class LocalFrame:
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """``points`` (n, 3) in the source's axis order, in this frame's metres."""
-        import pyproj
-
-        pipeline = pyproj.Transformer.from_pipeline(
-            "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
-            f"+step {self.proj.replace(' +units=m +no_defs', '')}"
+        x, y = frame_pipeline(self.proj).transform(
+            points[:, self.lon_axis], points[:, self.lat_axis]
         )
-        x, y = pipeline.transform(points[:, self.lon_axis], points[:, self.lat_axis])
         return np.stack([x, y, points[:, 2]], axis=1)
+
+
+def frame_pipeline(proj: str) -> Any:
+    """The local frame of PROJ definition ``proj`` (:attr:`LocalFrame.proj`) as a pyproj
+    transformer from longitude, latitude in degrees to its metres east and north."""
+    import pyproj
+
+    return pyproj.Transformer.from_pipeline(
+        "+proj=pipeline +step +proj=unitconvert +xy_in=deg +xy_out=rad "
+        f"+step {proj.replace(' +units=m +no_defs', '')}"
+    )
 
 
 @dataclass
@@ -58,13 +78,16 @@ class Crs:
     vertical: str | None = None
     geographic: Any = None
     frame: LocalFrame | None = None
+    where: str = ""
+    """The file whose coordinates these are (named by messages)."""
 
     @classmethod
-    def of(cls, srs_name: str) -> Crs:
+    def of(cls, srs_name: str, where: str = "") -> Crs:
         codes = _EPSG.findall(srs_name)
         if not codes:
-            return cls(name=srs_name)
-        crs = cls(name=f"EPSG:{codes[0]}", vertical=f"EPSG:{codes[1]}" if len(codes) > 1 else None)
+            return cls(name=srs_name, where=where)
+        vertical = f"EPSG:{codes[1]}" if len(codes) > 1 else None
+        crs = cls(name=f"EPSG:{codes[0]}", vertical=vertical, where=where)
         crs.geographic = _geographic(int(codes[0]))
         return crs
 
@@ -82,6 +105,13 @@ class Crs:
             lat_axis, lon_axis = self.geographic["axes"]
             centred = points[:first] if first else points
             center = (centred.min(axis=0) + centred.max(axis=0)) / 2.0
+            if abs(center[lat_axis]) > 90.0 or abs(center[lon_axis]) > 180.0:
+                raise CrsError(
+                    f"its coordinates are not latitude and longitude, as {self.name} has them "
+                    f"(the first object lies at {center[lat_axis]:.6g}, {center[lon_axis]:.6g}); "
+                    "the CRS declared or given with --crs is not the one they are in",
+                    self.where or None,
+                )
             self.frame = LocalFrame(
                 self.name or "",
                 float(np.round(center[lat_axis], 6)),
@@ -123,3 +153,50 @@ def crs_attributes(crs: Crs | None) -> dict[str, Any]:
     if crs is not None and crs.frame is not None:
         attributes["local_frame"] = crs.frame.record()
     return attributes
+
+
+def pyproj_crs(name: str, vertical: str | None = None) -> Any:
+    """The pyproj CRS that ``name`` (with the vertical CRS ``vertical``, where given) stands
+    for; raises pyproj's ``CRSError`` where it knows none."""
+    import pyproj
+
+    crs = pyproj.CRS.from_user_input(name)
+    if vertical is None:
+        return crs
+    height = pyproj.CRS.from_user_input(vertical)
+    try:
+        return pyproj.crs.CompoundCRS(f"{crs.name} + {height.name}", [crs, height])
+    except pyproj.exceptions.CRSError:
+        raise pyproj.exceptions.CRSError(
+            f"proj_create: {name} + {vertical} is no compound CRS: {vertical} is not vertical "
+            f"or {name} has heights of its own"
+        ) from None
+
+
+def checked_crs_option(text: str) -> str:
+    """``text``, the CRS a user names (``--crs``), when pyproj knows it; :class:`UsageError`
+    otherwise."""
+    import pyproj
+
+    crs = Crs.of(text)
+    try:
+        pyproj_crs(crs.name or text, crs.vertical)
+    except pyproj.exceptions.CRSError as exc:
+        reason = str(exc).split("proj_create: ")[-1].rstrip(")") or "unknown"
+        raise UsageError(f"{text!r} names no CRS that pyproj knows ({reason})", "crs") from None
+    return text
+
+
+def vertical_reference(crs: Any) -> str:
+    """Which heights a pyproj CRS (or None) holds: its vertical CRS's name and code where it is
+    compound, ``ellipsoidal (<ellipsoid>)`` for a 3-D geographic or projected CRS, else
+    :data:`NOT_DECLARED`."""
+    if crs is None:
+        return NOT_DECLARED
+    if crs.is_compound:
+        height = crs.sub_crs_list[-1]
+        code = height.to_authority()
+        return f"{height.name} ({':'.join(code)})" if code else height.name
+    if len(crs.axis_info) == 3 and crs.ellipsoid is not None:
+        return f"ellipsoidal ({crs.ellipsoid.name})"
+    return NOT_DECLARED

@@ -96,11 +96,16 @@ class LodChain:
     culled: bool = False
     metadata: dict[str, Any] = field(default_factory=dict)
     dropped: dict[str, str] = field(default_factory=dict)
+    """Levels the planner left out (name → why): the finer level stays on in their place."""
+    unused: dict[str, str] = field(default_factory=dict)
+    """Source LoDs that no level is made from (label → why; :mod:`~lodconvert.sourcelods`)."""
     transform: np.ndarray | None = None
     """4×4 placement of the chain's frame (an instance of shared geometry): world =
     ``transform · (origin + local)``; ``None`` is the identity. Instances of one geometry share
     one ``levels`` list, which writers store once."""
-    """Levels the planner left out (name → why): the finer level stays on in their place."""
+    cut: tuple[str, ...] = ()
+    """What was cut from the object's id and attributes so that every output holds them
+    (:mod:`.safe_text`), one note per kind of cut."""
 
 
 @dataclass

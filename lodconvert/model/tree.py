@@ -11,12 +11,13 @@ parent's frame. Readers may yield nodes lazily; nothing here knows a file format
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
 from .geometry import Mesh, Surface
+from .safe_text import ObjectText, object_text
 
 
 @dataclass
@@ -40,6 +41,8 @@ class Node:
     """The source's own levels of detail, by their label as the source names them (CityGML
     ``"lod2"``, CityJSON ``"2.2"``…), each in the node's frame; ``geometry`` is the finest of
     them (what a reader without LoDs sets alone)."""
+    cut: tuple[str, ...] = ()
+    """What :meth:`written` cut before (a node parked on disk keeps its text bounded)."""
 
     def __post_init__(self) -> None:
         if isinstance(self.geometry, Surface):
@@ -74,6 +77,12 @@ class Node:
             return dict(self.attributes)
         return {**self.attributes, "parts": parts}
 
+    def written(self) -> ObjectText:
+        """This node's object's id and attributes (:meth:`object_attributes`) as every output
+        keeps them, bounded and cleaned (:mod:`.safe_text`), with what was cut for that."""
+        text = object_text(self.id, self.object_attributes())
+        return replace(text, cut=self.cut + text.cut) if self.cut else text
+
 
 @dataclass
 class Scene:
@@ -87,6 +96,9 @@ class Scene:
     size: int | None = None
     """How many nodes with geometry the scene holds, where the reader knows before yielding
     them (for progress)."""
+    city: bool = False
+    """Whether a city model's reader made it: its objects are city objects, with their own
+    LoDs and plots, in the CRS the file declares (or none)."""
 
     def __iter__(self) -> Iterator[Node]:
         return iter(self.nodes)

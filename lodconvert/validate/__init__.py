@@ -14,8 +14,8 @@ from pathlib import Path
 
 from ..errors import InputError, LodConvertError
 from ..io import own_format
+from ..io.findings import ERROR, WARNING, Finding, Findings
 from ..io.x3d.check import load_x3d_schema
-from .findings import ERROR, WARNING, Finding, Findings
 
 
 def validate_file(

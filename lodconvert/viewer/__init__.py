@@ -5,13 +5,16 @@ The page holds its own script and the configuration read from the output
 one viewer library — three.js for glTF (the levels of each ``MSFT_lod`` chain put in a
 ``THREE.LOD`` at the cutoffs, points drawn at our point size) or X_ITE for X3D (its own ``LOD``
 and ``PointProperties``). The library comes from a public CDN unless a URL or a local copy of the
-npm package is given. An on-screen readout shows each object's active level and distance and,
-for a file with LOD parents, each cell's state (open, merged: showing its far level, culled, or
-hidden inside a coarser cell that is not open) and how many are merged; a LOD scale (the page's
-field, or ``?lodscale=`` in its URL) multiplies every cutoff the page switches at. Clicking an
-object shows its id and attributes (``chain.metadata`` as read back: a city object's type,
-name, function, measured height, address, generic attributes…), clicking empty space clears
-them; ``window.lodconvertViewer`` exposes the same state (``objects``, ``cells``, ``merged``,
+npm package is given; when it (or the output) cannot be loaded, a box over the view names the URL
+that failed and, for the library, how to give the page a local copy (``--viewer-lib``). An
+on-screen readout (in a panel that folds to its heading) shows each object's active level and
+distance and, for a file with LOD parents, each cell's state (open, merged: showing its far
+level, culled, or hidden inside a coarser cell that is not open) and how many are merged; a LOD
+scale (the page's field, or ``?lodscale=`` in its URL) multiplies every cutoff the page switches
+at. Clicking an object shows its id and attributes (``chain.metadata`` as read back: a city
+object's type, name, function, measured height, address, generic attributes…) and highlights
+its levels, clicking empty space (or the attributes' close button) clears both;
+``window.lodconvertViewer`` exposes the same state (``objects``, ``cells``, ``merged``,
 ``lodScale``), ``setDistance(d)``, ``setLodScale(s)`` and ``screenPoint([x, y, z])`` (where a
 world point shows on the page).
 
@@ -177,6 +180,7 @@ def render_page(
     kind = config["format"]
     base = library_base(kind, library, page.parent, served)
     imports = {name: f"{base}/{path}" for name, path in LIBRARIES[kind].imports}
+    config["library"] = {"package": LIBRARIES[kind].package, "version": LIBRARIES[kind].version}
     fields = {
         "title": html.escape(f"{asset.name} — lodconvert viewer"),
         "asset": html.escape(asset.name),

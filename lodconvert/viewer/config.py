@@ -7,6 +7,13 @@ names its ``Switch`` es and sensors). Per cell its id, tier, centre, cutoffs, cu
 ids, the kind of its far level and that level's point size, the cell holding it and, for glTF,
 its near and far nodes; for X3D its ``LOD`` node.
 
+Centres are in the file's scene coordinates, where the page draws: a georeferenced file's
+scene frame (:mod:`lodconvert.io.frame`) turns them y-up about its origin, and ``rotation``
+holds its rotation (row-major; the identity for a file in source coordinates), which turns a level's
+geometry (in its object's source axes) into the scene. ``view.direction`` is where the page's
+viewer stands from the middle of the objects: along +z, tilted :data:`PITCH_DEG` up for a
+y-up city, so that it looks 3-D.
+
 Raises :class:`~lodconvert.errors.InputError` for files lodconvert did not write.
 """
 
@@ -20,11 +27,14 @@ import numpy as np
 
 from ..errors import InputError
 from ..io import own_format, read_chains
+from ..io.frame import ROTATION
 from ..model import LodChain
 from ..ranges import REFERENCE_VIEW
 
 FORMAT_KINDS = {"x3d": "x3d", "gltf": "gltf"}
 """Registry format name → the page script that shows it."""
+PITCH_DEG = 35.0
+"""How far above the horizon the page first views a georeferenced (y-up) scene."""
 
 
 def _point_size(px: float | None, distance: float | None) -> dict[str, float] | None:
@@ -139,5 +149,22 @@ def page_config(path: Path) -> dict[str, Any]:
     found = entry.read_cells(path) if entry.read_cells is not None else []
     cells = [_cell(cell, entry.name) for cell in found]
     _link(objects, cells, path)
-    view = {"height_px": REFERENCE_VIEW.height_px, "fov_y_deg": REFERENCE_VIEW.fov_y_deg}
-    return {"format": kind, "view": view, "objects": objects, "cells": cells}
+    frame = entry.read_frame(path) if entry.read_frame is not None else None
+    rotation, direction = np.eye(3), [0.0, 0.0, 1.0]
+    if frame is not None:
+        rotation, pitch = ROTATION, np.radians(PITCH_DEG)
+        direction = [0.0, float(np.sin(pitch)), float(np.cos(pitch))]
+        for placed in (*objects, *cells):
+            placed["center"] = (ROTATION @ (np.asarray(placed["center"]) - frame.origin)).tolist()
+    view = {
+        "height_px": REFERENCE_VIEW.height_px,
+        "fov_y_deg": REFERENCE_VIEW.fov_y_deg,
+        "direction": direction,
+    }
+    return {
+        "format": kind,
+        "view": view,
+        "rotation": rotation.tolist(),
+        "objects": objects,
+        "cells": cells,
+    }

@@ -2,8 +2,8 @@
 // cutoffs (extras.lodconvert), points sized as lodconvert sizes them and lit like the mesh; a
 // LOD parent (cell) is a THREE.LOD too, whose first level holds its members' LODs (objects', or
 // finer cells') and whose second is its far node; a ray through the clicked pixel picks the
-// nearest level shown, and so its object. The library is imported in load(), so that a wrong
-// library URL is reported on the page.
+// nearest level shown, and so its object, whose levels it tints. The library is imported in
+// load(), so that a wrong library URL is reported on the page.
 
 const halfFov = (config.view.fov_y_deg * Math.PI) / 360;
 const referenceFocal = config.view.height_px / (2 * Math.tan(halfFov));
@@ -109,11 +109,18 @@ function makeLod(center, levels, cutoffs, culled) {
   return lod;
 }
 
+/** A node's geometry, in its object's source axes, turned into the scene's (see `rotation`). */
+function turn(node) {
+  const [a, b, c] = rotation;
+  node.quaternion.setFromRotationMatrix(new THREE.Matrix4().set(...a, 0, ...b, 0, ...c, 0, 0, 0, 0, 1));
+}
+
 async function buildLod(gltf, object) {
   const levels = [];
   for (const [k, index] of [object.node, ...object.ids].entries()) {
     const level = await gltf.parser.getDependency("node", index);
-    level.position.set(...object.local_center).negate(); // geometry is relative to the origin
+    turn(level);
+    level.position.set(...turned(object.local_center)).negate(); // geometry is relative to the origin
     sizePoints(level, object.points[k]);
     levels.push(level);
   }
@@ -128,7 +135,9 @@ async function buildCellLod(gltf, cell, members) {
   sizePoints(far, cell.points);
   const lod = makeLod(cell.center, [near, far], cell.cutoffs, cell.culled);
   near.position.copy(lod.position).negate(); // the members stay where they are
-  far.position.sub(new THREE.Vector3(...cell.center)); // from the cell's origin (scene units)
+  turn(far);
+  far.position.set(...turned(far.position.toArray())); // from the cell's origin (scene units)
+  far.position.sub(new THREE.Vector3(...cell.center));
   return lod;
 }
 
@@ -145,6 +154,45 @@ async function buildScene(gltf) {
     cellLods[i] = await buildCellLod(gltf, cells[i], members[i]);
     place(cellLods[i], cells[i].parent);
   }
+}
+
+/** The emissive colour and intensity that highlight the clicked object. */
+const HIGHLIGHT = { color: 0xff9900, intensity: 0.6 };
+/** [part, its own material] of each part the highlight tints (on a copy of its material). */
+let highlighted = [];
+
+/**
+ * A copy of `material` tinted by HIGHLIGHT: glowing where it has an emissive colour (lit
+ * meshes and points), else in that colour; a point level's copy keeps its point size.
+ */
+function tinted(material) {
+  const copy = material.clone();
+  copy.onBeforeCompile = material.onBeforeCompile;
+  if (copy.emissive) {
+    copy.emissive.set(HIGHLIGHT.color);
+    copy.emissiveIntensity = HIGHLIGHT.intensity;
+  } else copy.color.set(HIGHLIGHT.color);
+  return copy;
+}
+
+/**
+ * Tint every level of object `index` (null: none), restoring the parts tinted before. The
+ * parts get tinted copies of their materials: the writer shares one material among all parts
+ * of a colour, of every object.
+ */
+function highlightObject(index) {
+  for (const [part, material] of highlighted) {
+    [part.material].flat().forEach((copy) => copy.dispose());
+    part.material = material;
+  }
+  highlighted = [];
+  lods[index]?.traverse((part) => {
+    if (!part.material) return;
+    highlighted.push([part, part.material]);
+    const { material } = part;
+    part.material = Array.isArray(material) ? material.map(tinted) : tinted(material);
+  });
+  render();
 }
 
 /** Switch every LOD at `scale` times its cutoffs. */
@@ -176,7 +224,7 @@ const backend = {
     controls = new OrbitControls(camera, renderer.domElement);
     controls.addEventListener("change", render);
     window.addEventListener("resize", () => resize(host));
-    camera.position.set(0, 0, 1);
+    camera.position.set(...viewDirection);
     resize(host);
   },
   async setDistance(distance) {
@@ -192,6 +240,7 @@ const backend = {
     camera.far = 10 * farthest;
     camera.updateProjectionMatrix();
   },
+  highlight: highlightObject,
   /** Index of the object of the nearest drawn level under the pointer of `event`, or null. */
   pick(event) {
     raycaster.setFromCamera(deviceCoordinates(event), camera);

@@ -3,17 +3,20 @@
 // shown), merged (its far level shown), culled, or hidden inside a coarser cell that is not
 // open; the distance slider, the LOD scale (a factor on every cutoff the page switches at, from
 // ?lodscale= in the URL or its field), the panel that shows the id and attributes of a clicked
-// object, and window.lodconvertViewer (state for tests and curious users, setDistance,
-// setLodScale and screenPoint). The format part after it (gltf.js or x3d.js) defines a backend
-// { load(host), setDistance(d), setLodScale(s), pick(event), screenPoint(point) } and calls
-// start(backend); it reports the levels and distances of objects through update() and of
-// cells through updateCell(). An object or cell inside a cell that is not open is not drawn by
-// its own LOD, whose level the page then ignores (a viewer need not update it).
+// object, the alert box over the view (what failed to load: the viewer library, imported here
+// first, or the model), and window.lodconvertViewer (state for tests and curious users,
+// setDistance, setLodScale and screenPoint). The format part after it (gltf.js or x3d.js)
+// defines a backend { load(host), setDistance(d), setLodScale(s), pick(event), highlight(index),
+// screenPoint(point) } and calls start(backend); it reports the levels and distances of objects
+// through update() and of cells through updateCell(). An object or cell inside a cell that is
+// not open is not drawn by its own LOD, whose level the page then ignores (a viewer need not
+// update it).
 
 const config = JSON.parse(document.getElementById("lodconvert-config").textContent);
 const readout = document.getElementById("readout");
 const slider = document.getElementById("distance");
 const status = document.getElementById("status");
+const problem = document.getElementById("problem");
 const inspect = document.getElementById("inspect");
 const cellReadout = document.getElementById("cells");
 const lodScaleField = document.getElementById("lodscale");
@@ -27,10 +30,18 @@ const CLICK_SLOP_PX = 4;
 const most = (values) => values.reduce((a, b) => Math.max(a, b), -Infinity);
 const least = (values) => values.reduce((a, b) => Math.min(a, b), Infinity);
 const centers = config.objects.map((o) => o.center);
-/** The viewer looks at the middle of the objects' centres from `distance` along +z. */
+/** The viewer looks at the middle of the objects' centres from `distance` along `viewDirection`. */
 const focus = [0, 1, 2].map((k) => {
   const values = centers.map((c) => c[k]);
   return (least(values) + most(values)) / 2;
+});
+/** Where the viewer stands from the focus: a unit vector (+z, tilted up for a y-up city). */
+const viewDirection = config.view.direction;
+/** The file's scene frame rotation, rows: an object's source axes → the scene's. */
+const rotation = config.rotation;
+/** `v` turned by the rotation (transposed: back into source axes). */
+const turned = (v, transposed = false) => rotation.map((row, i) => {
+  return row.reduce((sum, _, k) => sum + (transposed ? rotation[k][i] : row[k]) * v[k], 0);
 });
 /** Distance between the points `a` and `b`. */
 const distanceBetween = (a, b) => Math.hypot(...a.map((v, k) => v - b[k]));
@@ -142,7 +153,11 @@ function derive() {
 }
 
 const brief = (value) => (value === null ? "…" : value.toPrecision(4));
-const cutoffText = (entry) => scaled(entry.cutoffs).map(brief).join(" | ");
+/** The cutoffs of `entry` (object or cell) at the LOD scale; an object of one level has none. */
+function cutoffText(entry) {
+  if (entry.cutoffs.length === 0) return "no cutoff";
+  return `cutoffs ${scaled(entry.cutoffs).map(brief).join(" | ")}`;
+}
 
 /** Lines of the first `max` of `lines`, and one more counting the others as `what`. */
 function listed(lines, max, what) {
@@ -153,14 +168,12 @@ function listed(lines, max, what) {
 
 function objectLine(o, i) {
   const shown = o.cell === null ? o.level ?? "…" : `${state.cells[o.cell].state} with ${o.cell}`;
-  const cutoffs = cutoffText(config.objects[i]);
-  return `${o.id}: ${shown} at distance ${brief(o.distance)} (cutoffs ${cutoffs})`;
+  return `${o.id}: ${shown} at distance ${brief(o.distance)} (${cutoffText(config.objects[i])})`;
 }
 
 function cellLine(cell) {
   const { state: shown, distance } = state.cells[cell.id];
-  const cutoffs = cutoffText(cell);
-  return `${cell.id} (${cell.kind}): ${shown} at distance ${brief(distance)} (cutoffs ${cutoffs})`;
+  return `${cell.id} (${cell.kind}): ${shown} at distance ${brief(distance)} (${cutoffText(cell)})`;
 }
 
 let readoutPending = false;
@@ -229,7 +242,10 @@ function addAttributes(table, attributes, name = null) {
   }
 }
 
-/** Show the id and attributes of object `index` in the panel; null empties and hides it. */
+/**
+ * Show the id and attributes of object `index` in the panel, with a button that deselects it;
+ * null empties and hides it.
+ */
 function select(index) {
   const object = index === null ? null : config.objects[index];
   state.selected = object?.id ?? null;
@@ -241,25 +257,109 @@ function select(index) {
   const table = document.createElement("table");
   const { id, ...others } = object.attributes; // the id is the heading already
   addAttributes(table, id === object.id ? others : object.attributes);
-  inspect.append(heading, table);
+  const close = document.createElement("button");
+  Object.assign(close, { type: "button", className: "close", textContent: "×" });
+  close.title = "Deselect";
+  inspect.append(close, heading, table);
 }
 
-/** Clicks on the view select the object under the pointer (or nothing); drags do not. */
+/**
+ * Clicks on the view select the object under the pointer (or nothing): its attributes show in
+ * the panel, and the backend highlights it in place of the one before; drags do not. The
+ * panel's close button selects nothing.
+ */
 function watchClicks(backend, view) {
+  const choose = (index) => {
+    select(index);
+    backend.highlight(index);
+  };
   let pressed = null;
   view.addEventListener("pointerdown", (event) => { pressed = [event.clientX, event.clientY]; });
   view.addEventListener("click", (event) => {
     if (pressed === null) return;
     if (Math.hypot(event.clientX - pressed[0], event.clientY - pressed[1]) > CLICK_SLOP_PX) return;
-    select(backend.pick(event));
+    choose(backend.pick(event));
     state.clicks += 1;
+  });
+  inspect.addEventListener("click", (event) => {
+    if (event.target.closest("button.close")) choose(null);
   });
 }
 
+/** Show `text` in the page's alert box, over the view (null: hide it). */
+function alertBox(text) {
+  problem.textContent = text ?? "";
+  problem.hidden = text === null;
+}
+
+/** Show `error` (an Error or a message) in the alert box, as the page's error. */
 function fail(error) {
   state.error = String(error?.message ?? error);
-  status.textContent = state.error;
+  alertBox(state.error);
   console.error(error);
+}
+
+/** A failure to load what the page shows, its message naming what failed for the user. */
+class LoadFailure extends Error {}
+
+/** The file name of the asset the page shows. */
+const assetName = () => decodeURIComponent(config.asset.split("/").pop());
+
+/** How to give the page a viewer library it can reach (lines of the alert box). */
+function localLibraryHint() {
+  const { package: name, version } = config.library;
+  return "Re-run lodconvert with --viewer-lib DIR, DIR a local copy of the npm package " +
+    `${name}@${version} (npm install ${name}@${version} puts one in node_modules/${name}) ` +
+    "inside this page's folder, or serve both:\n" +
+    `lodconvert view ${assetName()} --serve --viewer-lib DIR`;
+}
+
+/** Seconds the viewer library may take to load before the page says where it waits. */
+const SLOW_LIBRARY_S = 10;
+
+/**
+ * Import the modules of the viewer library the page's import map names (the backend imports
+ * them again from the cache): the readout says which one it waits for and, after
+ * SLOW_LIBRARY_S, the alert box how to do without it; one that fails to load throws a
+ * LoadFailure naming its URL.
+ */
+async function importLibrary() {
+  const { imports } = JSON.parse(document.querySelector('script[type="importmap"]').textContent);
+  const modules = Object.entries(imports).filter(([name]) => !name.endsWith("/"));
+  for (const [name, relative] of modules) {
+    const url = new URL(relative, location.href);
+    const where = url.origin === location.origin ? "" : " (offline, or its host blocked?)";
+    readout.textContent = `loading the viewer library ${url} …`;
+    const slow = setTimeout(() => {
+      alertBox(`Still waiting for the viewer library\n${url}${where}\n\n${localLibraryHint()}`);
+    }, SLOW_LIBRARY_S * 1000);
+    try {
+      await import(name);
+    } catch (error) {
+      console.error(error);
+      const failed = `Could not load the viewer library\n${url}${where}`;
+      throw new LoadFailure(`${failed}\n\n${localLibraryHint()}`);
+    } finally {
+      clearTimeout(slow);
+    }
+  }
+  alertBox(null);
+  readout.textContent = `loading ${assetName()} …`;
+}
+
+/**
+ * The message for `error`, thrown while loading the library or the model: the model's URL and
+ * why it could not be fetched, when it cannot.
+ */
+async function loadFailure(error) {
+  if (error instanceof LoadFailure) return error.message;
+  const url = new URL(config.asset, location.href);
+  const response = await fetch(url, { method: "HEAD", cache: "no-store" }).catch(() => null);
+  const text = String(error?.message ?? error);
+  if (response?.ok) return `Could not show the model\n${url}\n${text}`;
+  const why = response ? `HTTP ${response.status} ${response.statusText}`.trim() : "unreachable";
+  return `Could not load the model\n${url} (${why})\n\nIt must lie where it was when the ` +
+    `page was written, in the folder served:\nlodconvert view ${assetName()} --serve`;
 }
 
 /** Two animation frames: whatever was changed before has been drawn. */
@@ -324,6 +424,7 @@ async function start(backend) {
     const view = document.getElementById("view");
     applyLodScale(urlLodScale());
     cellReadout.hidden = cells.length === 0;
+    await importLibrary();
     await backend.load(view);
     if (lodScale !== 1) backend.setLodScale(lodScale);
     watchClicks(backend, view);
@@ -343,6 +444,7 @@ async function start(backend) {
     state.loadMs = performance.now() - started;
     state.ready = true;
   } catch (error) {
-    fail(error);
+    readout.textContent = "not shown: see the message over the view";
+    fail(await loadFailure(error));
   }
 }

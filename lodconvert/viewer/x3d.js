@@ -7,7 +7,8 @@
 // A click is picked by X_ITE itself, with the browser methods its pointing-device sensors use
 // (getPointerFromEvent, touch(x, y), then getHit(): the Shape drawn at that pixel; they are not
 // part of its typed API), and the page maps the Shape to the object whose LOD holds it; objects
-// that USE another's LOD (instances) share its Shapes, and a click on one selects the first.
+// that USE another's LOD (instances) share its Shapes, and a click on one selects the first;
+// the clicked object's Materials glow (emissiveColor) until another or nothing is clicked.
 // The library is imported in load(), so that a wrong library URL is reported on the page.
 
 /**
@@ -25,6 +26,7 @@ const levelsAt = config.objects.map((object) => (position) => {
   return levelAt(object, distanceBetween(object.center, position));
 });
 const objectOfShape = new Map(); // Shape (X_ITE's node, not its SFNode) → first object's index
+const shapesOf = config.objects.map(() => []); // per object, the Shapes (SFNodes) of its levels
 let X3D, browser, canvas, viewpoint;
 const eye = { position: focus, orientation: null }; // the viewer's, from the sensor
 let target = 0;
@@ -68,7 +70,8 @@ const prismNodes = (scene, object, role) =>
 
 /**
  * Follow the level that object `index`, prism-switched, shows: that of its first Switch at its
- * near choice (0), else its coarsest (or nothing, culled).
+ * near choice (0), else its coarsest (or nothing, culled); an object of one level has no
+ * Switch, nothing to follow, and shows that level.
  */
 function followSwitches(scene, object, index) {
   const switches = prismNodes(scene, object, "Switch");
@@ -78,6 +81,7 @@ function followSwitches(scene, object, index) {
     report(index);
   };
   for (const node of switches) watch(node, "whichChoice", read);
+  if (switches.length === 0) read(); // a single level has no Switch: it always shows
 }
 
 /**
@@ -92,27 +96,52 @@ function followBoxes(scene, object, index) {
     const grown = (scale) => 2 * (scale - 1) * object.cutoffs[k];
     scalings.push((scale) => { sensor.size = vector(size.map((v) => v + grown(scale))); });
   });
-  const origin = object.center.map((c, k) => c - object.local_center[k]); // of its Transform
   const holds = (sensor, local) => ["x", "y", "z"].every((axis, k) => {
     return Math.abs(local[k] - sensor.center[axis]) < sensor.size[axis] / 2;
   });
-  levelsAt[index] = (position) => {
-    const local = position.map((v, k) => v - origin[k]);
+  levelsAt[index] = (position) => { // in the object's Transform (its source axes)
+    const local = turned(position.map((v, k) => v - object.center[k]), true)
+      .map((v, k) => v + object.local_center[k]);
     const inside = sensors.findIndex((sensor) => holds(sensor, local));
     return inside < 0 ? sensors.length : inside;
   };
 }
 
-/** Record in objectOfShape that the Shapes under `node` are drawn by object `index`. */
+/**
+ * Record in objectOfShape that the Shapes under `node` are drawn by object `index`, and add
+ * them to its shapesOf.
+ */
 function collectShapes(node, index) {
   if (node.getNodeTypeName() === "Shape") {
     if (!objectOfShape.has(node.getValue())) objectOfShape.set(node.getValue(), index);
+    shapesOf[index].push(node);
     return;
   }
   const grouping = node.getFieldDefinitions().some((field) => field.name === "children");
   for (const child of grouping ? node.children : []) {
     if (child) collectShapes(child, index);
   }
+}
+
+/** The emissive colour that highlights the clicked object. */
+const HIGHLIGHT = [0.6, 0.36, 0];
+/** [Material, its emissiveColor before] of each Material the highlight tints. */
+let highlighted = [];
+
+/**
+ * Tint the Materials of object `index`'s Shapes (null: none) by HIGHLIGHT, restoring those
+ * tinted before. Each level has Appearances of its own (instances share them, and so the
+ * highlight); a PointSet draws its own colours, unlit, and does not show it.
+ */
+function highlightObject(index) {
+  for (const [material, emissive] of highlighted) material.emissiveColor = emissive;
+  const materials = new Map(); // node → SFNode, each once
+  for (const shape of index === null ? [] : shapesOf[index]) {
+    const material = shape.appearance?.material;
+    if (material) materials.set(material.getValue(), material);
+  }
+  highlighted = [...materials.values()].map((m) => [m, m.emissiveColor.copy()]);
+  for (const [material] of highlighted) material.emissiveColor = new X3D.SFColor(...HIGHLIGHT);
 }
 
 function viewerMoved(position) {
@@ -191,8 +220,10 @@ const backend = {
   /** Resolves once every LOD drawn shows its level at the new place, and the sensor said so. */
   async setDistance(distance) {
     const move = ++target;
-    const position = [focus[0], focus[1], focus[2] + distance];
+    const position = focus.map((v, k) => v + distance * viewDirection[k]);
     viewpoint.position = vector(position);
+    const pitch = Math.atan2(viewDirection[1], viewDirection[2]); // looking down at the focus
+    viewpoint.orientation = new X3D.SFRotation(1, 0, 0, -pitch);
     viewpoint.set_bind = true;
     for (let frame = 0; frame < SETTLE_FRAMES && move === target; frame++) {
       await nextFrame();
@@ -203,6 +234,7 @@ const backend = {
   setLodScale(scale) {
     for (const scaling of scalings) scaling(scale);
   },
+  highlight: highlightObject,
   /** Index of the object drawing the Shape under the pointer of `event`, or null. */
   pick(event) {
     const { x, y } = browser.getPointerFromEvent(event);

@@ -5,7 +5,7 @@
 //
 //   node tests/browser/drive.mjs SCENARIO BASE_URL PARAMS_JSON
 //
-// SCENARIO: x_ite, x3dom, babylon, three or viewer (PARAMS: see each below).
+// SCENARIO: x_ite, x3dom, babylon, three, three_upright or viewer (PARAMS: see each below).
 
 import { doing, evaluate, openTestPage, openViewer, run, waitFor } from "./harness.mjs";
 
@@ -42,13 +42,17 @@ async function pixels(page, selector, background = null) {
 }
 
 const scenarios = {
-  /** X_ITE: load params.file, then per stop place the viewer and read params.lod's level. */
+  /**
+   * X_ITE: load params.file (with params.start, screenshot the view it starts with: the file's
+   * own Viewpoint), then per stop place the viewer and read params.lod's level.
+   */
   async x_ite(page, { base, params }) {
     await openTestPage(page, base, "x_ite", "X_ITE");
     const firstFrameMs = await evaluate(page, `X_ITE loading ${params.file}`,
       ([url, lods]) => window.harness.load(url, lods),
       [`${base}/${params.file}`, params.lod ? [params.lod] : []],
     );
+    const start = params.start ? await pixels(page, "x3d-canvas") : null;
     const stops = [];
     for (const stop of params.stops ?? []) {
       const [x, y, z] = params.center;
@@ -59,7 +63,7 @@ const scenarios = {
         ([lod, level]) => window.harness.settle(lod, level), [params.lod, stop.level]);
       stops.push({ distance: stop.distance, level, ...(await pixels(page, "x3d-canvas")) });
     }
-    return { firstFrameMs, stops };
+    return { firstFrameMs, start, stops };
   },
 
   /** X3DOM: load params.file in an Inline, wait until it is drawn, collect X3DOM's log. */
@@ -104,6 +108,13 @@ const scenarios = {
       [`${base}/${params.file}`, params.node],
     );
     return { ...result, ...(await pixels(page, "canvas")) };
+  },
+
+  /** three.js, plainly: load params.file and draw its scene from straight above (+Y). */
+  async three_upright(page, { base, params }) {
+    await openTestPage(page, base, "three_upright", "three.js");
+    return evaluate(page, `three.js loading ${params.file}`,
+      (url) => window.harness.fromAbove(url), `${base}/${params.file}`);
   },
 
   /**

@@ -1,6 +1,6 @@
-// What the Node drivers of the browser tests (drive.mjs, inspect.mjs, hlod.mjs, prism.mjs) share:
-// each drives headless Chromium through one of its scenarios and prints what it saw as one line
-// of JSON.
+// What the Node drivers of the browser tests (drive.mjs, inspect.mjs, hlod.mjs, page.mjs,
+// prism.mjs) share: each drives headless Chromium through one of its scenarios and prints what
+// it saw as one line of JSON.
 //
 //   node tests/browser/DRIVER.mjs SCENARIO BASE_URL PARAMS_JSON
 //

@@ -4,7 +4,8 @@ by hlod.mjs in headless Chromium: near the district no cell is merged, farther s
 slider's far end all are, and the page says so (its state and its cells readout); every cell
 shows the state of its distance and every object in an open cell (or in none) the level of its
 own; a LOD scale from the URL or the page's field multiplies the cutoffs. A prism-switched
-file's page shows its object's level, read from the Switches. Every wait is on page state."""
+file's page shows its object's level, read from the Switches (an object of one level has
+none: that level). Every wait is on page state."""
 
 from __future__ import annotations
 
@@ -61,21 +62,24 @@ def district(site: Path) -> dict[str, Chain]:
 
 
 def _viewer(config: dict[str, Any], distance: float) -> np.ndarray:
-    """Where the page puts the viewer for ``distance``: that far along +z from the middle of
-    the objects' centres."""
+    """Where the page puts the viewer for ``distance``: that far along its view direction from
+    the middle of the objects' centres (in the file's scene coordinates)."""
     centres = np.array([o["center"] for o in config["objects"]])
-    return (centres.min(axis=0) + centres.max(axis=0)) / 2 + [0.0, 0.0, distance]
+    middle = (centres.min(axis=0) + centres.max(axis=0)) / 2
+    return middle + distance * np.asarray(config["view"]["direction"])
 
 
 def _switch_heights(config: dict[str, Any], scale: float = 1.0) -> list[float]:
-    """Per cell, how far along the viewer's line (+z from the middle of the objects' centres) it
-    merges at LOD scale ``scale``: where its distance reaches its scaled cutoff (0 where it does
-    all along)."""
+    """Per cell, how far along the viewer's line (the view direction from the middle of the
+    objects' centres) it merges at LOD scale ``scale``: where its distance reaches its scaled
+    cutoff (0 where it does all along)."""
     heights = []
+    direction = np.asarray(config["view"]["direction"])
     for cell in config["cells"]:
-        x, y, z = np.asarray(cell["center"]) - _viewer(config, 0.0)
-        cutoff, off = scale * cell["cutoffs"][0], math.hypot(x, y)
-        heights.append(z + math.sqrt(cutoff**2 - off**2) if cutoff > off else 0.0)
+        offset = np.asarray(cell["center"]) - _viewer(config, 0.0)
+        along = float(offset @ direction)
+        cutoff, off = scale * cell["cutoffs"][0], float(np.linalg.norm(offset - along * direction))
+        heights.append(along + math.sqrt(cutoff**2 - off**2) if cutoff > off else 0.0)
     return heights
 
 
@@ -184,4 +188,27 @@ def test_prism_page_shows_the_objects_level_from_its_switches(site: Path, hlod: 
     assert scaled["distance"] == pytest.approx(stops[-1]["distance"]), message
     expected = names[_box_level(larger, _viewer(config, scaled["distance"]))]
     assert scaled["objects"][0]["level"] == expected != names[-1], message
+    assert not _errors(out), message
+
+
+def test_prism_page_shows_the_level_of_single_level_objects(site: Path, hlod: Drive) -> None:
+    """Potsdam's LoD1 buildings, one level each (no cutoff, so no Switch), with prism
+    switching: near and at the slider's far end every object shows LOD1, and each line of the
+    readout says so at the distance of the move, with no cutoff (it said '…' for ever)."""
+    source = SHARED / "data" / "citygml" / "potsdam_lod1_v1.gml"
+    if not source.exists():
+        pytest.skip(f"{source} is absent (shared test data not checked out)")
+    chain = _make(site, source, "prism_potsdam.x3d", write_options={"switching": "prism"})
+    assert {len(obj["levels"]) for obj in chain.report["objects"]} == {1}
+    out = hlod("stops", page=chain.page, stops=[{"key": "Home"}, {"key": "End"}])
+    _, near, far = out["result"]["stops"]
+    message = f"{[near['readout'], far['readout']]}\n{console_text(out)}"
+    for at in (near, far):
+        assert {obj["level"] for obj in at["objects"]} == {"LOD1"}, message
+        lines = at["readout"].splitlines()[:LISTED]
+        for obj, line in zip(at["objects"][:LISTED], lines, strict=True):
+            start, distance = line.removesuffix(" (no cutoff)").rsplit(" ", 1)
+            assert start == f"{obj['id']}: LOD1 at distance", message
+            assert float(distance) == pytest.approx(obj["distance"], rel=1e-3), message
+    assert far["objects"][0]["distance"] > 10 * near["objects"][0]["distance"], message
     assert not _errors(out), message

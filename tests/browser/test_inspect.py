@@ -1,5 +1,6 @@
-"""Clicking an object on the viewer page shows its id and attributes, clicking empty space
-clears them: the TUM Munich district (CityGML LoD2) as X3D in X_ITE and as glTF in three.js,
+"""Clicking an object on the viewer page shows its id and attributes and highlights it (its roof
+changes colour until another building or empty space is clicked), clicking empty space clears
+both: the TUM Munich district (CityGML LoD2) as X3D in X_ITE and as glTF in three.js,
 clicked by inspect.mjs in headless Chromium where the page itself says a roof shows; the SIG3D
 LoD4 house shows the attributes of its parts (its room and the furniture in it)."""
 
@@ -12,7 +13,8 @@ import numpy as np
 import pytest
 from lxml import etree
 
-from lodconvert.io import read_chains
+from lodconvert.io import own_format, read_chains
+from lodconvert.io.frame import ROTATION
 
 from ..conftest import SHARED
 from .conftest import Chain, Drive, Driver, console_text, make_chain
@@ -50,9 +52,10 @@ def district(site: Path) -> dict[str, Chain]:
 
 def _roof(path: Path, object_id: str | None = None) -> tuple[str, list[float]]:
     """An object of ``path`` (``object_id`` where given) and a point on its roof, safe to
-    click: of all upward-facing triangles of the objects' finest levels, the centre of the
-    largest inscribed circle (from above, as the page first shows the district, a roof shows,
-    its edges farthest away)."""
+    click, in the file's scene coordinates (where the page draws): of all upward-facing
+    triangles of the objects' finest levels, the centre of the largest inscribed circle (from
+    above the horizon, as the page first shows the district, a roof shows, its edges farthest
+    away)."""
     best = (0.0, "", [0.0, 0.0, 0.0])
     for chain in read_chains(path):
         if object_id is not None and chain.object_id != object_id:
@@ -67,7 +70,9 @@ def _roof(path: Path, object_id: str | None = None) -> tuple[str, list[float]]:
         if radii[k] > best[0]:
             centre = (sides[k] @ corners[k]) / sides[k].sum()
             best = (radii[k], chain.object_id, (chain.origin + centre).tolist())
-    return best[1], best[2]
+    frame = own_format(path).read_frame(path)
+    point = best[2] if frame is None else (ROTATION @ (best[2] - frame.origin)).tolist()
+    return best[1], point
 
 
 def _source_attributes(gml_id: str) -> dict[str, str]:
@@ -99,6 +104,48 @@ def test_clicking_a_building_shows_its_id_and_attributes(
     assert rows["function"] == source["function"] and rows["type"] == "Building", message
     assert sky["selected"] is None and sky["hidden"], message
     assert sky["heading"] is None and sky["rows"] == [], message
+    assert not _errors(out), message
+
+
+EXPOSED = "DEBY_LOD2_4959457"
+"""A TUM Munich building whose largest roof (4.6 m inscribed circle, 545 m high) lies highest of
+all the buildings' largest roofs: nothing near rises above it to hide it, from any view above
+the horizon."""
+TINTED = 40.0
+"""How much (in a channel, 0-255) a highlighted roof's colour differs at least from before."""
+UNCHANGED = 6.0
+"""How much at most a roof's colour may differ from before when it is not highlighted."""
+
+
+def _change(colour: list[float], before: list[float]) -> float:
+    return max(abs(a - b) for a, b in zip(colour, before, strict=True))
+
+
+@pytest.mark.parametrize("suffix", ["x3d", "glb"])
+def test_clicking_a_building_highlights_it_until_another_is_clicked(
+    district: dict[str, Chain], inspect: Drive, site: Path, suffix: str
+) -> None:
+    """Clicking a building tints its roof and no other; clicking a second building moves the
+    tint there (the first shows its own colour again); the inspect panel's close button clears
+    it, and so does clicking empty space."""
+    path = site / district["x3d"].name
+    first, roof = _roof(path)
+    second, other = _roof(path, EXPOSED)
+    clicks = [{"point": roof}, {"point": other}, {"close": True}, {"point": roof}, {"at": SKY}]
+    out = inspect("clicks", page=district[suffix].page, clicks=clicks, probes=[roof, other])
+    result = out["result"]
+    message = f"{result['probes']} then {[c['probes'] for c in result['clicks']]}"
+    message += f"\n{console_text(out)}"
+    selected = [c["selected"] for c in result["clicks"]]
+    assert selected == [first, second, None, first, None], message
+    assert [c["hidden"] for c in result["clicks"]] == [False, False, True, False, True], message
+    before = result["probes"]
+    # per click: is each roof tinted?
+    expected = [[True, False], [False, True], [False, False], [True, False], [False, False]]
+    for click, tints in zip(result["clicks"], expected, strict=True):
+        for colour, was, tinted in zip(click["probes"], before, tints, strict=True):
+            change = _change(colour, was)
+            assert change >= TINTED if tinted else change <= UNCHANGED, message
     assert not _errors(out), message
 
 

@@ -2,8 +2,9 @@
 viewpoints at the same distance from its centre, one off its long side and one off its short
 end, show different levels, as its boxes predict (its LOD ranges would show one level at both).
 Moving far away reaches the coarsest level, moving in the finest; a viewer already inside the
-boxes when the file loads gets the finest level, one outside keeps the coarsest. Levels are read
-from the Switches' ``whichChoice`` through X_ITE's scripting API (tests/browser/prism.mjs)."""
+boxes when the file loads (at the file's Viewpoint) gets the finest level, one outside keeps the
+coarsest. Levels are read from the Switches' ``whichChoice`` through X_ITE's scripting API
+(tests/browser/prism.mjs)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from lxml import etree
 
 from lodconvert.io import OutputInfo
 from lodconvert.io.x3d import prism_boxes, write_x3d
@@ -27,15 +29,13 @@ BUILDING = (60.0, 10.0, 10.0)
 BETA, GAMMA = 0.5, 2.0
 """Ranges Y = α·β·γˣ of 39, 49 and 62 m, comparable to the building, so its shape shows."""
 LEVELS = ("LOD4", "LOD3", "LOD2", "LOD1")
-X3D_START = (0.0, 0.0, 10.0)
-"""Where X_ITE puts the viewer of a scene without a Viewpoint (X3D's default position)."""
 DISTANCE = 60.0
 """From the building's centre, off its long side and off its short end."""
 
 
-def _building(object_id: str, origin: tuple[float, float, float]) -> LodChain:
+def _building(object_id: str, origin: tuple[float, float, float], beta: float = BETA) -> LodChain:
     """A city-like chain of the building: four levels (the same box) switching at Y(0.33),
-    Y(0.66) and Y(1.0), placed at ``origin``."""
+    Y(0.66) and Y(1.0) (with ``beta``), placed at ``origin``."""
     box = trimesh.creation.box(extents=BUILDING)
     surface = Surface(np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces))
     alpha = float(np.linalg.norm(BUILDING))
@@ -43,11 +43,11 @@ def _building(object_id: str, origin: tuple[float, float, float]) -> LodChain:
     return LodChain(
         object_id=object_id,
         levels=[Level(name, "source", mesh=surface) for name in LEVELS],
-        cutoffs=cutoffs(alpha, BETA, GAMMA, xs),
+        cutoffs=cutoffs(alpha, beta, GAMMA, xs),
         origin=np.asarray(origin, dtype=np.float64),
         center=np.zeros(3),
         alpha=alpha,
-        beta=BETA,
+        beta=beta,
         gamma=GAMMA,
         xs=xs,
     )
@@ -69,14 +69,21 @@ def _sphere_level(chain: LodChain, position: tuple[float, float, float]) -> int:
 
 
 @pytest.fixture(scope="module")
-def block(site: Path) -> tuple[str, list[LodChain]]:
-    """The building at the origin (the viewer starts inside its boxes) and again 2 km away
-    (outside them), written with prism switching into the test site."""
-    chains = [_building("near", (0.0, 0.0, 0.0)), _building("far", (2000.0, 0.0, 0.0))]
+def block(site: Path) -> tuple[str, list[LodChain], tuple[float, ...]]:
+    """The building at the origin, again 2 km away, and at the origin with ranges of kilometres
+    (the file's Viewpoint, framing the scene from a few kilometres, lies inside the boxes of
+    the last alone), written with prism switching into the test site."""
+    chains = [
+        _building("near", (0.0, 0.0, 0.0)),
+        _building("far", (2000.0, 0.0, 0.0)),
+        _building("wide", (0.0, 0.0, 0.0), beta=100 * BETA),
+    ]
     name = "prism_block.x3d"
     with (site / name).open("wb") as handle:
         write_x3d(chains, handle, OutputInfo("lodconvert tests", "building"), switching="prism")
-    return name, chains
+    viewpoint = etree.parse(str(site / name)).getroot().find("Scene/Viewpoint")
+    start = tuple(float(v) for v in viewpoint.get("position").split())
+    return name, chains, start  # start: where X_ITE puts the viewer, the file's Viewpoint
 
 
 @pytest.fixture(scope="module")
@@ -86,16 +93,16 @@ def prism(driver: Driver) -> Drive:
 
 
 def test_x_ite_switches_levels_on_boxes(
-    block: tuple[str, list[LodChain]], prism: Drive, measure
+    block: tuple[str, list[LodChain], tuple[float, ...]], prism: Drive, measure
 ) -> None:
-    name, chains = block
+    name, chains, start = block
     near = chains[0]
     side, end = (0.0, 0.0, DISTANCE), (DISTANCE, 0.0, 0.0)
     # the premise: spheres give both viewpoints one level, boxes two
     assert _sphere_level(near, side) == _sphere_level(near, end)
     assert _box_level(near, side) != _box_level(near, end)
     far_away, close = (0.0, 0.0, 400.0), (0.0, 0.0, 20.0)
-    places = [X3D_START, side, end, far_away, close, (0.0, 0.0, 48.0), side]
+    places = [start, side, end, far_away, close, (0.0, 0.0, 48.0), side]
     expected = [[_box_level(chain, place) for chain in chains] for place in places]
     stops = [{"expected": expected[0]}]  # the viewer X_ITE starts with, before any move
     stops += [{"position": p, "expected": e} for p, e in zip(places[1:], expected[1:], strict=True)]
@@ -105,7 +112,7 @@ def test_x_ite_switches_levels_on_boxes(
     message = f"expected {expected}, saw {seen}"
     assert levels == expected, message
     coarsest, finest = len(LEVELS) - 1, 0
-    assert levels[0] == [finest, coarsest], message  # at load: inside near's boxes, outside far's
+    assert levels[0] == [coarsest, coarsest, finest], message  # at load: inside wide's boxes
     assert levels[3][0] == coarsest and levels[4][0] == finest, message
     assert levels[1][0] != levels[2][0], message
     measure(

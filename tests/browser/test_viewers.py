@@ -1,6 +1,7 @@
 """Real viewers in headless Chromium: X_ITE and X3DOM load our X3D, Babylon.js and three.js our
 glb, and lodconvert's own viewer page switches levels at the cutoffs (also served with a library
-from elsewhere), its slider spans every object's ranges and its points are lit like its meshes.
+from elsewhere), its slider spans every object's ranges and its points are lit like its meshes;
+its panel folds, and it says what failed to load (an unreachable library, a moved model).
 Also the time to first frame and the .x3d / .glb sizes of the same chain (printed under "viewer
 measurements", as measurements only: no test has a time limit)."""
 
@@ -10,6 +11,7 @@ import itertools
 import math
 import os
 import shutil
+import socket
 from pathlib import Path
 
 import numpy as np
@@ -19,11 +21,11 @@ import trimesh
 from lodconvert.io import OutputInfo
 from lodconvert.io.x3d import write_x3d
 from lodconvert.model import Level, LodChain, Surface
-from lodconvert.viewer import LIBRARIES
+from lodconvert.viewer import LIBRARIES, write_page
 
 from ..conftest import stanford
 from ..test_viewer import view_served
-from .conftest import Chain, Drive, console_text, make_chain
+from .conftest import Chain, Drive, Driver, console_text, make_chain
 
 pytestmark = pytest.mark.browser
 
@@ -148,6 +150,102 @@ def test_viewer_page_slider_reaches_beyond_every_objects_last_cutoff(
         assert shown["level"] == "nothing (culled)", message
     assert seen["foreground"] == 0, message
     assert not _errors(out), message
+
+
+@pytest.fixture(scope="module")
+def page_ui(driver: Driver) -> Drive:
+    """Run a scenario of page.mjs: the viewer page's own panel and alert box."""
+    return driver("page.mjs")
+
+
+def test_viewer_page_panel_folds_by_its_heading(knot: dict[str, Chain], page_ui: Drive) -> None:
+    """A click on the readout panel's heading folds it to that line: the view shows where the
+    readout was. Another click unfolds it, its readout current (the viewer moved meanwhile)."""
+    chain = knot["glb"]
+    stop = chain.stops()[1]
+    out = page_ui("panel", page=chain.page, distance=stop["distance"])
+    first, folded, unfolded = (out["result"][k] for k in ("first", "folded", "unfolded"))
+    message = f"{out['result']}\n{console_text(out)}"
+    assert first["open"] and first["readoutShown"] and not first["view"], message
+    assert not folded["open"] and not folded["readoutShown"] and folded["view"], message
+    assert unfolded["open"] and unfolded["readoutShown"] and not unfolded["view"], message
+    assert unfolded["height"] > 2 * folded["height"], message
+    level = chain.level_names()[stop["level"]]
+    assert f"{chain.obj['id']}: {level} at distance" in unfolded["readout"], message
+    assert not _errors(out), message
+
+
+def _words(text: str) -> str:
+    """``text`` with its line breaks and runs of spaces as single spaces."""
+    return " ".join(text.split())
+
+
+def _closed_port() -> int:
+    """A port of 127.0.0.1 that nothing listens on (free a moment ago)."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.parametrize("suffix", ["glb", "x3d"])
+def test_viewer_page_names_an_unreachable_library(
+    knot: dict[str, Chain], site: Path, page_ui: Drive, suffix: str
+) -> None:
+    """Offline, the CDN cannot be reached (here: a library URL on a port nothing listens on):
+    over the view the page names the module that failed and says to re-run with
+    ``--viewer-lib DIR``, a local copy of the npm package it names."""
+    chain = knot[suffix]
+    library = LIBRARIES["x3d" if suffix == "x3d" else "gltf"]
+    base = f"http://127.0.0.1:{_closed_port()}/lib"
+    page = write_page(site / chain.name, site / f"offline_{chain.page}", library=base)
+    out = page_ui("alert", page=page.name)
+    result = out["result"]
+    message, text = f"{result}\n{console_text(out)}", _words(result["text"])
+    module = next(path for name, path in library.imports if not name.endswith("/"))
+    assert not result["ready"] and result["shown"], message
+    assert f"Could not load the viewer library {base}/{module}" in text, message
+    assert "Re-run lodconvert with --viewer-lib DIR" in text, message
+    assert f"npm package {library.package}@{library.version}" in text, message
+    assert f"lodconvert view {chain.name} --serve --viewer-lib DIR" in text, message
+
+
+def test_viewer_page_says_where_it_waits_for_a_library(
+    knot: dict[str, Chain], site: Path, page_ui: Drive
+) -> None:
+    """A library host that takes the connection and never answers (as behind a firewall that
+    drops packets): after a while the page says which module it still waits for and how to
+    do without the CDN, and has no error."""
+    chain = knot["glb"]
+    with socket.socket() as silent:
+        silent.bind(("127.0.0.1", 0))
+        silent.listen()
+        base = f"http://127.0.0.1:{silent.getsockname()[1]}/lib"
+        page = write_page(site / chain.name, site / f"waiting_{chain.page}", library=base)
+        out = page_ui("alert", page=page.name)
+    result = out["result"]
+    message, text = f"{result}\n{console_text(out)}", _words(result["text"])
+    assert not result["ready"] and not result["error"] and result["shown"], message
+    assert f"Still waiting for the viewer library {base}/build/three.module.js" in text, message
+    assert "Re-run lodconvert with --viewer-lib DIR" in text, message
+
+
+@pytest.mark.parametrize("suffix", ["glb", "x3d"])
+def test_viewer_page_names_a_missing_model(
+    knot: dict[str, Chain], site: Path, page_ui: Drive, suffix: str
+) -> None:
+    """The output moved away after its page was written: over the view the page names its URL
+    and the HTTP status it got."""
+    asset = site / f"moved_knot.{suffix}"
+    shutil.copyfile(site / knot[suffix].name, asset)
+    package = LIBRARIES["x3d" if suffix == "x3d" else "gltf"].package
+    page = write_page(asset, library=str(site / "node_modules" / package))
+    asset.unlink()
+    out = page_ui("alert", page=page.name)
+    result = out["result"]
+    message, text = f"{result}\n{console_text(out)}", _words(result["text"])
+    assert not result["ready"] and result["shown"], message
+    assert "Could not load the model http://127.0.0.1:" in text, message
+    assert f"/{asset.name} (HTTP 404 " in text, message
 
 
 BRIGHTNESS_STEP = 5.0
@@ -306,6 +404,8 @@ def test_x_ite_shows_a_district_and_a_building_switches_at_its_cutoffs(
     """TUM Munich (290 CityGML LoD2 buildings) in X_ITE: the district is drawn, and its first
     building shows its LoD2 nearer than its cutoff and its LOD1 prism beyond."""
     from lodconvert.io import read_chains
+    from lodconvert.io.frame import ROTATION
+    from lodconvert.io.x3d import read_frame
 
     from ..conftest import SHARED
 
@@ -318,11 +418,13 @@ def test_x_ite_shows_a_district_and_a_building_switches_at_its_cutoffs(
         c for c in read_chains(site / chain.name, geometry=False) if c.object_id == chain.obj["id"]
     ]
     stops = chain.stops()
+    frame = read_frame(site / chain.name)  # the district is y-up about its scene origin
+    assert frame is not None
     out = drive(
         "x_ite",
         file=chain.name,
         lod=written.metadata["x3d"]["lod"],
-        center=chain.obj["origin"],
+        center=(ROTATION @ (np.asarray(chain.obj["origin"]) - frame.origin)).tolist(),
         stops=stops,
     )
     seen = out["result"]["stops"]

@@ -55,6 +55,7 @@ def grid_obj(side: int) -> bytes:
 
 
 SQUARE = [[0, 0, 0], [10, 0, 0], [10, 10, 0], [0, 10, 0]]
+_RD = {"referenceSystem": "https://www.opengis.net/def/crs/EPSG/0/7415"}
 
 
 def city_object(boundaries: object = None, kind: str = "MultiSurface") -> dict:
@@ -66,14 +67,17 @@ def city_object(boundaries: object = None, kind: str = "MultiSurface") -> dict:
 
 
 def city(objects: dict, vertices: object = SQUARE, **extra: object) -> bytes:
-    """A CityJSON 2.0 document of ``objects`` over ``vertices`` (no transform)."""
-    document = {"type": "CityJSON", "version": "2.0", "CityObjects": objects, **extra}
+    """A CityJSON 2.0 document of ``objects`` over ``vertices`` (no transform, in the Dutch
+    national CRS)."""
+    document = {"type": "CityJSON", "version": "2.0", "metadata": _RD, "CityObjects": objects}
+    document |= extra
     return json.dumps({**document, "vertices": vertices}).encode()
 
 
 def sequence(*features: dict, header: dict | None = None) -> bytes:
     """A CityJSONSeq file: a header line, then one line per feature."""
-    head = {"type": "CityJSON", "version": "2.0", "CityObjects": {}, "vertices": []}
+    head = {"type": "CityJSON", "version": "2.0", "metadata": _RD, "CityObjects": {}}
+    head["vertices"] = []
     lines = [head | (header or {})] + [{"type": "CityJSONFeature", **f} for f in features]
     return "".join(json.dumps(line) + "\n" for line in lines).encode()
 

@@ -84,7 +84,7 @@ def read_citygml(
     tally = InputTally(source, limits)
     document = Document(path, limits, types, tally, colors)
     if crs is not None:
-        document.crs = Crs.of(crs)
+        document.crs = Crs.of(crs, source)
     nodes = document.nodes()
     first = next(nodes, None)
     if first is None and len(tally.skipped) == 1:
@@ -103,6 +103,7 @@ def read_citygml(
         nodes=chain([first], nodes),
         crs=declared.scene_crs,
         attributes=attributes,
+        city=True,
     )
     return attach_tally(scene, tally)
 

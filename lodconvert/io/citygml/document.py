@@ -17,6 +17,7 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh, Node
 from ...semantics import DEFAULT_PALETTE, Palette
+from ..archive import open_compressed
 from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
 from ..mesh import object_id
@@ -32,7 +33,7 @@ from .names import (
     local,
     namespace,
 )
-from .source import first_look, open_document, parser_options
+from .source import first_look, parser_options
 
 BATCH = 64
 """City objects triangulated together (their elements are held until then)."""
@@ -66,7 +67,7 @@ class Document:
 
     def nodes(self) -> Iterator[Node]:
         """The document's city objects with geometry, one at a time, as it is parsed."""
-        stream = open_document(self.path, self.limits)
+        stream = open_compressed(self.path, self.limits)
         try:
             replay, root = first_look(stream, self.limits, self.source)
             self._check_root(root)
@@ -113,7 +114,7 @@ class Document:
         name = local(element)
         if name == "boundedBy" and self.crs is None:
             srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
-            self.crs = Crs.of(srs) if srs else None
+            self.crs = Crs.of(srs, self.source) if srs else None
         if name in MEMBERS:
             for child in element:
                 if (collected := self._collected(child)) is not None:
@@ -131,7 +132,7 @@ class Document:
             return None
         if self.crs is None:
             srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
-            self.crs = Crs.of(srs) if srs else Crs()
+            self.crs = Crs.of(srs, self.source) if srs else Crs()
         top = holders_of(element)
         node = self._node(top)
         collect(top, self.gml, self.limits.xml_depth, self.source, self.templates)

@@ -1,6 +1,8 @@
 """CityJSON reader: CityJSON 1.1 and 2.0 (``.json``, ``.city.json``) and CityJSONSeq
-(``.city.jsonl``), each also gzip-compressed (``.gz``). CityJSON 1.0 is read the same way (its
-numeric ``lod`` values become labels: ``2`` → ``"2"``); other versions are refused.
+(``.city.jsonl``), each also gzip-compressed (``.gz``) or the one city model file of a ``.zip``
+(:mod:`..archive`; what it inflates to is capped at ``decompressed_bytes``, as CityGML's).
+CityJSON 1.0 is read the same way (its numeric ``lod`` values become labels: ``2`` → ``"2"``);
+other versions are refused.
 
 Every CityObject with geometry or with children becomes a :class:`Node`: ``id`` is its key (the
 writers make it a valid X3D DEF; the raw key is kept in ``attributes["id"]``), ``type`` its
@@ -72,6 +74,7 @@ from ...limits import DEFAULT_LIMITS, Limits
 from ...model import Scene
 from ...semantics import DEFAULT_PALETTE, Palette
 from .. import Format
+from ..archive import member_name
 from .document import read_document, read_sequence
 
 __all__ = ["FORMAT", "read_cityjson"]
@@ -88,11 +91,11 @@ def read_cityjson(
     colors: Palette = DEFAULT_PALETTE,
     crs: str | None = None,
 ) -> Scene:
-    """Read a CityJSON (``.json``) or CityJSONSeq (``.jsonl``) file, ``.gz`` or not, into a
-    Scene (see the module docstring); :class:`InputError` with a one-line reason when it
-    cannot be. ``types``: keep only CityObjects of these types (and their descendants);
-    ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`); ``crs``
-    replaces the CRS the file declares.
+    """Read a CityJSON (``.json``) or CityJSONSeq (``.jsonl``) file, plain, ``.gz`` or in a
+    ``.zip``, into a Scene (see the module docstring); :class:`InputError` with a one-line
+    reason when it cannot be. ``types``: keep only CityObjects of these types (and their
+    descendants); ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`);
+    ``crs`` replaces the CRS the file declares.
     The scene carries an :class:`~..geometry_checks.InputTally` of dropped faces and skipped
     objects."""
     path = Path(path)
@@ -100,14 +103,15 @@ def read_cityjson(
         raise InputError("no such file" if not path.exists() else "is not a file", str(path))
     if path.stat().st_size == 0:
         raise InputError("is empty", str(path))
-    name = path.name.lower().removesuffix(".gz")
+    name = (member_name(path) if path.name.lower().endswith(".zip") else path.name).lower()
+    name = name.removesuffix(".gz")
     read = read_sequence if name.endswith(".jsonl") else read_document
     return read(path, limits, _types(types), colors, crs)
 
 
 FORMAT = Format(
     name="cityjson",
-    suffixes=(".json", ".jsonl"),
+    suffixes=(".json", ".jsonl", ".zip"),
     read=read_cityjson,
     read_options=("limits", "types", "colors", "crs"),
 )

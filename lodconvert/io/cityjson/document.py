@@ -56,7 +56,7 @@ def read_document(
     """A ``.json`` CityJSON file: every node built before the scene is returned."""
     tally = InputTally(str(path), limits)
     data = load_document(path, limits, tally)
-    ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs), palette)
+    ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs, str(path)), palette)
     nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
     if not size and not tally.skipped:
@@ -64,7 +64,7 @@ def read_document(
             raise tally.nothing_left()
         which = f"of type {', '.join(sorted(types))} " if types is not None else ""
         raise InputError(f"has no CityObject {which}with surfaces", str(path))
-    scene = Scene(source=str(path), nodes=nodes, crs=ctx.crs, size=size)
+    scene = Scene(source=str(path), nodes=nodes, crs=ctx.crs, size=size, city=True)
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(data.get("version"))
     return attach_tally(scene, tally)
@@ -166,7 +166,9 @@ def read_sequence(
             raise unreadable(path, exc) from None
         header = cityjson_object(parsed(text, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
-        ctx = context_of(header, tally, declared_crs(header.get("metadata"), crs), palette)
+        ctx = context_of(
+            header, tally, declared_crs(header.get("metadata"), crs, str(path)), palette
+        )
     except InputError:
         lines.close()
         raise
@@ -176,6 +178,7 @@ def read_sequence(
         source=str(path),
         nodes=chain(() if first_node is None else (first_node,), nodes),
         crs=ctx.crs,
+        city=True,
     )
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))

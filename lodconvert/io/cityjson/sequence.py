@@ -1,7 +1,7 @@
 """The lines of a CityJSONSeq file, read in chunks: blank lines are skipped without a Python
 step per line (a chunk of nothing but white space at once, shorter runs by a regular
-expression), a ``.gz`` stops once it inflates past ``decompressed_bytes``, and a line once it
-passes ``sequence_line_bytes``."""
+expression), a ``.gz`` or ``.zip`` stops once it inflates past ``decompressed_bytes``, and a
+line once it passes ``sequence_line_bytes``."""
 
 from __future__ import annotations
 
@@ -12,26 +12,23 @@ from pathlib import Path
 
 from ...errors import InputError
 from ...limits import Limits
-from .source import CHUNK, open_binary, too_large, unreadable
+from ..archive import open_compressed
+from .source import CHUNK, unreadable
 
 _BLANK = re.compile(rb"[ \t\r\n]*")
 
 
 def sequence_lines(path: Path, limits: Limits) -> Iterator[tuple[int, bytes]]:
-    """Each line of ``path`` that holds more than white space, with its number (from 1),
-    without its line break. :class:`InputError` for a file that cannot be read, a ``.gz``
-    that inflates past ``limits.decompressed_bytes`` and a line longer than
-    ``limits.sequence_line_bytes``."""
-    inflates = path.name.lower().endswith(".gz")
+    """Each line of ``path`` (what it inflates to, for ``.gz``/``.zip``) that holds more than
+    white space, with its number (from 1), without its line break. :class:`InputError` for a
+    file that cannot be read, one that inflates past ``limits.decompressed_bytes``
+    (:func:`..archive.open_compressed`) and a line longer than ``limits.sequence_line_bytes``."""
     longest = limits.sequence_line_bytes
     pending = bytearray()
-    number, read = 1, 0
+    number = 1
     try:
-        with open_binary(path) as stream:
+        with open_compressed(path, limits) as stream:
             while chunk := stream.read(CHUNK):
-                read += len(chunk)
-                if inflates and read > limits.decompressed_bytes:
-                    raise too_large(path, limits.decompressed_bytes)
                 if not pending and chunk.isspace():  # blank lines, skipped at C speed
                     number += chunk.count(b"\n")
                     continue

@@ -1,15 +1,14 @@
-"""Reading a CityJSON file: opening it (through gzip for ``.gz``), parsing its JSON, checking that
-it is CityJSON of a version read, its CRS, its vertices (scaled and translated by its
-``transform``), and the :class:`Context` its geometry is read against."""
+"""Reading a CityJSON file: its bytes (what a ``.gz`` or ``.zip`` inflates to) read in chunks
+up to the limit, its JSON parsed and checked to be CityJSON of a version read, its CRS, and the
+:class:`Context` its geometry is read against (vertices: :mod:`.vertices`)."""
 
 from __future__ import annotations
 
 import gc
-import gzip
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
@@ -17,6 +16,7 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh
 from ...semantics import DEFAULT_PALETTE, Palette
+from ..archive import inflation_error, open_compressed
 from ..crs import Crs
 from ..geometry_checks import InputTally
 from .jsonkind import json_kind
@@ -54,18 +54,17 @@ class Context:
         return self.declared.scene_crs if self.declared is not None else None
 
 
-def open_binary(path: Path) -> IO[bytes]:
-    """``path`` opened for reading bytes, through gzip when it ends in ``.gz``."""
-    if path.name.lower().endswith(".gz"):
-        return gzip.open(path, "rb")
-    return path.open("rb")
+def is_compressed(path: Path) -> bool:
+    """Whether ``path`` is a ``.gz`` or a ``.zip``, read as what it inflates to."""
+    return path.name.lower().endswith((".gz", ".zip"))
 
 
 def too_large(path: Path, limit: int) -> InputError:
-    """The error for a file (inflated, for ``.gz``) past ``limit`` bytes."""
-    what = "inflates past" if path.name.lower().endswith(".gz") else "is larger than"
+    """The error for a file past ``limit`` bytes (what it inflates to, for ``.gz``/``.zip``)."""
+    if is_compressed(path):
+        return inflation_error(limit, str(path))
     return InputError(
-        f"{what} the limit of {limit:,} bytes (decompressed_bytes; "
+        f"is larger than the limit of {limit:,} bytes (decompressed_bytes; "
         "raise it with --limit decompressed_bytes=N)",
         str(path),
     )
@@ -76,14 +75,16 @@ def unreadable(path: Path, exc: Exception) -> InputError:
     return InputError(f"cannot be read ({exc})", str(path))
 
 
-def read_bytes(path: Path, limit: int) -> bytearray:
-    """The bytes of ``path`` (inflated, for ``.gz``), read :data:`CHUNK` bytes at a time into a
-    buffer that grows with them: :class:`InputError` as soon as they pass ``limit``."""
+def read_bytes(path: Path, limits: Limits) -> bytearray:
+    """The bytes of ``path`` (what it inflates to, for ``.gz``/``.zip``:
+    :func:`..archive.open_compressed`), read :data:`CHUNK` bytes at a time into a buffer that
+    grows with them: :class:`InputError` as soon as they pass ``limits.decompressed_bytes``."""
+    limit = limits.decompressed_bytes
     buffer = bytearray()
     try:
-        if not path.name.lower().endswith(".gz") and path.stat().st_size > limit:
+        if not is_compressed(path) and path.stat().st_size > limit:
             raise too_large(path, limit)
-        with open_binary(path) as stream:
+        with open_compressed(path, limits) as stream:
             while chunk := stream.read(CHUNK):
                 if len(buffer) + len(chunk) > limit:
                     raise too_large(path, limit)
@@ -96,7 +97,7 @@ def read_bytes(path: Path, limit: int) -> bytearray:
 def load_document(path: Path, limits: Limits, tally: InputTally) -> dict[str, Any]:
     """The JSON object of a ``.json`` file (its ``vertices`` an array, see :func:`parsed`);
     :class:`InputError` unless it is CityJSON within the limits."""
-    buffer = read_bytes(path, limits.decompressed_bytes)
+    buffer = read_bytes(path, limits)
     try:
         text = buffer.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
@@ -138,14 +139,14 @@ def cityjson_object(data: Any, kind: str, where: str) -> dict[str, Any]:
     return data
 
 
-def declared_crs(metadata: Any, override: str | None) -> Crs | None:
-    """The CRS the vertices are given in: ``override`` (the user's ``--crs``) wins over
-    ``metadata.referenceSystem`` (URL or URN of an EPSG code, which becomes ``EPSG:<code>``;
-    other forms are kept as given); None where neither names one."""
+def declared_crs(metadata: Any, override: str | None, where: str) -> Crs | None:
+    """The CRS the vertices of file ``where`` are given in: ``override`` (the user's ``--crs``)
+    wins over ``metadata.referenceSystem`` (URL or URN of an EPSG code, which becomes
+    ``EPSG:<code>``; other forms are kept as given); None where neither names one."""
     system = metadata.get("referenceSystem") if isinstance(metadata, dict) else None
     if override is not None:
         system = override
-    return Crs.of(str(system)) if system else None
+    return Crs.of(str(system), where) if system else None
 
 
 def member(data: dict[str, Any], key: str, kind: type, where: str) -> Any:

@@ -4,8 +4,9 @@ registry entry each for ``.glb`` and ``.gltf``."""
 
 from __future__ import annotations
 
-from .. import Format, imported_on_call, streamed
-from .reader import GltfLevel, GltfObject, read_back, read_cells, read_lod_gltf
+from .. import Format, streamed
+from .check import check_gltf
+from .reader import GltfLevel, GltfObject, read_back, read_cells, read_frame, read_lod_gltf
 from .writer import (
     GLB_BIN,
     GLB_JSON,
@@ -24,7 +25,8 @@ FORMAT = Format(
     write=streamed({".glb": write_glb, ".gltf": write_gltf}),
     read_back=read_back,
     read_cells=read_cells,
-    check=imported_on_call("lodconvert.io.gltf.check", "check_gltf"),
+    read_frame=read_frame,
+    check=check_gltf,
 )
 
 __all__ = [
@@ -39,6 +41,7 @@ __all__ = [
     "linear_rgba",
     "read_back",
     "read_cells",
+    "read_frame",
     "read_lod_gltf",
     "srgb_rgba",
     "write_glb",

@@ -4,8 +4,10 @@ indices inside them, declared ``min``/``max`` equal to the data; every reference
 array; and the ``MSFT_lod`` rules lodconvert follows (DESIGN.md): ``ids`` inside ``nodes`` and
 distinct, coarser nodes neither scene roots nor children, ``extras.MSFT_screencoverage``
 strictly falling with one value more than ``ids``, the extension in ``extensionsUsed`` but not
-required, and ``extras.lodconvert`` levels and cutoffs consistent with the chain. A file without
-any chain is an error: ``lodconvert validate`` checks lodconvert's outputs.
+required, and ``extras.lodconvert`` levels and cutoffs consistent with the chain; where the asset
+records a scene frame (:mod:`lodconvert.io.frame`), the record whole and the scene's one root the
+frame node that turns it y-up. A file without any chain is an error: ``lodconvert validate``
+checks lodconvert's outputs.
 
 This module reads the file (GLB chunks, the JSON, buffer 0) and runs the checks: first the
 summary checks (:mod:`.summary`), which decide from compact facts whether the file is clean,
@@ -33,7 +35,8 @@ from typing import Any, BinaryIO
 
 from lxml import etree
 
-from ...validate.findings import Findings
+from ..findings import Findings
+from ..frame import frame_from_record
 from .elements import ElementChecks
 from .stream import (
     LazyArray,
@@ -45,7 +48,7 @@ from .stream import (
     utf8_error,
 )
 from .summary import SINKS, clean
-from .writer import GLB_BIN, GLB_JSON, GLB_MAGIC
+from .writer import FRAME_MATRIX, FRAME_NODE, GLB_BIN, GLB_JSON, GLB_MAGIC
 
 GLB_HEADER_SIZE = 12
 GLB_CHUNK_HEADER_SIZE = 8
@@ -294,6 +297,27 @@ def _mapped(handle: BinaryIO) -> Iterator[memoryview]:
             view.release()
 
 
+def _check_frame(doc: dict[str, Any], findings: Findings) -> None:
+    """The scene frame that ``asset.extras.lodconvert.frame`` records, if any: a whole record,
+    and the default scene's one root node the frame node, its ``matrix`` z-up → y-up."""
+    record = doc["asset"].get("extras", {}).get("lodconvert", {}).get("frame")
+    if record is None:
+        return
+    try:
+        frame_from_record(record)
+    except (KeyError, TypeError, ValueError) as exc:
+        findings.error("SCENE_FRAME", f"asset.extras.lodconvert.frame is malformed ({exc})")
+        return
+    roots = doc["scenes"][doc.get("scene", 0)].get("nodes", [])
+    node = doc["nodes"][roots[0]] if len(roots) == 1 else {}
+    if node.get("name") != FRAME_NODE or node.get("matrix") != FRAME_MATRIX:
+        findings.error(
+            "SCENE_FRAME",
+            f"the asset records a scene frame, but the scene's roots {roots} are not its one "
+            f"{FRAME_NODE!r} node turning z-up into y-up",
+        )
+
+
 def _check_data(data: memoryview, suffix: str, findings: Findings, fd: int | None = None) -> None:
     """Check the file's bytes ``data`` (``fd``: the open file, read from without mapping
     where that is enough): first the summary checks of :func:`clean`, and only where they
@@ -303,6 +327,8 @@ def _check_data(data: memoryview, suffix: str, findings: Findings, fd: int | Non
     if parsed is None:
         return
     doc, blob, source = parsed
+    with contextlib.suppress(AttributeError, KeyError, IndexError, TypeError, ValueError):
+        _check_frame(doc, findings)  # (a malformed document: the checks below say what is wrong)
     try:
         if clean(doc, source):
             return

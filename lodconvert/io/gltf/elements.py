@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ...validate.findings import Findings
+from ..findings import Findings
 from .rules import (
     COMPONENT_DTYPES,
     COMPONENT_SIZES,

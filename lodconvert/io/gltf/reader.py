@@ -1,6 +1,8 @@
 """Reading back the glTF files lodconvert wrote: per root node its levels in ``MSFT_lod`` order
 (:func:`read_lod_gltf`), chains with the facts of ``extras.lodconvert`` (:func:`read_back`) and
-LOD parents (:func:`read_cells`)."""
+LOD parents (:func:`read_cells`). Origins and centres come back in the source's coordinates:
+the scene frame of a georeferenced file (``asset.extras.lodconvert.frame``, see
+:mod:`lodconvert.io.frame`) is undone."""
 
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ import numpy as np
 from ...errors import InputError
 from ...model import LodChain
 from ..declared import chain_from_facts, level_from_facts
+from ..frame import SceneFrame, frame_from_record
 from .writer import (
     _DTYPES,
     _WIDTHS,
@@ -52,9 +55,10 @@ class GltfLevel:
 
 @dataclass
 class GltfObject:
-    """One object (root node): id, float64 origin, levels finest first, coverage thresholds,
-    the finest node's ``extras.lodconvert``, its node index, its ``MSFT_lod`` ids and the root
-    node's ``extras.attributes`` as stored (``None`` without any)."""
+    """One object (root node): id, float64 origin (source coordinates), levels finest first,
+    coverage thresholds, the finest node's ``extras.lodconvert``, its node index, its
+    ``MSFT_lod`` ids and the root node's ``extras.attributes`` as stored (``None`` without
+    any)."""
 
     object_id: str
     origin: np.ndarray
@@ -75,8 +79,17 @@ def read_lod_gltf(path: str | Path, geometry: bool = True) -> list[GltfObject]:
     """
     with _read_errors(path):
         obj, blob = _load(Path(path))
+        frame = scene_frame_of(obj)
         roots = _object_roots(obj["nodes"], _scene_roots(obj))
-        return [_read_object(obj, blob, i, geometry) for i in roots]
+        return [_read_object(obj, blob, i, frame, geometry) for i in roots]
+
+
+def read_frame(path: str | Path) -> SceneFrame | None:
+    """The scene frame of a ``.glb``/``.gltf`` lodconvert wrote (``None``: none, the file is in
+    source coordinates). Raises :class:`InputError` as :func:`read_lod_gltf` does."""
+    with _read_errors(path):
+        obj, _ = _load(Path(path))
+        return scene_frame_of(obj)
 
 
 def read_cells(path: str | Path) -> list[dict[str, Any]]:
@@ -122,9 +135,19 @@ def _load(path: Path) -> tuple[dict[str, Any], bytes]:
     return obj, blob
 
 
+def scene_frame_of(obj: dict[str, Any]) -> SceneFrame | None:
+    """The scene frame a glTF's JSON object records (``None``: no frame, source coordinates)."""
+    return frame_from_record(obj["asset"]["extras"]["lodconvert"].get("frame"))
+
+
 def _scene_roots(obj: dict[str, Any]) -> list[int]:
-    """The root nodes of the glTF's scene."""
-    return obj["scenes"][obj.get("scene", 0)].get("nodes", [])
+    """The root nodes of the glTF's objects and LOD parents: its scene's, or the children of
+    the scene's one frame node."""
+    roots = obj["scenes"][obj.get("scene", 0)].get("nodes", [])
+    if scene_frame_of(obj) is None:
+        return roots
+    (frame_node,) = roots
+    return obj["nodes"][frame_node].get("children", [])
 
 
 def _cell_near(nodes: list[dict[str, Any]], index: int) -> int | None:
@@ -267,7 +290,11 @@ def _read_level(obj: dict[str, Any], blob: bytes, node: dict[str, Any], facts: d
 
 
 def _read_object(
-    obj: dict[str, Any], blob: bytes, root_index: int, geometry: bool = True
+    obj: dict[str, Any],
+    blob: bytes,
+    root_index: int,
+    frame: SceneFrame | None,
+    geometry: bool = True,
 ) -> GltfObject:
     nodes = obj["nodes"]
     root = nodes[root_index]
@@ -282,11 +309,15 @@ def _read_object(
             f"{root.get('name')!r}: {len(level_nodes)} level nodes but "
             f"{len(facts['levels'])} levels in extras"
         )
+    if "origin" in facts:  # an instance's, declared in source coordinates
+        origin = np.array(facts["origin"], dtype=np.float64)
+    else:
+        origin = np.array(root.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64)
+        if frame is not None:
+            origin = frame.origin + origin
     return GltfObject(
         object_id=root["name"],
-        origin=np.array(
-            facts.get("origin", root.get("translation", [0.0, 0.0, 0.0])), dtype=np.float64
-        ),
+        origin=origin,
         levels=[
             _read_level(obj, blob, node if geometry else {}, level)
             for node, level in zip(level_nodes, facts["levels"], strict=True)

@@ -1,11 +1,17 @@
 """glTF 2.0 output (``.glb`` and self-contained ``.gltf``) with levels chained by ``MSFT_lod``.
 
 Each chain becomes a root node named after the object, translated to ``chain.origin`` (float64
-JSON numbers, so georeferenced coordinates keep their precision while level geometry stays small
-in float32 buffers). Its only child is the finest level's node, which carries
-``extensions.MSFT_lod.ids`` (the coarser level nodes, finest to coarsest) and
-``extras.MSFT_screencoverage``. Coarser nodes belong to no scene and no parent: a client without
-``MSFT_lod`` loads the finest level only, one with it substitutes them for the finest node.
+JSON numbers, while level geometry stays small in float32 buffers). Its only child is the
+finest level's node, which carries ``extensions.MSFT_lod.ids`` (the coarser level nodes, finest
+to coarsest) and ``extras.MSFT_screencoverage``. Coarser nodes belong to no scene and no
+parent: a client without ``MSFT_lod`` loads the finest level only, one with it substitutes them
+for the finest node.
+
+A scene with a CRS (a city model) is written in its scene frame (:mod:`lodconvert.io.frame`):
+the object roots are the children of one root node whose ``matrix`` turns z-up into glTF's
+y-up, and their translations are offsets from one scene origin (within 100 km, so float32
+node matrices keep them), recorded in ``asset.extras.lodconvert.frame`` with the CRS. A scene
+without a CRS keeps its axes and absolute translations.
 
 No viewer switches levels by distance from ``MSFT_lod``, so the switching data (cutoffs, bake
 parameters, point sizes) is also written to ``extras.lodconvert`` on the nodes and the asset.
@@ -38,7 +44,9 @@ from PIL import Image as PILImage
 from ...errors import LodConvertError
 from ...model import CellChain, Level, LodChain, PointCloud, Surface
 from ...ranges import ReferenceView, screen_coverage
+from ...sinks import writing_temporary
 from .. import OutputInfo
+from ..frame import ROTATION, SceneFrame, scene_frame
 
 MSFT_LOD = "MSFT_lod"
 UNLIT = "KHR_materials_unlit"
@@ -67,6 +75,10 @@ _PENDING = 256
 """Elements of a JSON array kept as text before they are written to its file."""
 _BLOCK = 3 << 18
 """Bytes copied at a time (768 KiB, a multiple of 3: base64 blocks join without padding)."""
+FRAME_NODE = "scene_frame"
+"""Name of the root node that turns a georeferenced scene y-up (:mod:`lodconvert.io.frame`)."""
+FRAME_MATRIX = [float(v) for v in np.block([[ROTATION, np.zeros((3, 1))], [0, 0, 0, 1]]).T.ravel()]
+"""Its ``matrix`` (column-major): z-up source axes → y-up glTF axes, exact in float32."""
 
 
 def float32_positions(positions: np.ndarray) -> np.ndarray:
@@ -247,12 +259,15 @@ def _coverages(chain: LodChain | CellChain, view: ReferenceView) -> list[float]:
     return [float(v) for v in values] + ([] if chain.culled else [0.0])
 
 
-def _asset_extras(info: OutputInfo) -> dict[str, Any]:
-    """``asset.extras.lodconvert``: provenance and the meaning of the coverage values."""
+def _asset_extras(info: OutputInfo, frame: SceneFrame | None) -> dict[str, Any]:
+    """``asset.extras.lodconvert``: provenance, the scene frame (where a CRS gives one) and the
+    meaning of the coverage values."""
     return _plain(
         {
             "source": info.source,
             "crs": info.crs,
+            **({"vertical_reference": info.vertical} if info.vertical else {}),
+            **({"frame": frame.record()} if frame is not None else {}),
             "reference_view": {"height_px": info.view.height_px, "fov_y_deg": info.view.fov_y_deg},
             "screencoverage": COVERAGE_MEANING,
             "options": info.options,
@@ -325,6 +340,8 @@ class _Array:
         self.depth = depth
         self.spool = spool
         self.count = 0
+        self.last: dict[str, Any] | None = None
+        """An element written after the others, which may hold :class:`_Array` s itself."""
         self._head = "," + layout.newline(depth + 1)
         self._pending: list[str] = []
 
@@ -349,7 +366,11 @@ class _Array:
         self._flush()
         out.write(b"[")
         _copy(self.spool, out)
-        out.write(((self.layout.newline(self.depth) if self.count else "") + "]").encode())
+        if self.last is not None:
+            out.write((("," if self.count else "") + self.layout.newline(self.depth + 1)).encode())
+            _write_json(self.last, out, self.layout, self.depth + 1)
+        empty = not self.count and self.last is None
+        out.write((("" if empty else self.layout.newline(self.depth)) + "]").encode())
 
 
 class _DataUri:
@@ -429,11 +450,14 @@ def _material(
     )
 
 
-def _root_node(chain: LodChain, finest: int) -> dict[str, Any]:
+def _root_node(chain: LodChain, finest: int, frame: SceneFrame | None) -> dict[str, Any]:
     """A chain's root node: translated to the chain's origin, or placed by the instance's
-    matrix, with the object's attributes (where a GIS user looks for them)."""
+    matrix (from the ``frame``'s origin, where there is one), with the object's attributes
+    (where a GIS user looks for them)."""
     placed = np.eye(4) if chain.transform is None else chain.transform.copy()
     placed[:3, 3] += placed[:3, :3] @ chain.origin
+    if frame is not None:
+        placed[:3, 3] = frame.offset(placed[:3, 3], f"object {chain.object_id!r}")
     moved_only = chain.transform is None or np.array_equal(placed[:3, :3], np.eye(3))
     return _object(
         extras={"attributes": _plain(chain.metadata)} if chain.metadata else None,
@@ -453,11 +477,8 @@ class _Document:
 
     def __init__(self, info: OutputInfo, layout: _Layout) -> None:
         self.reference_view = info.view
-        self.asset = {
-            "extras": {"lodconvert": _asset_extras(info)},
-            "generator": info.generator,
-            "version": "2.0",
-        }
+        self.info = info
+        self.frame: SceneFrame | None = None  # set by the first item, for a scene with a CRS
         self._layout = layout
         self._files = contextlib.ExitStack()
         self.blob = self._spool()
@@ -629,6 +650,8 @@ class _Document:
 
     def add(self, item: LodChain | CellChain) -> None:
         """Add a chain, or a LOD parent with everything in it, to the scene."""
+        if not self.scene_nodes:
+            self.frame = scene_frame(self.info.crs, item)
         self.scene_nodes.append(len(self.nodes))
         self._add(item)
 
@@ -667,7 +690,7 @@ class _Document:
             extras={"lodconvert": _plain(facts)},
             mesh=mesh,
             name=far_name,
-            translation=[float(v) for v in cell.origin],
+            translation=[float(v) for v in self._placed(cell.origin, f"cell {cell.cell_id!r}")],
         )
         assert self.nodes.append(far) == at
 
@@ -679,7 +702,7 @@ class _Document:
             (level, switch_in, self._level_mesh(_level_name(chain, level), level, shared))
             for level, switch_in in zip(chain.levels[1:], chain.cutoffs, strict=False)
         ]
-        root = self.nodes.append(_root_node(chain, len(self.nodes) + 1))
+        root = self.nodes.append(_root_node(chain, len(self.nodes) + 1, self.frame))
         ids = list(range(root + 2, root + 2 + len(coarser)))
         extras: dict[str, Any] = {}
         if ids:
@@ -692,16 +715,34 @@ class _Document:
             facts = {"level": level.name, **_level_params(level), "switch_in": float(switch_in)}
             self.nodes.append(_level_node(chain, level, mesh, {"lodconvert": facts}))
 
+    def _placed(self, origin: np.ndarray, what: str) -> np.ndarray:
+        """Where a node at ``origin`` (source coordinates) is translated: from the scene
+        frame's origin where there is one."""
+        return origin if self.frame is None else self.frame.offset(origin, what)
+
+    def _scene_roots(self) -> _Array | list[int]:
+        """``scenes[0].nodes``: the objects' roots, or the frame node holding them (the last
+        node, with them as its children)."""
+        if self.frame is None:
+            return self.scene_nodes
+        self.nodes.last = _object(children=self.scene_nodes, matrix=FRAME_MATRIX, name=FRAME_NODE)
+        return [len(self.nodes)]
+
     def json_value(self, data_uri: bool) -> dict[str, Any]:
         """The glTF JSON object; the buffer is embedded as a base64 data URI when ``data_uri``,
         else left for a GLB BIN chunk."""
+        asset = {
+            "extras": {"lodconvert": _asset_extras(self.info, self.frame)},
+            "generator": self.info.generator,
+            "version": "2.0",
+        }
         buffers = []
         if self.blob_length:
             uri = _DataUri(self.blob) if data_uri else None
             buffers.append(_object(uri=uri, byteLength=self.blob_length))
         return _object(
             accessors=self.accessors,
-            asset=self.asset,
+            asset=asset,
             bufferViews=self.buffer_views,
             buffers=buffers,
             extensionsUsed=self.extensions_used,
@@ -711,7 +752,7 @@ class _Document:
             nodes=self.nodes,
             samplers=self.samplers,
             scene=0,
-            scenes=[_object(nodes=self.scene_nodes)],
+            scenes=[_object(nodes=self._scene_roots())],
             textures=self.textures,
         )
 
@@ -736,9 +777,10 @@ def _document(chains: Iterable[LodChain], info: OutputInfo, layout: _Layout) -> 
     """A document holding ``chains``; its temporary files are deleted when the block ends."""
     doc = _Document(info, layout)
     try:
-        for item in chains:
-            doc.add(item)
-        doc.flush_blob()
+        with writing_temporary():
+            for item in chains:
+                doc.add(item)
+            doc.flush_blob()
         yield doc
     finally:
         doc.close()
@@ -761,7 +803,8 @@ def write_glb(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) ->
         _document(chains, info, _COMPACT) as doc,
         tempfile.SpooledTemporaryFile(_SPOOL_BYTES) as text,
     ):
-        _write_json(doc.json_value(data_uri=False), text, _COMPACT)
+        with writing_temporary():
+            _write_json(doc.json_value(data_uri=False), text, _COMPACT)
         chunks = [(GLB_JSON, text, text.tell(), b" ")]
         if doc.blob_length:
             chunks.append((GLB_BIN, doc.blob, doc.blob_length, b"\x00"))

@@ -3,8 +3,16 @@ structural checks (:mod:`.check`), declared as one registry entry."""
 
 from __future__ import annotations
 
-from .. import Format, imported_on_call, streamed
-from .reader import X3DLevel, read_back, read_cells, read_x3d_points, x3d_read_errors
+from .. import Format, streamed
+from .check import check_x3d
+from .reader import (
+    X3DLevel,
+    read_back,
+    read_cells,
+    read_frame,
+    read_x3d_points,
+    x3d_read_errors,
+)
 from .writer import (
     METADATA_SET,
     SWITCHING_MODES,
@@ -20,7 +28,8 @@ FORMAT = Format(
     write=streamed({".x3d": write_x3d}),
     read_back=read_back,
     read_cells=read_cells,
-    check=imported_on_call("lodconvert.io.x3d.check", "check_x3d"),
+    read_frame=read_frame,
+    check=check_x3d,
     write_options=("switching",),
 )
 
@@ -33,6 +42,7 @@ __all__ = [
     "prism_boxes",
     "read_back",
     "read_cells",
+    "read_frame",
     "read_x3d_points",
     "vertex_colors",
     "write_x3d",

@@ -25,7 +25,7 @@ import numpy as np
 from lxml import etree
 
 from ...errors import LodConvertError
-from ...validate.findings import Findings
+from ..findings import Findings
 from .writer import METADATA_SET
 
 MAX_SCHEMA_FINDINGS = 20

@@ -1,6 +1,8 @@
 """Reading back the X3D files lodconvert wrote: level geometry (:func:`read_x3d_points`),
 chains with the facts declared in the lodconvert ``MetadataSet`` s (:func:`read_back`) and
-LOD parents (:func:`read_cells`)."""
+LOD parents (:func:`read_cells`). Origins and centres come back in the source's coordinates:
+the scene frame of a georeferenced file (the ``scene_frame`` Transform, see
+:mod:`lodconvert.io.frame`) is undone."""
 
 from __future__ import annotations
 
@@ -18,7 +20,8 @@ from lxml import etree
 from ...errors import InputError
 from ...model import LodChain
 from ..declared import chain_from_facts, level_from_facts
-from .writer import METADATA_SET
+from ..frame import SceneFrame, frame_from_record
+from .writer import FRAME_METADATA, METADATA_SET
 
 
 @dataclass
@@ -188,6 +191,33 @@ def _vector(text: str | None) -> np.ndarray:
     return values[:3] if len(values) >= 3 else np.zeros(3)
 
 
+def _frame_origin(element: etree._Element) -> np.ndarray:
+    """The scene origin that the frame's ``MetadataSet`` ``element`` records; ``ValueError``
+    for one that is not a frame lodconvert writes."""
+    facts = _metadata_values(element)
+    rotation = np.asarray(facts.get("rotation"), dtype=np.float64).reshape(-1, 3).tolist()
+    frame = frame_from_record({"origin": facts.get("origin"), "rotation": rotation})
+    assert frame is not None
+    return frame.origin
+
+
+def _is_frame(element: etree._Element) -> bool:
+    return element.tag == "MetadataSet" and element.get("name") == FRAME_METADATA
+
+
+def read_frame(path: str | Path) -> SceneFrame | None:
+    """The scene frame of an ``.x3d`` lodconvert wrote (``None``: none, the file is in source
+    coordinates); read up to the first ``LOD``. Raises
+    :class:`~lodconvert.errors.InputError` as :func:`read_back` does."""
+    with x3d_read_errors(path, "scene frame"):
+        for event, element in etree.iterparse(str(path), events=("start", "end")):
+            if event == "start" and element.tag == "LOD":
+                return None
+            if event == "end" and _is_frame(element):
+                return SceneFrame(_frame_origin(element))
+    return None
+
+
 def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
     """Per ``LOD`` node carrying lodconvert metadata: its origin (the enclosing translations),
     centre, chain facts (from the ``MetadataSet`` of its ``Transform``, or of the LOD itself),
@@ -196,6 +226,7 @@ def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
     objects: list[dict[str, Any]] = []
     lods: dict[str, dict[str, Any]] = {}  # DEF → entry, for LODs that instances USE
     transforms: list[dict[str, Any]] = []  # open Transforms: translation and metadata
+    shift = np.zeros(3)  # the scene origin, once the frame declares it
     for event, element in etree.iterparse(str(path), events=("start", "end")):
         tag = element.tag
         if event == "start":
@@ -211,7 +242,7 @@ def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
                 ]
                 used = lods.get(element.get("USE", ""))
                 entry = {
-                    "origin": _sum(offsets),
+                    "origin": _sum(offsets) + (0.0 if "transform" in facts else shift),
                     "center": _vector(element.get("center")) if used is None else used["center"],
                     "facts": facts,
                     "levels": [] if used is None else [dict(lv) for lv in used["levels"]],
@@ -234,6 +265,8 @@ def _x3d_facts(path: str | Path) -> list[dict[str, Any]]:
             transforms.pop()
         elif tag == "Shape":
             element.clear()
+        elif _is_frame(element):
+            shift = _frame_origin(element)
         elif (
             tag == "MetadataSet"
             and element.get("name") == METADATA_SET
@@ -292,6 +325,7 @@ def read_cells(path: str | Path) -> list[dict[str, Any]]:
     with x3d_read_errors(path, "cell metadata"):
         opened: list[dict[str, Any]] = []  # cells whose Group is open: group, LOD, entry
         offsets: list[np.ndarray] = []
+        shift = np.zeros(3)  # the scene origin, once the frame declares it
         for event, element in etree.iterparse(str(path), events=("start", "end")):
             tag, cell = element.tag, opened[-1] if opened else None
             if event == "start":
@@ -299,13 +333,15 @@ def read_cells(path: str | Path) -> list[dict[str, Any]]:
                     offsets.append(_vector(element.get("translation")))
                 elif tag == "LOD" and cell is not None and element.getparent() is cell["group"]:
                     cell["lod"] = element
-                    centre = _sum(offsets) + _vector(element.get("center"))
+                    centre = shift + _sum(offsets) + _vector(element.get("center"))
                     cell["entry"]["center"] = centre.tolist()
                     cell["entry"]["x3d"] = {"lod": element.get("DEF")}
             elif tag == "Transform":
                 offsets.pop()
             elif tag == "Shape":
                 element.clear()
+            elif _is_frame(element):
+                shift = _frame_origin(element)
             elif tag == "MetadataSet" and element.get("name") == METADATA_SET:
                 _cell_metadata(element, cell, cells, opened)
             elif tag == "Group" and cell is not None and element is cell["group"]:

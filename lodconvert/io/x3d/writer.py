@@ -4,8 +4,11 @@
 Layout of a written file (validates against the official x3d-4.0.xsd)::
 
     <X3D profile='Interchange' version='4.0' ...>
-      <head> components Navigation 2, Rendering 4, Shape 5; meta generator, source, crs, ...
+      <head> components Navigation 2, Rendering 4, Shape 5; meta generator, source, crs,
+              vertical-reference, ...
       <Scene>
+        <Transform DEF='scene_frame' rotation='1 0 0 -1.5707963267948966'>   (only with a CRS)
+          <MetadataSet name='lodconvert_frame' containerField='metadata'> origin, rotation, ...
         <Transform DEF='id' translation='origin (full float64 precision)'>
           <LOD DEF='id_LOD' center=... range='cutoffs' forceTransitions='true'>
             <MetadataSet name='lodconvert' containerField='metadata'> alpha, β, γ, xs, ...
@@ -17,6 +20,14 @@ Layout of a written file (validates against the official x3d-4.0.xsd)::
             <Group DEF='id_LOD3'>   (baked points)
               <MetadataSet ...> + Shapes with PointProperties + PointSet ...
             <Group/>   (only for a culled chain: nothing is drawn beyond the last range)
+        </Transform>   (scene_frame: it holds every object)
+        <NavigationInfo type='"EXAMINE" "ANY"'/>
+        <Viewpoint DEF='lodconvert_view' ...>   (the whole scene, seen obliquely)
+
+A scene with a CRS (a city model) is written in its scene frame (:mod:`lodconvert.io.frame`):
+one ``Transform`` turns its z-up coordinates into X3D's y-up, and the objects' translations
+are offsets from the scene origin its ``MetadataSet`` records (float64, with the rotation).
+The ``Viewpoint`` comes last, once every object is written (:mod:`.viewpoint`).
 
 Each level is a ``Group`` of one or more ``Shape`` s so that no attribute value comes near
 libxml2's 10 MB limit on a text node (``XML_MAX_TEXT_LENGTH``), which default XML parsers and
@@ -89,6 +100,7 @@ from __future__ import annotations
 import base64
 import contextlib
 import io
+import itertools
 import json
 import math
 import re
@@ -101,8 +113,11 @@ from PIL import Image as PILImage
 
 from ...errors import UsageError
 from ...model import CellChain, Level, LodChain, Mesh, Surface
+from ...model.safe_text import NOT_XML_CHARS, xml_text
 from .. import OutputInfo
+from ..frame import ROTATION, SceneFrame, scene_frame
 from ..numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
+from .viewpoint import NAVIGATION, SceneBox
 
 XSI = "http://www.w3.org/2001/XMLSchema-instance"
 SCHEMA_URL = "https://www.web3d.org/specifications/x3d-4.0.xsd"
@@ -140,6 +155,12 @@ Interchange. A profile, not component statements: a script adding a component th
 already declares fails in X_ITE (lodconvert's viewer page adds EnvironmentalSensor)."""
 
 METADATA_SET = "lodconvert"
+FRAME_DEF = "scene_frame"
+"""DEF of the ``Transform`` that turns a georeferenced scene y-up (:mod:`lodconvert.io.frame`)."""
+FRAME_METADATA = "lodconvert_frame"
+"""Name of that Transform's ``MetadataSet``: the scene origin and rotation."""
+FRAME_ROTATION = "1 0 0 -1.5707963267948966"
+"""The frame's ``rotation``: −90° about x, source (x, y, z) → scene (x, z, −y)."""
 _NOT_NCNAME = re.compile(r"[^A-Za-z0-9_.\-]")
 
 Metadata = tuple[str, str, str]
@@ -147,12 +168,6 @@ Metadata = tuple[str, str, str]
 
 
 _DECLARATION = "<?xml version='1.0' encoding='UTF-8'?>"
-_NOT_XML_CHARS = r"\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff"
-"""Characters that XML 1.0 forbids, which lxml refuses (a lone surrogate fails UTF-8 encoding)."""
-_NOT_XML = re.compile(f"[{_NOT_XML_CHARS}]")
-_NOT_XML_ERROR = (
-    "All strings must be XML compatible: Unicode or ASCII, no NULL bytes or control characters"
-)
 _ENTITIES = (
     ("&", "&amp;"),
     ("<", "&lt;"),
@@ -163,16 +178,16 @@ _ENTITIES = (
     ("\r", "&#13;"),
 )
 """What libxml2 escapes in a double-quoted attribute value, ``&`` first."""
-_TO_ESCAPE = re.compile(f'[&<>"\\t\\n\\r{_NOT_XML_CHARS}]')
+_TO_ESCAPE = re.compile(f'[&<>"\\t\\n\\r{NOT_XML_CHARS}]')
 
 
 def _escape(value: str) -> str:
     """``value`` as double-quoted XML attribute text, escaped as libxml2 (lxml) writes it; a
-    character XML forbids raises :class:`ValueError`, as lxml does."""
+    character XML cannot hold (which lxml refuses) or a lone surrogate is written as
+    ``\\uXXXX`` first (:func:`~lodconvert.model.safe_text.xml_text`)."""
     if _TO_ESCAPE.search(value) is None:
         return value
-    if _NOT_XML.search(value):
-        raise ValueError(_NOT_XML_ERROR)
+    value = xml_text(value)
     for char, entity in _ENTITIES:
         if char in value:
             value = value.replace(char, entity)
@@ -257,6 +272,7 @@ def _head(out: _Out, info: OutputInfo, switching: str) -> None:
         ("generator", info.generator),
         ("source", info.source),
         *([("crs", info.crs)] if info.crs else []),
+        *([("vertical-reference", info.vertical)] if info.vertical else []),
         (
             "reference-view",
             f"{view.height_px} px high viewport, {view.fov_y_deg:g} degree vertical field of "
@@ -286,6 +302,17 @@ def _head(out: _Out, info: OutputInfo, switching: str) -> None:
             out.leaf("component", {"name": name, "level": str(level)})
         for name, content in meta:
             out.leaf("meta", {"name": name, "content": content})
+
+
+def _frame_metadata(out: _Out, frame: SceneFrame) -> None:
+    """The scene frame's ``MetadataSet``: its origin (float64), rotation (row-major), axes and
+    how to get source coordinates back."""
+    record = frame.record()
+    with out.node("MetadataSet", {"name": FRAME_METADATA, "containerField": "metadata"}):
+        out.leaf("MetadataDouble", {"name": "origin", "value": format_exact(frame.origin)})
+        out.leaf("MetadataDouble", {"name": "rotation", "value": format_exact(ROTATION.ravel())})
+        for name in ("axes", "meaning"):
+            out.leaf("MetadataString", {"name": name, "value": _mfstring([record[name]])})
 
 
 def _metadata_set(out: _Out, entries: list[Metadata]) -> None:
@@ -645,21 +672,31 @@ class _Written:
 
 
 def _write_chain(
-    out: _Out, chain: LodChain, used: set[str], written: dict[int, _Written], switching: str
+    out: _Out,
+    chain: LodChain,
+    used: set[str],
+    written: dict[int, _Written],
+    switching: str,
+    shift: np.ndarray,
 ) -> None:
     """One chain: its ``Transform`` (inside one more for an instance of shared geometry) with
     the chain's metadata and its ``LOD`` — defined the first time its levels are written,
     ``USE`` d by later instances. With prism switching the LOD goes into a ``Switch`` that
-    draws nothing, followed by the nodes that draw its levels (:func:`_write_prism`)."""
+    draws nothing, followed by the nodes that draw its levels (:func:`_write_prism`). Positions
+    are less ``shift`` (the scene origin, zero without a frame): an object's translation, or an
+    instance's placement (its chain keeps its origin, as its facts declare)."""
     _check_chain(chain)
     shared = written.get(id(chain.levels))
     prism_regions = len(chain.cutoffs) if switching == "prism" else None
     levels = [] if shared else chain.levels
     base, level_defs = _unique_names(chain.object_id, used, levels, prism_regions)
-    transform = {"DEF": base, "translation": format_exact(chain.origin)}
+    origin = chain.origin if chain.transform is not None else chain.origin - shift
+    transform = {"DEF": base, "translation": format_exact(origin)}
     with contextlib.ExitStack() as stack:
         if chain.transform is not None:
-            fields = {"DEF": f"{base}_instance", **instance_fields(chain.transform)}
+            placed = chain.transform.copy()
+            placed[:3, 3] -= shift
+            fields = {"DEF": f"{base}_instance", **instance_fields(placed)}
             stack.enter_context(out.node("Transform", fields))
         with out.node("Transform", transform):
             # The chain's metadata goes on the Transform: X3DOM counts a MetadataSet inside
@@ -765,12 +802,13 @@ def _write_item(
     used: set[str],
     written: dict[int, _Written],
     switching: str,
+    shift: np.ndarray,
 ) -> None:
-    """An object's chain, or a LOD parent with everything in it."""
+    """An object's chain, or a LOD parent with everything in it, placed from ``shift``."""
     if isinstance(item, CellChain):
-        _write_cell(out, item, used, written, switching)
+        _write_cell(out, item, used, written, switching, shift)
     else:
-        _write_chain(out, item, used, written, switching)
+        _write_chain(out, item, used, written, switching, shift)
 
 
 def _cell_metadata(cell: CellChain) -> list[Metadata]:
@@ -787,12 +825,17 @@ def _cell_metadata(cell: CellChain) -> list[Metadata]:
 
 
 def _write_cell(
-    out: _Out, cell: CellChain, used: set[str], written: dict[int, _Written], switching: str
+    out: _Out,
+    cell: CellChain,
+    used: set[str],
+    written: dict[int, _Written],
+    switching: str,
+    shift: np.ndarray,
 ) -> None:
     """A LOD parent: a ``Group`` with the cell's metadata around an ``LOD`` (centred on the
     members' bounding box, in scene coordinates) whose near child holds the members as they
     are written alone and whose far child is the cell's one level, in a ``Transform`` to the
-    cell's origin (then an empty ``Group`` for a culled cell)."""
+    cell's origin (then an empty ``Group`` for a culled cell); positions less ``shift``."""
     base, (far_def,) = _unique_names(cell.cell_id, used, [cell.far])
     near, far = f"{base}_near", f"{base}_far"
     used.update((near, far))
@@ -800,15 +843,16 @@ def _write_cell(
         _metadata_set(out, _cell_metadata(cell))
         lod = {
             "DEF": f"{base}_LOD",
-            "center": format_exact(cell.origin + cell.center),
+            "center": format_exact(cell.origin - shift + cell.center),
             "range": format_exact(cell.cutoffs),
             "forceTransitions": "true",
         }
         with out.node("LOD", lod):
             with out.node("Group", {"DEF": near}):
                 for member in cell.members:
-                    _write_item(out, member, used, written, switching)
-            with out.node("Transform", {"DEF": far, "translation": format_exact(cell.origin)}):
+                    _write_item(out, member, used, written, switching, shift)
+            placed = format_exact(cell.origin - shift)
+            with out.node("Transform", {"DEF": far, "translation": placed}):
                 # the far level shows from the cell's first cutoff on, like a chain's second
                 _write_level(out, cell.far, far_def, cell.cutoffs, 1, cell.alpha)
             if cell.culled:
@@ -863,8 +907,24 @@ def write_x3d(
     with out.node("X3D", root):
         _head(out, info, switching)
         with out.node("Scene"):
-            for item in chains:
-                _write_item(out, item, used, written, switching)
-                out.flush()
+            items = iter(chains)
+            first = next(items, None)
+            frame = scene_frame(info.crs, first) if first is not None else None
+            box = SceneBox(frame)
+            shift = frame.origin if frame is not None else np.zeros(3)
+            with contextlib.ExitStack() as framed:
+                if frame is not None:
+                    used.add(FRAME_DEF)
+                    attrib = {"DEF": FRAME_DEF, "rotation": FRAME_ROTATION}
+                    framed.enter_context(out.node("Transform", attrib))
+                    _frame_metadata(out, frame)
+                for item in itertools.chain([first] if first is not None else [], items):
+                    _write_item(out, item, used, written, switching, shift)
+                    box.add(item)
+                    out.flush()
+            view = box.viewpoint()
+            if view is not None:
+                out.leaf("NavigationInfo", NAVIGATION)
+                out.leaf("Viewpoint", view)
     out.flush()
     handle.write(b"\n")

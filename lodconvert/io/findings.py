@@ -1,4 +1,4 @@
-"""The :class:`Finding` of a check and the collector the format checks report into."""
+"""The :class:`Finding` of a check and the collector the formats' checks report into."""
 
 from __future__ import annotations
 

@@ -1,0 +1,83 @@
+"""Every module of the package imports on its own, as in a fresh interpreter: no import cycle
+hides behind the order in which other modules happen to be imported first. Each is imported in
+a child forked from an interpreter that has loaded what the package imports from elsewhere but
+none of the package's own modules."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from .conftest import ROOT
+
+PACKAGE = ROOT / "lodconvert"
+ALONE = r"""
+import importlib, os, sys, traceback
+
+def forked(body):
+    # run body() in a child of this process; its exit status and what it printed to a pipe
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(read)
+        try:
+            text, status = body() or "", 0
+        except BaseException:
+            text, status = traceback.format_exc().strip().splitlines()[-1], 1
+        os.write(write, text.encode())
+        os._exit(status)
+    os.close(write)
+    with os.fdopen(read, "rb") as pipe:
+        text = pipe.read().decode()
+    return os.waitstatus_to_exitcode(os.waitpid(pid, 0)[1]), text
+
+def others():
+    for module in sys.argv[1:]:
+        try:
+            importlib.import_module(module)
+        except BaseException:
+            pass
+    return "\n".join(sorted(n for n in sys.modules if n.split(".")[0] != "lodconvert"))
+
+# what the package imports from elsewhere is loaded once, here, so that each child imports
+# only the package's own modules, and those from none but the one it is asked for
+for name in forked(others)[1].split():
+    try:
+        importlib.import_module(name)
+    except BaseException:
+        pass
+assert not any(n.split(".")[0] == "lodconvert" for n in sys.modules)
+for module in sys.argv[1:]:
+    status, text = forked(lambda: importlib.import_module(module) and None)
+    if status:
+        print(f"{module}: {text}")
+"""
+
+
+def _modules() -> list[str]:
+    names = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        if parts[-1] == "__main__":
+            continue  # running it is the CLI
+        if parts[-1] == "__init__":
+            parts.pop()
+        names.append(".".join(parts))
+    return names
+
+
+def test_every_module_imports_alone_in_a_fresh_interpreter() -> None:
+    modules = _modules()
+    assert "lodconvert.io.x3d.check" in modules and len(modules) > 50
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    run = subprocess.run(
+        [sys.executable, "-c", ALONE, *modules],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip() == ""

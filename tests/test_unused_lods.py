@@ -1,0 +1,96 @@
+"""Source LoDs that no level is made from are named in the report, with why: the lower labels
+of a slot (CityJSON LoD 1.2 beside 1.3), a LoD 0 beside a source LoD 1, every other LoD where
+the options bake from the finest geometry."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+import trimesh
+
+from lodconvert.chain import ChainOptions
+from lodconvert.model import Mesh, Surface
+from lodconvert.pipeline import convert
+from lodconvert.sourcelods import unused_levels
+
+from .conftest import ROOT, SHARED
+from .test_cli import run
+
+MULTI_LOD = SHARED / "data" / "cityjson" / "multi_lod_10bldg.city.json"
+SIG3D = SHARED / "data" / "citygml" / "sig3d_house_lod0-4"
+
+
+def present(path: Path) -> Path:
+    """``path``, or skip the test where the shared data is absent."""
+    if not path.exists():
+        pytest.skip(f"{path} is absent (shared test data not checked out)")
+    return path
+
+
+def block(height: float) -> Mesh:
+    """A 10 × 10 m box standing on z = 0."""
+    box = trimesh.creation.box((10, 10, height))
+    box.apply_translation((0, 0, height / 2))
+    return Mesh([Surface(np.asarray(box.vertices, float), np.asarray(box.faces, np.int64))])
+
+
+def objects_of(tmp_path: Path, inputs: list[Path], options: ChainOptions) -> list[dict]:
+    """The report's objects of converting ``inputs``, the report checked against its schema."""
+    report = tmp_path / "report.json"
+    convert(inputs, tmp_path / "out.glb", options, backend="numpy", report_path=report)
+    data = json.loads(report.read_text())
+    jsonschema.validate(data, json.loads((ROOT / "schemas/report.schema.json").read_text()))
+    return data["objects"]
+
+
+def test_each_label_left_out_of_a_slot_says_which_took_it() -> None:
+    empty = Mesh([Surface(np.zeros((0, 3)), np.zeros((0, 3), np.int64))])
+    lods = {"1.2": block(8), "1.3": block(9), "1.1": block(7), "2.2": block(10)}
+    lods |= {"5": block(11), "roof edge": block(1), "2.0": empty}
+    assert unused_levels(lods) == {
+        "1.2": "slot LOD1 taken by LoD 1.3",
+        "1.1": "slot LOD1 taken by LoD 1.3",
+        "5": "names no LoD 0–4",
+        "roof edge": "names no LoD 0–4",
+        "2.0": "has no faces",
+    }
+
+
+def test_the_report_names_lod_1_2_beside_the_lod_1_3_that_fills_lod1(tmp_path: Path) -> None:
+    objects = objects_of(tmp_path, [present(MULTI_LOD)], ChainOptions())
+    assert len(objects) == 10
+    for obj in objects:
+        assert obj["unused"] == {"1.2": "slot LOD1 taken by LoD 1.3"}
+        assert [level["name"] for level in obj["levels"]] == ["LOD2", "LOD1"]
+
+
+def test_the_summary_counts_the_unused_lods(tmp_path: Path) -> None:
+    result = run(present(MULTI_LOD), "-o", tmp_path / "out.glb", "--backend", "numpy")
+    assert result.returncode == 0, result.stderr
+    assert "10 object(s) have source LoDs that no level is made from: LoD 1.2 (10)" in (
+        result.stderr
+    )
+
+
+def test_with_three_levels_every_lod_but_the_finest_is_unused(tmp_path: Path) -> None:
+    objects = objects_of(tmp_path, [present(MULTI_LOD)], ChainOptions(levels=3))
+    for obj in objects:
+        assert obj["unused"] == {
+            "1.2": "slot LOD1 taken by LoD 1.3",
+            "1.3": "--levels 3: every level is made from the finest geometry",
+        }
+
+
+def test_the_sig3d_house_names_its_footprint_where_its_own_lod1_fills_the_slot(
+    tmp_path: Path,
+) -> None:
+    files = sorted(present(SIG3D).glob("*.gml"))
+    objects = objects_of(tmp_path, files, ChainOptions())
+    house = next(obj for obj in objects if len(obj["levels"]) == 4)
+    assert house["unused"] == {"lod0": "LOD1 is the source's lod1, not a prism of this footprint"}
+    lod0_only = objects_of(tmp_path, [files[0]], ChainOptions())  # Building_LOD0: the prism
+    assert next(o for o in lod0_only if o["id"] == house["id"])["unused"] == {}
