@@ -31,6 +31,8 @@ class Limits:
     """Nesting depth of an XML input (city models)."""
     xml_text_bytes: int = 256 * MIB
     """Bytes of one XML text node (a ``posList``, say) of an XML input."""
+    sequence_line_bytes: int = 64 * MIB
+    """Bytes of one line of a CityJSONSeq input (its header or one feature)."""
 
     def check(self) -> None:
         """Raise :class:`UsageError` unless every limit is a positive whole number."""

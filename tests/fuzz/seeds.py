@@ -1,6 +1,7 @@
 """Small valid files of every input suffix, generated here (no files checked in): a box as
 OBJ, ASCII and binary PLY, ASCII and binary STL, OFF, GLB and glTF (buffer embedded); a house
-as CityJSON, CityJSONSeq, CityGML and CityGML in a zip."""
+as CityJSON, CityJSONSeq, CityGML and CityGML in a zip; a building with a part and a tree
+placed as a template's instance as CityJSON and CityJSONSeq."""
 
 from __future__ import annotations
 
@@ -43,8 +44,8 @@ def generated() -> dict[str, tuple[bytes, ...]]:
         ".off": (mesh.export(file_type="off").encode(),),
         ".glb": (scene.export(file_type="glb"),),
         ".gltf": (json.dumps(json.loads(gltf["model.gltf"])).encode(),),
-        ".json": (_cityjson()[0],),
-        ".jsonl": (_cityjson()[1],),
+        ".json": (_cityjson()[0], _cityjson_parts_and_template()[0]),
+        ".jsonl": (_cityjson()[1], _cityjson_parts_and_template()[1]),
         ".gml": (_citygml(), _citygml_interior_and_terrain(), _citygml_implicit()),
         ".xml": (_citygml(),),
         ".zip": (_zipped("city.gml", _citygml()),),
@@ -88,6 +89,50 @@ def _cityjson() -> tuple[bytes, bytes]:
     }
     sequence = json.dumps({**header, "CityObjects": {}, "vertices": []}) + "\n"
     return json.dumps(document).encode(), (sequence + json.dumps(feature) + "\n").encode()
+
+
+def _cityjson_parts_and_template() -> tuple[bytes, bytes]:
+    """A building with a BuildingPart (``children`` and ``parents``) and a tree placed as an
+    instance of a geometry template, as CityJSON 2.0 and as CityJSONSeq."""
+    square = [[[0, 1, 2, 3]]]
+    building = {
+        "type": "Building",
+        "children": ["part"],
+        "geometry": [{"type": "MultiSurface", "lod": "1", "boundaries": square}],
+    }
+    part = {
+        "type": "BuildingPart",
+        "parents": ["building"],
+        "geometry": [{"type": "MultiSurface", "lod": "2", "boundaries": [[[4, 5, 6, 7]]]}],
+    }
+    instance = {
+        "type": "GeometryInstance",
+        "template": 0,
+        "boundaries": [8],
+        "transformationMatrix": [2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 1],
+    }
+    tree = {"type": "SolitaryVegetationObject", "geometry": [instance]}
+    vertices = [[0, 0, 0], [900, 0, 0], [900, 900, 0], [0, 900, 0]]
+    vertices += [[x, y, 500] for x, y, _ in vertices] + [[2000, 2000, 0]]
+    header = {
+        "type": "CityJSON",
+        "version": "2.0",
+        "transform": {"scale": [0.01, 0.01, 0.01], "translate": [1000.0, 2000.0, 0.0]},
+        "geometry-templates": {
+            "templates": [{"type": "MultiSurface", "lod": "2", "boundaries": square}],
+            "vertices-templates": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+        },
+    }
+    objects = {"building": building, "part": part, "tree": tree}
+    document = {**header, "CityObjects": objects, "vertices": vertices}
+    features = [
+        {"CityObjects": {"building": building, "part": part}, "vertices": vertices},
+        {"CityObjects": {"tree": tree}, "vertices": vertices},
+    ]
+    lines = [{**header, "CityObjects": {}, "vertices": []}]
+    lines += [{"type": "CityJSONFeature", "id": f"f{k}", **f} for k, f in enumerate(features)]
+    sequence = "".join(json.dumps(line) + "\n" for line in lines)
+    return json.dumps(document).encode(), sequence.encode()
 
 
 def _citygml() -> bytes:
