@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import trimesh
 
+from lodconvert import convert
 from lodconvert.chain import ChainOptions
 from lodconvert.model import Mesh, Surface
-from lodconvert.pipeline import convert
 from lodconvert.sourcelods import unused_levels
 
 from .conftest import ROOT, SHARED

@@ -1,0 +1,309 @@
+"""Baking as pure work: a :class:`BakeTask` (a batch of objects, each with its options resolved)
+gives a :class:`BakeResult` (each object's chain, or why it was skipped, and its warnings, as
+data), and an :class:`Executor` runs tasks and gives their results back in the order the tasks
+were submitted.
+
+Two executors: :class:`SerialExecutor` runs each task in this process when its result is asked
+for; :class:`PoolExecutor` runs them in worker processes started with ``spawn`` (a forked child
+of a process holding a GL context deadlocks; each worker makes its own backend), with a bounded
+window of tasks in flight, so memory stays bounded and the output is the same as serial. A
+worker that dies mid-task is replaced and its task run once more; when it dies again, the task's
+objects are reported as failed and the run goes on.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import time
+from collections import deque
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+from typing import Any, Self
+
+from .bake import Backend, get_backend
+from .chain import ChainOptions, ChainPlan, Progress, bake_chain, plan_chain
+from .errors import InputError
+from .limits import DEFAULT_LIMITS, Limits
+from .model import LodChain, Node
+
+TASK_SECONDS = 0.1
+"""Work a batch is sized for: a process pool costs about 0.1 ms a task, so this keeps the
+overhead well under 1 %."""
+MAX_BATCH = 256
+"""Objects a batch holds at most (memory in flight stays small)."""
+
+
+@dataclass(frozen=True)
+class BakeTask:
+    """Objects to bake, each with the options to bake it with (γ already decided); with
+    ``plan_only``, plan each chain (:func:`~.chain.plan_chain`) and bake nothing."""
+
+    items: tuple[tuple[Node, ChainOptions], ...]
+    limits: Limits = DEFAULT_LIMITS
+    plan_only: bool = False
+
+    def object_ids(self) -> list[str]:
+        """The ids of the task's objects, in order."""
+        return [node.id for node, _ in self.items]
+
+
+@dataclass(frozen=True)
+class Baked:
+    """What became of one object: its chain (or plan), or the ``reason`` it was skipped, and the
+    warnings its baking gave, in order."""
+
+    chain: LodChain | ChainPlan | None
+    reason: str | None = None
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class BakeResult:
+    """The outcome of each object of a task, in the task's order, and the seconds it took."""
+
+    outcomes: tuple[Baked, ...]
+    seconds: float
+
+
+def run_task(task: BakeTask, backend: Backend, progress: Progress | None = None) -> BakeResult:
+    """Bake (or plan) each object of ``task`` with ``backend``; an object whose geometry cannot
+    be baked (:class:`~.errors.InputError`) is an outcome with its reason, not an error.
+    ``progress`` hears what is being baked as it happens."""
+    start = time.perf_counter()
+    outcomes = []
+    for node, options in task.items:
+        warnings: list[str] = []
+        try:
+            chain = plan_chain(node, options) if task.plan_only else bake_chain(
+                node, options, backend, progress=progress, warn=warnings.append,
+                limits=task.limits,
+            )  # fmt: skip
+        except InputError as exc:
+            outcomes.append(Baked(None, str(exc), tuple(warnings)))
+            continue
+        outcomes.append(Baked(chain, None, tuple(warnings)))
+    return BakeResult(tuple(outcomes), time.perf_counter() - start)
+
+
+def failed_result(task: BakeTask, reason: str) -> BakeResult:
+    """The result of a task none of whose objects could be converted, for ``reason``."""
+    return BakeResult(tuple(Baked(None, f"{i}: {reason}") for i in task.object_ids()), 0.0)
+
+
+class Executor:
+    """Runs tasks; their results come back in submission order. Use as a context manager:
+    leaving it stops whatever it started."""
+
+    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+        """The result of each of ``tasks``, in order (tasks are taken as they are needed)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Stop whatever runs tasks (nothing by default)."""
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass
+class SerialExecutor(Executor):
+    """Each task run in this process when its result is asked for (``--workers 1``)."""
+
+    backend: Backend
+    progress: Progress | None = None
+
+    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+        """The result of each of ``tasks``, each run as it is taken."""
+        for task in tasks:
+            yield run_task(task, self.backend, self.progress)
+
+
+def _work(conn: Connection, backend_name: str) -> None:
+    """A worker process: take tasks from ``conn``, send back what it heard of progress and
+    then each result (or the exception that ended a task) until ``None`` arrives. Ctrl-C is
+    the main process's to handle: it stops the workers."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    backend = get_backend(backend_name)  # a GL context, if any, is made here, after spawn
+
+    def progress(text: str) -> None:
+        conn.send(("progress", text))
+
+    while (task := conn.recv()) is not None:
+        try:
+            conn.send(("result", run_task(task, backend, progress)))
+        except Exception as exc:  # a bug, not bad input: the main process raises it
+            conn.send(("error", exc))
+
+
+@dataclass
+class _Worker:
+    """One worker process, its end of the pipe and the task it holds (its sequence number)."""
+
+    process: Any
+    conn: Connection
+    holding: int | None = None
+
+
+class PoolExecutor(Executor):
+    """Tasks run by ``workers`` processes (``spawn``), each baking with its own backend of
+    ``backend_name``; at most ``window`` tasks are in flight or waiting to be consumed."""
+
+    def __init__(
+        self,
+        workers: int,
+        backend_name: str,
+        progress: Progress | None = None,
+        window: int | None = None,
+    ) -> None:
+        self.workers = workers
+        self.backend_name = backend_name
+        self.progress = progress
+        self.window = window or 2 * workers
+        self._context = multiprocessing.get_context("spawn")
+        self._workers: list[_Worker] = []
+
+    def _start(self) -> _Worker:
+        ours, theirs = self._context.Pipe()
+        process = self._context.Process(
+            target=_work, args=(theirs, self.backend_name), daemon=True, name="lodconvert-worker"
+        )
+        process.start()
+        theirs.close()
+        return _Worker(process, ours)
+
+    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+        """The result of each of ``tasks``, in order; a task whose worker died twice gives a
+        result with each of its objects failed."""
+        pending = iter(tasks)
+        submitted: dict[int, BakeTask] = {}
+        queue: deque[int] = deque()  # tasks waiting for a worker, by number
+        tries: dict[int, int] = {}
+        done: dict[int, BakeResult] = {}
+        workers = self._workers
+        taken = next_number = 0
+        exhausted = False
+        try:
+            while True:
+                while not exhausted and next_number - taken < self.window:
+                    task = next(pending, None)
+                    if task is None:
+                        exhausted = True
+                        break
+                    submitted[next_number] = task
+                    queue.append(next_number)
+                    next_number += 1
+                if taken in done:
+                    submitted.pop(taken)
+                    yield done.pop(taken)
+                    taken += 1
+                    continue
+                if exhausted and taken == next_number:
+                    return
+                self._dispatch(workers, queue, submitted)
+                self._collect(workers, queue, submitted, tries, done)
+        finally:
+            self.close()
+
+    def _dispatch(
+        self, workers: list[_Worker], queue: deque[int], submitted: dict[int, BakeTask]
+    ) -> None:
+        """Give waiting tasks to idle workers, starting workers up to the pool's size."""
+        while queue:
+            idle = next((w for w in workers if w.holding is None), None)
+            if idle is None and len(workers) < self.workers:
+                idle = self._start()
+                workers.append(idle)
+            if idle is None:
+                return
+            idle.holding = queue.popleft()
+            idle.conn.send(submitted[idle.holding])
+
+    def _collect(
+        self,
+        workers: list[_Worker],
+        queue: deque[int],
+        submitted: dict[int, BakeTask],
+        tries: dict[int, int],
+        done: dict[int, BakeResult],
+    ) -> None:
+        """Wait until a busy worker sends something or dies, and take it in."""
+        busy = [w for w in workers if w.holding is not None]
+        ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy])
+        for worker in busy:
+            assert worker.holding is not None
+            if worker.conn in ready:
+                try:
+                    kind, value = worker.conn.recv()
+                except EOFError:  # it died: its sentinel says so below
+                    kind, value = "died", None
+                if kind == "progress" and self.progress is not None:
+                    self.progress(value)
+                elif kind == "result":
+                    done[worker.holding] = value
+                    worker.holding = None
+                elif kind == "error":
+                    raise value
+                if kind != "died":
+                    continue
+            if worker.conn in ready or worker.process.sentinel in ready:
+                number = worker.holding
+                worker.process.join()
+                code = worker.process.exitcode
+                workers.remove(worker)
+                tries[number] = tries.get(number, 0) + 1
+                if tries[number] < 2:
+                    queue.appendleft(number)
+                else:
+                    done[number] = failed_result(submitted[number], _death(code))
+
+    def close(self) -> None:
+        """End every worker: idle ones are told to, busy ones terminated; all are waited for."""
+        workers, self._workers[:] = list(self._workers), []
+        for worker in workers:
+            if worker.holding is None:
+                try:
+                    worker.conn.send(None)
+                except OSError:
+                    worker.process.terminate()
+            else:
+                worker.process.terminate()
+        for worker in workers:
+            worker.process.join()
+            worker.conn.close()
+
+
+def _death(code: int | None) -> str:
+    """Why a task failed when its worker died with exit ``code`` twice."""
+    how = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else code
+    return f"the worker process converting it died twice ({how})"
+
+
+def default_workers() -> int:
+    """The cores this process may run on."""
+    return len(os.sched_getaffinity(0))
+
+
+def batches(
+    items: Iterable[tuple[Node, ChainOptions]],
+    per_object: list[float],
+    limits: Limits,
+    plan_only: bool = False,
+) -> Iterator[BakeTask]:
+    """``items`` as tasks of about :data:`TASK_SECONDS` of work each, judged by ``per_object``
+    (a one-item list: seconds an object takes so far, updated by the caller; 0: not known yet,
+    a task of one object)."""  # fmt: skip
+    batch: list[tuple[Node, ChainOptions]] = []
+    for item in items:
+        batch.append(item)
+        wanted = int(TASK_SECONDS / per_object[0]) if per_object[0] > 0 else 1
+        if len(batch) >= max(1, min(MAX_BATCH, wanted)):
+            yield BakeTask(tuple(batch), limits, plan_only)
+            batch = []
+    if batch:
+        yield BakeTask(tuple(batch), limits, plan_only)
