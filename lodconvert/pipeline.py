@@ -193,7 +193,7 @@ class _Bakery:
     ) -> Iterator[LodChain | ChainPlan | None]:
         """The chain (the plan, with ``plan_only``) of each of ``objects`` (each with the plot
         radius to use as its γ, or ``None``), in order; ``None`` for one that is skipped."""
-        seen: set[int] = set()
+        seen: set[int | None] = set()  # keys of geometry placed by a node sent before
         shared: dict[int, LodChain | ChainPlan] = {}
         order: deque[tuple[Node, float | None, bool]] = deque()  # each object, and if sent
         per_object = [0.0]
@@ -201,9 +201,10 @@ class _Bakery:
         def sent() -> Iterator[tuple[Node, ChainOptions]]:
             for node, radius in objects:
                 key = id(node.geometry) if node.transform is not None else None
-                order.append((node, radius, key is None or key not in seen))
-                if key is None or key not in seen:
-                    seen.add(key) if key is not None else None
+                first = key is None or key not in seen
+                order.append((node, radius, first))
+                if first:
+                    seen.add(key)
                     yield node, self._options(radius)
 
         tasks = self.clock.iterate("plan", batches(sent(), per_object, self.limits, self.plan_only))

@@ -13,6 +13,7 @@ objects are reported as failed and the run goes on.
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import signal
@@ -168,6 +169,13 @@ class PoolExecutor(Executor):
         self._context = multiprocessing.get_context("spawn")
         self._workers: list[_Worker] = []
 
+    def __enter__(self) -> Self:
+        """Start the workers now, so that they are ready (imports done, backends made) when the
+        first task comes: that happens while the main process reads."""
+        while len(self._workers) < self.workers:
+            self._workers.append(self._start())
+        return self
+
     def _start(self) -> _Worker:
         ours, theirs = self._context.Pipe()
         process = self._context.Process(
@@ -222,7 +230,8 @@ class PoolExecutor(Executor):
             if idle is None:
                 return
             idle.holding = queue.popleft()
-            idle.conn.send(submitted[idle.holding])
+            with contextlib.suppress(BrokenPipeError, ConnectionResetError):  # it died: see
+                idle.conn.send(submitted[idle.holding])  # _collect, which waits on its sentinel
 
     def _collect(
         self,

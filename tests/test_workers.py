@@ -195,3 +195,10 @@ def test_an_interrupted_run_stops_its_workers_and_leaves_nothing(
         assert run.wait() == code, rest
     assert list(out.parent.iterdir()) == []
     assert not [pid for pid in workers if Path(f"/proc/{pid}").exists()]
+
+
+def test_workers_below_one_is_a_usage_error(mixed: Path, tmp_path: Path) -> None:
+    run = _lodconvert(mixed, "-o", tmp_path / "out.glb", "--workers", "0")
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines()[-1].endswith("--workers must be at least 1, got 0")
+    assert list(tmp_path.iterdir()) == []
