@@ -1,9 +1,12 @@
-"""The conversion session: read → bake each object → stream chains into the writer → check →
-commit every output together.
+"""The conversion as stages over data, with one :class:`RunOptions`: read → plan tasks (each
+object's γ, geometry placed by several nodes baked once, batches) → execute them
+(:mod:`.tasks`: in this process or in worker processes) → assemble (records, LOD parents) →
+write → check → commit every output together.
 
-Readers are free of processing and writers of baking; this module joins them, times each step
-and collects what the ``--report`` file records. One object that cannot be baked is reported and
-skipped; when none can, the conversion fails and no output file appears.
+Readers are free of processing and writers of baking; this module joins them, times each stage
+and collects what the ``--report`` file records. The main process takes each object's outcome in
+order: one that cannot be baked is reported and skipped; when none can, the conversion fails
+and no output file appears.
 """
 
 from __future__ import annotations
