@@ -16,11 +16,13 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import queue
 import signal
+import threading
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any, Self
 
@@ -33,6 +35,8 @@ from .model import LodChain, Node
 TASK_SECONDS = 0.1
 """Work a batch is sized for: a process pool costs about 0.1 ms a task, so this keeps the
 overhead well under 1 %."""
+DEPTH = 2
+"""Tasks sent to one worker at most: the one it works on and the next."""
 MAX_BATCH = 256
 """Objects a batch holds at most (memory in flight stays small)."""
 
@@ -126,29 +130,64 @@ class SerialExecutor(Executor):
 
 
 def _work(conn: Connection, backend_name: str) -> None:
-    """A worker process: take tasks from ``conn``, send back what it heard of progress and
-    then each result (or the exception that ended a task) until ``None`` arrives. Ctrl-C is
-    the main process's to handle: it stops the workers."""
+    """A worker process: run the tasks that arrive on ``conn`` in order, send back what it
+    heard of progress and then each result (or the exception that ended a task) until ``None``
+    arrives. Two threads move tasks and results through ``conn`` meanwhile, so baking goes on
+    while the main process is busy elsewhere. Ctrl-C is the main process's to handle: it stops
+    the workers."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    inbox: queue.SimpleQueue[BakeTask | None] = queue.SimpleQueue()
+    outbox: queue.SimpleQueue[tuple[str, Any] | None] = queue.SimpleQueue()
+    threading.Thread(target=_receive, args=(conn, inbox), daemon=True).start()
+    sender = threading.Thread(target=_send, args=(conn, outbox), daemon=True)
+    sender.start()
     backend = get_backend(backend_name)  # a GL context, if any, is made here, after spawn
 
     def progress(text: str) -> None:
-        conn.send(("progress", text))
+        outbox.put(("progress", text))
 
-    while (task := conn.recv()) is not None:
+    while (task := inbox.get()) is not None:
         try:
-            conn.send(("result", run_task(task, backend, progress)))
+            outbox.put(("result", run_task(task, backend, progress)))
         except Exception as exc:  # a bug, not bad input: the main process raises it
-            conn.send(("error", exc))
+            outbox.put(("error", exc))
+    outbox.put(None)
+    sender.join()
+
+
+def _receive(conn: Connection, inbox: queue.SimpleQueue[BakeTask | None]) -> None:
+    """Move tasks from ``conn`` to ``inbox`` as they arrive, then ``None`` (no more tasks, or
+    the main process is gone)."""
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            task = None
+        inbox.put(task)
+        if task is None:
+            return
+
+
+def _send(conn: Connection, outbox: queue.SimpleQueue[tuple[str, Any] | None]) -> None:
+    """Send what arrives in ``outbox`` through ``conn`` until ``None`` (or the main process is
+    gone); a result that cannot be pickled is sent as the error it raised."""
+    while (message := outbox.get()) is not None:
+        try:
+            conn.send(message)
+        except OSError:
+            return
+        except Exception as exc:
+            conn.send(("error", RuntimeError(f"a worker's {message[0]} cannot be sent: {exc}")))
 
 
 @dataclass
 class _Worker:
-    """One worker process, its end of the pipe and the task it holds (its sequence number)."""
+    """One worker process, its end of the pipe and the tasks sent to it (their numbers, in
+    the order it runs them: the first is the one it works on)."""
 
     process: Any
     conn: Connection
-    holding: int | None = None
+    held: deque[int] = field(default_factory=deque)
 
 
 class PoolExecutor(Executor):
@@ -165,7 +204,7 @@ class PoolExecutor(Executor):
         self.workers = workers
         self.backend_name = backend_name
         self.progress = progress
-        self.window = window or 2 * workers
+        self.window = window or (DEPTH + 1) * workers
         self._context = multiprocessing.get_context("spawn")
         self._workers: list[_Worker] = []
 
@@ -190,7 +229,7 @@ class PoolExecutor(Executor):
         result with each of its objects failed."""
         pending = iter(tasks)
         submitted: dict[int, BakeTask] = {}
-        queue: deque[int] = deque()  # tasks waiting for a worker, by number
+        waiting: deque[int] = deque()  # tasks not sent to a worker yet, by number
         tries: dict[int, int] = {}
         done: dict[int, BakeResult] = {}
         workers = self._workers
@@ -204,7 +243,7 @@ class PoolExecutor(Executor):
                         exhausted = True
                         break
                     submitted[next_number] = task
-                    queue.append(next_number)
+                    waiting.append(next_number)
                     next_number += 1
                 if taken in done:
                     submitted.pop(taken)
@@ -213,69 +252,71 @@ class PoolExecutor(Executor):
                     continue
                 if exhausted and taken == next_number:
                     return
-                self._dispatch(workers, queue, submitted)
-                self._collect(workers, queue, submitted, tries, done)
+                self._dispatch(workers, waiting, submitted)
+                self._collect(workers, waiting, submitted, tries, done)
         finally:
             self.close()
 
     def _dispatch(
-        self, workers: list[_Worker], queue: deque[int], submitted: dict[int, BakeTask]
+        self, workers: list[_Worker], waiting: deque[int], submitted: dict[int, BakeTask]
     ) -> None:
-        """Give waiting tasks to idle workers, starting workers up to the pool's size."""
-        while queue:
-            idle = next((w for w in workers if w.holding is None), None)
-            if idle is None and len(workers) < self.workers:
-                idle = self._start()
-                workers.append(idle)
-            if idle is None:
+        """Give waiting tasks to the workers holding fewest (up to :data:`DEPTH` each, so
+        that each has the next at hand), starting workers up to the pool's size."""
+        while waiting:
+            if len(workers) < self.workers:
+                workers.append(self._start())
+            worker = min(workers, key=lambda w: len(w.held))
+            if len(worker.held) >= DEPTH:
                 return
-            idle.holding = queue.popleft()
+            worker.held.append(waiting.popleft())
             with contextlib.suppress(BrokenPipeError, ConnectionResetError):  # it died: see
-                idle.conn.send(submitted[idle.holding])  # _collect, which waits on its sentinel
+                worker.conn.send(submitted[worker.held[-1]])  # _collect, which waits on it
 
     def _collect(
         self,
         workers: list[_Worker],
-        queue: deque[int],
+        waiting: deque[int],
         submitted: dict[int, BakeTask],
         tries: dict[int, int],
         done: dict[int, BakeResult],
     ) -> None:
-        """Wait until a busy worker sends something or dies, and take it in."""
-        busy = [w for w in workers if w.holding is not None]
+        """Wait until a busy worker sends something or dies, and take it in: a dead worker's
+        first task is charged a try (run again, or after two failed with each object), the
+        others it held wait again."""
+        busy = [w for w in workers if w.held]
         ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy])
         for worker in busy:
-            assert worker.holding is not None
+            dead = worker.process.sentinel in ready
             if worker.conn in ready:
                 try:
                     kind, value = worker.conn.recv()
-                except EOFError:  # it died: its sentinel says so below
-                    kind, value = "died", None
+                except (EOFError, ConnectionResetError):  # it died
+                    kind, value, dead = "died", None, True
                 if kind == "progress" and self.progress is not None:
                     self.progress(value)
                 elif kind == "result":
-                    done[worker.holding] = value
-                    worker.holding = None
+                    done[worker.held.popleft()] = value
                 elif kind == "error":
                     raise value
                 if kind != "died":
-                    continue
-            if worker.conn in ready or worker.process.sentinel in ready:
-                number = worker.holding
-                worker.process.join()
-                code = worker.process.exitcode
-                workers.remove(worker)
-                tries[number] = tries.get(number, 0) + 1
-                if tries[number] < 2:
-                    queue.appendleft(number)
-                else:
-                    done[number] = failed_result(submitted[number], _death(code))
+                    continue  # if it died too, its sentinel is read on the next wait
+            if not dead:
+                continue
+            worker.process.join()
+            workers.remove(worker)
+            first = worker.held.popleft()
+            waiting.extendleft(reversed(worker.held))
+            tries[first] = tries.get(first, 0) + 1
+            if tries[first] < 2:
+                waiting.appendleft(first)
+            else:
+                done[first] = failed_result(submitted[first], _death(worker.process.exitcode))
 
     def close(self) -> None:
         """End every worker: idle ones are told to, busy ones terminated; all are waited for."""
         workers, self._workers[:] = list(self._workers), []
         for worker in workers:
-            if worker.holding is None:
+            if not worker.held:
                 try:
                     worker.conn.send(None)
                 except OSError:
