@@ -368,6 +368,7 @@ def convert(
             vertical=crs_record["vertical"] if scene.city else None,
             view=options.view,
             options=options_record(options),
+            city=scene.city,
         )
 
         def recorded(items: Iterator[LodChain | CellChain]) -> Iterator[LodChain | CellChain]:
@@ -375,7 +376,7 @@ def convert(
             dropped = tally.dropped_by_object if tally is not None else {}
             for item in items:
                 if not frames:
-                    frames.append(scene_frame(info.crs, item))
+                    frames.append(scene_frame(info.framed, item))
                 objects = item.objects() if isinstance(item, CellChain) else [item]
                 for chain in objects:
                     records.append(
