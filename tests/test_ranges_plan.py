@@ -96,6 +96,18 @@ def test_points_still_to_bake_are_marked(tmp_path: Path) -> None:
     assert "LOD4 LOD3* LOD2* LOD1*" in table.stdout and "* points convert bakes" in table.stdout
 
 
+def test_the_table_keeps_its_columns_under_long_ids() -> None:
+    """KIT's ids are 45 characters long: every value still stands under its heading."""
+    (row, *_), table = run_json(
+        "ranges", shared_data(CITYGML / "kit_testcases_lod2_100bldg_v3.gml")
+    )
+    heading, first = table.stdout.splitlines()[:2]
+    assert first.startswith(row["id"] + " ")
+    for name, value in (("alpha", f"{row['alpha']:.6g}"), ("gamma", f"{row['gamma']:g}")):
+        assert first.index(value, len(row["id"])) + len(value) == heading.index(name) + len(name)
+    assert first.index("LOD2") == heading.index("levels")
+
+
 def run_json(*args: str | Path) -> tuple[list[dict], object]:
     """The rows of ``lodconvert ranges ... --json`` and the table run without ``--json``."""
     rows = run(*args, "--json")
