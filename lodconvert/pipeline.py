@@ -437,13 +437,17 @@ def read_inputs(
     if (read_options or {}).get("crs") is not None:
         checked_crs_option(read_options["crs"])
     sources = sources or [input_format(path) for path in inputs]
-    one_crs = in_one_crs(
-        [
-            source.read_file(path, limits=limits, **(read_options or {}))
-            for source, path in zip(sources, inputs, strict=True)
-        ],
-        warn,
-    )
+    scenes = [
+        source.read_file(path, limits=limits, **(read_options or {}))
+        for source, path in zip(sources, inputs, strict=True)
+    ]
+    for scene in scenes if (read_options or {}).get("crs") is not None else ():
+        if not scene.city:
+            warn(
+                f"{scene.source}: not a city model: --crs is not applied (a mesh keeps its own "
+                "axes and coordinates)"
+            )
+    one_crs = in_one_crs(scenes, warn)
     return merged(one_crs.scenes), one_crs.record
 
 
