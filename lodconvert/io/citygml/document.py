@@ -17,7 +17,6 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh, Node
 from ...semantics import DEFAULT_PALETTE, Palette
-from ..archive import open_compressed
 from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
 from ..mesh import object_id
@@ -33,7 +32,7 @@ from .names import (
     local,
     namespace,
 )
-from .source import first_look, parser_options
+from .source import first_look, open_document, parser_options
 
 BATCH = 64
 """City objects triangulated together (their elements are held until then)."""
@@ -67,7 +66,7 @@ class Document:
 
     def nodes(self) -> Iterator[Node]:
         """The document's city objects with geometry, one at a time, as it is parsed."""
-        stream = open_compressed(self.path, self.limits)
+        stream = open_document(self.path, self.limits)
         try:
             replay, root = first_look(stream, self.limits, self.source)
             self._check_root(root)
