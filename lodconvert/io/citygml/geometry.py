@@ -59,6 +59,8 @@ from .names import (
 
 OBJECT_DEPTH = 3
 """Nesting depth of a top-level city object (the root ``CityModel``, a member, the object)."""
+PARSER_DEPTH = 2048
+"""Nesting depth libxml2 parses at most (with ``huge_tree``)."""
 MAX_PART_DEPTH = 32
 """Parts nested in parts below a top-level object (a building's parts' parts…) read; an object
 whose parts nest deeper is skipped."""
@@ -328,6 +330,8 @@ def _relief_lod(component: etree._Element, top: etree._Element) -> str | None:
 def check_depth(element: etree._Element, depth_limit: int, source: str) -> None:
     """:class:`InputError` when an element of the top-level object ``element`` lies deeper in
     its document than ``depth_limit`` (checked before any of it is walked)."""
+    if depth_limit >= PARSER_DEPTH:
+        return  # the parser refuses deeper documents itself
     below = depth_limit - OBJECT_DEPTH
     if below < 0 or _deeper_than(below)(element):
         raise InputError(
