@@ -36,8 +36,8 @@ the batch, not the file.
 What a reader must check passes :mod:`..geometry_checks`: a polygon whose ring is degenerate
 (fewer than three distinct points, no area) is dropped and counted with the object's dropped
 faces; an object left with nothing, or whose coordinates cannot be read (a word that is not a
-number, a ring of partial points, a coordinate that is not finite or beyond 1e15, a latitude
-beyond ±90°), or whose parts nest too deep, is recorded as skipped.
+number, a ring of partial points, a coordinate that is not finite or beyond 1e15), or whose
+parts nest too deep, is recorded as skipped.
 """
 
 from __future__ import annotations

@@ -504,23 +504,6 @@ def _relative_points(read: _Read) -> None:
     read.relative = np.repeat(ring_relative, read.lengths)
 
 
-def _check_latitudes(read: _Read, crs: Crs) -> None:
-    """:class:`BrokenObject` when a point of ``read`` in geographic ``crs`` (its own points and
-    its implicit geometry's reference points) has a latitude beyond ±90° (given longitude
-    first, say)."""
-    axis = crs.geographic["axes"][0]
-    latitudes = read.points[:, axis]
-    if read.relative is not None:
-        latitudes = latitudes[~read.relative]
-    references = [reference[axis] for _, reference in read.placements.values()]
-    if not (np.abs(np.append(latitudes, references)) <= 90.0).all():
-        order = "first" if axis == 0 else "second"
-        raise BrokenObject(
-            f"has latitudes beyond ±90° ({crs.name} gives latitude {order}: are its "
-            "coordinates in another axis order?)"
-        )
-
-
 def _metric(reads: list[_Read], crs: Crs) -> np.ndarray:
     """The points of ``reads`` in metres (a geographic CRS's frame centred on the first
     object's own points); the points of implicit polygons are left in their frames, and their
@@ -554,8 +537,6 @@ def _coordinates(tops: list[Holder], crs: Crs) -> tuple[list[tuple[Holder, str]]
             read = _Read(top, *_top_rings(top))
             if any(polygon.implicit is not None for polygon in read.polygons):
                 _relative_points(read)
-            if crs.geographic is not None:
-                _check_latitudes(read, crs)
         except BrokenObject as exc:
             broken.append((top, str(exc)))
             continue
