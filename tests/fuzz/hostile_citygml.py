@@ -13,6 +13,7 @@ HEAD = (
     'xmlns:gen="http://www.opengis.net/citygml/generics/2.0" '
     'xmlns:veg="http://www.opengis.net/citygml/vegetation/2.0" '
     'xmlns:xlink="http://www.w3.org/1999/xlink">'
+    '<gml:boundedBy><gml:Envelope srsName="EPSG:25832"/></gml:boundedBy>'
 )
 TAIL = "</CityModel>"
 _QUADS = ((0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (2, 6, 7, 3), (0, 4, 6, 2), (1, 3, 7, 5))
