@@ -14,6 +14,8 @@ import trimesh
 
 from lodconvert.io import formats
 
+from . import hostile_citygml as gml
+
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 
 
@@ -46,7 +48,12 @@ def generated() -> dict[str, tuple[bytes, ...]]:
         ".gltf": (json.dumps(json.loads(gltf["model.gltf"])).encode(),),
         ".json": (_cityjson()[0], _cityjson_parts_and_template()[0]),
         ".jsonl": (_cityjson()[1], _cityjson_parts_and_template()[1]),
-        ".gml": (_citygml(), _citygml_interior_and_terrain(), _citygml_implicit()),
+        ".gml": (
+            _citygml(),
+            _citygml_interior_and_terrain(),
+            _citygml_implicit(),
+            _citygml_structures(),
+        ),
         ".xml": (_citygml(),),
         ".zip": (_zipped("city.gml", _citygml()),),
     }
@@ -244,6 +251,19 @@ def _citygml_implicit() -> bytes:
         + tree("t2", link, "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1", "110 200 10")
         + "</CityModel>"
     ).encode()
+
+
+def _citygml_structures() -> bytes:
+    """What the hostile CityGML cases grow, at a size that reads: a building without an id
+    whose parts (without ids) nest three deep, generic attribute sets nested three deep, a
+    description split by a comment, composites nested three deep and a chain of three links
+    (:mod:`.hostile_citygml`); the mutations vary the depths, ids and coordinates."""
+    description = "<gml:description>a<!-- note -->b</gml:description>"
+    return gml.document(
+        gml.building(description + gml.attribute_sets(3) + gml.parts(3), gml_id=""),
+        gml.building(gml.composites(3), "composites"),
+        gml.building(gml.links(3), "links"),
+    )
 
 
 def _zipped(name: str, data: bytes) -> bytes:
