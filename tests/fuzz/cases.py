@@ -92,6 +92,14 @@ def _chain(depth: int) -> bytes:
     return city(objects)
 
 
+def _nested(depth: int) -> object:
+    """A JSON value ``depth`` objects deep."""
+    value: object = 1
+    for _ in range(depth):
+        value = {"a": value}
+    return value
+
+
 def _instance(template: dict, point: object = 0) -> bytes:
     """A tree placed as an instance of ``template`` at vertex ``point``."""
     instance = {"type": "GeometryInstance", "template": 0, "boundaries": [point]}
@@ -490,6 +498,27 @@ CASES = (
         lambda: gml.empty_members_gz(64 << 20),
         args=("--limit", "decompressed_bytes=8M"),
         words=("inflates past the limit of 8,388,608 bytes",),
+    ),
+    Case(
+        "CityJSON: an id with U+0001 and an attribute with a lone surrogate",
+        "text.city.json",
+        lambda: city({"a\x01b": {**city_object(), "attributes": {"name": "x\ud800y"}}}),
+        code=0,
+        words=("wrote",),
+    ),
+    Case(
+        "CityJSON: a 12 MB attribute (past libxml2's 10 MB attribute limit)",
+        "long.city.json",
+        lambda: city({"a": {**city_object(), "attributes": {"note": "x" * (12 << 20)}}}),
+        code=0,
+        words=("wrote",),
+    ),
+    Case(
+        "CityJSON: an attribute nested 600 deep",
+        "deep.city.json",
+        lambda: city({"a": {**city_object(), "attributes": {"deep": _nested(600)}}}),
+        code=0,
+        words=("wrote",),
     ),
     *(
         Case(

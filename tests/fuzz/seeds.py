@@ -1,7 +1,8 @@
 """Small valid files of every input suffix, generated here (no files checked in): a box as
 OBJ, ASCII and binary PLY, ASCII and binary STL, OFF, GLB and glTF (buffer embedded); a house
 as CityJSON, CityJSONSeq, CityGML and CityGML in a zip; a building with a part and a tree
-placed as a template's instance as CityJSON and CityJSONSeq."""
+placed as a template's instance as CityJSON and CityJSONSeq; a house with hostile id and
+attribute text as CityJSON."""
 
 from __future__ import annotations
 
@@ -46,7 +47,7 @@ def generated() -> dict[str, tuple[bytes, ...]]:
         ".off": (mesh.export(file_type="off").encode(),),
         ".glb": (scene.export(file_type="glb"),),
         ".gltf": (json.dumps(json.loads(gltf["model.gltf"])).encode(),),
-        ".json": (_cityjson()[0], _cityjson_parts_and_template()[0]),
+        ".json": (_cityjson()[0], _cityjson_parts_and_template()[0], _cityjson_hostile_text()),
         ".jsonl": (_cityjson()[1], _cityjson_parts_and_template()[1]),
         ".gml": (
             _citygml(),
@@ -96,6 +97,19 @@ def _cityjson() -> tuple[bytes, bytes]:
     }
     sequence = json.dumps({**header, "CityObjects": {}, "vertices": []}) + "\n"
     return json.dumps(document).encode(), (sequence + json.dumps(feature) + "\n").encode()
+
+
+def _cityjson_hostile_text() -> bytes:
+    """The CityJSON house with an id holding U+0001, an attribute holding a lone surrogate
+    and one nested 40 objects deep (text every output must bound and clean)."""
+    document = json.loads(_cityjson()[0])
+    house = document["CityObjects"].pop("house")
+    deep: object = "leaf"
+    for _ in range(40):
+        deep = {"a": deep}
+    house["attributes"] = {"name": "x\ud800y", "deep": deep}
+    document["CityObjects"]["house\x01"] = house
+    return json.dumps(document).encode()
 
 
 def _cityjson_parts_and_template() -> tuple[bytes, bytes]:
