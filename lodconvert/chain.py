@@ -29,7 +29,14 @@ from .bake import Backend, Grid, bake_points
 from .errors import InputError, UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
-from .plan import POINT_COST, least_point_cost, level_cost, silhouette_estimate
+from .plan import (
+    POINT_COST,
+    least_point_cost,
+    level_cost,
+    mesh_silhouette_estimate,
+    silhouette_estimate,
+)
+from .prisms import FOOTPRINT_TOLERANCE_PX, LOW_F, MIN_PRISM_F, MORE_TRIANGLES, prism
 from .ranges import (
     DEFAULT_BETA,
     DEFAULT_GAMMA,
@@ -43,7 +50,7 @@ from .ranges import (
     diagonal,
     projected_px,
 )
-from .sourcelods import GROUND_COVERS, SLOTS, lod_name, prism, source_levels, unused_levels
+from .sourcelods import GROUND_COVERS, SLOTS, lod_name, source_levels, unused_levels
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
@@ -569,12 +576,9 @@ def _source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOpt
         elif slot == 1 and obj.type in GROUND_COVERS:
             level = f"a {obj.type} covers the ground: no prism"
         elif slot == 1:
-            shape = prism(obj.lods, finest, obj.attributes)
-            level = (
-                Level(name=name, kind="prism", mesh=shape.translated(-origin))
-                if shape is not None
-                else "no footprint with area to extrude"
-            )
+            made = [p.level for p in levels if p.level is not None]
+            distance = cutoff(frame[1], opts.beta, opts.gamma, xs[index])
+            level = _prism_level(obj, finest, origin, surface, made[-1], distance, opts)
         elif not _points_may_pay([p.level for p in levels], _least_cost(surface, opts)):
             level = NO_POINTS_PAY
         if isinstance(level, str):
@@ -589,6 +593,37 @@ def _source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOpt
             else dropped["LOD1"]
         )
     return _plan(obj, opts, levels, frame, dropped, unused)
+
+
+def _prism_level(
+    obj: Node,
+    finest: Mesh,
+    origin: np.ndarray,
+    surface: Mesh,
+    previous: Level,
+    distance: float,
+    opts: ChainOptions,
+) -> Level | str:
+    """The LOD1 prism of ``obj`` (its footprint simplified within
+    :data:`~.prisms.FOOTPRINT_TOLERANCE_PX` pixels at ``distance``, where it switches in), or
+    why it is left out: no footprint, no fewer triangles than ``previous`` (the source LoD
+    planned before it), or a silhouette F against ``surface`` (the finest level) below
+    :data:`~.prisms.MIN_PRISM_F` at ``distance``."""
+    pixel = distance / opts.view.focal_px
+    shape = prism(obj.lods, finest, obj.attributes, FOOTPRINT_TOLERANCE_PX * pixel)
+    if shape is None:
+        return "no footprint with area to extrude"
+    assert previous.mesh is not None
+    if shape.face_count >= previous.mesh.face_count:
+        return (
+            f"{MORE_TRIANGLES} {previous.name}: the prism has {shape.face_count:,} "
+            f"triangles, {previous.name} {previous.mesh.face_count:,}"
+        )
+    mesh = shape.translated(-origin)
+    f = mesh_silhouette_estimate(surface, mesh, distance, opts.view).f
+    if f < MIN_PRISM_F:
+        return f"{LOW_F} {f:.3f} where it switches in, below {MIN_PRISM_F}"
+    return Level(name="LOD1", kind="prism", mesh=mesh, silhouette_f=f)
 
 
 def _lod0_plan(obj: Node, opts: ChainOptions) -> ChainPlan | None:

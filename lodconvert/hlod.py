@@ -256,8 +256,7 @@ def _silhouette_f(source: Mesh, level: Level, distance: float, options: ChainOpt
     else:
         assert level.mesh is not None
         estimate = mesh_silhouette_estimate(source, level.mesh, distance, options.view)
-    p, r = estimate.precision, estimate.recall
-    return 2 * p * r / (p + r) if p + r > 0 else 0.0
+    return estimate.f
 
 
 def _placed(chain: LodChain, mesh: Mesh) -> Mesh:

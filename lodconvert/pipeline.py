@@ -88,6 +88,8 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
         if not level.is_points:
             assert level.mesh is not None
             entry["faces"] = len(level.mesh.faces)
+            if level.silhouette_f is not None:
+                entry["silhouette_f"] = round(level.silhouette_f, 4)
         else:
             assert level.params is not None
             entry.update(

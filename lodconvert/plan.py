@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .bake.grid import Grid
-from .bake.numpy import NumpyBackend
+from .bake.numpy import coverage
 from .model import Level, Mesh, PointCloud
 from .ranges import REFERENCE_VIEW, ReferenceView
 
@@ -84,6 +84,12 @@ class SilhouetteEstimate:
         """Both at least :data:`MIN_SILHOUETTE`."""
         return self.precision >= MIN_SILHOUETTE and self.recall >= MIN_SILHOUETTE
 
+    @property
+    def f(self) -> float:
+        """Silhouette F: the harmonic mean of precision and recall."""
+        p, r = self.precision, self.recall
+        return 2 * p * r / (p + r) if p + r > 0 else 0.0
+
 
 def _source_masks(
     mesh: Mesh, pixel: float, bounds: np.ndarray | None = None
@@ -93,15 +99,7 @@ def _source_masks(
     bounds = mesh.bounds if bounds is None else bounds
     resolution = max(1, math.ceil(float(np.ptp(bounds, axis=0).max()) / pixel - 1e-9))
     grid = Grid.for_bounds(bounds, resolution, 1)
-    hits = list(NumpyBackend().rasterize(mesh, grid))
-    masks = []
-    for axis in range(3):
-        mask = np.zeros(grid.image_shape(axis), dtype=bool)
-        for h in hits:
-            if h.axis == axis:
-                mask[h.iv, h.iu] = True
-        masks.append(mask)
-    return grid, masks
+    return grid, [coverage(mesh, grid, axis) for axis in range(3)]
 
 
 def _splat(centres: np.ndarray, size: float, shape: tuple[int, int], pad: int) -> np.ndarray:

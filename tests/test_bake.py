@@ -162,3 +162,27 @@ def test_hole_filters_match_opencv(kind: str) -> None:
         ey, ex = np.nonzero(grown)
         fy, fx = _filled(mask, kind, y, x)
         assert (fy.tolist(), fx.tolist()) == (ey.tolist(), ex.tolist())
+
+
+@pytest.mark.parametrize("resolution", [3, 16, 61])
+def test_coverage_is_the_silhouette_the_axis_rays_hit(resolution: int) -> None:
+    """The silhouette masks the planner scores (one span per face and pixel row) are exactly
+    the pixels where the axis rasteriser finds a hit, from either side: on the torus knot,
+    curved and self-occluding."""
+    from lodconvert.bake.grid import Grid
+    from lodconvert.bake.numpy import coverage
+    from lodconvert.io import read_scene
+
+    from .conftest import SAMPLE
+
+    (node,) = read_scene(SAMPLE).nodes
+    mesh = node.geometry
+    grid = Grid.for_bounds(mesh.bounds, resolution, 1)
+    hits = list(NumpyBackend().rasterize(mesh, grid))
+    for axis in range(3):
+        expected = np.zeros(grid.image_shape(axis), dtype=bool)
+        for h in hits:
+            if h.axis == axis:
+                expected[h.iv, h.iu] = True
+        assert expected.any()
+        assert np.array_equal(coverage(mesh, grid, axis), expected)

@@ -228,14 +228,16 @@ def test_a_tin_of_control_points_is_triangulated_in_plan(
 
 
 def test_terrain_and_ground_covers_get_no_prism(tmp_path: Path) -> None:
-    """A house's LoD2 file gives the house a prism for LOD1, its terrain none (a block from
-    its lowest to its highest point would hide the house); the terrain is no neighbour of the
-    house, which stands alone on its plot (γ 10 m, not the 2 m of half the distance between
-    their centres)."""
+    """A house's LoD2 file gives the house a prism to weigh for LOD1 (its steep gable roof
+    makes the block miss silhouette F 0.95 where it would switch in: the LoD2 stays on), its
+    terrain none (a block from its lowest to its highest point would hide the house); the
+    terrain is no neighbour of the house, which stands alone on its plot (γ 10 m, not the 2 m
+    of half the distance between their centres)."""
     report = convert([sample(SIG3D.format(2))], tmp_path / "house.x3d")
     house, terrain = report["objects"]
     assert house["gamma"] == terrain["gamma"] == 10.0
-    assert [lv["kind"] for lv in house["levels"]] == ["source", "prism"]
+    assert [lv["kind"] for lv in house["levels"]] == ["source"]
+    assert house["dropped"]["LOD1"].startswith("silhouette F 0.8")
     assert [lv["kind"] for lv in terrain["levels"]] == ["source"]
     assert "covers the ground: no prism" in terrain["dropped"]["LOD1"]
     assert errors_of(validate_file(tmp_path / "house.x3d")) == []

@@ -286,7 +286,7 @@ def test_out_of_range_index_skips_that_object_only(tmp_path: Path) -> None:
 
 
 def test_degenerate_and_malformed_objects_are_reported_and_dropped(tmp_path: Path) -> None:
-    line = [[[4, 5, 6]]]  # three points on a line
+    line = [[4, 5, 6]]  # three points on a line
     vertices = [*square(), [0, 0, 5], [1, 0, 5], [2, 0, 5]]
     malformed = surface_object([["x"]])
     malformed["geometry"][0]["semantics"] = [1]
@@ -517,7 +517,7 @@ def test_fuzz_found_a_float_vertex_index_too_large_for_an_integer(tmp_path: Path
     reported and skipped like any other."""
     from .fuzz.seeds import seeds_for
 
-    (seed,) = seeds_for(".json")
+    seed = seeds_for(".json")[0]
     data = json.loads(seed)
     data["CityObjects"]["house"]["geometry"][0]["boundaries"][0][0][0][0] = 1e308
     path = write_json(tmp_path / "big_index.city.json", data)

@@ -6,6 +6,7 @@ only itself, and CityJSONSeq must still be read a batch of features at a time.""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -295,40 +296,35 @@ def test_a_sequence_counts_every_mesh_once_as_its_nodes_are_freed(
     assert tally is not None and (tally.vertices, tally.faces) == (vertices, faces)
 
 
+def test_rings_are_lists_of_whole_numbers() -> None:
+    index, lengths, counts = geometry._rings([[[0, 1, 2, 3]], [[0, 1, 2], [3, 4, 5, 6]], [], [[]]])
+    assert index.dtype == np.int64 and index.tolist() == [0, 1, 2, 3, 0, 1, 2, 3, 4, 5, 6]
+    assert (lengths, counts) == ([4, 3, 4, 0], [1, 2, 0, 1])
+
+
 @pytest.mark.parametrize(
-    "surfaces",
+    ("surfaces", "words"),
     [
-        [[[0, 1, 2, 3]], [[0, 1, 2], [3, 4, 5, 6]], [], [[]]],
-        [[[0.0, 1.9, True, "3"]]],
-        [[[[0], [1], [2]]], [[0, 1, 2]]],
-        [[[[0], [1], [2]]]],
-        [["0123"]],
-        [[5]],
-        [[{"a": 1}]],
-        [{"a": [0, 1, 2]}],
-        [None, [[0, 1, 2]]],
-        [[None]],
-        [[[2**70, 1, 2]]],
-        [[[float("nan"), 1, 2]]],
+        ([[[0.0, 1, 2]]], "an index is number 0.0, not a whole number"),
+        ([[[16.5, 1, 2]]], "an index is number 16.5, not a whole number"),
+        ([[[0, 1, True]]], "an index is boolean true, not a whole number"),
+        ([[[0, 1, "3"]]], 'an index is string "3", not a whole number'),
+        ([[[[0], [1], [2]]], [[0, 1, 2]]], "an index is array [0], not a whole number"),
+        ([["0123"]], 'a ring is string "0123", not a list of indices'),
+        ([[5]], "a ring is number 5, not a list of indices"),
+        ([[{"a": 1}]], 'a ring is object {"a": 1}, not a list of indices'),
+        ([{"a": [0, 1, 2]}], "a surface is object"),
+        ([None, [[0, 1, 2]]], "a surface is null, not a list of rings"),
+        ([[None]], "a ring is null"),
+        ([[[float("nan"), 1, 2]]], "an index is number NaN"),
     ],
 )
-def test_rings_read_in_one_go_are_those_read_ring_by_ring(surfaces: list) -> None:
-    """Lists of numbers are read in one go; whatever the boundaries hold, the indices, lengths
-    and errors are those of reading each ring with ``np.asarray`` as before."""
+def test_rings_refuse_what_is_not_a_whole_number(surfaces: list, words: str) -> None:
+    """16.5 was truncated, ``"3"`` and ``true`` taken as indices, an extra level flattened."""
+    with pytest.raises(ValueError, match=re.escape(words)):
+        geometry._rings(surfaces)
 
-    def one_by_one() -> tuple[list, list, list]:
-        rings = [[np.asarray(r, dtype=np.int64).ravel() for r in s] for s in surfaces]
-        flat = [ring for surface in rings for ring in surface]
-        index = np.concatenate(flat) if flat else np.zeros(0, np.int64)
-        return index.tolist(), [len(r) for r in flat], [len(s) for s in rings]
 
-    try:
-        expected = one_by_one()
-    except (TypeError, ValueError, OverflowError) as exc:
-        with pytest.raises(type(exc)) as raised:
-            geometry._rings(surfaces)
-        assert str(raised.value) == str(exc)
-        return
-    index, lengths, counts = geometry._rings(surfaces)
-    assert index.dtype == np.int64
-    assert (index.tolist(), lengths, counts) == expected
+def test_an_index_beyond_int64_is_refused() -> None:
+    with pytest.raises(OverflowError):
+        geometry._rings([[[2**70, 1, 2]]])

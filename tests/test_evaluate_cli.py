@@ -173,3 +173,11 @@ def test_default_chain_meets_the_fidelity_target(name: str, tmp_path: Path) -> N
     assert obj["mean_point_f"] >= 0.95
     first_points = obj["levels"][1]
     assert first_points["fraction"] < 0.5  # well below the source's vertex count
+
+
+def test_deeply_nested_gltf_json_is_one_line_error(tmp_path: Path) -> None:
+    # json.loads raised RecursionError, which escaped as a raw Python error
+    deep = tmp_path / "deep.gltf"
+    lodconvert = '{"asset": {"version": "2.0", "extras": {"lodconvert": {}}}, "x": '
+    deep.write_text(lodconvert + "[" * 100_000 + "]" * 100_000 + "}")
+    assert_one_line_error(run("evaluate", SAMPLE, deep), 1, "deep.gltf", "nested too deeply")

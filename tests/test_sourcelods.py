@@ -13,8 +13,9 @@ from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.model import Mesh, Node, Surface
 from lodconvert.polygons import triangulate
+from lodconvert.prisms import footprint, prism
 from lodconvert.ranges import cutoff
-from lodconvert.sourcelods import footprint, lod_rank, prism, source_levels
+from lodconvert.sourcelods import lod_rank, source_levels
 
 
 def block(width: float, depth: float, height: float, x: float = 0.0, y: float = 0.0) -> Mesh:
@@ -40,8 +41,9 @@ def surfaces_area(mesh: Mesh, facing: float) -> float:
 
 
 def enclosed_volume(mesh: Mesh) -> float:
-    """Signed volume its faces enclose: positive when they face outward."""
-    tri = mesh.triangles - mesh.vertices[0]
+    """Signed volume its faces enclose: positive when they face outward. Measured about a point
+    of its lowest plane, so that a prism's missing floor (which lies there) adds nothing."""
+    tri = mesh.triangles - mesh.bounds[0]
     return float(np.einsum("ij,ij->", tri[:, 0], np.cross(tri[:, 1], tri[:, 2]))) / 6
 
 
@@ -68,11 +70,12 @@ def test_a_lod2_building_shows_its_lod2_up_to_the_lod1_slot_and_a_prism_beyond()
     assert chain.cutoffs == [pytest.approx(cutoff(chain.alpha, 3.0, 20.0, 1.0))]
     shape = chain.levels[1].mesh.translated(chain.origin)
     assert surfaces_area(shape, 1.0) == pytest.approx(300.0)  # the L, not its convex hull
-    assert surfaces_area(shape, -1.0) == pytest.approx(300.0)
+    assert surfaces_area(shape, -1.0) == 0.0  # no floor: never seen from above the ground
     assert shape.bounds[0, 2] == pytest.approx(0.0)
-    assert shape.bounds[1, 2] == pytest.approx(12.0)  # measuredHeight
-    assert enclosed_volume(shape) == pytest.approx(300.0 * 12.0)  # faces outward, as the source's
+    assert shape.bounds[1, 2] == pytest.approx(9.0)  # its roof, not measuredHeight
+    assert enclosed_volume(shape) == pytest.approx(300.0 * 9.0)  # faces outward, as the source's
     assert enclosed_volume(house) > 0
+    assert closed_and_wound_alike(with_floor(shape))
 
 
 def test_a_source_lod1_wins_over_a_prism_and_finer_slots_keep_their_place() -> None:
@@ -91,6 +94,16 @@ def test_no_footprint_means_no_prism() -> None:
     assert prism({"lod2": wall}, wall, {}) is None
     chain = bake_chain(Node("w", wall, lods={"lod2": wall}), ChainOptions(), NumpyBackend())
     assert [lv.name for lv in chain.levels] == ["LOD2"] and "LOD1" in chain.dropped
+
+
+def with_floor(shape: Mesh) -> Mesh:
+    """A prism closed by its top faces turned over at its base."""
+    surface = shape.single
+    assert surface is not None  # one part: one draw call
+    up = surface.face_normals(np.arange(len(surface.faces)))[:, 2] > 0.5
+    floor = surface.vertices.copy()
+    floor[:, 2] = shape.bounds[0, 2]
+    return Mesh([surface, Surface(floor, surface.faces[up][:, ::-1])])
 
 
 def closed_and_wound_alike(mesh: Mesh) -> bool:
@@ -139,8 +152,8 @@ def test_the_slivers_of_steep_faces_join_the_footprint_exactly(
     seen = [shapely.Polygon(np.array(corners)[:, :2]) for corners in slivers]
     outline = shapely.union_all([shapely.box(-5, -4, 5, 4), *seen])
     shape = prism({"lod2": house}, house, {})
-    assert shape is not None and closed_and_wound_alike(shape)
-    assert surfaces_area(shape, -1.0) == pytest.approx(outline.area, rel=1e-12)
+    assert shape is not None and closed_and_wound_alike(with_floor(shape))
+    assert surfaces_area(shape, -1.0) == 0.0
     assert surfaces_area(shape, 1.0) == pytest.approx(outline.area, rel=1e-12)
     assert shape.bounds[:, :2] == pytest.approx(np.reshape(outline.bounds, (2, 2)))
 
@@ -154,7 +167,7 @@ def test_a_footprint_with_a_courtyard_keeps_it() -> None:
     (part,) = footprint({"lod0": ground, "lod2": house}, house)
     assert len(part.rings) == 2  # the yard is a hole
     shape = prism({"lod0": ground, "lod2": house}, house, {})
-    assert shape is not None and closed_and_wound_alike(shape)
+    assert shape is not None and closed_and_wound_alike(with_floor(shape))
     assert surfaces_area(shape, 1.0) == pytest.approx(91.0)
     assert surfaces_area(shape, 0.0) == pytest.approx(4 * 10 * 5 + 4 * 3 * 5)  # walls
     assert enclosed_volume(shape) == pytest.approx(91.0 * 5)
@@ -200,12 +213,15 @@ def test_inputs_merge_the_lods_of_one_city_object() -> None:
     ]
 
 
-def test_every_prism_of_a_real_district_faces_outward_like_its_source() -> None:
-    """TUM Munich's LoD2 buildings and their derived LOD1 prisms all enclose their volume
-    with outward faces (viewers light and cull them by their winding)."""
+def test_every_prism_of_a_real_district_pays_looks_alike_and_faces_outward() -> None:
+    """On TUM Munich no kept prism draws as many triangles as the LoD2 it replaces, each
+    has silhouette F ≥ 0.95 where it switches in, and beyond the last cutoff the district
+    draws at least 30 % fewer triangles than its LoD2; the prisms enclose their volume with
+    outward faces, as the buildings do (viewers light and cull them by their winding)."""
     from lodconvert.bake import get_backend
     from lodconvert.io import read_scene
     from lodconvert.pipeline import iter_chains
+    from lodconvert.prisms import MIN_PRISM_F
 
     from .test_citygml import sample
 
@@ -214,8 +230,15 @@ def test_every_prism_of_a_real_district_faces_outward_like_its_source() -> None:
             read_scene(sample("tum_munich_lod2_v2.zip")), ChainOptions(), get_backend("numpy")
         )
     )
-    prisms = [lv.mesh for chain in chains for lv in chain.levels if lv.kind == "prism"]
-    assert len(prisms) == len(chains) == 290
-    assert all(enclosed_volume(mesh) > 0 for mesh in prisms)
+    assert len(chains) == 290
+    kept = [(chain.levels[0].mesh, chain.levels[-1]) for chain in chains if len(chain.levels) > 1]
+    assert [lv.kind for _, lv in kept] == ["prism"] * len(kept) and len(kept) > 200
+    assert all(lv.mesh.face_count < lod2.face_count for lod2, lv in kept)
+    assert all(lv.silhouette_f >= MIN_PRISM_F for _, lv in kept)
+    assert all("LOD1" in chain.dropped for chain in chains if len(chain.levels) == 1)
+    finest = sum(chain.levels[0].mesh.face_count for chain in chains)
+    beyond = sum(chain.levels[-1].mesh.face_count for chain in chains)
+    assert beyond <= 0.7 * finest
+    assert all(enclosed_volume(lv.mesh) > 0 for _, lv in kept)
     sources = [chain.levels[0].mesh for chain in chains]
     assert sum(enclosed_volume(mesh) > 0 for mesh in sources) > 0.95 * len(sources)

@@ -62,9 +62,8 @@ def face_table(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
     pu, pv, w = tri[:, :, u] - centre[u], tri[:, :, v] - centre[v], tri[:, :, axis] - centre[axis]
     ax, bx, cx = pu[:, 0], pu[:, 1], pu[:, 2]
     ay, by, cy = pv[:, 0], pv[:, 1], pv[:, 2]
-    area = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-    extent = float(np.ptp(surface.bounds, axis=0).max())
-    idx = np.flatnonzero(np.abs(area) > 1e-15 * extent * extent)
+    area = _projected_area(pu, pv)
+    idx = np.flatnonzero(_not_edge_on(area, surface))
     ax, ay, bx, by, cx, cy, area = (a[idx] for a in (ax, ay, bx, by, cx, cy, area))
     inv = (1.0 / area)[:, None]
     b0 = np.stack([by - cy, cx - bx, bx * cy - by * cx], axis=1) * inv
@@ -84,6 +83,31 @@ def face_table(surface: Mesh, axis: int) -> dict[str, np.ndarray]:
         "b1": b1,
         "plane": plane,
     }
+
+
+def _projected_area(pu: np.ndarray, pv: np.ndarray) -> np.ndarray:
+    """Twice the signed areas of triangles with corners ``pu``, ``pv`` ((m, 3) each)."""
+    return (pu[:, 1] - pu[:, 0]) * (pv[:, 2] - pv[:, 0]) - (pv[:, 1] - pv[:, 0]) * (
+        pu[:, 2] - pu[:, 0]
+    )
+
+
+def _not_edge_on(area: np.ndarray, surface: Mesh) -> np.ndarray:
+    """Which faces of ``surface`` (``area``: twice their projected areas) are not seen edge-on:
+    they cover pixels."""
+    extent = float(np.ptp(surface.bounds, axis=0).max())
+    return np.abs(area) > 1e-15 * extent * extent
+
+
+def _projection(surface: Mesh, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The corners of ``surface``'s faces not seen edge-on along ``axis``, projected: u and v
+    ((m, 3) each) relative to ``centre``, the bounding box's centre (returned third)."""
+    u, v = Grid.plane_axes(axis)
+    centre = surface.bounds.mean(axis=0)
+    tri = surface.triangles
+    pu, pv = tri[:, :, u] - centre[u], tri[:, :, v] - centre[v]
+    seen = _not_edge_on(_projected_area(pu, pv), surface)
+    return pu[seen], pv[seen], centre
 
 
 def _pixel_range(lo: np.ndarray, hi: np.ndarray, origin: float, pitch: float, n: int):
@@ -190,3 +214,48 @@ def rasterize_axis(
         )
         for sign, (key, depth, face) in ((1, low), (-1, high))
     ]
+
+
+def coverage(
+    surface: Mesh, grid: Grid, axis: int, memory_bytes: int = DEFAULT_LIMITS.memory_bytes
+) -> np.ndarray:
+    """The silhouette of ``surface`` along ``axis``: the pixels of ``grid``'s image ((rows,
+    cols) bool) whose rays :func:`rasterize_axis` finds a hit on, without depths. Each face
+    covers, in each pixel row its projection crosses, the span of pixel centres between its
+    edges there (edges inclusive, faces seen edge-on left out); a quarter of ``memory_bytes``
+    worth of spans at a time."""
+    pu, pv, centre = surface.derived(f"numpy-projection-{axis}", lambda: _projection(surface, axis))
+    u, v = grid.plane_axes(axis)
+    rows_n, cols_n = grid.image_shape(axis)
+    origin_u, origin_v = grid.lo[u] - centre[u], grid.lo[v] - centre[v]
+    iv0, nv = _pixel_range(pv.min(axis=1), pv.max(axis=1), origin_v, grid.pitch, rows_n)
+    live = np.flatnonzero(nv)
+    count = nv[live]
+    cum = np.cumsum(count)
+    chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
+    edges = np.zeros(rows_n * (cols_n + 1), dtype=np.int64)
+    start = 0
+    while start < len(live):
+        base = cum[start - 1] if start else 0
+        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
+        c = count[start:stop]
+        faces = np.repeat(live[start:stop], c)
+        iv = iv0[faces] + np.arange(len(faces)) - np.repeat(np.cumsum(c) - c, c)
+        y = origin_v + (iv + 0.5) * grid.pitch
+        low, high = np.full(len(faces), np.inf), np.full(len(faces), -np.inf)
+        for k in range(3):
+            ay, by = pv[faces, k], pv[faces, (k + 1) % 3]
+            ax, bx = pu[faces, k], pu[faces, (k + 1) % 3]
+            crosses = (np.minimum(ay, by) <= y) & (y <= np.maximum(ay, by))
+            rise = np.where(ay != by, by - ay, 1.0)
+            x = ax + np.clip((y - ay) / rise, 0.0, 1.0) * (bx - ax)
+            low = np.where(crosses, np.minimum(low, x), low)
+            high = np.where(crosses, np.maximum(high, x), high)
+        found = low <= high
+        first, n = _pixel_range(low[found], high[found], origin_u, grid.pitch, cols_n)
+        spans = n > 0
+        row = iv[found][spans] * (cols_n + 1)
+        edges += np.bincount(row + first[spans], minlength=len(edges))
+        edges -= np.bincount(row + first[spans] + n[spans], minlength=len(edges))
+        start = stop
+    return edges.reshape(rows_n, cols_n + 1).cumsum(axis=1)[:, :cols_n] > 0

@@ -50,6 +50,7 @@ LINEAR_COLOR_SUFFIXES = (".glb", ".gltf")
 _EYE = np.eye(4)
 _OBJ_DATA = re.compile(rb"^[ \t]*[vf][ \t]", re.MULTILINE)
 _OFF_HEADER = re.compile(rb"\A\s*(?:#[^\n]*\n\s*)*[A-Za-z0-9]*OFF\b")
+_ASCII_PLY = re.compile(rb"^format[ \t]+ascii", re.MULTILINE)
 _OBJ_OBJECT = re.compile(r"^[og](?=[ \t]|$)", re.MULTILINE)
 _CHUNK = 1 << 20
 """Bytes inflated at a time from a ``.gz`` input."""
@@ -73,11 +74,27 @@ def object_id(name: str, taken: set[str]) -> str:
     base = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "object"
     if not (base[0].isalpha() or base[0] == "_"):
         base = f"_{base}"
-    candidate, n = base, 2
-    while candidate in taken:
-        candidate, n = f"{base}_{n}", n + 1
+    candidate = base
+    if candidate in taken:
+        candidate = f"{base}_{_free_suffix(base, taken)}"
     taken.add(candidate)
     return candidate
+
+
+def _free_suffix(base: str, taken: set[str]) -> int:
+    """A number ``n`` ≥ 2 with ``{base}_{n}`` not in ``taken``: the one after the run of taken
+    numbers from 2 (the next free one when they were taken in order), found by doubling and
+    then halving, so that naming ``k`` objects alike costs ``k log k``, not ``k²``."""
+    low, high = 1, 2  # {base}_{low} counts as taken; {base}_{high} is to be tested
+    while f"{base}_{high}" in taken:
+        low, high = high, high * 2
+    while high - low > 1:
+        middle = (low + high) // 2
+        if f"{base}_{middle}" in taken:
+            low = middle
+        else:
+            high = middle
+    return high
 
 
 # --- colours --------------------------------------------------------------------------------------
@@ -167,21 +184,29 @@ def surface_from_trimesh(
 
 def _file_bytes(path: Path, suffix: str, limit: int) -> bytes:
     """The file's content, decompressed when it ends in ``.gz``: streamed, and stopped with
-    :class:`InputError` once it inflates past ``limit`` bytes."""
+    :class:`InputError` once it inflates past ``limit`` bytes. In a text format (OBJ, OFF,
+    ASCII PLY) a chunk of nothing but white space is kept as one character of it, so that
+    blank padding costs no memory."""
     try:
         if not path.name.lower().endswith(".gz"):
             return path.read_bytes()
         out = io.BytesIO()
+        inflated, textual = 0, suffix in (".obj", ".off")
         with gzip.open(path, "rb") as stream:
             while chunk := stream.read(_CHUNK):
-                if not out.tell() and suffix in _HEADED and len(chunk) >= _HEAD:
-                    _refuse_other_format(chunk, suffix, path)
-                if out.tell() + len(chunk) > limit:
+                if not inflated:
+                    if suffix in _HEADED and len(chunk) >= _HEAD:
+                        _refuse_other_format(chunk, suffix, path)
+                    textual = textual or bool(suffix == ".ply" and _ASCII_PLY.search(chunk[:_HEAD]))
+                inflated += len(chunk)
+                if inflated > limit:
                     raise InputError(
                         f"inflates past the limit of {limit:,} bytes (decompressed_bytes; "
                         "raise it with --limit decompressed_bytes=N)",
                         str(path),
                     )
+                if textual and chunk.isspace():  # white space of text: one character does
+                    chunk = b"\n" if b"\n" in chunk else b" "
                 out.write(chunk)
     except OSError as exc:
         if isinstance(exc, gzip.BadGzipFile) or not exc.strerror:
@@ -259,14 +284,16 @@ def _truncated(declared: dict[str, int], holds: str, source: str) -> InputError:
     return InputError(f"is truncated: its header declares {counts} elements, {holds}", source)
 
 
-def _check_ply_counts(data: bytes, tally: InputTally) -> None:
+def _check_ply_counts(data: bytes, tally: InputTally) -> int:
     """Compare a PLY header's element counts with what its data can hold (a line per element
     in ASCII, the fixed bytes of each element in binary) and with the limits, before trimesh
-    allocates anything for them. A header too damaged to read is left to trimesh."""
+    allocates anything for them. A header too damaged to read is left to trimesh. The bytes
+    trimesh reads: in ASCII, up to the last element's line (it makes an array of every line,
+    junk after the elements included)."""
     end = data.find(b"end_header")
     start = data.find(b"\n", end) + 1
     if end < 0 or not start:
-        return
+        return len(data)
     binary = re.search(rb"^format[ \t]+binary", data[:end], re.MULTILINE) is not None
     counts: dict[str, int] = {}
     row_bytes: dict[str, int] = {}
@@ -286,6 +313,23 @@ def _check_ply_counts(data: bytes, tally: InputTally) -> None:
     if not binary and sum(counts.values()) > lines:
         raise _truncated(counts, f"a line each, but its data has {lines:,}", tally.source)
     tally.count(counts.get("vertex", 0), counts.get("face", 0), declared=True)
+    return len(data) if binary else _past_lines(data, start, sum(counts.values()))
+
+
+def _past_lines(data: bytes, start: int, lines: int) -> int:
+    """The index past the first ``lines`` lines of ``data[start:]`` (or its end), found by
+    counting line breaks a chunk at a time."""
+    at = start
+    while lines > 0 and at < len(data):
+        end = min(at + _CHUNK, len(data))
+        found = data.count(b"\n", at, end)
+        if found < lines:
+            lines, at = lines - found, end
+            continue
+        for _ in range(lines):
+            at = data.index(b"\n", at) + 1
+        return at
+    return len(data)
 
 
 def _check_off_counts(data: bytes, tally: InputTally) -> None:
@@ -519,7 +563,8 @@ def read_mesh(path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_L
     _refuse_other_format(data, suffix, path)
     tally = InputTally(str(path), limits)
     if suffix == ".ply":
-        _check_ply_counts(data, tally)
+        needed = _check_ply_counts(data, tally)
+        data = data[:needed] if needed < len(data) else data
     elif suffix == ".off":
         _check_off_counts(data, tally)
     labels = None

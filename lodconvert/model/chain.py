@@ -41,7 +41,9 @@ class Level:
     distance (from the chain centre) its resolution and point size were chosen for: where it
     first shows, or α·β for a baked finest level. At that distance, at the reference view, its
     points are ``params.point_size`` pixels wide; viewers scale them with 1/distance.
-    ``bake_seconds`` is the time spent baking it. Geometry is relative to the chain's origin.
+    ``bake_seconds`` is the time spent baking it. ``silhouette_f`` is the level's silhouette F
+    against the finest level where it switches in, where the planner measured one (prisms).
+    Geometry is relative to the chain's origin.
     """
 
     name: str
@@ -52,6 +54,7 @@ class Level:
     spacing: float | None = None
     design_distance: float | None = None
     bake_seconds: float = 0.0
+    silhouette_f: float | None = None
 
     def __post_init__(self) -> None:
         if self.mesh is not None and not isinstance(self.mesh, Mesh):

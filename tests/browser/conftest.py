@@ -151,11 +151,13 @@ def drive(driver: Driver) -> Drive:
 
 @dataclass
 class Chain:
-    """An output in the site and what the converter reported of its (single) object."""
+    """An output in the site and what the converter reported of its object (its first, or
+    the one at ``index``)."""
 
     name: str
     size: int
     report: dict[str, Any]
+    index: int = 0
 
     @property
     def page(self) -> str:
@@ -164,7 +166,7 @@ class Chain:
 
     @property
     def obj(self) -> dict[str, Any]:
-        return self.report["objects"][0]
+        return self.report["objects"][self.index]
 
     def stops(self) -> list[dict[str, Any]]:
         """A distance inside each range (the first at half the first cutoff, the last at 1.5×

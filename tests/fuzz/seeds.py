@@ -1,6 +1,8 @@
 """Small valid files of every input suffix, generated here (no files checked in): a box as
 OBJ, ASCII and binary PLY, ASCII and binary STL, OFF, GLB and glTF (buffer embedded); a house
-as CityJSON, CityJSONSeq, CityGML and CityGML in a zip."""
+as CityJSON, CityJSONSeq, CityGML and CityGML in a zip; a building with a part and a tree
+placed as a template's instance as CityJSON and CityJSONSeq; a house with hostile id and
+attribute text as CityJSON."""
 
 from __future__ import annotations
 
@@ -12,6 +14,8 @@ from pathlib import Path
 import trimesh
 
 from lodconvert.io import formats
+
+from . import hostile_citygml as gml
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 
@@ -43,9 +47,14 @@ def generated() -> dict[str, tuple[bytes, ...]]:
         ".off": (mesh.export(file_type="off").encode(),),
         ".glb": (scene.export(file_type="glb"),),
         ".gltf": (json.dumps(json.loads(gltf["model.gltf"])).encode(),),
-        ".json": (_cityjson()[0],),
-        ".jsonl": (_cityjson()[1],),
-        ".gml": (_citygml(), _citygml_interior_and_terrain(), _citygml_implicit()),
+        ".json": (_cityjson()[0], _cityjson_parts_and_template()[0], _cityjson_hostile_text()),
+        ".jsonl": (_cityjson()[1], _cityjson_parts_and_template()[1]),
+        ".gml": (
+            _citygml(),
+            _citygml_interior_and_terrain(),
+            _citygml_implicit(),
+            _citygml_structures(),
+        ),
         ".xml": (_citygml(),),
         ".zip": (_zipped("city.gml", _citygml()),),
     }
@@ -88,6 +97,63 @@ def _cityjson() -> tuple[bytes, bytes]:
     }
     sequence = json.dumps({**header, "CityObjects": {}, "vertices": []}) + "\n"
     return json.dumps(document).encode(), (sequence + json.dumps(feature) + "\n").encode()
+
+
+def _cityjson_hostile_text() -> bytes:
+    """The CityJSON house with an id holding U+0001, an attribute holding a lone surrogate
+    and one nested 40 objects deep (text every output must bound and clean)."""
+    document = json.loads(_cityjson()[0])
+    house = document["CityObjects"].pop("house")
+    deep: object = "leaf"
+    for _ in range(40):
+        deep = {"a": deep}
+    house["attributes"] = {"name": "x\ud800y", "deep": deep}
+    document["CityObjects"]["house\x01"] = house
+    return json.dumps(document).encode()
+
+
+def _cityjson_parts_and_template() -> tuple[bytes, bytes]:
+    """A building with a BuildingPart (``children`` and ``parents``) and a tree placed as an
+    instance of a geometry template, as CityJSON 2.0 and as CityJSONSeq."""
+    square = [[[0, 1, 2, 3]]]
+    building = {
+        "type": "Building",
+        "children": ["part"],
+        "geometry": [{"type": "MultiSurface", "lod": "1", "boundaries": square}],
+    }
+    part = {
+        "type": "BuildingPart",
+        "parents": ["building"],
+        "geometry": [{"type": "MultiSurface", "lod": "2", "boundaries": [[[4, 5, 6, 7]]]}],
+    }
+    instance = {
+        "type": "GeometryInstance",
+        "template": 0,
+        "boundaries": [8],
+        "transformationMatrix": [2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 2, 0, 0, 0, 0, 1],
+    }
+    tree = {"type": "SolitaryVegetationObject", "geometry": [instance]}
+    vertices = [[0, 0, 0], [900, 0, 0], [900, 900, 0], [0, 900, 0]]
+    vertices += [[x, y, 500] for x, y, _ in vertices] + [[2000, 2000, 0]]
+    header = {
+        "type": "CityJSON",
+        "version": "2.0",
+        "transform": {"scale": [0.01, 0.01, 0.01], "translate": [1000.0, 2000.0, 0.0]},
+        "geometry-templates": {
+            "templates": [{"type": "MultiSurface", "lod": "2", "boundaries": square}],
+            "vertices-templates": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+        },
+    }
+    objects = {"building": building, "part": part, "tree": tree}
+    document = {**header, "CityObjects": objects, "vertices": vertices}
+    features = [
+        {"CityObjects": {"building": building, "part": part}, "vertices": vertices},
+        {"CityObjects": {"tree": tree}, "vertices": vertices},
+    ]
+    lines = [{**header, "CityObjects": {}, "vertices": []}]
+    lines += [{"type": "CityJSONFeature", "id": f"f{k}", **f} for k, f in enumerate(features)]
+    sequence = "".join(json.dumps(line) + "\n" for line in lines)
+    return json.dumps(document).encode(), sequence.encode()
 
 
 def _citygml() -> bytes:
@@ -199,6 +265,19 @@ def _citygml_implicit() -> bytes:
         + tree("t2", link, "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1", "110 200 10")
         + "</CityModel>"
     ).encode()
+
+
+def _citygml_structures() -> bytes:
+    """What the hostile CityGML cases grow, at a size that reads: a building without an id
+    whose parts (without ids) nest three deep, generic attribute sets nested three deep, a
+    description split by a comment, composites nested three deep and a chain of three links
+    (:mod:`.hostile_citygml`); the mutations vary the depths, ids and coordinates."""
+    description = "<gml:description>a<!-- note -->b</gml:description>"
+    return gml.document(
+        gml.building(description + gml.attribute_sets(3) + gml.parts(3), gml_id=""),
+        gml.building(gml.composites(3), "composites"),
+        gml.building(gml.links(3), "links"),
+    )
 
 
 def _zipped(name: str, data: bytes) -> bytes:

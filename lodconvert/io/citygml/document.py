@@ -17,12 +17,19 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh, Node
 from ...semantics import DEFAULT_PALETTE, Palette
-from ..archive import open_compressed
 from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
 from ..mesh import object_id
 from .attributes import attributes_of
-from .geometry import Holder, collect, holders_of, triangulate_batch
+from .geometry import (
+    BrokenObject,
+    Holder,
+    check_depth,
+    collect,
+    gml_id_of,
+    holders_of,
+    triangulate_batch,
+)
 from .implicit import Templates
 from .names import (
     CITYGML_NAMESPACE,
@@ -33,7 +40,7 @@ from .names import (
     local,
     namespace,
 )
-from .source import first_look, parser_options
+from .source import first_look, open_document, parser_options
 
 BATCH = 64
 """City objects triangulated together (their elements are held until then)."""
@@ -67,7 +74,7 @@ class Document:
 
     def nodes(self) -> Iterator[Node]:
         """The document's city objects with geometry, one at a time, as it is parsed."""
-        stream = open_compressed(self.path, self.limits)
+        stream = open_document(self.path, self.limits)
         try:
             replay, root = first_look(stream, self.limits, self.source)
             self._check_root(root)
@@ -122,7 +129,9 @@ class Document:
 
     def _collected(self, element: etree._Element) -> tuple[Node, Holder] | None:
         """A top-level city object's node (parts as children, without geometry) and its
-        holder with the polygons found in it; None when the object is not read."""
+        holder with the polygons found in it; None when the object is not read (or skipped:
+        parts nested too deep, no polygon). :class:`InputError` when it nests deeper than
+        the ``xml_depth`` limit, checked before it is walked."""
         kind = local(element)
         if not is_feature(kind) or kind in NOT_OBJECTS:
             self._count("not_read", kind or "?")
@@ -133,10 +142,20 @@ class Document:
         if self.crs is None:
             srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
             self.crs = Crs.of(srs, self.source) if srs else Crs()
-        top = holders_of(element)
-        node = self._node(top)
-        collect(top, self.gml, self.limits.xml_depth, self.source, self.templates)
-        return node, top
+        check_depth(element, self.limits.xml_depth, self.source)
+        try:
+            top = holders_of(element)
+        except BrokenObject as exc:
+            self._skip(object_id(gml_id_of(element) or kind, self.taken), str(exc))
+            return None
+        collect(top, self.gml, self.templates)
+        if not any(holder.polygons for holder in top.walk()):
+            node_id = object_id(top.gml_id or kind, self.taken)
+            if unresolved := sum(holder.unresolved for holder in top.walk()):
+                self.stats["unresolved_links"][node_id] = unresolved
+            self._skip(node_id, "has no surface geometry")
+            return None
+        return self._node(top), top
 
     def _node(self, holder: Holder) -> Node:
         """The node of a holder and, as its children, of its parts (ids taken in document
@@ -163,8 +182,6 @@ class Document:
                 self.crs,
                 self.palette,
                 self.tally,
-                self.limits.xml_text_bytes,
-                self.source,
             )
         )
         for node, top in batch:

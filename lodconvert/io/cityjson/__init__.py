@@ -40,10 +40,13 @@ geometry of its own, gets one child node per instance (``<id>-instance<k>``).
 
 Checks (:mod:`..geometry_checks`): degenerate polygons (those
 :func:`~lodconvert.polygons.triangulate` refuses) and triangles without area are dropped and
-counted; an object with a boundary index out of range, a malformed boundary, bad coordinates or
-an extent the outputs cannot hold is reported (one line naming file and object) in the tally's
-``skipped`` and left out, the rest of its batch converts; so is an object whose JSON is not of
-the shape CityJSON gives it.
+counted; an object with a boundary index out of range or not a whole number, a malformed
+boundary, a vertex that is unreadable or not finite (:mod:`.vertices`) or an extent the outputs
+cannot hold is reported (one line naming file and object) in the tally's ``skipped`` and left
+out, the rest of its batch converts; so is an object whose JSON is not of the shape CityJSON
+gives it, and one nested more than :data:`~.objects.MAX_DEPTH` levels deep in
+``children``/``parents`` (with the objects below it). Objects in a cycle of ``children`` and
+``parents`` hang below the first of them in file order.
 
 CRS: ``metadata.referenceSystem`` in its URL or URN form becomes ``EPSG:<code>`` on the scene
 and every node; none declared leaves it ``None``. A projected CRS stays as it is. A geographic
@@ -52,11 +55,13 @@ degrees) is projected with ``pyproj``, as CityGML's is (:mod:`lodconvert.io.crs`
 transverse Mercator centred on the document's vertices (a CityJSONSeq file's: on its first
 feature's), whose PROJ definition becomes the scene's and every node's CRS and whose definition
 the scene's ``local_frame`` attribute keeps; template vertices are taken as metres from their
-reference points. CityJSONSeq is read line by line: the header line (``transform``, ``metadata``,
-``geometry-templates``) first, then one ``CityJSONFeature`` per line; features are read until
-they hold :data:`~.document.BATCH` objects, then triangulated together and their nodes yielded,
-so memory holds one batch of features at a time; a line that is not a feature is reported and
-skipped.
+reference points. CityJSONSeq is read line by line (:mod:`.sequence`: in chunks, blank lines
+skipped, a ``.gz`` stopped at ``decompressed_bytes`` and a line at ``sequence_line_bytes``):
+the header line (``transform``, ``metadata``, ``geometry-templates``) first, then one
+``CityJSONFeature`` per line; features are read until they hold :data:`~.document.BATCH`
+objects (or that many lines, or ``sequence_line_bytes`` of text), then triangulated together
+and their nodes yielded, so memory holds one batch of features at a time; a line that is not a
+feature is reported and skipped.
 """
 
 from __future__ import annotations

@@ -5,10 +5,11 @@ in batches of :data:`BATCH` objects, their nodes yielded lazily."""
 from __future__ import annotations
 
 from collections.abc import Iterator
+from contextlib import closing
 from dataclasses import dataclass
 from itertools import chain
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 from ...errors import InputError
 from ...limits import Limits
@@ -16,18 +17,20 @@ from ...model import Node, Scene
 from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
-from .objects import Objects, checked_node, checked_nodes, read_object
+from .objects import Objects, checked_node, checked_nodes
+from .sequence import sequence_lines
 from .source import (
     Context,
     cityjson_object,
     context_of,
     declared_crs,
     load_document,
-    open_text,
+    materials_of,
     parsed,
-    vertices_of,
+    unreadable,
 )
 from .triangulation import triangulate_batch
+from .vertices import vertices_of
 
 BATCH = 64
 """City objects whose polygons are triangulated together (a CityJSONSeq reader holds the
@@ -43,9 +46,7 @@ def _object_nodes(
     nodes: dict[str, Node | None] = {}
     for at in range(0, len(tree.order), BATCH):
         keys = tree.order[at : at + BATCH]
-        nodes.update(
-            zip(keys, checked_nodes([(key, objects[key], ctx) for key in keys]), strict=True)
-        )
+        nodes.update(zip(keys, checked_nodes([tree.read(key, ctx) for key in keys]), strict=True))
     return tree.roots(nodes.__getitem__)
 
 
@@ -53,8 +54,8 @@ def read_document(
     path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
 ) -> Scene:
     """A ``.json`` CityJSON file: every node built before the scene is returned."""
-    data = load_document(path, limits)
     tally = InputTally(str(path), limits)
+    data = load_document(path, limits, tally)
     ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs, str(path)), palette)
     nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
     size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
@@ -81,19 +82,22 @@ class _Feature:
 
 
 def _feature(
-    line: str, where: str, header: dict[str, Any], ctx: Context, types: frozenset[str] | None
+    line: bytes, where: str, header: dict[str, Any], ctx: Context, types: frozenset[str] | None
 ) -> _Feature:
     """The ``CityJSONFeature`` of a line, against the header's transform and context."""
     try:
-        feature = cityjson_object(parsed(line, where), "CityJSONFeature", where)
-        appearance = feature.get("appearance") or {}
+        try:
+            text = line.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise InputError(f"is not UTF-8 text ({exc})", where) from None
+        feature = cityjson_object(parsed(text, where), "CityJSONFeature", where)
         local = Context(
             tally=ctx.tally,
             vertices=vertices_of(
                 feature.get("vertices"), header.get("transform"), where, ctx.declared
             ),
             declared=ctx.declared,
-            materials=list(appearance.get("materials") or ctx.materials),
+            materials=materials_of(feature, where) or ctx.materials,
             templates=ctx.templates,
             template_vertices=ctx.template_vertices,
             shared=ctx.shared,
@@ -106,24 +110,27 @@ def _feature(
 
 
 def _feature_nodes(
-    handle: IO[str], header: dict[str, Any], ctx: Context, types: frozenset[str] | None
+    lines: Iterator[tuple[int, bytes]],
+    header: dict[str, Any],
+    ctx: Context,
+    types: frozenset[str] | None,
 ) -> Iterator[Node]:
-    """The nodes of each ``CityJSONFeature`` line of ``handle``, a line that is not one
-    recorded as skipped. Lines are read until they hold :data:`BATCH` objects (or are that
-    many), whose polygons are triangulated together; their nodes are then yielded feature by
-    feature, so memory holds one batch of features at a time."""
+    """The nodes of each ``CityJSONFeature`` line, a line that is not one recorded as
+    skipped. Lines are read until they hold :data:`BATCH` objects (or are that many, or
+    ``sequence_line_bytes`` of text), whose polygons are triangulated together; their nodes
+    are then yielded feature by feature, so memory holds one batch of features at a time."""
     waiting: list[_Feature] = []
-    objects = 0
-    with handle:
-        for number, line in enumerate(handle, start=2):
-            if not line.strip():
-                continue
+    objects = held = 0
+    with closing(lines):
+        for number, line in lines:
             feature = _feature(line, f"line {number}", header, ctx, types)
             waiting.append(feature)
             objects += len(feature.tree.objects) if feature.tree is not None else 0
-            if objects >= BATCH or len(waiting) >= BATCH:
+            held += len(line)
+            full = held >= ctx.tally.limits.sequence_line_bytes
+            if objects >= BATCH or len(waiting) >= BATCH or full:
                 yield from _finished_features(waiting, ctx.tally)
-                waiting, objects = [], 0
+                waiting, objects, held = [], 0, 0
         yield from _finished_features(waiting, ctx.tally)
 
 
@@ -131,7 +138,7 @@ def _finished_features(waiting: list[_Feature], tally: InputTally) -> Iterator[N
     """The root nodes of a batch of features, in line order, their polygons triangulated
     together; each feature's vertices are counted, and its objects finished, as it comes."""
     reads = [
-        [read_object(key, f.tree.objects[key], f.ctx) for key in f.tree.order]
+        [f.tree.read(key, f.ctx) for key in f.tree.order]
         if f.ctx is not None and f.tree is not None
         else []
         for f in waiting
@@ -150,25 +157,26 @@ def read_sequence(
     path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
 ) -> Scene:
     """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
+    lines = sequence_lines(path, limits)
     try:
-        handle = open_text(path, limits)
-        first = handle.readline(limits.decompressed_bytes)
-    except (OSError, EOFError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot be read ({exc})", str(path)) from None
-    try:
-        header = cityjson_object(parsed(first, str(path)), "CityJSON", str(path))
+        _, first = next(lines, (1, b""))
+        try:
+            text = first.decode("utf-8-sig")
+        except UnicodeDecodeError as exc:
+            raise unreadable(path, exc) from None
+        header = cityjson_object(parsed(text, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
         ctx = context_of(
             header, tally, declared_crs(header.get("metadata"), crs, str(path)), palette
         )
     except InputError:
-        handle.close()
+        lines.close()
         raise
-    nodes = _feature_nodes(handle, header, ctx, types)
-    first = next(nodes, None)  # its vertices centre a geographic CRS's local frame
+    nodes = _feature_nodes(lines, header, ctx, types)
+    first_node = next(nodes, None)  # its vertices centre a geographic CRS's local frame
     scene = Scene(
         source=str(path),
-        nodes=chain(() if first is None else (first,), nodes),
+        nodes=chain(() if first_node is None else (first_node,), nodes),
         crs=ctx.crs,
         city=True,
     )

@@ -14,7 +14,9 @@ import numpy as np
 
 from ...errors import InputError
 from ...model import Mesh
+from .jsonkind import json_shown
 from .source import Context
+from .vertices import check_used
 
 _CLASSES = ("RoofSurface", "WallSurface", "GroundSurface", None)
 """Semantic classes in part order (None: any other surface)."""
@@ -27,14 +29,19 @@ SURFACE_DEPTH = {
 }
 """How deep the list of surfaces is nested in each geometry type's ``boundaries``."""
 _LIST = {list}
+_INT = {int}
+_LISTED = {list, type(None)}
 _INDICES = {int, type(None)}
 
 
 def _surfaces(boundaries: Any, depth: int) -> list[Any]:
-    """The surfaces (lists of rings) of ``boundaries`` nested ``depth`` lists deep."""
+    """The surfaces (lists of rings) of ``boundaries`` nested ``depth`` lists deep (null
+    taken as an empty list); ``ValueError`` for a level that is not a list."""
     items = [boundaries]
     for _ in range(depth):
-        items = [inner for outer in items for inner in (outer or [])]
+        if not set(map(type, items)) <= _LISTED:
+            raise ValueError(f"a boundary is {_first_other(items, _LISTED)}, not a list")
+        items = [inner for outer in items if outer is not None for inner in outer]
     return items
 
 
@@ -43,7 +50,7 @@ def _values(values: Any, depth: int, count: int) -> list[Any]:
     (all None when they are not nested so)."""
     try:
         flat = _surfaces(values, depth) if isinstance(values, list) else []
-    except TypeError:
+    except ValueError:
         flat = []
     return (flat + [None] * count)[:count]
 
@@ -90,22 +97,23 @@ def _materials(geometry: dict[str, Any], depth: int, count: int) -> list[Any]:
 
 def _rings(surfaces: list[Any]) -> tuple[np.ndarray, list[int], list[int]]:
     """Every ring's vertex indices end to end (int64), each ring's length and each surface's
-    number of rings. Rings that are lists of numbers are read in one go; anything else ring
-    by ring as ``np.asarray(ring, dtype=np.int64).ravel()``, which also says what is wrong
-    (TypeError, ValueError, OverflowError)."""
-    if set(map(type, surfaces)) <= _LIST:
-        rings = list(chain.from_iterable(surfaces))
-        if set(map(type, rings)) <= _LIST:
-            try:
-                index = np.array(list(chain.from_iterable(rings)), dtype=np.int64)
-            except (TypeError, ValueError, OverflowError):
-                index = None  # read ring by ring below, for the error of the ring at fault
-            if index is not None and index.ndim == 1:
-                return index, list(map(len, rings)), list(map(len, surfaces))
-    arrays = [[np.asarray(r, dtype=np.int64).ravel() for r in s] for s in surfaces]
-    flat = [ring for surface in arrays for ring in surface]
-    index = np.concatenate(flat) if flat else np.zeros(0, np.int64)
-    return index, [len(ring) for ring in flat], [len(surface) for surface in arrays]
+    number of rings. ``ValueError`` (or ``OverflowError``) naming what is wrong unless every
+    surface is a list of rings and every ring a list of whole numbers (not ``16.5``,
+    ``"16"`` or ``true``) of int64."""
+    if not set(map(type, surfaces)) <= _LIST:
+        raise ValueError(f"a surface is {_first_other(surfaces, _LIST)}, not a list of rings")
+    rings = list(chain.from_iterable(surfaces))
+    if not set(map(type, rings)) <= _LIST:
+        raise ValueError(f"a ring is {_first_other(rings, _LIST)}, not a list of indices")
+    flat = list(chain.from_iterable(rings))
+    if not set(map(type, flat)) <= _INT:
+        raise ValueError(f"an index is {_first_other(flat, _INT)}, not a whole number")
+    return np.array(flat, dtype=np.int64), list(map(len, rings)), list(map(len, surfaces))
+
+
+def _first_other(values: list[Any], wanted: set[type]) -> str:
+    """The first of ``values`` of none of the types ``wanted``, shown as JSON."""
+    return json_shown(next(v for v in values if type(v) not in wanted))
 
 
 @dataclass(eq=False)
@@ -159,6 +167,7 @@ def read_lod(
                 f"{len(vertices):,} vertices, 0 to {len(vertices) - 1:,})",
                 where,
             )
+        check_used(vertices, index, where)
         classes = _classes(geometry, depth, len(ring_counts))
         keys += zip(classes, _materials(geometry, depth, len(ring_counts)), strict=True)
         indices.append(index)

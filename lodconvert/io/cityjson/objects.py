@@ -46,6 +46,10 @@ PART_TYPES = frozenset(
 )
 """CityJSON's 2nd-level types: the parts of the 1st-level object they are children of."""
 
+MAX_DEPTH = 32
+"""Levels of ``children``/``parents`` below a root that are read; an object deeper is left out
+(with the objects below it) and reported."""
+
 _MALFORMED = (TypeError, ValueError, AttributeError, KeyError, IndexError)
 """What JSON of a shape CityJSON does not give raises somewhere in an object."""
 
@@ -136,10 +140,9 @@ def checked_node(read: Read) -> Node | None:
     return node
 
 
-def checked_nodes(objects: list[tuple[str, Any, Context]]) -> Iterator[Node | None]:
-    """:func:`checked_node` of each object, their polygons triangulated together; each is
-    finished (and recorded in the tally) as it is yielded."""
-    reads = [read_object(key, obj, ctx) for key, obj, ctx in objects]
+def checked_nodes(reads: list[Read]) -> Iterator[Node | None]:
+    """:func:`checked_node` of each object read, their polygons triangulated together; each
+    is finished (and recorded in the tally) as it is yielded."""
     triangulate_batch([lod for read in reads for lod in read.lods])
     return map(checked_node, reads)
 
@@ -168,12 +171,14 @@ def _children(objects: dict[str, Any]) -> dict[str, list[str]]:
 class Objects:
     """The CityObjects of a file or of a CityJSONSeq feature: their child keys and which of
     them are read (each at most once), in the order their tree is built (children before
-    their parent, parents in file order)."""
+    their parent, parents in file order); those nested deeper than :data:`MAX_DEPTH` (and
+    how many objects below them are left out with them)."""
 
     objects: dict[str, Any]
     types: frozenset[str] | None
     children: dict[str, list[str]] = field(init=False)
     order: list[str] = field(init=False)
+    too_deep: dict[str, int] = field(init=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         self.children = _children(self.objects)
@@ -181,22 +186,39 @@ class Objects:
         self.roots(lambda key: order.append(key))
         self.order = order
 
+    def read(self, key: str, ctx: Context) -> Read:
+        """Object ``key`` read (:func:`read_object`), or its problem when it is too deep."""
+        if key in self.too_deep:
+            problem = InputError(
+                f"is nested more than {MAX_DEPTH} levels deep in children/parents: left out "
+                f"with the {self.too_deep[key]:,} object(s) below it",
+                key,
+            )
+            return Read(key, ctx, problem=problem)
+        return read_object(key, self.objects[key], ctx)
+
     def roots(self, node_of: Callable[[str], Node | None]) -> list[Node]:
         """The root nodes: each object of a kept type (all, when ``types`` is None, else those
         types and the descendants of kept objects; a ``type`` that is not a string is of no
         type) that ``node_of`` gives a node with geometry or children, its children below it;
-        kept descendants of objects left out (None) take their place."""
+        kept descendants of objects left out (None) take their place. Objects in a cycle of
+        ``children``/``parents`` that no root reaches hang below the first of them in file
+        order."""
         objects, types, children = self.objects, self.types, self.children
         below = {child for kids in children.values() for child in kids}
         seen: set[str] = set()
 
-        def build(key: str, kept: bool) -> list[Node]:
+        def build(key: str, kept: bool, depth: int) -> list[Node]:
             if key in seen:  # a cycle, or a second parent
                 return []
             seen.add(key)
+            if depth > MAX_DEPTH:
+                self.too_deep[key] = _mark_below(key, children, seen)
+                node_of(key)
+                return []
             kind = objects[key].get("type") if isinstance(objects[key], dict) else None
             kept = kept or types is None or (isinstance(kind, str) and kind in types)
-            kids = [node for child in children[key] for node in build(child, kept)]
+            kids = [node for child in children[key] for node in build(child, kept, depth + 1)]
             node = node_of(key) if kept else None
             if node is None:
                 return kids
@@ -205,7 +227,20 @@ class Objects:
                 _absorb_parts(node)
             return [node] if node.geometry is not None or node.children else []
 
-        return [node for key in objects if key not in below for node in build(key, False)]
+        roots = [node for key in objects if key not in below for node in build(key, False, 0)]
+        return roots + [node for key in objects if key not in seen for node in build(key, False, 0)]
+
+
+def _mark_below(key: str, children: dict[str, list[str]], seen: set[str]) -> int:
+    """Mark the objects below ``key`` not yet seen as seen; how many they are."""
+    stack, count = list(children[key]), 0
+    while stack:
+        child = stack.pop()
+        if child not in seen:
+            seen.add(child)
+            count += 1
+            stack.extend(children[child])
+    return count
 
 
 def _parts(node: Node) -> Iterator[Node]:

@@ -1,16 +1,14 @@
-"""Reading a CityJSON file: opening it (through gzip for ``.gz``), parsing its JSON, checking that
-it is CityJSON of a version read, its CRS, its vertices (scaled and translated by its
-``transform``), and the :class:`Context` its geometry is read against."""
+"""Reading a CityJSON file: its bytes (what a ``.gz`` or ``.zip`` inflates to) read in chunks
+up to the limit, its JSON parsed and checked to be CityJSON of a version read, its CRS, and the
+:class:`Context` its geometry is read against (vertices: :mod:`.vertices`)."""
 
 from __future__ import annotations
 
 import gc
-import gzip
-import io
-import json
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
@@ -18,11 +16,15 @@ from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh
 from ...semantics import DEFAULT_PALETTE, Palette
-from ..archive import open_member
+from ..archive import inflation_error, open_compressed
 from ..crs import Crs
-from ..geometry_checks import InputTally, checked_vertices
+from ..geometry_checks import InputTally
+from .jsonkind import json_kind
+from .vertices import top_level, vertices_of
 
 _VERSIONS = ("1.", "2.")
+CHUNK = 1 << 20
+"""Bytes read (inflated) at a time."""
 
 
 @dataclass
@@ -52,44 +54,72 @@ class Context:
         return self.declared.scene_crs if self.declared is not None else None
 
 
-def open_text(path: Path, limits: Limits) -> IO[str]:
-    """``path`` opened as UTF-8 text, through gzip when it ends in ``.gz``; of a ``.zip``, the
-    one file it holds, capped at ``limits.decompressed_bytes`` (:mod:`..archive`)."""
-    name = path.name.lower()
-    if name.endswith(".zip"):
-        return io.TextIOWrapper(io.BufferedReader(open_member(path, limits)), encoding="utf-8")
-    if name.endswith(".gz"):
-        return gzip.open(path, "rt", encoding="utf-8")
-    return path.open(encoding="utf-8")
+def is_compressed(path: Path) -> bool:
+    """Whether ``path`` is a ``.gz`` or a ``.zip``, read as what it inflates to."""
+    return path.name.lower().endswith((".gz", ".zip"))
 
 
-def load_document(path: Path, limits: Limits) -> dict[str, Any]:
-    """The JSON object of a ``.json`` file; :class:`InputError` unless it is CityJSON."""
+def too_large(path: Path, limit: int) -> InputError:
+    """The error for a file past ``limit`` bytes (what it inflates to, for ``.gz``/``.zip``)."""
+    if is_compressed(path):
+        return inflation_error(limit, str(path))
+    return InputError(
+        f"is larger than the limit of {limit:,} bytes (decompressed_bytes; "
+        "raise it with --limit decompressed_bytes=N)",
+        str(path),
+    )
+
+
+def unreadable(path: Path, exc: Exception) -> InputError:
+    """The error for a file that cannot be read (or inflated) at all."""
+    return InputError(f"cannot be read ({exc})", str(path))
+
+
+def read_bytes(path: Path, limits: Limits) -> bytearray:
+    """The bytes of ``path`` (what it inflates to, for ``.gz``/``.zip``:
+    :func:`..archive.open_compressed`), read :data:`CHUNK` bytes at a time into a buffer that
+    grows with them: :class:`InputError` as soon as they pass ``limits.decompressed_bytes``."""
+    limit = limits.decompressed_bytes
+    buffer = bytearray()
     try:
-        with open_text(path, limits) as handle:
-            text = handle.read(limits.decompressed_bytes + 1)
-    except (OSError, EOFError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot be read ({exc})", str(path)) from None
-    if len(text) > limits.decompressed_bytes:
-        raise InputError(
-            f"is larger than the limit of {limits.decompressed_bytes:,} bytes "
-            "(raise it with --limit decompressed_bytes=N)",
-            str(path),
-        )
+        if not is_compressed(path) and path.stat().st_size > limit:
+            raise too_large(path, limit)
+        with open_compressed(path, limits) as stream:
+            while chunk := stream.read(CHUNK):
+                if len(buffer) + len(chunk) > limit:
+                    raise too_large(path, limit)
+                buffer += chunk
+    except (OSError, EOFError, zlib.error) as exc:
+        raise unreadable(path, exc) from None
+    return buffer
+
+
+def load_document(path: Path, limits: Limits, tally: InputTally) -> dict[str, Any]:
+    """The JSON object of a ``.json`` file (its ``vertices`` an array, see :func:`parsed`);
+    :class:`InputError` unless it is CityJSON within the limits."""
+    buffer = read_bytes(path, limits)
+    try:
+        text = buffer.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise unreadable(path, exc) from None
+    del buffer
     collecting = gc.isenabled()
     gc.disable()  # JSON makes no cycles; full passes would scan the growing document again
     try:
-        data = parsed(text, str(path))
+        data = parsed(text, str(path), tally)
     finally:
         if collecting:
             gc.enable()
     return cityjson_object(data, "CityJSON", str(path))
 
 
-def parsed(text: str, where: str) -> Any:
-    """``text`` parsed as JSON; :class:`InputError` saying it is not CityJSON otherwise."""
+def parsed(text: str, where: str, tally: InputTally | None = None) -> Any:
+    """``text`` parsed as JSON; :class:`InputError` saying it is not CityJSON otherwise. A
+    top-level ``vertices`` of rows of three numbers is parsed a chunk of text at a time into
+    an (n, 3) float64 array (:func:`~.vertices.top_level`), its rows counted against
+    ``tally``'s limits before it is allocated."""
     try:
-        return json.loads(text)
+        return top_level(text, tally)
     except (ValueError, RecursionError) as exc:
         raise InputError(f"is not CityJSON (not valid JSON: {exc})", where) from None
 
@@ -119,20 +149,16 @@ def declared_crs(metadata: Any, override: str | None, where: str) -> Crs | None:
     return Crs.of(str(system), where) if system else None
 
 
-def vertices_of(values: Any, transform: Any, where: str, crs: Crs | None = None) -> np.ndarray:
-    """A vertex list in float64 metres: scaled and translated by ``transform`` where given,
-    then, for a geographic ``crs``, projected onto its local frame (which the first vertices
-    projected centre)."""
-    try:
-        v = np.asarray(values if values else np.zeros((0, 3)), dtype=np.float64)
-        if isinstance(transform, dict):
-            v = v * np.asarray(transform["scale"], dtype=np.float64) + np.asarray(
-                transform["translate"], dtype=np.float64
-            )
-    except (ValueError, TypeError, KeyError) as exc:
-        raise InputError(f"has malformed vertices or transform ({exc})", where) from None
-    v = checked_vertices(v.reshape(-1, 3) if v.size == 0 else v, where)
-    return crs.to_metric(v) if crs is not None else v
+def member(data: dict[str, Any], key: str, kind: type, where: str) -> Any:
+    """``data[key]`` when it is of JSON type ``kind`` (``dict``: an object, ``list``: an
+    array), an empty one when absent or null; :class:`InputError` for any other value."""
+    value = data.get(key)
+    if value is None:
+        return kind()
+    if not isinstance(value, kind):
+        name = "an object" if kind is dict else "an array"
+        raise InputError(f"has {key!r} of JSON {json_kind(value)}, not {name}", where)
+    return value
 
 
 def context_of(
@@ -141,15 +167,20 @@ def context_of(
     """The context of a CityJSON document: vertices (in metres), materials, templates (whose
     vertices are offsets in metres from their reference points, never projected)."""
     where = tally.source
-    tally.count(len(data.get("vertices") or ()), 0, declared=True)
-    appearance = data.get("appearance") or {}
-    templates = data.get("geometry-templates") or {}
+    vertices = vertices_of(data.get("vertices"), data.get("transform"), where, declared)
+    tally.count(len(vertices), 0, declared=True)
+    templates = member(data, "geometry-templates", dict, where)
     return Context(
         tally=tally,
-        vertices=vertices_of(data.get("vertices"), data.get("transform"), where, declared),
+        vertices=vertices,
         declared=declared,
-        materials=list(appearance.get("materials") or []),
-        templates=list(templates.get("templates") or []),
+        materials=materials_of(data, where),
+        templates=member(templates, "templates", list, where),
         template_vertices=vertices_of(templates.get("vertices-templates"), None, where),
         palette=palette,
     )
+
+
+def materials_of(data: dict[str, Any], where: str) -> list[Any]:
+    """The ``appearance.materials`` of a document or a feature (empty where it has none)."""
+    return list(member(member(data, "appearance", dict, where), "materials", list, where))

@@ -10,8 +10,13 @@ import numpy as np
 from ...errors import InputError
 from ...model import Mesh, Node
 from .geometry import SURFACE_DEPTH, lod_label, read_lod
+from .jsonkind import json_shown
 from .source import Context
 from .triangulation import triangulate_batch
+from .vertices import check_used
+
+_IGNORED = frozenset({"MultiPoint", "MultiLineString"})
+"""Template types that are no surfaces: their instances are ignored, as such geometry is."""
 
 
 def _mesh(
@@ -28,11 +33,18 @@ def _mesh(
 def template_mesh(index: Any, ctx: Context, where: str, kind: str) -> tuple[str, Mesh] | None:
     """Template ``index`` as its (LoD label, Mesh), read once per file (coloured for the
     type ``kind`` of the first object using it)."""
-    if not isinstance(index, int) or not 0 <= index < len(ctx.templates):
+    if type(index) is not int or not 0 <= index < len(ctx.templates):
         raise InputError(f"uses template {index!r}; the file has {len(ctx.templates)}", where)
     if index not in ctx.shared:
         template = ctx.templates[index]
-        if template.get("type") not in SURFACE_DEPTH:
+        kind_of_template = template.get("type") if isinstance(template, dict) else None
+        if kind_of_template not in SURFACE_DEPTH and kind_of_template not in _IGNORED:
+            raise InputError(
+                f"uses template {index}, whose type {json_shown(kind_of_template)} is not that "
+                "of a surface, point or line geometry",
+                where,
+            )
+        if kind_of_template in _IGNORED:
             ctx.shared[index] = None
         else:
             mesh, dropped = _mesh([template], ctx.template_vertices, ctx, where, kind)
@@ -44,14 +56,23 @@ def template_mesh(index: Any, ctx: Context, where: str, kind: str) -> tuple[str,
 
 def placement(geometry: dict[str, Any], ctx: Context, where: str) -> np.ndarray:
     """An instance's 4×4 transform: its ``transformationMatrix`` moved to its reference
-    point."""
+    point (a vertex that exists, whose coordinates are finite)."""
     try:
-        matrix = np.asarray(geometry.get("transformationMatrix", np.eye(4)), dtype=np.float64)
-        matrix = matrix.reshape(4, 4).copy()
+        values = geometry.get("transformationMatrix", np.eye(4).ravel().tolist())
+        if not isinstance(values, list) or not set(map(type, values)) <= {int, float}:
+            raise ValueError("its transformationMatrix is not a list of 16 numbers")
+        matrix = np.array(values, dtype=np.float64).reshape(4, 4)
         (point,) = geometry["boundaries"]
-        matrix[:3, 3] += ctx.vertices[int(point)]
-    except (TypeError, ValueError, KeyError, IndexError) as exc:
+    except (TypeError, ValueError, KeyError, OverflowError) as exc:
         raise InputError(f"has a malformed GeometryInstance ({exc})", where) from None
+    if type(point) is not int or not 0 <= point < len(ctx.vertices):
+        raise InputError(
+            f"has a GeometryInstance whose reference point {json_shown(point)} is not one of "
+            f"the {len(ctx.vertices):,} vertices",
+            where,
+        )
+    check_used(ctx.vertices, np.array([point]), where)
+    matrix[:3, 3] += ctx.vertices[point]
     if not np.isfinite(matrix).all():
         raise InputError("has a GeometryInstance with a non-finite transformationMatrix", where)
     return matrix

@@ -118,6 +118,8 @@ def _read_errors(path: str | Path) -> Iterator[None]:
         raise InputError(str(exc), str(path)) from None
     except (ValueError, KeyError, IndexError, TypeError, AttributeError, struct.error) as exc:
         raise InputError(f"malformed glTF ({type(exc).__name__}: {exc})", str(path)) from None
+    except RecursionError:  # JSON, or LOD parents, nested past Python's recursion limit
+        raise InputError("malformed glTF (nested too deeply)", str(path)) from None
 
 
 def _load(path: Path) -> tuple[dict[str, Any], bytes]:

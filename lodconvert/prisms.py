@@ -1,0 +1,431 @@
+"""The LOD1 prism of a city object that has no LoD 1 of its own.
+
+A derived **prism** is the object's footprint — its lod0 surfaces, else the outline of its
+finest geometry seen from above — simplified (shapely, topology kept) within a tolerance the
+caller derives from the pixel size where the prism switches in, and extruded from the lowest
+point to a high percentile of the roof's heights (:data:`ROOF_PERCENTILE`, over the roof's
+area seen from above), as 3D BAG's LoD1.2 blocks take a percentile of the roof points' heights
+rather than the highest (an object with nothing but LoD 0 has no roof: ``measuredHeight``
+where plausible). Its top takes the roof's colour and its walls the walls' (the finest
+geometry's own, so source materials win over class colours as they do there), as vertex
+colours of one part: one draw call. It has no floor: from a viewer's side of the ground the
+underside of a building is never seen. Only objects that stand on the ground get one
+(:data:`~.sourcelods.GROUND_COVERS` get none). Coordinates are z-up, as in CityGML and
+CityJSON.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from .model import GREY, Mesh, Surface
+from .sourcelods import source_levels
+
+CLOSED_TOLERANCE = 1e-3
+"""Downward-facing triangles covering this much less ground than the upward-facing ones still
+make the footprint."""
+SEAM_TOLERANCE = 1e-6
+"""Corners of a footprint's outline less than this × its extent off the line through their
+neighbours are dropped (the seams of a union of triangles)."""
+STEEP = 0.5
+"""A triangle whose ground projection is less than this fraction of its area (one steeper than
+60°: a wall) is a sliver seen from above."""
+ROOF_PERCENTILE = 90.0
+"""The prism's top: this percentile of the roof's heights. Of 50, 70, 80, 90 and 100 it keeps
+the most prisms at silhouette F ≥ :data:`MIN_PRISM_F` on TUM Munich, and the lightest
+(``benchmarks/results/city_levels.md``)."""
+FOOTPRINT_TOLERANCE_PX = 0.5
+"""The footprint's simplification tolerance, in pixels of the reference view where the prism
+switches in."""
+MIN_PRISM_F = 0.95
+"""Least silhouette F of a prism against the finest level where it switches in."""
+MORE_TRIANGLES = "no fewer triangles than"
+"""How a prism left out for costing as much as the level before it is reported."""
+LOW_F = "silhouette F"
+"""How a prism left out for looking unlike the object is reported."""
+
+
+class FootprintPart(NamedTuple):
+    """One polygon of a footprint, ready to extrude: its ``points`` (n, 2) on the ground plane,
+    the ``triangles`` (m, 3) covering it, clockwise seen from above, and its ``rings`` (each
+    (k, 2), open, exterior first), along which the walls stand. As in shapely's output, exterior
+    rings run clockwise and holes counter-clockwise."""
+
+    points: np.ndarray
+    triangles: np.ndarray
+    rings: list[np.ndarray]
+
+
+def _extent(mesh: Mesh) -> float:
+    """The longer side of ``mesh``'s bounding rectangle seen from above (1 where it has none)."""
+    return float((mesh.bounds[1, :2] - mesh.bounds[0, :2]).max()) or 1.0
+
+
+def _doubled_areas(tri: np.ndarray) -> np.ndarray:
+    """Twice the signed areas of triangles ``tri`` ((m, 3, 2) or more coordinates, of which x and
+    y count): positive where they run counter-clockwise seen from above."""
+    side, other = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    return side[:, 0] * other[:, 1] - side[:, 1] * other[:, 0]
+
+
+def _clockwise(corners: np.ndarray, twice: np.ndarray) -> np.ndarray:
+    """Triangles ``corners`` (m, 3) turned clockwise seen from above (``twice`` their doubled
+    signed areas)."""
+    return np.where((twice > 0)[:, None], corners[:, ::-1], corners)
+
+
+def _seen(mesh: Mesh, extent: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The triangles of ``mesh`` that make its footprint: which ones (a mask), their corners
+    projected on the ground plane ((m, 3, 2)) and their doubled signed areas there. Triangles
+    seen edge-on are left out. A closed surface's downward-facing triangles cover as much of
+    the ground as its upward-facing ones, so when they do, only they are kept."""
+    tri = mesh.triangles[:, :, :2]
+    twice = _doubled_areas(tri)
+    seen = np.abs(twice) > 1e-9 * extent * extent
+    down = seen & (twice < 0)
+    if -twice[down].sum() >= (1 - CLOSED_TOLERANCE) * twice[seen & ~down].sum():
+        seen = down
+    return seen, tri[seen], twice[seen]
+
+
+def _steep(mesh: Mesh, seen: np.ndarray, twice: np.ndarray) -> np.ndarray:
+    """Which of ``mesh``'s ``seen`` triangles (``twice`` their doubled areas seen from above,
+    their normals' z components) are steeper than :data:`STEEP` allows."""
+    corner = mesh.triangles[seen]
+    side, other = corner[:, 1] - corner[:, 0], corner[:, 2] - corner[:, 0]
+    across = (side[:, 1] * other[:, 2] - side[:, 2] * other[:, 1]) ** 2 + (
+        side[:, 2] * other[:, 0] - side[:, 0] * other[:, 2]
+    ) ** 2  # the normals' x and y components, squared
+    return twice**2 < STEEP**2 * (twice**2 + across)
+
+
+def _indexed(tri: np.ndarray, twice: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct corners (n, 2) of triangles ``tri`` ((m, 3, 2), contiguous; ``twice`` their
+    doubled signed areas) and the triangles as clockwise indices into them (m, 3)."""
+    keys, corners = np.unique(tri.reshape(-1, 2).view(np.complex128), return_inverse=True)
+    return keys.view(np.float64).reshape(-1, 2), _clockwise(corners.reshape(-1, 3), twice)
+
+
+def _merged(
+    points: np.ndarray, corners: np.ndarray, extent: float
+) -> tuple[list[np.ndarray], Any] | None:
+    """The rings (exterior first) of the polygon that clockwise triangles ``corners`` (indices
+    into ``points``) cover together, traced along the edges they do not share, and it as a
+    shapely polygon; or ``None`` unless those edges make one clockwise exterior ring and
+    counter-clockwise holes that bound a valid polygon. The triangles then cover that polygon
+    exactly once (their edges add up to its boundary), so it is their union."""
+    import shapely
+
+    edges: set[tuple[int, int]] = set()
+    for a, b, c in corners.tolist():
+        for edge in ((a, b), (b, c), (c, a)):
+            if edge in edges:
+                return None  # two triangles on one side of an edge: they overlap
+            edges.add(edge)
+    following: dict[int, int] = {}
+    for a, b in edges:
+        if (b, a) not in edges:
+            if a in following:
+                return None  # rings that meet at a point
+            following[a] = b
+    loops = []
+    for first in sorted(following):
+        if first in following:
+            loop, point = [first], following.pop(first)
+            while point != first:
+                loop.append(point)
+                point = following.pop(point)
+            loops.append(loop)
+    rings = [points[loop] for loop in loops]
+    if len(rings) > 1:  # a single loop bounds what clockwise triangles cover: it runs clockwise
+        areas = np.array([_doubled_area(ring - points[0]) for ring in rings])
+        exterior = np.flatnonzero(areas < 0)
+        if len(exterior) != 1 or (np.abs(areas) <= 1e-9 * extent * extent).any():
+            return None
+        rings.insert(0, rings.pop(int(exterior[0])))
+    polygon = shapely.Polygon(rings[0], rings[1:])
+    return (rings, polygon) if polygon.is_valid else None
+
+
+def _doubled_area(ring: np.ndarray) -> float:
+    """Twice the signed area of ``ring`` ((k, 2), open; positive: counter-clockwise)."""
+    return float(np.dot(ring[:, 0], np.roll(ring[:, 1], -1) - np.roll(ring[:, 1], 1)))
+
+
+def _traced(
+    points: np.ndarray, corners: np.ndarray, rings: list[np.ndarray], polygon: Any, extent: float
+) -> list[FootprintPart]:
+    """The footprint of triangles ``corners`` (indices into ``points``) that :func:`_merged`
+    traced into ``rings`` and ``polygon``; simplified as a union of triangles is
+    (:func:`_polygons`) where corners of its outline lie within :data:`SEAM_TOLERANCE` of a
+    straight line."""
+    import shapely
+
+    simple = shapely.simplify(polygon, SEAM_TOLERANCE * extent)
+    if shapely.get_num_coordinates(simple) < shapely.get_num_coordinates(polygon):
+        return _polygons(simple)
+    return [FootprintPart(points, corners, rings)]
+
+
+def _used(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ``points`` that triangles ``corners`` use, and the triangles as indices into them."""
+    used = np.zeros(len(points), dtype=bool)
+    used[corners] = True
+    return points[used], (np.cumsum(used) - 1)[corners]
+
+
+def _closed(tri: np.ndarray) -> Any:
+    """Triangles ``tri`` ((m, 3, 2)) as shapely polygons."""
+    import shapely
+
+    return shapely.polygons(np.concatenate([tri, tri[:, :1]], axis=1))
+
+
+def _without_slivers(
+    steep: np.ndarray, tri: np.ndarray, points: np.ndarray, corners: np.ndarray, extent: float
+) -> list[FootprintPart] | None:
+    """The union of triangles ``tri`` (``corners`` into ``points`` as :func:`_merged` takes
+    them) where the slivers of the ``steep`` ones keep them from merging; ``None`` unless the
+    others merge. A sliver inside their polygon adds nothing; those outside merge with it where
+    they only touch it, else shapely joins them to it."""
+    import shapely
+
+    if steep.all() or not steep.any():
+        return None
+    rest = _merged(points, corners[~steep], extent)
+    if rest is None:
+        return None
+    slivers = np.flatnonzero(steep)
+    relations = shapely.relate(_closed(tri[slivers]), rest[1]).tolist()  # DE-9IM matrices
+    outside = [r[2:6:3] != "FF" for r in relations]  # parts of them outside the polygon
+    if not any(outside):
+        return _traced(*_used(points, corners[~steep]), *rest, extent)
+    if all(r[0] == "F" for r, out in zip(relations, outside, strict=True) if out):  # they touch
+        keep = ~steep
+        keep[slivers[outside]] = True
+        merged = _merged(points, corners[keep], extent)
+        if merged is not None:
+            return _traced(*_used(points, corners[keep]), *merged, extent)
+    return _outline(shapely.union_all([rest[1], *_closed(tri[slivers[outside]])]), extent)
+
+
+def _outline(union: Any, extent: float) -> list[FootprintPart]:
+    """The polygons of a shapely ``union`` of triangles, made valid where it is not, without
+    the collinear seams of the union (:data:`SEAM_TOLERANCE`)."""
+    import shapely
+
+    valid = union if union.is_valid else shapely.make_valid(union).buffer(0)
+    return _polygons(shapely.simplify(valid, SEAM_TOLERANCE * extent))
+
+
+def _polygons(outline: Any) -> list[FootprintPart]:
+    """The polygons with area of shapely geometry ``outline``, ear-clipped into triangles."""
+    import mapbox_earcut
+    import shapely
+
+    outline = shapely.orient_polygons(outline, exterior_cw=True)
+    parts = []
+    for polygon in getattr(outline, "geoms", [outline]):
+        if not isinstance(polygon, shapely.Polygon) or polygon.is_empty or polygon.area <= 0:
+            continue
+        rings = [np.asarray(polygon.exterior.coords)[:-1]]
+        rings += [np.asarray(ring.coords)[:-1] for ring in polygon.interiors]
+        points = np.concatenate(rings)
+        ends = np.cumsum([len(ring) for ring in rings]).astype(np.uint32)
+        corners = mapbox_earcut.triangulate_float64(points - points[0], ends)
+        corners = corners.astype(np.int64).reshape(-1, 3)
+        parts.append(
+            FootprintPart(points, _clockwise(corners, _doubled_areas(points[corners])), rings)
+        )
+    return parts
+
+
+def footprint(lods: dict[str, Mesh], finest: Mesh) -> list[FootprintPart]:
+    """The object's footprint as polygons to extrude: the union of its lod0 surfaces if it has
+    any, else of its finest geometry, seen from above. Triangles that merge into one polygon
+    (slivers of walls aside) are traced along their outer edges; shapely joins the others."""
+    import shapely
+
+    base = source_levels(lods).get(0, (None, finest))[1]
+    extent = _extent(base)
+    seen, tri, twice = _seen(base, extent)
+    if len(tri) == 0:
+        return []
+    points, corners = _indexed(tri, twice)
+    merged = _merged(points, corners, extent)
+    if merged is not None:
+        return _traced(points, corners, *merged, extent)
+    parts = _without_slivers(_steep(base, seen, twice), tri, points, corners, extent)
+    return parts if parts is not None else _outline(shapely.union_all(_closed(tri)), extent)
+
+
+def prism_height(
+    lods: dict[str, Mesh], finest: Mesh, attributes: dict[str, object]
+) -> tuple[float, float]:
+    """Base and top height of the prism: the lowest point, and the :data:`ROOF_PERCENTILE` th
+    percentile of the roof heights where the object has a solid LoD (1 or finer) with a roof;
+    else the base plus ``measuredHeight`` when that is a plausible number (positive, at most
+    twice the geometry's own height), else the highest point."""
+    low, high = float(finest.bounds[0, 2]), float(finest.bounds[1, 2])
+    if source_levels(lods).keys() - {0}:
+        roof = _roofs(finest)
+        if roof.any():
+            tri = finest.triangles[roof]
+            top = _percentile(tri[:, :, 2], np.abs(_doubled_areas(tri)), ROOF_PERCENTILE / 100)
+            if top > low:
+                return low, top
+    measured = attributes.get("measuredHeight")
+    try:
+        value = float(measured)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        value = math.nan
+    if math.isfinite(value) and 0 < value <= 2 * max(high - low, value / 2):
+        return low, low + value
+    return low, high
+
+
+def _normals(mesh: Mesh) -> np.ndarray:
+    """The faces' normals (m, 3), as long as twice their areas; all turned over where the faces
+    enclose a negative volume (wound inward), so that roofs face up."""
+
+    def compute() -> np.ndarray:
+        tri = mesh.triangles - mesh.bounds.mean(axis=0)
+        across = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        return -across if float(np.einsum("ij,ij->", tri[:, 0], across)) < 0 else across
+
+    return mesh.derived("outward-normals", compute)
+
+
+def _roofs(mesh: Mesh) -> np.ndarray:
+    """Which faces of ``mesh`` are roofs: facing up, less steep than :data:`STEEP` allows."""
+    normals = _normals(mesh)
+    return normals[:, 2] > STEEP * np.linalg.norm(normals, axis=1)
+
+
+def _walls(mesh: Mesh) -> np.ndarray:
+    """Which faces of ``mesh`` are walls: steeper than :data:`STEEP` allows."""
+    normals = _normals(mesh)
+    return np.abs(normals[:, 2]) < STEEP * np.linalg.norm(normals, axis=1)
+
+
+def _percentile(heights: np.ndarray, weights: np.ndarray, share: float) -> float:
+    """The height below which ``share`` of the area of triangles with corner ``heights``
+    ((m, 3)) and areas ``weights`` lies, heights varying linearly across each triangle: the
+    bracket around it narrowed by 64 probes at a time, to 65⁻⁴ of the heights' range."""
+    z = np.sort(heights, axis=1)
+    a, b, c = z[:, 0], z[:, 1], z[:, 2]
+    lo, hi = float(a.min()), float(c.max())
+    total = float(weights.sum())
+    if total <= 0 or hi <= lo:
+        return hi
+    for _ in range(4):
+        t = np.linspace(lo, hi, 66)[1:-1, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rising = (t - a) ** 2 / ((b - a) * (c - a))
+            falling = 1 - (c - t) ** 2 / ((c - a) * (c - b))
+        part = np.where(t >= c, 1.0, np.where(t <= a, 0.0, np.where(t <= b, rising, falling)))
+        i = int(np.searchsorted(part @ weights / total, share))
+        lo, hi = (float(t[i - 1, 0]) if i else lo), (float(t[i, 0]) if i < len(t) else hi)
+    return hi
+
+
+def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    """The prism's roof and wall colours (RGBA): the mean colour of ``finest``'s roofs and of
+    its walls, over their areas (grey where it has none)."""
+    everything = np.arange(finest.face_count)
+    centres = finest.triangles.mean(axis=1)
+    areas = np.linalg.norm(_normals(finest), axis=1)
+    colors = []
+    for faces in (everything[_roofs(finest)], everything[_walls(finest)]):
+        weights = areas[faces]
+        if weights.sum() <= 0:
+            colors.append(GREY.copy())
+            continue
+        seen = finest.colors_at(faces, centres[faces]).astype(np.float64)
+        colors.append(np.rint(weights @ seen / weights.sum()).astype(np.uint8))
+    return colors[0], colors[1]
+
+
+def simplified(parts: list[FootprintPart], tolerance: float) -> list[FootprintPart]:
+    """The footprint ``parts`` simplified within ``tolerance`` (shapely, topology kept),
+    without the polygons and holes smaller than a ``tolerance`` square; ``parts`` themselves
+    where that removes no corner."""
+    import shapely
+
+    if tolerance <= 0 or not parts:
+        return parts
+    outline = shapely.MultiPolygon([shapely.Polygon(p.rings[0], p.rings[1:]) for p in parts])
+    simple = shapely.simplify(outline, tolerance, preserve_topology=True)
+    least = tolerance * tolerance
+    kept = [
+        shapely.Polygon(polygon.exterior, [h for h in polygon.interiors if _area(h) >= least])
+        for polygon in getattr(simple, "geoms", [simple])
+        if isinstance(polygon, shapely.Polygon) and polygon.area >= least
+    ]
+    if not kept:
+        return parts
+    result = shapely.MultiPolygon(kept)
+    if shapely.get_num_coordinates(result) >= shapely.get_num_coordinates(outline):
+        return parts
+    return _polygons(result)
+
+
+def _area(ring: Any) -> float:
+    """The area a shapely ``ring`` bounds."""
+    return abs(_doubled_area(np.asarray(ring.coords)[:-1])) / 2
+
+
+def _extruded(part: FootprintPart, base: float, top: float) -> tuple[Surface, Surface]:
+    """``part`` extruded from ``base`` to ``top``: its top (facing up) and its walls (facing
+    outward), no floor. Exterior rings run clockwise and holes counter-clockwise seen from
+    above, so the solid lies to the right of every ring."""
+    roof = Surface(
+        np.column_stack([part.points, np.full(len(part.points), top)]),
+        part.triangles[:, ::-1].copy(),
+    )
+    sizes = [len(ring) for ring in part.rings]
+    wall = np.concatenate(part.rings)
+    k = len(wall)
+    vertices = np.column_stack([np.concatenate([wall, wall]), np.repeat([base, top], k)])
+    i = np.arange(k)
+    j = i + 1
+    ends = np.cumsum(sizes)
+    j[ends - 1] = ends - sizes  # each ring closes on its first corner
+    faces = np.stack([i, j + k, j, i, i + k, j + k], axis=1).reshape(-1, 3)
+    return roof, Surface(vertices, faces)
+
+
+def prism(
+    lods: dict[str, Mesh], finest: Mesh, attributes: dict[str, object], tolerance: float = 0.0
+) -> Mesh | None:
+    """The LOD1 prism of a city object, its footprint simplified within ``tolerance`` (scene
+    units; see :func:`simplified`), its tops first, then its walls: one part (one draw call),
+    coloured per vertex (``None`` when it has no footprint with area)."""
+    base, top = prism_height(lods, finest, attributes)
+    if not top > base:
+        return None
+    parts = simplified(footprint(lods, finest), tolerance)
+    if not parts:
+        return None
+    extruded = [_extruded(part, base, top) for part in parts]
+    roof_color, wall_color = prism_colors(finest)
+    surfaces = [roof for roof, _ in extruded] + [walls for _, walls in extruded]
+    colors = [roof_color] * len(extruded) + [wall_color] * len(extruded)
+    offsets = np.cumsum([0] + [len(s.vertices) for s in surfaces[:-1]])
+    return Mesh(
+        [
+            Surface(
+                np.concatenate([s.vertices for s in surfaces]),
+                np.concatenate([s.faces + o for s, o in zip(surfaces, offsets, strict=True)]),
+                vertex_colors=np.concatenate(
+                    [
+                        np.tile(c, (len(s.vertices), 1))
+                        for s, c in zip(surfaces, colors, strict=True)
+                    ]
+                ),
+            )
+        ]
+    )

@@ -1,0 +1,172 @@
+"""Hostile CityJSON, CityJSONSeq and padded mesh files: memory measured in a child process
+(``RLIMIT_AS``, peak RSS against a small run's), time compared between n and 4n bytes, and
+what a user sees of objects the reader leaves out. The one-line errors are cases of
+:data:`tests.fuzz.cases.CASES`."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import pytest
+
+from lodconvert.errors import InputError
+from lodconvert.io import read_scene
+from lodconvert.limits import Limits
+
+from .fuzz.cases import CASES, SQUARE, city, city_object, sequence, zeros_gz
+from .fuzz.seeds import _cityjson
+from .fuzz.worker import run_cli
+from .test_cli import run
+
+MB = 1 << 20
+GB = 1 << 30
+
+
+def _case(name: str, folder: Path) -> Path:
+    (case,) = [c for c in CASES if c.name == name]
+    return case.write(folder)
+
+
+@pytest.fixture(scope="module")
+def small_peak(tmp_path_factory: pytest.TempPathFactory) -> int:
+    """Peak RSS of a run that reads a 1 KB CityJSON file and refuses it."""
+    src = _case("appearance.city.json", tmp_path_factory.mktemp("small"))
+    result = run_cli(src, "-o", src.with_suffix(".glb"))
+    assert result.code == 1, result.stderr
+    return result.peak_bytes
+
+
+def test_a_small_cityjson_file_converts_under_a_2gib_address_space(tmp_path: Path) -> None:
+    # the reader allocated a buffer of the 2 GiB limit (+ 1) before reading a byte
+    src = tmp_path / "house.city.json"
+    src.write_bytes(_cityjson()[0])
+    result = run_cli(src, "-o", tmp_path / "house.glb", budget=2 * GB)
+    assert result.code == 0, result.stderr
+    assert (tmp_path / "house.glb").exists()
+
+
+@pytest.mark.parametrize("bad", [None, float("nan"), "x"])
+def test_vertices_take_the_memory_of_an_array(tmp_path: Path, small_peak: int, bad) -> None:
+    # as JSON lists of Python numbers, 1M vertices took some 235 MB; as float64, 24 MB (and
+    # so they do with a row that is not three numbers among them)
+    vertices = [[k % 1000, k * 7 % 1000, k % 800] for k in range(1_000_000)]
+    if bad is not None:
+        vertices[500_000] = [bad, 0, 0]
+    src = tmp_path / "many.city.json"
+    src.write_bytes(city({"a": city_object()}, SQUARE + vertices))
+    result = run_cli(src, "-o", tmp_path / "many.glb", budget=4 * GB)
+    assert result.code == 0, result.stderr
+    assert result.peak_bytes - small_peak < 120 * MB, (result.peak_bytes, small_peak)
+
+
+def test_a_gz_past_the_limit_holds_no_more_than_the_limit(tmp_path: Path, small_peak: int):
+    src = tmp_path / "bomb.city.json.gz"
+    src.write_bytes(zeros_gz(256 * MB, b'{"type": "CityJSON", "x": "', b"x"))
+    result = run_cli(src, "-o", tmp_path / "bomb.glb", "--limit", "decompressed_bytes=128M")
+    assert result.code == 1 and "inflates past the limit" in result.stderr, result.stderr
+    assert result.peak_bytes - small_peak < 192 * MB, (result.peak_bytes, small_peak)
+
+
+def test_a_long_sequence_line_is_refused_before_it_is_held(tmp_path: Path, small_peak: int):
+    src = tmp_path / "long.city.jsonl.gz"
+    src.write_bytes(zeros_gz(256 * MB, sequence() + b'{"type": "CityJSONFeature", "x": "', b"x"))
+    result = run_cli(src, "-o", tmp_path / "long.glb", "--limit", "sequence_line_bytes=4M")
+    assert result.code == 1 and "line 2" in result.stderr, result.stderr
+    assert result.peak_bytes - small_peak < 32 * MB, (result.peak_bytes, small_peak)
+
+
+def _read_seconds(path: Path) -> float:
+    start = time.perf_counter()
+    scene = read_scene(path)
+    assert list(scene.nodes) == []
+    return time.perf_counter() - start
+
+
+def test_blank_lines_of_a_sequence_take_time_linear_in_their_bytes(tmp_path: Path) -> None:
+    seconds = []
+    for n in (16, 64):
+        src = tmp_path / f"blank{n}.city.jsonl.gz"
+        src.write_bytes(zeros_gz(n * MB, sequence(), b"\n"))
+        seconds.append(min(_read_seconds(src) for _ in range(2)))
+    assert seconds[1] < 8 * seconds[0], seconds
+
+
+def test_a_ply_gz_padded_with_newlines_converts_in_little_memory(tmp_path: Path) -> None:
+    # trimesh made a numpy array of every line of an ASCII PLY: 64 MiB of newlines took 11 GB
+    result = run_cli(_case("blank.ply.gz", tmp_path), "-o", tmp_path / "out.glb", budget=1 * GB)
+    assert result.code == 0, result.stderr
+    assert result.peak_bytes < 400 * MB, result.peak_bytes
+
+
+def test_an_obj_gz_of_spaces_is_not_held_inflated(tmp_path: Path, small_peak: int) -> None:
+    result = run_cli(_case("spaces.obj.gz", tmp_path), "-o", tmp_path / "out.glb")
+    assert result.code == 1 and "no vertex" in result.stderr, result.stderr
+    assert result.peak_bytes - small_peak < 64 * MB, (result.peak_bytes, small_peak)
+
+
+def test_a_ply_followed_by_blank_lines_converts(tmp_path: Path) -> None:
+    src = tmp_path / "blank.ply"
+    src.write_bytes(
+        b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        b"property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+        b"end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n" + b"\n" * (16 * MB)
+    )
+    result = run_cli(src, "-o", tmp_path / "out.glb", budget=1 * GB)
+    assert result.code == 0, result.stderr
+    assert result.peak_bytes < 400 * MB, result.peak_bytes
+
+
+def test_coordinates_that_are_not_finite_skip_their_buildings_without_warnings(
+    tmp_path: Path,
+) -> None:
+    src = _case("nan.city.json", tmp_path)
+    report = tmp_path / "report.json"
+    result = run_cli(src, "-o", tmp_path / "out.glb", "--report", report)
+    assert result.code == 0, result.stderr
+    assert "Warning" not in result.stderr, result.stderr
+    skipped = {s["id"]: s["reason"] for s in json.loads(report.read_text())["skipped"]}
+    assert sorted(skipped) == ["big", "inf", "nan"]
+    assert "uses vertex 4, whose coordinates are unreadable or not finite" in skipped["nan"]
+    assert "uses vertex 6" in skipped["big"]
+    assert "1 skipped" not in result.stderr and "3 skipped" in result.stderr
+
+
+def test_unreadable_vertex_rows_skip_the_buildings_using_them(tmp_path: Path) -> None:
+    vertices = [*SQUARE, [0, "1", 2], [0, 1], [True, 0, 0], [10**400, 0, 0]]
+    objects = {"good": city_object()} | {
+        f"bad{k}": city_object([[[0, 1, 2, k]]]) for k in range(4, 8)
+    }
+    src = tmp_path / "rows.city.json"
+    src.write_text(city(objects, vertices).decode())
+    report = tmp_path / "report.json"
+    result = run(src, "-o", tmp_path / "out.glb", "--report", report)
+    assert result.returncode == 0, result.stderr
+    data = json.loads(report.read_text())
+    assert [o["id"] for o in data["objects"]] == ["good"]
+    assert [s["id"] for s in data["skipped"]] == ["bad4", "bad5", "bad6", "bad7"]
+    assert "--strict" not in result.stderr
+    strict = run(src, "-o", tmp_path / "strict.glb", "--strict")
+    assert strict.returncode == 1 and "bad4" in strict.stderr
+
+
+def test_a_deep_chain_is_cut_and_a_cycle_kept(tmp_path: Path) -> None:
+    report = tmp_path / "chain.json"
+    result = run(_case("chain.city.json", tmp_path), "-o", tmp_path / "c.glb", "--report", report)
+    assert result.returncode == 0, result.stderr
+    (skipped,) = json.loads(report.read_text())["skipped"]
+    assert skipped["id"] == "o33"
+    assert "nested more than 32 levels deep" in skipped["reason"]
+    assert "566 object(s) below it" in skipped["reason"]
+    report = tmp_path / "cycle.json"
+    result = run(_case("cycle.city.json", tmp_path), "-o", tmp_path / "y.glb", "--report", report)
+    assert result.returncode == 0, result.stderr
+    assert sorted(o["id"] for o in json.loads(report.read_text())["objects"]) == ["a", "b"]
+
+
+def test_a_plain_file_over_the_limit_is_refused_by_its_size(tmp_path: Path) -> None:
+    src = tmp_path / "house.city.json"
+    src.write_bytes(_cityjson()[0])
+    with pytest.raises(InputError, match="is larger than the limit of 100 bytes"):
+        read_scene(src, limits=Limits(decompressed_bytes=100))

@@ -1,0 +1,117 @@
+"""The LOD1 prism's shape, height and colours, and the rule that keeps it only where it pays
+and looks like the building."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from lodconvert.bake import NumpyBackend
+from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.model import Mesh, Node, Surface
+from lodconvert.prisms import LOW_F, MORE_TRIANGLES, prism
+
+from .test_plan import gabled_house
+from .test_sourcelods import block
+
+
+def house_of(mesh: trimesh.Trimesh) -> Mesh:
+    return Mesh([Surface(np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64))])
+
+
+@pytest.mark.parametrize("inward", [False, True])
+def test_the_top_stands_at_the_90th_percentile_of_the_roof_not_its_ridge(inward: bool) -> None:
+    """Seen from above, a gabled roof's height grows evenly from the eaves (6 m) to the ridge
+    (10 m): 90 % of it lies below 9.6 m, whichever way the house's faces are wound."""
+    house = house_of(gabled_house(10, 8, 6, 10))
+    if inward:
+        house = Mesh([Surface(house.vertices, house.faces[:, ::-1].copy())])
+    shape = prism({"lod2": house}, house, {"measuredHeight": 10.0})
+    assert shape is not None
+    assert shape.bounds[:, 2] == pytest.approx([0.0, 9.6])
+
+
+def test_the_top_takes_the_roofs_colour_and_the_walls_the_walls() -> None:
+    """The source's materials: a red roof over white walls gives a red top over white walls
+    (the floor's dark grey nowhere)."""
+    red, white, dark = ([r, g, b, 255] for r, g, b in ((170, 40, 30), (250, 250, 250), (9, 9, 9)))
+    box = block(10, 8, 6).single
+    normals = box.face_normals(np.arange(len(box.faces)))
+    parts = [
+        Surface(box.vertices, box.faces[facing], base_color=np.array(color, np.uint8))
+        for facing, color in (
+            (normals[:, 2] > 0.5, red),
+            (np.abs(normals[:, 2]) < 0.5, white),
+            (normals[:, 2] < -0.5, dark),
+        )
+    ]
+    house = Mesh(parts)
+    shape = prism({"lod2": house}, house, {})
+    assert shape is not None
+    faces = np.arange(shape.face_count)
+    colors = shape.colors_at(faces, shape.triangles.mean(axis=1)).tolist()
+    up = shape.face_normals(faces)[:, 2]
+    assert len(shape.parts) == 1  # one draw call
+    assert {tuple(c) for c, z in zip(colors, up, strict=True) if z > 0.99} == {tuple(red)}
+    assert {tuple(c) for c, z in zip(colors, up, strict=True) if abs(z) < 0.01} == {tuple(white)}
+    assert (np.abs(up) > 0.99).sum() == 2  # the top's two triangles, no floor
+
+
+def notched(depth: float) -> Mesh:
+    """A 20 × 10 × 6 block with a notch ``depth`` deep and 2 m wide in its long south side."""
+    a, b, c = (
+        block(9, 10, 6, 4.5, 5),
+        block(2, 10 - depth, 6, 10, 5 + depth / 2),
+        block(9, 10, 6, 15.5, 5),
+    )
+    return Mesh([*a.parts, *b.parts, *c.parts])
+
+
+def test_the_footprint_is_simplified_within_the_tolerance_topology_kept() -> None:
+    house = notched(0.2)
+    exact = prism({"lod2": house}, house, {})
+    simple = prism({"lod2": house}, house, {}, tolerance=0.5)
+    assert exact is not None and simple is not None
+    assert walls(exact) == 2 * 8  # the notch's four corners kept
+    assert walls(simple) == 2 * 4 and simple.face_count == 2 * 4 + 2  # a rectangle
+    deep = prism({"lod2": notched(2.0)}, notched(2.0), {}, tolerance=0.5)
+    assert deep is not None and walls(deep) == 2 * 8
+
+
+def walls(shape: Mesh) -> int:
+    """The wall triangles of ``shape``."""
+    return int((np.abs(shape.face_normals(np.arange(shape.face_count))[:, 2]) < 0.01).sum())
+
+
+def test_a_prism_with_as_many_triangles_as_the_lod2_is_left_out() -> None:
+    """A pyramid's 4 triangles against a triangular prism's 7: the pyramid stays on."""
+    pyramid = house_of(trimesh.Trimesh([(0, 0, 0), (10, 0, 0), (0, 10, 0), (3, 3, 8)],
+                                       [(0, 2, 1), (0, 1, 3), (1, 2, 3), (2, 0, 3)]))  # fmt: skip
+    chain = bake_chain(Node("p", pyramid, "Building", lods={"lod2": pyramid}), ChainOptions(),
+                       NumpyBackend())  # fmt: skip
+    assert [lv.name for lv in chain.levels] == ["LOD2"] and chain.cutoffs == []
+    assert chain.dropped["LOD1"].startswith(f"{MORE_TRIANGLES} LOD2")
+    assert "the prism has 7 triangles, LOD2 4" in chain.dropped["LOD1"]
+
+
+def test_a_prism_that_loses_the_tower_is_left_out() -> None:
+    """A 30 m tower on a 20 × 20 × 3 m podium: nine tenths of the roof lie at 3 m, and a 3 m
+    block would not look like it where it switches in."""
+    podium, tower = block(20, 20, 3), block(4, 4, 30)
+    house = Mesh([*podium.parts, *tower.parts])
+    chain = bake_chain(Node("t", house, "Building", lods={"lod2": house}), ChainOptions(),
+                       NumpyBackend())  # fmt: skip
+    assert [lv.name for lv in chain.levels] == ["LOD2"]
+    assert chain.dropped["LOD1"].startswith(LOW_F) and "below 0.95" in chain.dropped["LOD1"]
+
+
+def test_a_kept_prism_reports_its_silhouette_f() -> None:
+    from lodconvert.pipeline import chain_record
+
+    house = house_of(gabled_house(10, 8, 6, 7))
+    chain = bake_chain(Node("h", house, "Building", lods={"lod2": house}), ChainOptions(),
+                       NumpyBackend())  # fmt: skip
+    (prism_level,) = [lv for lv in chain_record(chain)["levels"] if lv["kind"] == "prism"]
+    assert 0.95 <= prism_level["silhouette_f"] <= 1.0
+    assert prism_level["faces"] == 10  # top 2, walls 8: no floor
