@@ -370,6 +370,7 @@ def convert(
             vertical=crs_record["vertical"] if scene.city else None,
             view=options.view,
             options=options_record(options),
+            city=scene.city,
         )
 
         def recorded(items: Iterator[LodChain | CellChain]) -> Iterator[LodChain | CellChain]:
@@ -377,7 +378,7 @@ def convert(
             dropped = tally.dropped_by_object if tally is not None else {}
             for item in items:
                 if not frames:
-                    frames.append(scene_frame(info.crs, item))
+                    frames.append(scene_frame(info.framed, item))
                 objects = item.objects() if isinstance(item, CellChain) else [item]
                 for chain in objects:
                     records.append(
@@ -438,13 +439,17 @@ def read_inputs(
     if (read_options or {}).get("crs") is not None:
         checked_crs_option(read_options["crs"])
     sources = sources or [input_format(path) for path in inputs]
-    one_crs = in_one_crs(
-        [
-            source.read_file(path, limits=limits, **(read_options or {}))
-            for source, path in zip(sources, inputs, strict=True)
-        ],
-        warn,
-    )
+    scenes = [
+        source.read_file(path, limits=limits, **(read_options or {}))
+        for source, path in zip(sources, inputs, strict=True)
+    ]
+    for scene in scenes if (read_options or {}).get("crs") is not None else ():
+        if not scene.city:
+            warn(
+                f"{scene.source}: not a city model: --crs is not applied (a mesh keeps its own "
+                "axes and coordinates)"
+            )
+    one_crs = in_one_crs(scenes, warn)
     return merged(one_crs.scenes), one_crs.record
 
 
