@@ -223,3 +223,47 @@ def test_inflation_stops_at_the_limit_with_work_to_match(tmp_path: Path) -> None
 
     seconds(1 << 20)  # warm up
     assert seconds(8 << 20) < 8 * seconds(2 << 20)
+
+
+def test_empty_members_take_no_memory_per_member(tmp_path: Path) -> None:
+    """Inflating 4× as many empty members (``<bldg:Building/>``, 320,000 against 80,000) up to
+    the limit raises the peak by less than 16 MB (it was some 300 bytes a member: an id taken
+    and a skip record each)."""
+    path = write(tmp_path, "members.gml.gz", gml.empty_members_gz(17 << 20))
+    code = (
+        "import resource, sys\n"
+        "from lodconvert.errors import InputError\n"
+        "from lodconvert.io import read_scene\n"
+        "from lodconvert.limits import Limits\n"
+        "limits = Limits(decompressed_bytes=int(sys.argv[2]))\n"
+        "try: list(read_scene(sys.argv[1], limits=limits).nodes)\n"
+        "except InputError as exc: assert 'inflates past the limit' in str(exc), exc\n"
+        "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)\n"
+    )
+
+    def peak(limit: int) -> int:
+        done = subprocess.run(
+            [sys.executable, "-c", code, str(path), str(limit)],
+            capture_output=True,
+            text=True,
+            check=True,
+            env=child_env(),
+        )
+        return int(done.stdout)
+
+    assert peak(16 << 20) - peak(4 << 20) < 16 << 20
+
+
+def test_an_object_with_nothing_in_it_is_counted_not_skipped(tmp_path: Path) -> None:
+    """An empty ``<bldg:Building/>`` takes no id and no skip record (no warning line); one
+    with content but no geometry is still skipped with its id and the reason."""
+    text = gml.document(
+        gml.building("", "empty"),
+        gml.building("<gml:name>n</gml:name>", "nameonly"),
+        gml.box_building("good"),
+    )
+    scene = read_scene(write(tmp_path, "city.gml", text))
+    assert [node.id for node in scene.nodes] == ["good"]
+    assert scene.attributes["citygml"]["empty"] == {"Building": 1}
+    (skipped,) = tally_of(scene).skipped
+    assert skipped["id"] == "nameonly" and "has no surface geometry" in skipped["reason"]

@@ -65,8 +65,15 @@ class Document:
     templates: Templates = field(default_factory=Templates)
     """Relative geometries of implicit geometry, for links from later objects."""
     stats: dict[str, dict[str, int]] = field(
-        default_factory=lambda: {"unresolved_links": {}, "degenerate_polygons": {}, "not_read": {}}
+        default_factory=lambda: {
+            "unresolved_links": {},
+            "degenerate_polygons": {},
+            "not_read": {},
+            "empty": {},
+        }
     )
+    """Counts by object id (links not resolved, degenerate polygons) or by type (features not
+    read, objects with nothing in them: no id is taken and nothing else kept for those)."""
 
     @property
     def source(self) -> str:
@@ -130,9 +137,13 @@ class Document:
     def _collected(self, element: etree._Element) -> tuple[Node, Holder] | None:
         """A top-level city object's node (parts as children, without geometry) and its
         holder with the polygons found in it; None when the object is not read (or skipped:
-        parts nested too deep, no polygon). :class:`InputError` when it nests deeper than
-        the ``xml_depth`` limit, checked before it is walked."""
+        parts nested too deep, no polygon; an object with no element in it is only counted).
+        :class:`InputError` when it nests deeper than the ``xml_depth`` limit, checked before
+        it is walked."""
         kind = local(element)
+        if not len(element) and is_feature(kind) and kind not in NOT_OBJECTS:
+            self._count("empty", kind)
+            return None
         if not is_feature(kind) or kind in NOT_OBJECTS:
             self._count("not_read", kind or "?")
             return None
