@@ -11,11 +11,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from lxml import etree
 
 from ...errors import InputError
 from ...limits import Limits
-from ...model import Mesh, Node
+from ...model import Mesh, Node, Surface
 from ...semantics import DEFAULT_PALETTE, Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
@@ -224,7 +225,7 @@ class Document:
         if dropped:
             self.tally.dropped_faces += dropped
             self.tally.dropped_by_object[node.id] = dropped
-        node.lods = {lod: Mesh(parts) for lod, parts in merged.items()}
+        node.lods = {lod: Mesh(_joined(parts)) for lod, parts in merged.items()}
         node.geometry = _finest(node.lods)
         if node.geometry is None:
             if dropped:
@@ -252,6 +253,30 @@ def _free(element: etree._Element) -> None:
     element.clear(keep_tail=False)
     while element.getprevious() is not None:
         del element.getparent()[0]
+
+
+def _joined(surfaces: list[Surface]) -> list[Surface]:
+    """``surfaces`` (of an object and its parts, in one LoD) joined into one surface per
+    colour, in the order each colour first comes: an object of many parts is a few surfaces,
+    however many parts it has."""
+    by_color: dict[bytes, list[Surface]] = {}
+    for surface in surfaces:
+        assert surface.base_color is not None  # as triangulate_batch makes them
+        by_color.setdefault(surface.base_color.tobytes(), []).append(surface)
+    return [group[0] if len(group) == 1 else _one_surface(group) for group in by_color.values()]
+
+
+def _one_surface(group: list[Surface]) -> Surface:
+    """The surfaces of ``group`` (of one colour) as one, its bounds theirs."""
+    starts = np.cumsum([0] + [len(s.vertices) for s in group[:-1]])
+    joined = Surface(
+        np.concatenate([s.vertices for s in group]),
+        np.concatenate([s.faces + start for s, start in zip(group, starts, strict=True)]),
+        base_color=group[0].base_color,
+    )
+    boxes = np.stack([s.bounds for s in group])
+    joined.derived("bounds", lambda: np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)]))
+    return joined
 
 
 def _finest(lods: dict[str, Mesh]) -> Mesh | None:
