@@ -147,8 +147,8 @@ def with_coordinate(value: str, *more: str) -> bytes:
 
 
 def without_ids(count: int, parts: bool) -> bytes:
-    """``count`` objects without ``gml:id``: parts of one building (``parts``), else empty
-    buildings before a good one."""
+    """``count`` objects without ``gml:id``: parts of one building (``parts``), else buildings
+    without geometry (a name alone: each is skipped under an id of its own) before a good one."""
     if parts:
         part = (
             "<bldg:consistsOfBuildingPart><bldg:BuildingPart>{}</bldg:BuildingPart>"
@@ -156,7 +156,17 @@ def without_ids(count: int, parts: bool) -> bytes:
         )
         inner = "".join(part.format(surfaces(cube(2.0 * i)[:1])) for i in range(count))
         return document(building(inner, gml_id=""))
-    return document(building("", gml_id="") * count, box_building("good"))
+    return document(building("<gml:name>n</gml:name>", gml_id="") * count, box_building("good"))
+
+
+def many_parts(count: int) -> bytes:
+    """A building of ``count`` parts, each a one-metre cube with an id, in a row."""
+    part = (
+        '<bldg:consistsOfBuildingPart><bldg:BuildingPart gml:id="P{}">{}</bldg:BuildingPart>'
+        "</bldg:consistsOfBuildingPart>"
+    )
+    inner = "".join(part.format(i, surfaces(cube(2.0 * i))) for i in range(count))
+    return document(building(inner))
 
 
 def scaled_tree(scale: str, gml_id: str = "tree") -> str:

@@ -11,11 +11,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from lxml import etree
 
 from ...errors import InputError
 from ...limits import Limits
-from ...model import Mesh, Node
+from ...model import Mesh, Node, Surface
 from ...semantics import DEFAULT_PALETTE, Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
@@ -65,8 +66,15 @@ class Document:
     templates: Templates = field(default_factory=Templates)
     """Relative geometries of implicit geometry, for links from later objects."""
     stats: dict[str, dict[str, int]] = field(
-        default_factory=lambda: {"unresolved_links": {}, "degenerate_polygons": {}, "not_read": {}}
+        default_factory=lambda: {
+            "unresolved_links": {},
+            "degenerate_polygons": {},
+            "not_read": {},
+            "empty": {},
+        }
     )
+    """Counts by object id (links not resolved, degenerate polygons) or by type (features not
+    read, objects with nothing in them: no id is taken and nothing else kept for those)."""
 
     @property
     def source(self) -> str:
@@ -130,9 +138,13 @@ class Document:
     def _collected(self, element: etree._Element) -> tuple[Node, Holder] | None:
         """A top-level city object's node (parts as children, without geometry) and its
         holder with the polygons found in it; None when the object is not read (or skipped:
-        parts nested too deep, no polygon). :class:`InputError` when it nests deeper than
-        the ``xml_depth`` limit, checked before it is walked."""
+        parts nested too deep, no polygon; an object with no element in it is only counted).
+        :class:`InputError` when it nests deeper than the ``xml_depth`` limit, checked before
+        it is walked."""
         kind = local(element)
+        if not len(element) and is_feature(kind) and kind not in NOT_OBJECTS:
+            self._count("empty", kind)
+            return None
         if not is_feature(kind) or kind in NOT_OBJECTS:
             self._count("not_read", kind or "?")
             return None
@@ -213,7 +225,7 @@ class Document:
         if dropped:
             self.tally.dropped_faces += dropped
             self.tally.dropped_by_object[node.id] = dropped
-        node.lods = {lod: Mesh(parts) for lod, parts in merged.items()}
+        node.lods = {lod: Mesh(_joined(parts)) for lod, parts in merged.items()}
         node.geometry = _finest(node.lods)
         if node.geometry is None:
             if dropped:
@@ -241,6 +253,30 @@ def _free(element: etree._Element) -> None:
     element.clear(keep_tail=False)
     while element.getprevious() is not None:
         del element.getparent()[0]
+
+
+def _joined(surfaces: list[Surface]) -> list[Surface]:
+    """``surfaces`` (of an object and its parts, in one LoD) joined into one surface per
+    colour, in the order each colour first comes: an object of many parts is a few surfaces,
+    however many parts it has."""
+    by_color: dict[bytes, list[Surface]] = {}
+    for surface in surfaces:
+        assert surface.base_color is not None  # as triangulate_batch makes them
+        by_color.setdefault(surface.base_color.tobytes(), []).append(surface)
+    return [group[0] if len(group) == 1 else _one_surface(group) for group in by_color.values()]
+
+
+def _one_surface(group: list[Surface]) -> Surface:
+    """The surfaces of ``group`` (of one colour) as one, its bounds theirs."""
+    starts = np.cumsum([0] + [len(s.vertices) for s in group[:-1]])
+    joined = Surface(
+        np.concatenate([s.vertices for s in group]),
+        np.concatenate([s.faces + start for s, start in zip(group, starts, strict=True)]),
+        base_color=group[0].base_color,
+    )
+    boxes = np.stack([s.bounds for s in group])
+    joined.derived("bounds", lambda: np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)]))
+    return joined
 
 
 def _finest(lods: dict[str, Mesh]) -> Mesh | None:

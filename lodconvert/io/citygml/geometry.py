@@ -88,7 +88,7 @@ class BrokenObject(ValueError):
     """An object whose geometry cannot be read (the message says why)."""
 
 
-@dataclass(eq=False)
+@dataclass(eq=False, slots=True)
 class Polygon:
     """One polygon met in an object: its LoD, semantic type (``""``: none), whether an
     ``OrientableSurface`` reversed it, its element, what places it, and its rings (exterior
@@ -231,17 +231,22 @@ class _Walker:
 
     def place(self, element: etree._Element) -> _Place | None:
         """Where ``element`` lies, or None when it is not read (not under a geometry property,
-        or in a solid's interior shell, a curve or a property not read). Remembered, so that
-        elements sharing ancestors walk up only once (in a loop: elements may nest as deep as
-        a document holds)."""
+        or in a solid's interior shell, a curve or a property not read). Remembered for
+        ``element`` and for the ancestors with several child elements (those that other
+        elements share), so that shared ancestors are walked up once and each polygon's
+        single-child wrappers (``surfaceMember``…) cost nothing kept (in a loop: elements may
+        nest as deep as a document holds)."""
         unplaced = []
         ancestor: etree._Element | None = element
         while ancestor is not None and ancestor not in self.places:
             unplaced.append(ancestor)
             ancestor = None if self._settled(ancestor) else ancestor.getparent()
+        found: dict[Any, _Place | None] = {}
         for each in reversed(unplaced):
-            self.places[each] = self._found(each)
-        return self.places[element]
+            found[each] = place = self._found(each, found)
+            if each is element or len(each) > 1:
+                self.places[each] = place
+        return found[element] if element in found else self.places[element]
 
     def _settled(self, element: etree._Element) -> bool:
         """Whether where ``element`` lies is known without its parent's place."""
@@ -256,8 +261,9 @@ class _Walker:
             or (name == "interior" and local(parent) == "Solid")
         )
 
-    def _found(self, element: etree._Element) -> _Place | None:
-        """Where ``element`` lies, its parent's place known unless :meth:`_settled`."""
+    def _found(self, element: etree._Element, found: dict[Any, _Place | None]) -> _Place | None:
+        """Where ``element`` lies, its parent's place known (remembered, or just ``found``)
+        unless :meth:`_settled`."""
         name = local(element)
         parent = element.getparent()
         if parent is None or element is self.top.element or name in NOT_SURFACES:
@@ -276,7 +282,7 @@ class _Walker:
             return None if above is None or lod is None else _Place(above[0], lod, "", False)
         if name == "interior" and local(parent) == "Solid":
             return None
-        outer = self.places[parent]
+        outer = found[parent] if parent in found else self.places[parent]
         if outer is None:
             return None
         flip = outer.flip ^ (name == "OrientableSurface" and element.get("orientation") == "-")
