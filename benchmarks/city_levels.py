@@ -20,9 +20,7 @@ prisms kept and the triangles beyond Y(1.0) for other roof percentiles and footp
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -38,7 +36,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 from city import DATA, TUM, Template, tum_document, write_district  # noqa: E402
-from tables import markdown_table, write_results  # noqa: E402
+from tables import markdown_table, one_core_facts, write_results  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "city_levels.md"
@@ -200,18 +198,12 @@ def main(argv: list[str] | None = None) -> int:
             ),
             "",
         ]
-    import lodconvert
-
     command = f"python benchmarks/city_levels.py {' '.join(argv or sys.argv[1:])}".rstrip()
     text = "\n".join(
         [
             "# City levels: triangles beyond each cutoff, and the LOD1 prisms that pay",
             "",
-            f"- Date: {datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}",
-            f"- Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-            f"{platform.platform()}; one core (affinity), in one process",
-            f"- Software: Python {platform.python_version()}, lodconvert {lodconvert.__version__}",
-            f"- Command: `{command}` ({time.perf_counter() - started:.0f} s)",
+            *one_core_facts(command, time.perf_counter() - started),
             "- Triangles beyond Y(x): every building seen from beyond its cutoff at exponent x "
             "(the level it shows there); no LOD: every building at its finest level. A prism is "
             "kept only where it has fewer triangles than the level before it and silhouette F "

@@ -18,9 +18,7 @@ are in ``city_render.md`` (``benchmarks/city_render.py``).
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
-import platform
 import statistics
 import sys
 import tempfile
@@ -31,7 +29,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 from city import TUM, Template, tum_document, write_district  # noqa: E402
-from tables import markdown_table, write_results  # noqa: E402
+from tables import markdown_table, one_core_facts, write_results  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "hlod.md"
@@ -114,18 +112,14 @@ def main(argv: list[str] | None = None) -> int:
                     print(" | ".join(rows[-1]), flush=True)
             title = f"## {factor}× TUM Munich ({factor * template.buildings:,} buildings)"
             sections.append(f"{title}\n\n{markdown_table(header, rows, 2)}\n")
-    import lodconvert
-
     text = "\n".join(
         [
             "# LOD parents: far levels of points against merged meshes",
             "",
-            f"- Date: {datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}",
-            f"- Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-            f"{platform.platform()}; one core (affinity), in one process",
-            f"- Software: Python {platform.python_version()}, lodconvert {lodconvert.__version__}",
-            f"- Command: `python benchmarks/hlod.py {' '.join(argv or sys.argv[1:])}`".rstrip()
-            + f" ({time.perf_counter() - started:.0f} s)",
+            *one_core_facts(
+                f"python benchmarks/hlod.py {' '.join(argv or sys.argv[1:])}".rstrip(),
+                time.perf_counter() - started,
+            ),
             "- Far view: every cell and building seen from beyond all its cutoffs; *without* is "
             "the same buildings with their own chains only. Objects on their own: those no cell "
             "admitted (they would delay its switch past its formula distance). F: silhouette F "

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import datetime
+import os
+import platform
 from pathlib import Path
 
 
@@ -16,3 +19,16 @@ def write_results(path: Path, text: str) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(text, encoding="utf-8")
     print(text)
+
+
+def one_core_facts(command: str, seconds: float) -> list[str]:
+    """The date, machine, software and command lines of a one-core results file."""
+    import lodconvert
+
+    return [
+        f"- Date: {datetime.datetime.now(datetime.UTC).isoformat(timespec='seconds')}",
+        f"- Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"{platform.platform()}; one core (affinity), in one process",
+        f"- Software: Python {platform.python_version()}, lodconvert {lodconvert.__version__}",
+        f"- Command: `{command}` ({seconds:.0f} s)",
+    ]

@@ -30,7 +30,8 @@ class Limits:
     xml_depth: int = 256
     """Nesting depth of an XML input (city models)."""
     xml_text_bytes: int = 256 * MIB
-    """Bytes of one XML text node (a ``posList``, say) of an XML input."""
+    """Bytes of every text (a ``posList``, a description, an attribute value) of an XML
+    input."""
     sequence_line_bytes: int = 64 * MIB
     """Bytes of one line of a CityJSONSeq input (its header or one feature)."""
 

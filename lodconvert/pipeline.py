@@ -506,6 +506,7 @@ def _output_info(
         vertical=crs_record["vertical"] if scene.city else None,
         view=options.view,
         options=options_record(options),
+        city=scene.city,
     )
 
 
@@ -529,7 +530,7 @@ class _Assembly:
         dropped = tally.dropped_by_object if tally is not None else {}
         for item in items:
             if not self.started:
-                self.frame, self.started = scene_frame(self.info.crs, item), True
+                self.frame, self.started = scene_frame(self.info.framed, item), True
             objects = item.objects() if isinstance(item, CellChain) else [item]
             for chain in objects:
                 self.records.append(
@@ -591,13 +592,17 @@ def read_inputs(
     if (read_options or {}).get("crs") is not None:
         checked_crs_option(read_options["crs"])
     sources = sources or [input_format(path) for path in inputs]
-    one_crs = in_one_crs(
-        [
-            source.read_file(path, limits=limits, **(read_options or {}))
-            for source, path in zip(sources, inputs, strict=True)
-        ],
-        warn,
-    )
+    scenes = [
+        source.read_file(path, limits=limits, **(read_options or {}))
+        for source, path in zip(sources, inputs, strict=True)
+    ]
+    for scene in scenes if (read_options or {}).get("crs") is not None else ():
+        if not scene.city:
+            warn(
+                f"{scene.source}: not a city model: --crs is not applied (a mesh keeps its own "
+                "axes and coordinates)"
+            )
+    one_crs = in_one_crs(scenes, warn)
     return merged(one_crs.scenes), one_crs.record
 
 

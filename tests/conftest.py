@@ -49,12 +49,16 @@ def degenerate_meshes() -> list:
     ]
 
 
-def stanford(name: str) -> Path:
-    """Path of a Stanford scan in ../shared/data/stanford, or skip the test."""
-    path = STANFORD / name
+def shared_data(path: Path) -> Path:
+    """``path`` (in ../shared), or skip the test where the shared data is absent."""
     if not path.exists():
         pytest.skip(f"{path} is absent (shared test data not checked out)")
     return path
+
+
+def stanford(name: str) -> Path:
+    """Path of a Stanford scan in ../shared/data/stanford, or skip the test."""
+    return shared_data(STANFORD / name)
 
 
 def surface_of(mesh: trimesh.Trimesh) -> Surface:

@@ -17,7 +17,7 @@ import pytest
 import trimesh
 
 from lodconvert.cli import command_parser, main
-from lodconvert.commands import MAIN_COMMAND
+from lodconvert.commands import COMMANDS, MAIN_COMMAND
 
 from .conftest import ROOT, SAMPLE, degenerate_meshes
 
@@ -221,3 +221,15 @@ def test_readme_options_table_lists_every_option_of_the_main_command() -> None:
     flags = {s for a in command_parser(MAIN_COMMAND)._actions for s in a.option_strings}
     assert {"--crs", "--strict", "--limit"} <= flags
     assert sorted(flags - listed_flags) == []
+
+
+@pytest.mark.parametrize("name", sorted(set(COMMANDS) - {MAIN_COMMAND}))
+def test_readme_commands_table_lists_every_option_of_each_other_command(name: str) -> None:
+    """Each other command's row names every option of its own (those it shares with the main
+    command are in the options table; -h, -q, -v and --debug are every command's)."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    (row,) = [line for line in readme.splitlines() if line.startswith(f"| `lodconvert {name} ")]
+    listed = set(re.findall(r"(?<![\w-])--?[a-z][a-z0-9-]*", row))
+    shared = {s for a in command_parser(MAIN_COMMAND)._actions for s in a.option_strings}
+    flags = {s for a in command_parser(name)._actions for s in a.option_strings} - shared
+    assert sorted(flags - listed - {"-h", "--help", "-q", "--quiet", "-v", "--verbose"}) == []

@@ -19,7 +19,7 @@ from lodconvert.io.crs import CrsError
 from lodconvert.model import Node, Scene
 from lodconvert.reproject import in_one_crs
 
-from .conftest import ROOT, surface_of
+from .conftest import ROOT, SAMPLE, surface_of
 from .test_citygml import SIG3D
 from .test_citygml import sample as citygml_sample
 from .test_cityjson import delft, write_json
@@ -209,6 +209,27 @@ def test_crs_option_must_name_a_crs(given: str, tmp_path: Path) -> None:
     result = run(delft(), "-o", out, "--crs", given)
     assert_one_line_error(result, 2, "--crs", given)
     assert not out.exists()
+
+
+def test_crs_given_to_a_mesh_is_warned_of_not_dropped_silently(tmp_path: Path) -> None:
+    """A mesh records no CRS (its axes are its own): --crs given with one says so."""
+    out = tmp_path / "knot.glb"
+    result = run(SAMPLE, "-o", out, "--crs", "EPSG:25832", "--backend", "numpy")
+    assert result.returncode == 0, result.stderr
+    (line,) = [w for w in result.stderr.splitlines() if "--crs" in w]
+    assert line == (
+        f"lodconvert: warning: {SAMPLE}: not a city model: --crs is not applied "
+        "(a mesh keeps its own axes and coordinates)"
+    )
+    assert _glb_extras(out)["crs"] is None
+    result = run(delft(), SAMPLE, "-o", tmp_path / "both.x3d", "--crs", "EPSG:7415")
+    assert result.returncode == 0 and result.stderr.count("--crs is not applied") == 1
+
+
+def _glb_extras(path: Path) -> dict:
+    data = path.read_bytes()
+    length = int.from_bytes(data[12:16], "little")
+    return json.loads(data[20 : 20 + length])["asset"]["extras"]["lodconvert"]
 
 
 def test_geographic_crs_on_projected_coordinates_is_one_line(tmp_path: Path) -> None:

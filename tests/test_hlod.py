@@ -240,7 +240,10 @@ def test_glb_chains_cells_with_msft_lod_validly(tmp_path: Path, gltf_validator) 
     assert_khronos_valid(gltf_validator(out))
     doc, _ = gltf_load(out)
     nodes = doc["nodes"]
-    assert len(nodes) == report["hlod"]["draw"]["with"]["nodes"]  # the report counts the file
+    # the report counts the file's nodes but the scene frame's root (README: Upright, ...)
+    framed = [n for n in nodes if n.get("name") == "scene_frame"]
+    assert len(framed) == 1 and report["frame"] is not None
+    assert len(nodes) - 1 == report["hlod"]["draw"]["with"]["nodes"]
     for cell in report["hlod"]["cells"]:
         (root,) = [n for n in nodes if n.get("name") == cell["id"]]
         near = nodes[root["children"][0]]

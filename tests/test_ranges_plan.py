@@ -12,24 +12,17 @@ from lxml import etree
 
 from lodconvert.io import read_scene
 
-from .conftest import SAMPLE, SHARED
+from .conftest import SAMPLE, SHARED, shared_data
 from .test_cli import run
 
 CITYGML = SHARED / "data" / "citygml"
 CITYJSON = SHARED / "data" / "cityjson"
 
 
-def present(path: Path) -> Path:
-    """``path``, or skip the test where the shared data is absent."""
-    if not path.exists():
-        pytest.skip(f"{path} is absent (shared test data not checked out)")
-    return path
-
-
 def plateau_lod0(folder: Path) -> Path:
     """The PLATEAU building with its LoD 1 and 2 taken out: its LoD 0 roof edge and its
     measuredHeight (31.7 m) are left, so that its chain is the prism alone."""
-    tree = etree.parse(str(present(CITYGML / "plateau_53394517_bldg_lod012_v2.gml")))
+    tree = etree.parse(str(shared_data(CITYGML / "plateau_53394517_bldg_lod012_v2.gml")))
     for element in tree.iter("{*}lod1Solid", "{*}lod2Solid", "{*}lod2MultiSurface"):
         element.getparent().remove(element)
     path = folder / "plateau_lod0.gml"
@@ -40,12 +33,12 @@ def plateau_lod0(folder: Path) -> Path:
 def inputs_of(name: str, folder: Path) -> list[Path]:
     """The input files of a test case."""
     if name == "sig3d-house":
-        return sorted(present(CITYGML / "sig3d_house_lod0-4").glob("*.gml"))
+        return sorted(shared_data(CITYGML / "sig3d_house_lod0-4").glob("*.gml"))
     if name == "plateau-lod0":
         return [plateau_lod0(folder)]
     if name == "mesh":
         return [SAMPLE]
-    return [present(CITYGML / name if name.endswith(".zip") else CITYJSON / name)]
+    return [shared_data(CITYGML / name if name.endswith(".zip") else CITYJSON / name)]
 
 
 @pytest.mark.parametrize(
@@ -84,7 +77,7 @@ def test_ranges_prints_the_cutoffs_convert_writes(
 def test_a_lod2_building_has_one_cutoff_and_a_lod0_prism_the_alpha_of_its_box(
     tmp_path: Path,
 ) -> None:
-    rows, _ = run_json("ranges", present(CITYGML / "tum_munich_lod2_v2.zip"))
+    rows, _ = run_json("ranges", shared_data(CITYGML / "tum_munich_lod2_v2.zip"))
     tum = next(row for row in rows if "LOD1" not in row["dropped"])  # one whose prism pays
     assert [lv["name"] for lv in tum["levels"]] == ["LOD2", "LOD1"]
     assert tum["xs"] == [1.0] and len(tum["cutoffs"]) == 1
@@ -104,6 +97,18 @@ def test_points_still_to_bake_are_marked(tmp_path: Path) -> None:
     assert "LOD4 LOD3* LOD2* LOD1*" in table.stdout and "* points convert bakes" in table.stdout
 
 
+def test_the_table_keeps_its_columns_under_long_ids() -> None:
+    """KIT's ids are 45 characters long: every value still stands under its heading."""
+    (row, *_), table = run_json(
+        "ranges", shared_data(CITYGML / "kit_testcases_lod2_100bldg_v3.gml")
+    )
+    heading, first = table.stdout.splitlines()[:2]
+    assert first.startswith(row["id"] + " ")
+    for name, value in (("alpha", f"{row['alpha']:.6g}"), ("gamma", f"{row['gamma']:g}")):
+        assert first.index(value, len(row["id"])) + len(value) == heading.index(name) + len(name)
+    assert first.index("LOD2") == heading.index("levels")
+
+
 def run_json(*args: str | Path) -> tuple[list[dict], object]:
     """The rows of ``lodconvert ranges ... --json`` and the table run without ``--json``."""
     rows = run(*args, "--json")
@@ -114,7 +119,7 @@ def run_json(*args: str | Path) -> tuple[list[dict], object]:
 
 
 def test_a_broken_object_is_reported_and_the_others_listed(tmp_path: Path) -> None:
-    document = json.loads(present(CITYJSON / "multi_lod_10bldg.city.json").read_text())
+    document = json.loads(shared_data(CITYJSON / "multi_lod_10bldg.city.json").read_text())
     bad = list(document["CityObjects"])[3]
     document["CityObjects"][bad]["geometry"][1]["boundaries"][0][0][0][0] = 10**6
     path = tmp_path / "bad.city.json"

@@ -30,7 +30,7 @@ from lodconvert.pipeline import iter_chains
 from lodconvert.validate import validate_file
 from lodconvert.viewer.config import page_config
 
-from .conftest import SAMPLE, SHARED
+from .conftest import SAMPLE, SHARED, shared_data
 
 TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
 FAR = np.array([500000.0, 5400000.0, 100.0])
@@ -305,3 +305,23 @@ def test_validate_reports_a_broken_scene_frame(tmp_path: Path, tamper: str) -> N
     out.write_text(json.dumps(doc, indent=1))
     findings = validate_file(out)
     assert [f.code for f in findings] == ["SCENE_FRAME"], findings
+
+
+def test_a_city_without_a_crs_is_upright_too(tmp_path: Path) -> None:
+    """multi_lod_10bldg.city.json declares no CRS; its buildings are z-up all the same, so a
+    plain glTF or X3D viewer shows them standing and the viewer page from above the horizon."""
+    source = shared_data(SHARED / "data" / "cityjson" / "multi_lod_10bldg.city.json")
+    for suffix in (".glb", ".x3d"):
+        out = tmp_path / f"city{suffix}"
+        report = convert(source, out, backend="numpy")
+        assert report["crs"]["name"] is None and report["frame"]["rotation"] == ROTATION.tolist()
+        origin = np.array(report["frame"]["origin"])
+        assert np.abs(np.array(report["objects"][0]["origin"]) - origin).max() < 1
+        assert page_config(out)["view"]["direction"][1] > 0  # tilted: from above the horizon
+        for chain, record in zip(read_chains(out), report["objects"], strict=True):
+            np.testing.assert_allclose(chain.origin, record["origin"], atol=1e-6)
+    doc, _ = _glb(tmp_path / "city.glb")
+    (root,) = doc["scenes"][0]["nodes"]
+    assert doc["nodes"][root]["name"] == "scene_frame"
+    scene = etree.parse(str(tmp_path / "city.x3d")).getroot().find("Scene")
+    assert scene[0].get("DEF") == "scene_frame"

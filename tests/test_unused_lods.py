@@ -9,7 +9,6 @@ from pathlib import Path
 
 import jsonschema
 import numpy as np
-import pytest
 import trimesh
 
 from lodconvert import convert
@@ -17,18 +16,11 @@ from lodconvert.chain import ChainOptions
 from lodconvert.model import Mesh, Surface
 from lodconvert.sourcelods import unused_levels
 
-from .conftest import ROOT, SHARED
+from .conftest import ROOT, SHARED, shared_data
 from .test_cli import run
 
 MULTI_LOD = SHARED / "data" / "cityjson" / "multi_lod_10bldg.city.json"
 SIG3D = SHARED / "data" / "citygml" / "sig3d_house_lod0-4"
-
-
-def present(path: Path) -> Path:
-    """``path``, or skip the test where the shared data is absent."""
-    if not path.exists():
-        pytest.skip(f"{path} is absent (shared test data not checked out)")
-    return path
 
 
 def block(height: float) -> Mesh:
@@ -61,7 +53,7 @@ def test_each_label_left_out_of_a_slot_says_which_took_it() -> None:
 
 
 def test_the_report_names_lod_1_2_beside_the_lod_1_3_that_fills_lod1(tmp_path: Path) -> None:
-    objects = objects_of(tmp_path, [present(MULTI_LOD)], ChainOptions())
+    objects = objects_of(tmp_path, [shared_data(MULTI_LOD)], ChainOptions())
     assert len(objects) == 10
     for obj in objects:
         assert obj["unused"] == {"1.2": "slot LOD1 taken by LoD 1.3"}
@@ -69,7 +61,7 @@ def test_the_report_names_lod_1_2_beside_the_lod_1_3_that_fills_lod1(tmp_path: P
 
 
 def test_the_summary_counts_the_unused_lods(tmp_path: Path) -> None:
-    result = run(present(MULTI_LOD), "-o", tmp_path / "out.glb", "--backend", "numpy")
+    result = run(shared_data(MULTI_LOD), "-o", tmp_path / "out.glb", "--backend", "numpy")
     assert result.returncode == 0, result.stderr
     assert "10 object(s) have source LoDs that no level is made from: LoD 1.2 (10)" in (
         result.stderr
@@ -77,7 +69,7 @@ def test_the_summary_counts_the_unused_lods(tmp_path: Path) -> None:
 
 
 def test_with_three_levels_every_lod_but_the_finest_is_unused(tmp_path: Path) -> None:
-    objects = objects_of(tmp_path, [present(MULTI_LOD)], ChainOptions(levels=3))
+    objects = objects_of(tmp_path, [shared_data(MULTI_LOD)], ChainOptions(levels=3))
     for obj in objects:
         assert obj["unused"] == {
             "1.2": "slot LOD1 taken by LoD 1.3",
@@ -88,7 +80,7 @@ def test_with_three_levels_every_lod_but_the_finest_is_unused(tmp_path: Path) ->
 def test_the_sig3d_house_names_its_footprint_where_its_own_lod1_fills_the_slot(
     tmp_path: Path,
 ) -> None:
-    files = sorted(present(SIG3D).glob("*.gml"))
+    files = sorted(shared_data(SIG3D).glob("*.gml"))
     objects = objects_of(tmp_path, files, ChainOptions())
     house = next(obj for obj in objects if len(obj["levels"]) == 4)
     assert house["unused"] == {"lod0": "LOD1 is the source's lod1, not a prism of this footprint"}

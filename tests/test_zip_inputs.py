@@ -15,19 +15,12 @@ from lodconvert.errors import InputError
 from lodconvert.io import read_scene
 from lodconvert.limits import Limits
 
-from .conftest import SHARED
+from .conftest import SHARED, shared_data
 from .test_cityjson import _features
 from .test_cli import assert_one_line_error, run
 
 DELFT = SHARED / "data" / "cityjson" / "delft.city.json"
 MULTI_LOD = SHARED / "data" / "cityjson" / "multi_lod_10bldg.city.json"
-
-
-def present(path: Path) -> Path:
-    """``path``, or skip the test where the shared data is absent."""
-    if not path.exists():
-        pytest.skip(f"{path} is absent (shared test data not checked out)")
-    return path
 
 
 def zipped(path: Path, members: dict[str, bytes]) -> Path:
@@ -40,7 +33,7 @@ def zipped(path: Path, members: dict[str, bytes]) -> Path:
 
 def sequence() -> bytes:
     """The ten multi-LoD buildings as a CityJSONSeq: a header line, one feature a line."""
-    document = json.loads(present(MULTI_LOD).read_text())
+    document = json.loads(shared_data(MULTI_LOD).read_text())
     header = {
         "type": "CityJSON",
         "version": "2.0",
@@ -64,7 +57,7 @@ def same_nodes(got: Path, expected: Path) -> None:
 
 def test_a_city_json_in_a_zip_reads_and_converts_as_the_file(tmp_path: Path) -> None:
     path = zipped(tmp_path / "delft.zip", {"3-20-DELFSHAVEN/delft.city.json": DELFT.read_bytes()})
-    same_nodes(path, present(DELFT))
+    same_nodes(path, shared_data(DELFT))
     result = run(path, "-o", tmp_path / "delft.glb", "--backend", "numpy", "-q")
     assert result.returncode == 0, result.stderr
     assert "570 object(s)" in result.stderr
@@ -81,7 +74,7 @@ def test_a_cityjsonseq_in_a_zip_reads_as_the_plain_sequence(tmp_path: Path) -> N
 
 
 def test_files_beside_the_city_model_folders_and_macos_forks_are_ignored(tmp_path: Path) -> None:
-    data = present(MULTI_LOD).read_bytes()
+    data = shared_data(MULTI_LOD).read_bytes()
     members = {
         "LICENSE.txt": b"CC BY 4.0",
         "__MACOSX/._ten.city.json": b"\0",
@@ -117,7 +110,7 @@ def test_a_zip_without_exactly_one_city_model_is_refused_in_one_line(
 
 
 def test_a_cityjson_member_past_the_inflation_limit_is_refused(tmp_path: Path) -> None:
-    path = zipped(tmp_path / "delft.zip", {"delft.city.json": present(DELFT).read_bytes()})
+    path = zipped(tmp_path / "delft.zip", {"delft.city.json": shared_data(DELFT).read_bytes()})
     with pytest.raises(InputError, match="inflates past the limit of 100,000 bytes"):
         read_scene(path, limits=Limits(decompressed_bytes=100_000))
     # a member that declares a smaller size than it inflates to is read no further than that

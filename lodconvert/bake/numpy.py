@@ -176,16 +176,12 @@ def rasterize_axis(
     count = nu * nv
     live = np.flatnonzero(count)
     count = count[live]
-    cum = np.cumsum(count)
     chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
     empty = (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float64), table["face"][:0])
     low = high = empty
-    start = 0
-    while start < len(live):
-        base = cum[start - 1] if start else 0
-        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
-        c = count[start:stop]
-        rows = np.repeat(live[start:stop], c)
+    for part in _chunks(count, chunk):
+        c = count[part]
+        rows = np.repeat(live[part], c)
         offset = np.arange(len(rows)) - np.repeat(np.cumsum(c) - c, c)
         width = nu[rows]
         rows, iu, iv, depth = _candidates(
@@ -201,7 +197,6 @@ def rasterize_axis(
                 for p in zip(high, (key, depth, table["face_last"][rows]), strict=True)
             ),
         )
-        start = stop
     return [
         SlabHits(
             axis=axis,
@@ -214,6 +209,17 @@ def rasterize_axis(
         )
         for sign, (key, depth, face) in ((1, low), (-1, high))
     ]
+
+
+def _chunks(count: np.ndarray, chunk: int) -> Iterator[slice]:
+    """Consecutive slices of ``count`` each summing to at most ``chunk`` (or one item)."""
+    cum = np.cumsum(count)
+    start = 0
+    while start < len(count):
+        base = cum[start - 1] if start else 0
+        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
+        yield slice(start, stop)
+        start = stop
 
 
 def coverage(
@@ -231,15 +237,11 @@ def coverage(
     iv0, nv = _pixel_range(pv.min(axis=1), pv.max(axis=1), origin_v, grid.pitch, rows_n)
     live = np.flatnonzero(nv)
     count = nv[live]
-    cum = np.cumsum(count)
     chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
     edges = np.zeros(rows_n * (cols_n + 1), dtype=np.int64)
-    start = 0
-    while start < len(live):
-        base = cum[start - 1] if start else 0
-        stop = max(start + 1, int(np.searchsorted(cum, base + chunk, side="right")))
-        c = count[start:stop]
-        faces = np.repeat(live[start:stop], c)
+    for part in _chunks(count, chunk):
+        c = count[part]
+        faces = np.repeat(live[part], c)
         iv = iv0[faces] + np.arange(len(faces)) - np.repeat(np.cumsum(c) - c, c)
         y = origin_v + (iv + 0.5) * grid.pitch
         low, high = np.full(len(faces), np.inf), np.full(len(faces), -np.inf)
@@ -257,5 +259,4 @@ def coverage(
         row = iv[found][spans] * (cols_n + 1)
         edges += np.bincount(row + first[spans], minlength=len(edges))
         edges -= np.bincount(row + first[spans] + n[spans], minlength=len(edges))
-        start = stop
     return edges.reshape(rows_n, cols_n + 1).cumsum(axis=1)[:, :cols_n] > 0

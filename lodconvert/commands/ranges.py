@@ -38,13 +38,14 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if args.json:
         print(json.dumps(rows, indent=2))
         return EXIT_OK
-    print(f"{'object':24} {'alpha':>12} {'gamma':>8}  {'levels':24} cutoffs (x: Y)")
+    width = max([24, *(len(row["id"]) for row in rows)])
+    print(f"{'object':{width}} {'alpha':>12} {'gamma':>8}  {'levels':24} cutoffs (x: Y)")
     for row in rows:
         cuts = "  ".join(f"{x:g}: {y:.6g}" for x, y in zip(row["xs"], row["cutoffs"], strict=True))
         levels = " ".join(
             lv["name"] + (TO_BAKE if lv.get("to_bake") else "") for lv in row["levels"]
         )
-        print(f"{row['id']:24} {row['alpha']:12.6g} {row['gamma']:8g}  {levels:24} {cuts}")
+        print(f"{row['id']:{width}} {row['alpha']:12.6g} {row['gamma']:8g}  {levels:24} {cuts}")
     if any(lv.get("to_bake") for row in rows for lv in row["levels"]):
         print(
             f"{TO_BAKE} points convert bakes: kept, with the cutoff where they switch in, where "

@@ -59,6 +59,14 @@ class OutputInfo:
     vertical: str | None = None
     view: ReferenceView = REFERENCE_VIEW
     options: dict[str, Any] = field(default_factory=dict)
+    city: bool = False
+    """Whether the scene is a city model's (z-up, with or without a CRS)."""
+
+    @property
+    def framed(self) -> bool:
+        """Whether the scene is written in its scene frame (:mod:`lodconvert.io.frame`): a city
+        model's or one with a CRS; a plain mesh keeps its axes."""
+        return self.crs is not None or self.city
 
 
 @dataclass(frozen=True)

@@ -1,11 +1,12 @@
 """The scene frame of georeferenced output: glTF and X3D are +Y up, and engines hold node
-matrices in float32, so a scene with a CRS is written turned z-up → y-up about one scene origin.
+matrices in float32, so a city model's scene (with or without a CRS) or one with a CRS is
+written turned z-up → y-up about one scene origin.
 
 Scene (file) coordinates are ``ROTATION · (source − origin)``: ``ROTATION`` maps the source's
 (x, y, z) to (x, z, −y), so east stays +x, up becomes +y and north −z. ``origin`` is the first
 object's origin rounded to whole metres (float64, recorded with the CRS), so offsets stay small;
-source coordinates come back as ``origin + ROTATIONᵀ · scene``. Inputs without a CRS (plain
-meshes) get no frame: their own axes and coordinates are kept.
+source coordinates come back as ``origin + ROTATIONᵀ · scene``. Plain meshes without a CRS
+get no frame: their own axes and coordinates are kept.
 """
 
 from __future__ import annotations
@@ -71,10 +72,10 @@ def item_origin(item: LodChain | CellChain) -> np.ndarray:
     return item.transform[:3, :3] @ origin + item.transform[:3, 3]
 
 
-def scene_frame(crs: str | None, first: LodChain | CellChain) -> SceneFrame | None:
-    """The frame of a scene in ``crs`` whose first item is ``first``: its origin rounded to
-    whole metres; ``None`` without a CRS (a plain mesh keeps its axes)."""
-    if crs is None:
+def scene_frame(framed: bool, first: LodChain | CellChain) -> SceneFrame | None:
+    """The frame of a scene whose first item is ``first``: its origin rounded to whole metres;
+    ``None`` where the scene is not ``framed`` (a plain mesh keeps its axes)."""
+    if not framed:
         return None
     return SceneFrame(np.round(item_origin(first)) + 0.0)  # + 0.0: no negative zero
 

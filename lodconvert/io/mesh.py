@@ -74,11 +74,27 @@ def object_id(name: str, taken: set[str]) -> str:
     base = re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("_") or "object"
     if not (base[0].isalpha() or base[0] == "_"):
         base = f"_{base}"
-    candidate, n = base, 2
-    while candidate in taken:
-        candidate, n = f"{base}_{n}", n + 1
+    candidate = base
+    if candidate in taken:
+        candidate = f"{base}_{_free_suffix(base, taken)}"
     taken.add(candidate)
     return candidate
+
+
+def _free_suffix(base: str, taken: set[str]) -> int:
+    """A number ``n`` ≥ 2 with ``{base}_{n}`` not in ``taken``: the one after the run of taken
+    numbers from 2 (the next free one when they were taken in order), found by doubling and
+    then halving, so that naming ``k`` objects alike costs ``k log k``, not ``k²``."""
+    low, high = 1, 2  # {base}_{low} counts as taken; {base}_{high} is to be tested
+    while f"{base}_{high}" in taken:
+        low, high = high, high * 2
+    while high - low > 1:
+        middle = (low + high) // 2
+        if f"{base}_{middle}" in taken:
+            low = middle
+        else:
+            high = middle
+    return high
 
 
 # --- colours --------------------------------------------------------------------------------------

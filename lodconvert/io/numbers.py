@@ -1,4 +1,5 @@
-"""Fast, deterministic number formatting for text formats (X3D attributes, reports).
+"""Fast, deterministic number formatting for text formats (X3D attributes, reports), and
+parsing of long texts of numbers (:func:`parse_floats`).
 
 Large arrays (hundreds of thousands of vertices) are written without a Python statement per
 number: numpy rounds a whole array to integers in units of the last decimal, and one ``%``
@@ -144,3 +145,26 @@ def format_exact(values: Iterable[float]) -> str:
     """Floats with Python's shortest round-trip ``repr`` (full float64 precision), for the few
     numbers that must survive exactly, such as a georeferenced origin."""
     return " ".join([repr(float(v)) for v in values])
+
+
+SHORT_TEXT = 1 << 12
+"""Characters up to which a text of numbers is split into words first (faster for a few
+numbers); longer ones are parsed in C."""
+
+
+def parse_floats(text: str) -> np.ndarray:
+    """The whitespace-separated ASCII numbers of ``text`` as float64; a long text parsed in C
+    without a Python object per number, so that millions of numbers take little more than
+    their array. NaN, ``inf`` and values past float64 (as ``inf``) are parsed as such, for the
+    caller to check. ValueError for a word that is not a number.
+
+    >>> parse_floats(" 1 -2.5  3e2 "), parse_floats("  ")
+    (array([  1. ,  -2.5, 300. ]), array([], dtype=float64))
+    """
+    if not text.isascii():
+        raise ValueError("not ASCII numbers")
+    if len(text) <= SHORT_TEXT:
+        return np.array(text.split(), dtype=np.float64)
+    if text.isspace():  # numpy reads a text of blanks alone as [-1]
+        return np.zeros(0)
+    return np.fromstring(text, sep=" ")

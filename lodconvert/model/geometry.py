@@ -264,12 +264,15 @@ class Mesh:
         if self.single is not None:
             return self.single.colors_at(face_ids, points)
         out = np.zeros((len(face_ids), 4), dtype=np.uint8)
+        if not len(face_ids):
+            return out
         part_of = self.face_part[face_ids]
         first_face = np.cumsum([0] + [len(p.faces) for p in self.parts[:-1]])
-        for index in np.unique(part_of):
-            mask = part_of == index
-            local = face_ids[mask] - first_face[index]
-            out[mask] = self.parts[index].colors_at(local, points[mask])
+        order = np.argsort(part_of, kind="stable")  # each part's faces together: one pass
+        indices, starts = np.unique(part_of[order], return_index=True)
+        for index, run in zip(indices, np.split(order, starts[1:]), strict=True):
+            local = face_ids[run] - first_face[index]
+            out[run] = self.parts[index].colors_at(local, points[run])
         return out
 
     def translated(self, offset: np.ndarray) -> Mesh:

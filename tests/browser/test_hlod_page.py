@@ -123,8 +123,12 @@ def test_cells_merge_beyond_their_cutoff_and_the_page_says_so(
     held = [o["cell"] is not None for o in config["objects"]]
     assert len(cells) == 7 and sum(held) > len(held) / 2
     heights = sorted(_switch_heights(config))
-    half = len(heights) // 2  # some cells merge before the middle, the others after
-    stops = [{"distance": heights[0] / 2}, {"distance": sum(heights[half - 1 : half + 1]) / 2}]
+    # a small cell beside the viewer's line may be merged all along (height 0): the first stop
+    # comes before every other cell merges, the middle one between the others' middle two
+    always = sum(height == 0.0 for height in heights)
+    later = heights[always:]
+    half = len(later) // 2  # of the others, some merge before the middle, the rest after
+    stops = [{"distance": later[0] / 2}, {"distance": sum(later[half - 1 : half + 1]) / 2}]
     stops.append({"key": "End"})
     out = hlod("stops", page=chain.page, stops=stops)
     first, *seen = out["result"]["stops"]
@@ -132,8 +136,8 @@ def test_cells_merge_beyond_their_cutoff_and_the_page_says_so(
     for stop in [first, *seen]:
         _check_stop(stop, config, 1.0, message)
     at_near, middle, far = seen
-    assert at_near["merged"] == 0 and all(o["cell"] is None for o in at_near["objects"]), message
-    assert 0 < middle["merged"] < len(cells), message
+    assert at_near["merged"] == always < len(cells), message
+    assert at_near["merged"] < middle["merged"] < len(cells), message
     assert far["distance"] > max(c["cutoffs"][0] for c in cells), message
     assert far["merged"] == len(cells), message
     assert [o["cell"] is not None for o in far["objects"]] == held, message

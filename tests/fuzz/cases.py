@@ -10,6 +10,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from . import hostile_citygml as gml
+
 TRIANGLE = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
 
 
@@ -88,6 +90,14 @@ def _chain(depth: int) -> bytes:
     objects[f"o{depth - 1}"].pop("children")
     objects["o0"] = {**city_object(), "children": ["o1"]}
     return city(objects)
+
+
+def _nested(depth: int) -> object:
+    """A JSON value ``depth`` objects deep."""
+    value: object = 1
+    for _ in range(depth):
+        value = {"a": value}
+    return value
 
 
 def _instance(template: dict, point: object = 0) -> bytes:
@@ -414,6 +424,101 @@ CASES = (
         "spaces.obj.gz",
         lambda: zeros_gz(256 << 20, fill=b" "),
         words=("no vertex ('v') or face ('f') lines",),
+    ),
+    Case(
+        "CityGML: a generic attribute in genericAttributeSets nested 1,000 deep",
+        "sets.gml",
+        lambda: gml.nested_attribute_sets(1000),
+        words=("deeper than the limit of 256", "--limit xml_depth="),
+    ),
+    Case(
+        "CityGML: a BuildingPart of a BuildingPart… 500 deep",
+        "parts.gml",
+        lambda: gml.part_chain(500),
+        words=("deeper than the limit of 256",),
+    ),
+    Case(
+        "CityGML: BuildingParts nested 40 deep (within --limit xml_depth=2048)",
+        "parts40.gml",
+        lambda: gml.part_chain(40),
+        args=("--limit", "xml_depth=2048"),
+        words=("B1", "parts nested more than 32 deep"),
+    ),
+    Case(
+        "CityGML: 500 nested CompositeSurfaces",
+        "composites.gml",
+        lambda: gml.nested_composites(500),
+        words=("deeper than the limit of 256",),
+    ),
+    Case(
+        "CityGML: a solid reaching its polygons through 1,500 chained xlink:hrefs",
+        "links.gml",
+        lambda: gml.link_chain(1500),
+        code=0,
+        words=("wrote",),
+    ),
+    *(
+        Case(
+            f"CityGML: a posList value {value} in one of two buildings",
+            f"{name}.gml",
+            lambda value=value: gml.with_coordinate(value),
+            code=0,
+            words=("bad", reason, "skipped"),
+        )
+        for name, value, reason in (
+            ("nan", "nan", "NaN or infinite"),
+            ("inf", "-inf", "NaN or infinite"),
+            ("huge", "1e308", "1e+308"),
+        )
+    ),
+    Case(
+        "CityGML: a posList value NaN with --strict",
+        "strict_nan.gml",
+        lambda: gml.with_coordinate("nan"),
+        args=("--strict",),
+        words=("object bad", "NaN or infinite", "--strict"),
+    ),
+    Case(
+        "CityGML: a 2 MB gml:description, over --limit xml_text_bytes=1M",
+        "description.gml",
+        lambda: gml.long_text(2 << 20),
+        args=("--limit", "xml_text_bytes=1M"),
+        words=("over the limit of 1,048,576 bytes", "--limit xml_text_bytes="),
+    ),
+    Case(
+        "CityGML: a 2 MB gml:description in pieces between comments, over xml_text_bytes=1M",
+        "commented.gml",
+        lambda: gml.long_text(2 << 20, split_by="<!-- <a> -->"),
+        args=("--limit", "xml_text_bytes=1M"),
+        words=("over the limit of 1,048,576 bytes",),
+    ),
+    Case(
+        "CityGML: a .gml.gz of empty members inflating to 64 MiB, over decompressed_bytes=8M",
+        "members.gml.gz",
+        lambda: gml.empty_members_gz(64 << 20),
+        args=("--limit", "decompressed_bytes=8M"),
+        words=("inflates past the limit of 8,388,608 bytes",),
+    ),
+    Case(
+        "CityJSON: an id with U+0001 and an attribute with a lone surrogate",
+        "text.city.json",
+        lambda: city({"a\x01b": {**city_object(), "attributes": {"name": "x\ud800y"}}}),
+        code=0,
+        words=("wrote",),
+    ),
+    Case(
+        "CityJSON: a 12 MB attribute (past libxml2's 10 MB attribute limit)",
+        "long.city.json",
+        lambda: city({"a": {**city_object(), "attributes": {"note": "x" * (12 << 20)}}}),
+        code=0,
+        words=("wrote",),
+    ),
+    Case(
+        "CityJSON: an attribute nested 600 deep",
+        "deep.city.json",
+        lambda: city({"a": {**city_object(), "attributes": {"deep": _nested(600)}}}),
+        code=0,
+        words=("wrote",),
     ),
     *(
         Case(

@@ -1,7 +1,8 @@
 """Small valid files of every input suffix, generated here (no files checked in): a box as
 OBJ, ASCII and binary PLY, ASCII and binary STL, OFF, GLB and glTF (buffer embedded); a house
 as CityJSON, CityJSONSeq, CityGML and CityGML in a zip; a building with a part and a tree
-placed as a template's instance as CityJSON and CityJSONSeq."""
+placed as a template's instance as CityJSON and CityJSONSeq; a house with hostile id and
+attribute text as CityJSON."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ from pathlib import Path
 import trimesh
 
 from lodconvert.io import formats
+
+from . import hostile_citygml as gml
 
 SAMPLES = Path(__file__).resolve().parents[2] / "samples"
 
@@ -44,9 +47,14 @@ def generated() -> dict[str, tuple[bytes, ...]]:
         ".off": (mesh.export(file_type="off").encode(),),
         ".glb": (scene.export(file_type="glb"),),
         ".gltf": (json.dumps(json.loads(gltf["model.gltf"])).encode(),),
-        ".json": (_cityjson()[0], _cityjson_parts_and_template()[0]),
+        ".json": (_cityjson()[0], _cityjson_parts_and_template()[0], _cityjson_hostile_text()),
         ".jsonl": (_cityjson()[1], _cityjson_parts_and_template()[1]),
-        ".gml": (_citygml(), _citygml_interior_and_terrain(), _citygml_implicit()),
+        ".gml": (
+            _citygml(),
+            _citygml_interior_and_terrain(),
+            _citygml_implicit(),
+            _citygml_structures(),
+        ),
         ".xml": (_citygml(),),
         ".zip": (_zipped("city.gml", _citygml()),),
     }
@@ -89,6 +97,19 @@ def _cityjson() -> tuple[bytes, bytes]:
     }
     sequence = json.dumps({**header, "CityObjects": {}, "vertices": []}) + "\n"
     return json.dumps(document).encode(), (sequence + json.dumps(feature) + "\n").encode()
+
+
+def _cityjson_hostile_text() -> bytes:
+    """The CityJSON house with an id holding U+0001, an attribute holding a lone surrogate
+    and one nested 40 objects deep (text every output must bound and clean)."""
+    document = json.loads(_cityjson()[0])
+    house = document["CityObjects"].pop("house")
+    deep: object = "leaf"
+    for _ in range(40):
+        deep = {"a": deep}
+    house["attributes"] = {"name": "x\ud800y", "deep": deep}
+    document["CityObjects"]["house\x01"] = house
+    return json.dumps(document).encode()
 
 
 def _cityjson_parts_and_template() -> tuple[bytes, bytes]:
@@ -244,6 +265,19 @@ def _citygml_implicit() -> bytes:
         + tree("t2", link, "1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1", "110 200 10")
         + "</CityModel>"
     ).encode()
+
+
+def _citygml_structures() -> bytes:
+    """What the hostile CityGML cases grow, at a size that reads: a building without an id
+    whose parts (without ids) nest three deep, generic attribute sets nested three deep, a
+    description split by a comment, composites nested three deep and a chain of three links
+    (:mod:`.hostile_citygml`); the mutations vary the depths, ids and coordinates."""
+    description = "<gml:description>a<!-- note -->b</gml:description>"
+    return gml.document(
+        gml.building(description + gml.attribute_sets(3) + gml.parts(3), gml_id=""),
+        gml.building(gml.composites(3), "composites"),
+        gml.building(gml.links(3), "links"),
+    )
 
 
 def _zipped(name: str, data: bytes) -> bytes:

@@ -10,8 +10,9 @@ surfaces, openings and installations) is read into ``node.lods`` as ``"lod0"`` â
 :mod:`lodconvert.semantics`; ``node.geometry`` is the highest LoD above 0 with faces (LoD 0 when
 there is no other). A polygon that a solid refers to (``xlink:href``) and a thematic surface
 holds is read once, with its semantics. Building (bridge, tunnel) parts are children of their
-object: each keeps its own attributes and LoDs, and their geometry is part of the object's, so
-that a building is one object of the output however many parts it has. Its interior (rooms,
+object: each keeps its own attributes and LoDs, and their geometry is part of the object's (one
+surface per LoD and colour), so that a building is one object of the output however many parts
+it has. Its interior (rooms,
 furniture, interior installations: ``interiorRoom``, 3.0 ``buildingRoom``â€¦) is read the same
 way, as parts, in the LoD it is given at (LoD4 in 1.0 and 2.0). Terrain is read from its
 ``TINRelief`` components (their ``tin`` triangles, at the component's ``lod``; a ``Tin`` of
@@ -25,16 +26,20 @@ Geometry stays in the file's coordinates (float64) when its CRS is projected; a 
 centred on the data (:class:`LocalFrame`), whose PROJ definition becomes the scene's CRS.
 
 The parse is hardened: no DTD is loaded, no entity resolved, no network used, and a document
-with a DOCTYPE is refused before its content is read; the nesting depth and text size of the
-geometry read are held to the run's :class:`~lodconvert.limits.Limits` (libxml2's own limits
-bound the rest), and so is what a ``.gz`` or ``.zip`` inflates to. Only the root's children
-reach Python as the document streams; city objects are read :data:`~.document.BATCH` at a time
-and their elements freed once converted, so memory follows the batch, not the file.
+with a DOCTYPE is refused before its content is read; every text of the document is held to
+the run's :class:`~lodconvert.limits.Limits` as its bytes stream in (:mod:`.text_limit`), each
+city object's nesting depth before it is walked, and what a ``.gz`` or ``.zip`` inflates to.
+Nothing is walked by recursion deeper than :data:`~.geometry.MAX_PART_DEPTH` parts. Only the
+root's children reach Python as the document streams; city objects are read
+:data:`~.document.BATCH` at a time and their elements freed once converted, so memory follows
+the batch, not the file.
 
 What a reader must check passes :mod:`..geometry_checks`: a polygon whose ring is degenerate
 (fewer than three distinct points, no area) is dropped and counted with the object's dropped
-faces; an object left with nothing, or whose coordinates cannot be read (a word that is not a
-number, a ring of partial points, a vertex that is not finite), is recorded as skipped.
+faces; an object with no element in it is only counted by type (``"empty"`` of the
+scene's ``citygml`` attribute); an object left with nothing, or whose coordinates cannot be
+read (a word that is not a number, a ring of partial points, a coordinate that is not finite
+or beyond 1e15), or whose parts nest too deep, is recorded as skipped.
 """
 
 from __future__ import annotations

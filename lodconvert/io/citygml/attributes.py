@@ -49,19 +49,24 @@ def _child_text(element: etree._Element, name: str) -> str | None:
     return next((c.text or "" for c in element if local(c) == name), None)
 
 
-def _generic(element: etree._Element, generic: dict[str, Any], prefix: str = "") -> None:
+def _generic(element: etree._Element, generic: dict[str, Any]) -> None:
     """Add a generic attribute (2.0 ``gen:stringAttribute name=…``, 3.0
-    ``gen:StringAttribute`` with ``gen:name``; sets flattened as ``set.name``)."""
-    kind = local(element)
-    name = element.get("name") or _child_text(element, "name") or kind
-    if kind.lower() == "genericattributeset":
-        for member in element:
-            inner = member if local(member)[:1].isupper() or member.get("name") else None
-            for item in [inner] if inner is not None else list(member):
-                _generic(item, generic, f"{prefix}{name}.")
-        return
-    text = (_child_text(element, "value") or "").strip()
-    generic[prefix + name] = _typed(text, _GENERIC_TYPES.get(kind[:-9].lower(), str))
+    ``gen:StringAttribute`` with ``gen:name``; sets flattened as ``set.name``, in document
+    order, walked with a stack of its own: sets may nest as deep as a document holds)."""
+    stack = [(element, "")]
+    while stack:
+        element, prefix = stack.pop()
+        kind = local(element)
+        name = element.get("name") or _child_text(element, "name") or kind
+        if kind.lower() == "genericattributeset":
+            items = []
+            for member in element:
+                inner = member if local(member)[:1].isupper() or member.get("name") else None
+                items += [inner] if inner is not None else list(member)
+            stack += [(item, f"{prefix}{name}.") for item in reversed(items)]
+            continue
+        text = (_child_text(element, "value") or "").strip()
+        generic[prefix + name] = _typed(text, _GENERIC_TYPES.get(kind[:-9].lower(), str))
 
 
 def _joined(found: dict[str, str], *names: str) -> str:

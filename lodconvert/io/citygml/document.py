@@ -11,18 +11,26 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 from lxml import etree
 
 from ...errors import InputError
 from ...limits import Limits
-from ...model import Mesh, Node
+from ...model import Mesh, Node, Surface
 from ...semantics import DEFAULT_PALETTE, Palette
-from ..archive import open_compressed
 from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
 from ..mesh import object_id
 from .attributes import attributes_of
-from .geometry import Holder, collect, holders_of, triangulate_batch
+from .geometry import (
+    BrokenObject,
+    Holder,
+    check_depth,
+    collect,
+    gml_id_of,
+    holders_of,
+    triangulate_batch,
+)
 from .implicit import Templates
 from .names import (
     CITYGML_NAMESPACE,
@@ -33,7 +41,7 @@ from .names import (
     local,
     namespace,
 )
-from .source import first_look, parser_options
+from .source import first_look, open_document, parser_options
 
 BATCH = 64
 """City objects triangulated together (their elements are held until then)."""
@@ -58,8 +66,15 @@ class Document:
     templates: Templates = field(default_factory=Templates)
     """Relative geometries of implicit geometry, for links from later objects."""
     stats: dict[str, dict[str, int]] = field(
-        default_factory=lambda: {"unresolved_links": {}, "degenerate_polygons": {}, "not_read": {}}
+        default_factory=lambda: {
+            "unresolved_links": {},
+            "degenerate_polygons": {},
+            "not_read": {},
+            "empty": {},
+        }
     )
+    """Counts by object id (links not resolved, degenerate polygons) or by type (features not
+    read, objects with nothing in them: no id is taken and nothing else kept for those)."""
 
     @property
     def source(self) -> str:
@@ -67,7 +82,7 @@ class Document:
 
     def nodes(self) -> Iterator[Node]:
         """The document's city objects with geometry, one at a time, as it is parsed."""
-        stream = open_compressed(self.path, self.limits)
+        stream = open_document(self.path, self.limits)
         try:
             replay, root = first_look(stream, self.limits, self.source)
             self._check_root(root)
@@ -122,8 +137,14 @@ class Document:
 
     def _collected(self, element: etree._Element) -> tuple[Node, Holder] | None:
         """A top-level city object's node (parts as children, without geometry) and its
-        holder with the polygons found in it; None when the object is not read."""
+        holder with the polygons found in it; None when the object is not read (or skipped:
+        parts nested too deep, no polygon; an object with no element in it is only counted).
+        :class:`InputError` when it nests deeper than the ``xml_depth`` limit, checked before
+        it is walked."""
         kind = local(element)
+        if not len(element) and is_feature(kind) and kind not in NOT_OBJECTS:
+            self._count("empty", kind)
+            return None
         if not is_feature(kind) or kind in NOT_OBJECTS:
             self._count("not_read", kind or "?")
             return None
@@ -133,10 +154,20 @@ class Document:
         if self.crs is None:
             srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
             self.crs = Crs.of(srs, self.source) if srs else Crs()
-        top = holders_of(element)
-        node = self._node(top)
-        collect(top, self.gml, self.limits.xml_depth, self.source, self.templates)
-        return node, top
+        check_depth(element, self.limits.xml_depth, self.source)
+        try:
+            top = holders_of(element)
+        except BrokenObject as exc:
+            self._skip(object_id(gml_id_of(element) or kind, self.taken), str(exc))
+            return None
+        collect(top, self.gml, self.templates)
+        if not any(holder.polygons for holder in top.walk()):
+            node_id = object_id(top.gml_id or kind, self.taken)
+            if unresolved := sum(holder.unresolved for holder in top.walk()):
+                self.stats["unresolved_links"][node_id] = unresolved
+            self._skip(node_id, "has no surface geometry")
+            return None
+        return self._node(top), top
 
     def _node(self, holder: Holder) -> Node:
         """The node of a holder and, as its children, of its parts (ids taken in document
@@ -163,8 +194,6 @@ class Document:
                 self.crs,
                 self.palette,
                 self.tally,
-                self.limits.xml_text_bytes,
-                self.source,
             )
         )
         for node, top in batch:
@@ -196,7 +225,7 @@ class Document:
         if dropped:
             self.tally.dropped_faces += dropped
             self.tally.dropped_by_object[node.id] = dropped
-        node.lods = {lod: Mesh(parts) for lod, parts in merged.items()}
+        node.lods = {lod: Mesh(_joined(parts)) for lod, parts in merged.items()}
         node.geometry = _finest(node.lods)
         if node.geometry is None:
             if dropped:
@@ -224,6 +253,30 @@ def _free(element: etree._Element) -> None:
     element.clear(keep_tail=False)
     while element.getprevious() is not None:
         del element.getparent()[0]
+
+
+def _joined(surfaces: list[Surface]) -> list[Surface]:
+    """``surfaces`` (of an object and its parts, in one LoD) joined into one surface per
+    colour, in the order each colour first comes: an object of many parts is a few surfaces,
+    however many parts it has."""
+    by_color: dict[bytes, list[Surface]] = {}
+    for surface in surfaces:
+        assert surface.base_color is not None  # as triangulate_batch makes them
+        by_color.setdefault(surface.base_color.tobytes(), []).append(surface)
+    return [group[0] if len(group) == 1 else _one_surface(group) for group in by_color.values()]
+
+
+def _one_surface(group: list[Surface]) -> Surface:
+    """The surfaces of ``group`` (of one colour) as one, its bounds theirs."""
+    starts = np.cumsum([0] + [len(s.vertices) for s in group[:-1]])
+    joined = Surface(
+        np.concatenate([s.vertices for s in group]),
+        np.concatenate([s.faces + start for s, start in zip(group, starts, strict=True)]),
+        base_color=group[0].base_color,
+    )
+    boxes = np.stack([s.bounds for s in group])
+    joined.derived("bounds", lambda: np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)]))
+    return joined
 
 
 def _finest(lods: dict[str, Mesh]) -> Mesh | None:

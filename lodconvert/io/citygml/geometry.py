@@ -22,6 +22,7 @@ run as array operations over thousands of polygons instead of a few dozen.
 
 from __future__ import annotations
 
+import functools
 from collections import Counter
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -35,7 +36,12 @@ from ...model import Surface
 from ...polygons import Triangles, points_surface, triangulate_many
 from ...semantics import Palette
 from ..crs import Crs
-from ..geometry_checks import MAX_MAGNITUDE, InputTally, checked_vertices, faces_with_area
+from ..geometry_checks import (
+    InputTally,
+    check_magnitude,
+    faces_with_area,
+)
+from ..numbers import parse_floats
 from .implicit import Templates, placed, placement
 from .names import (
     GML_NAMESPACES,
@@ -53,8 +59,11 @@ from .names import (
 
 OBJECT_DEPTH = 3
 """Nesting depth of a top-level city object (the root ``CityModel``, a member, the object)."""
-_RING_DEPTH = 3
-"""Levels from a polygon down to its coordinates (``exterior``, ``LinearRing``, ``posList``)."""
+PARSER_DEPTH = 2048
+"""Nesting depth libxml2 parses at most (with ``huge_tree``)."""
+MAX_PART_DEPTH = 32
+"""Parts nested in parts below a top-level object (a building's parts' parts…) read; an object
+whose parts nest deeper is skipped."""
 _DEDUP_DECIMALS = 6
 """A polygon whose exterior ring repeats another's of the same LoD to this many decimals is
 read once (a solid's copy of a thematic surface's polygon)."""
@@ -75,7 +84,11 @@ _EXTERIOR = frozenset({"exterior", "outerBoundaryIs"})
 _INTERIOR = frozenset({"interior", "innerBoundaryIs"})
 
 
-@dataclass(eq=False)
+class BrokenObject(ValueError):
+    """An object whose geometry cannot be read (the message says why)."""
+
+
+@dataclass(eq=False, slots=True)
 class Polygon:
     """One polygon met in an object: its LoD, semantic type (``""``: none), whether an
     ``OrientableSurface`` reversed it, its element, what places it, and its rings (exterior
@@ -106,6 +119,8 @@ class Holder:
     dropped: int = 0
     surfaces: dict[str, list[Surface]] = field(default_factory=dict)
     _ids: dict[str, etree._Element] | None = None
+    _reached: set[tuple[str, bool, etree._Element]] = field(default_factory=set)
+    """Elements walked, by LoD and whether a semantic type was given (see :meth:`reach`)."""
 
     def walk(self) -> Iterator[Holder]:
         """This holder, then its parts' holders depth first, in document order."""
@@ -124,66 +139,84 @@ class Holder:
             }
         return self._ids.get(href.removeprefix("#"))
 
+    def reach(self, element: etree._Element, place: _Place) -> bool:
+        """Whether ``element`` is met for the first time at ``place``'s LoD, with or without a
+        semantic type as ``place`` has one (noted): a polygon met again is not read again
+        (:func:`_kept` keeps each polygon's first with semantics, else its first), nor is a
+        geometry walked again, so that links cost what the object holds."""
+        key = (place.lod, bool(place.semantic), element)
+        if key in self._reached:
+            return False
+        self._reached.add(key)
+        return True
+
     def add_linked(
-        self,
-        element: etree._Element,
-        place: _Place,
-        seen: frozenset[str],
-        templates: Templates | None = None,
+        self, element: etree._Element, place: _Place, templates: Templates | None = None
     ) -> None:
         """Add every polygon under ``element`` (a geometry, or an element linking to one) as
         ``place`` says, following ``xlink:href`` within this holder (and, for an implicit
         geometry, to the relative geometries of ``templates``); a solid's interior shells are
-        left out."""
-        href = element.get(XLINK_HREF)
-        if href is not None:
-            target = self.target(href) if href not in seen else None
-            if target is None and place.implicit is not None and templates is not None:
-                target = templates.get(href) if href not in seen else None
-            if target is None:
-                self.unresolved += href not in seen
-                return
-            seen = seen | {href}
-            element = target
-        name = local(element)
-        if name in POLYGONS or (name == "Tin" and _points_only(element)):
-            self.polygons.append(
-                Polygon(place.lod, place.semantic, place.flip, element, place.implicit)
-            )
-            return
-        if name in NOT_SURFACES:
-            return
-        if name == "OrientableSurface" and element.get("orientation") == "-":
-            place = place._replace(flip=not place.flip)
-        for child in element:
-            if name == "Solid" and local(child) == "interior":
+        left out. The walk keeps a stack of its own (links may chain as deep as a document
+        holds)."""
+        stack = [(element, place)]
+        while stack:
+            element, place = stack.pop()
+            href = element.get(XLINK_HREF)
+            if href is not None:
+                target = self.target(href)
+                if target is None and place.implicit is not None and templates is not None:
+                    target = templates.get(href)
+                if target is None:
+                    self.unresolved += 1
+                    continue
+                element = target
+            if not self.reach(element, place):
                 continue
-            self.add_linked(child, place, seen, templates)
+            name = local(element)
+            if name in POLYGONS or (name == "Tin" and _points_only(element)):
+                self.polygons.append(
+                    Polygon(place.lod, place.semantic, place.flip, element, place.implicit)
+                )
+                continue
+            if name in NOT_SURFACES:
+                continue
+            if name == "OrientableSurface" and element.get("orientation") == "-":
+                place = place._replace(flip=not place.flip)
+            children = [
+                child for child in element if not (name == "Solid" and local(child) == "interior")
+            ]
+            stack += [(child, place) for child in reversed(children)]
 
 
-def holders_of(element: etree._Element) -> Holder:
-    """The holder of a city object (or part) and, nested, of its parts."""
-    parts = [
-        holders_of(part)
-        for prop in element
-        if local(prop) in HOLDING_PROPERTIES
-        for part in prop
-        if is_feature(local(part))
-    ]
-    gml_id = next((element.get(key) for key in _GML_IDS if element.get(key)), "")
-    return Holder(element, local(element), gml_id, parts)
+def holders_of(element: etree._Element, depth: int = 0) -> Holder:
+    """The holder of a city object (or part, ``depth`` parts down) and, nested, of its parts;
+    :class:`BrokenObject` when parts nest deeper than :data:`MAX_PART_DEPTH`."""
+    parts = []
+    for prop in element:
+        if local(prop) not in HOLDING_PROPERTIES:
+            continue
+        for part in prop:
+            if not is_feature(local(part)):
+                continue
+            if depth == MAX_PART_DEPTH:
+                raise BrokenObject(f"has parts nested more than {MAX_PART_DEPTH} deep")
+            parts.append(holders_of(part, depth + 1))
+    return Holder(element, local(element), gml_id_of(element), parts)
+
+
+def gml_id_of(element: etree._Element) -> str:
+    """The element's ``gml:id`` (any GML version), or ``""``."""
+    return next((element.get(key) for key in _GML_IDS if element.get(key)), "")
 
 
 class _Place(NamedTuple):
     """Where a polygon (or a link) lies in an object: the holder it belongs to, its LoD,
-    semantic type, orientation, its depth below the top-level object and the
-    ``ImplicitGeometry`` above it, if any."""
+    semantic type, orientation and the ``ImplicitGeometry`` above it, if any."""
 
     holder: Holder
     lod: str
     semantic: str
     flip: bool
-    depth: int
     implicit: etree._Element | None = None
 
 
@@ -198,51 +231,73 @@ class _Walker:
 
     def place(self, element: etree._Element) -> _Place | None:
         """Where ``element`` lies, or None when it is not read (not under a geometry property,
-        or in a solid's interior shell, a curve or a property not read). Remembered, so that
-        elements sharing ancestors walk up only once."""
-        if element in self.places:
-            return self.places[element]
-        found: _Place | None = None
+        or in a solid's interior shell, a curve or a property not read). Remembered for
+        ``element`` and for the ancestors with several child elements (those that other
+        elements share), so that shared ancestors are walked up once and each polygon's
+        single-child wrappers (``surfaceMember``…) cost nothing kept (in a loop: elements may
+        nest as deep as a document holds)."""
+        unplaced = []
+        ancestor: etree._Element | None = element
+        while ancestor is not None and ancestor not in self.places:
+            unplaced.append(ancestor)
+            ancestor = None if self._settled(ancestor) else ancestor.getparent()
+        found: dict[Any, _Place | None] = {}
+        for each in reversed(unplaced):
+            found[each] = place = self._found(each, found)
+            if each is element or len(each) > 1:
+                self.places[each] = place
+        return found[element] if element in found else self.places[element]
+
+    def _settled(self, element: etree._Element) -> bool:
+        """Whether where ``element`` lies is known without its parent's place."""
+        name = local(element)
+        parent = element.getparent()
+        return (
+            parent is None
+            or element is self.top.element
+            or name in NOT_SURFACES
+            or LOD_PROPERTY.fullmatch(name) is not None
+            or (name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)) is not None)
+            or (name == "interior" and local(parent) == "Solid")
+        )
+
+    def _found(self, element: etree._Element, found: dict[Any, _Place | None]) -> _Place | None:
+        """Where ``element`` lies, its parent's place known (remembered, or just ``found``)
+        unless :meth:`_settled`."""
         name = local(element)
         parent = element.getparent()
         if parent is None or element is self.top.element or name in NOT_SURFACES:
-            pass
-        elif (match := LOD_PROPERTY.fullmatch(name)) is not None:
+            return None
+        if (match := LOD_PROPERTY.fullmatch(name)) is not None:
             above = self._above(element)
-            if above is not None:
-                holder, semantic, depth = above
-                if match.group(2) in ("FootPrint", "RoofEdge"):
-                    semantic = name[4:]
-                found = _Place(holder, f"lod{match.group(1)}", semantic, False, depth)
-        elif name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)):
+            if above is None:
+                return None
+            holder, semantic = above
+            if match.group(2) in ("FootPrint", "RoofEdge"):
+                semantic = name[4:]
+            return _Place(holder, f"lod{match.group(1)}", semantic, False)
+        if name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)):
             above = self._above(element)
             lod = _relief_lod(parent, self.top.element)
-            if above is not None and lod is not None:
-                found = _Place(above[0], lod, "", False, above[2])
-        elif not (name == "interior" and local(parent) == "Solid"):
-            outer = self.place(parent)
-            if outer is not None:
-                flip = outer.flip ^ (
-                    name == "OrientableSurface" and element.get("orientation") == "-"
-                )
-                implicit = element if name == "ImplicitGeometry" else outer.implicit
-                found = _Place(
-                    outer.holder, outer.lod, outer.semantic, flip, outer.depth + 1, implicit
-                )
-        self.places[element] = found
-        return found
+            return None if above is None or lod is None else _Place(above[0], lod, "", False)
+        if name == "interior" and local(parent) == "Solid":
+            return None
+        outer = found[parent] if parent in found else self.places[parent]
+        if outer is None:
+            return None
+        flip = outer.flip ^ (name == "OrientableSurface" and element.get("orientation") == "-")
+        implicit = element if name == "ImplicitGeometry" else outer.implicit
+        return _Place(outer.holder, outer.lod, outer.semantic, flip, implicit)
 
-    def _above(self, prop: etree._Element) -> tuple[Holder, str, int] | None:
-        """For a geometry property: the holder it belongs to, the semantic type of the
-        feature holding it ("" for the holder itself) and its depth below the top-level
-        object; None when the features and properties above it are not read."""
+    def _above(self, prop: etree._Element) -> tuple[Holder, str] | None:
+        """For a geometry property: the holder it belongs to and the semantic type of the
+        feature holding it ("" for the holder itself); None when the features and properties
+        above it are not read."""
         semantic = ""
         holder = None
         feature_next = True
-        depth = 0
         element = prop
         while element is not self.top.element:
-            depth += 1
             element = element.getparent()
             if element is None:
                 return None
@@ -264,7 +319,7 @@ class _Walker:
             feature_next = not feature_next
         if holder is None and not feature_next:
             return None
-        return holder or self.top, semantic, depth
+        return holder or self.top, semantic
 
 
 def _relief_lod(component: etree._Element, top: etree._Element) -> str | None:
@@ -278,14 +333,32 @@ def _relief_lod(component: etree._Element, top: etree._Element) -> str | None:
     return None
 
 
-def collect(
-    top: Holder, gml: str, depth_limit: int, source: str, templates: Templates | None = None
-) -> None:
+def check_depth(element: etree._Element, depth_limit: int, source: str) -> None:
+    """:class:`InputError` when an element of the top-level object ``element`` lies deeper in
+    its document than ``depth_limit`` (checked before any of it is walked)."""
+    if depth_limit >= PARSER_DEPTH:
+        return  # the parser refuses deeper documents itself
+    below = depth_limit - OBJECT_DEPTH
+    if below < 0 or _deeper_than(below)(element):
+        raise InputError(
+            f"nests XML elements deeper than the limit of {depth_limit} "
+            "(raise it with --limit xml_depth=N)",
+            source,
+        )
+
+
+@functools.lru_cache(maxsize=4)
+def _deeper_than(levels: int) -> etree.XPath:
+    """Whether an element has a descendant more than ``levels`` levels below it (libxml2
+    walks the tree, level by level)."""
+    return etree.XPath(f"boolean({'/'.join(['*'] * (levels + 1))})")
+
+
+def collect(top: Holder, gml: str, templates: Templates | None = None) -> None:
     """Find the polygons of ``top`` (a top-level object of a document whose GML namespace is
     ``gml``) and of its parts, each put in the holder it belongs to in document order,
     following links (an implicit geometry's also to the relative geometries of ``templates``,
-    where this object's are added); :class:`InputError` when coordinates would lie deeper than
-    ``depth_limit``."""
+    where this object's are added)."""
     if templates is not None:
         templates.register(top.element)
     walker = _Walker(top, {holder.element: holder for holder in top.walk()})
@@ -295,7 +368,6 @@ def collect(
         for key in _GML_IDS:
             if (value := item.get(key)) is not None and item.get(XLINK_HREF) is None:
                 polygon_ids[value] = item
-    deepest = 0
     for item in items:
         href = item.get(XLINK_HREF)
         place = walker.place(item)
@@ -303,9 +375,9 @@ def collect(
             continue
         holder = place.holder
         if href is None:
-            deepest = max(deepest, place.depth)
-            polygon = Polygon(place.lod, place.semantic, place.flip, item, place.implicit)
-            holder.polygons.append(polygon)
+            if holder.reach(item, place):
+                polygon = Polygon(place.lod, place.semantic, place.flip, item, place.implicit)
+                holder.polygons.append(polygon)
             continue
         target = polygon_ids.get(href.removeprefix("#"))
         direct = walker.place(target) if target is not None else None
@@ -314,48 +386,35 @@ def collect(
             or (not place.semantic and direct.lod == place.lod and direct.semantic)
         ):
             continue  # read where it lies: by its own part, or here with its semantics
-        holder.add_linked(item, place, frozenset(), templates)
-    if OBJECT_DEPTH + deepest + _RING_DEPTH > depth_limit:
-        raise InputError(
-            f"nests XML elements deeper than the limit of {depth_limit} "
-            "(raise it with --limit xml_depth=N)",
-            source,
-        )
+        holder.add_linked(item, place, templates)
 
 
 # --- a batch of objects ---------------------------------------------------------------------------
 
 
-class BrokenObject(ValueError):
-    """An object whose geometry cannot be read (the message says why)."""
-
-
 @dataclass
 class _Rings:
-    """The coordinate words of a batch's rings and, per ring, its value count and width."""
+    """The coordinates of a batch's rings (an array per ``posList`` or ``pos``) and, per ring,
+    its value count and width."""
 
-    words: list[str] = field(default_factory=list)
+    values: list[np.ndarray] = field(default_factory=list)
     counts: list[int] = field(default_factory=list)
     widths: list[int] = field(default_factory=list)
 
 
-def _ring_words(ring: etree._Element, rings: _Rings, text_limit: int, source: str) -> None:
+def _ring_values(ring: etree._Element, rings: _Rings) -> None:
     """Add the coordinates of a ``LinearRing`` (its ``posList`` or ``pos`` elements)."""
     count = 0
     dimension = None
     for child in ring:
         name = local(child)
         if name == "posList" or name == "pos":
-            text = child.text or ""
-            if len(text) > text_limit:
-                raise InputError(
-                    f"has an XML text of {len(text):,} characters, over the limit of "
-                    f"{text_limit:,} (raise it with --limit xml_text_bytes=N)",
-                    source,
-                )
-            words = text.split()
-            rings.words += words
-            count += len(words)
+            try:
+                values = parse_floats(child.text or "")
+            except ValueError:
+                raise BrokenObject("has a coordinate that is not a number") from None
+            rings.values.append(values)
+            count += len(values)
             dimension = dimension or child.get("srsDimension")
     if dimension is None:
         declared = (a.get("srsDimension") for a in ring.iterancestors())
@@ -370,7 +429,7 @@ def _ring_words(ring: etree._Element, rings: _Rings, text_limit: int, source: st
     rings.widths.append(width)
 
 
-def _read_rings(polygons: list[Polygon], rings: _Rings, text_limit: int, source: str) -> list[int]:
+def _read_rings(polygons: list[Polygon], rings: _Rings) -> list[int]:
     """Add the rings of ``polygons``; per polygon, its rings' order (exterior first)."""
     layout: list[int] = []
     for polygon in polygons:
@@ -380,7 +439,7 @@ def _read_rings(polygons: list[Polygon], rings: _Rings, text_limit: int, source:
             for points in polygon.element:
                 if local(points) == "controlPoint":
                     exterior.append(len(rings.counts))
-                    _ring_words(points, rings, text_limit, source)
+                    _ring_values(points, rings)
         for boundary in polygon.element:
             kind = local(boundary)
             into = exterior if kind in _EXTERIOR else interior if kind in _INTERIOR else None
@@ -388,26 +447,24 @@ def _read_rings(polygons: list[Polygon], rings: _Rings, text_limit: int, source:
                 continue
             for ring in boundary:
                 into.append(len(rings.counts))
-                _ring_words(ring, rings, text_limit, source)
+                _ring_values(ring, rings)
         layout.append(len(exterior) + len(interior))
         layout += exterior[::-1] + interior
     return layout
 
 
-def _top_rings(
-    top: Holder, text_limit: int, source: str
-) -> tuple[list[Polygon], list[int], np.ndarray, np.ndarray]:
+def _top_rings(top: Holder) -> tuple[list[Polygon], list[int], np.ndarray, np.ndarray]:
     """The polygons of ``top`` and its parts, their rings' layout (per polygon: its number of
     rings, then their indices, exterior first), the rings' points ((n, 3) float64, 2-D rings
     with z = 0) and each ring's number of points. :class:`BrokenObject` when a ring cannot be
-    read."""
+    read, or holds a coordinate that is not finite or too large (:func:`_range_problem`)."""
     rings = _Rings()
     polygons = [polygon for holder in top.walk() for polygon in holder.polygons]
-    layout = _read_rings(polygons, rings, text_limit, source)
-    try:
-        flat = np.array(rings.words, dtype=np.float64)
-    except ValueError:
-        raise BrokenObject("has a coordinate that is not a number") from None
+    layout = _read_rings(polygons, rings)
+    flat = np.concatenate(rings.values) if rings.values else np.zeros(0)
+    del rings.values[:]
+    if problem := _range_problem(flat):
+        raise BrokenObject(problem)
     widths = np.array(rings.widths, dtype=np.int64)
     lengths = np.array(rings.counts, dtype=np.int64) // np.maximum(widths, 1)
     if (widths == 3).all():
@@ -475,9 +532,7 @@ def _metric(reads: list[_Read], crs: Crs) -> np.ndarray:
     return points
 
 
-def _coordinates(
-    tops: list[Holder], crs: Crs, text_limit: int, source: str
-) -> tuple[list[tuple[Holder, str]], list[Holder]]:
+def _coordinates(tops: list[Holder], crs: Crs) -> tuple[list[tuple[Holder, str]], list[Holder]]:
     """Read the rings of every polygon of ``tops`` into ``Polygon.rings`` (in metres, a
     geographic CRS's frame centred on the first object read; implicit geometry placed); the
     objects that could not be read (with the reason) and those that were."""
@@ -485,7 +540,7 @@ def _coordinates(
     reads: list[_Read] = []
     for top in tops:
         try:
-            read = _Read(top, *_top_rings(top, text_limit, source))
+            read = _Read(top, *_top_rings(top))
             if any(polygon.implicit is not None for polygon in read.polygons):
                 _relative_points(read)
         except BrokenObject as exc:
@@ -498,17 +553,37 @@ def _coordinates(
     counts = np.concatenate([read.lengths for read in reads])
     pieces = np.split(metric, np.cumsum(counts)[:-1]) if len(counts) else []
     offset = 0
+    read_tops = []
     for read in reads:
         cursor = 0
+        problem = _range_problem(metric[offset : offset + int(read.lengths.sum())])
         for polygon in read.polygons:
             n = read.layout[cursor]
             polygon.rings = [pieces[offset + i] for i in read.layout[cursor + 1 : cursor + 1 + n]]
             if polygon.implicit is not None:
                 matrix, reference = read.placements[id(polygon.implicit)]
                 polygon.rings = [placed(ring, matrix, reference) for ring in polygon.rings]
+                problem = problem or next(filter(None, map(_range_problem, polygon.rings)), None)
             cursor += 1 + n
         offset += len(read.lengths)
-    return broken, [read.top for read in reads]
+        if problem:
+            broken.append((read.top, problem))
+        else:
+            read_tops.append(read.top)
+    return broken, read_tops
+
+
+def _range_problem(values: np.ndarray) -> str | None:
+    """Why coordinates ``values`` cannot be read (one not finite, or beyond
+    :data:`~..geometry_checks.MAX_MAGNITUDE`), or None."""
+    largest = float(np.maximum.reduce(np.abs(values), axis=None, initial=0.0))
+    if not np.isfinite(largest):
+        return "has NaN or infinite coordinates"
+    try:
+        check_magnitude(largest, "")
+    except InputError as exc:
+        return str(exc)
+    return None
 
 
 def _dedup_keys(polygons: list[Polygon]) -> list[Any]:
@@ -645,41 +720,15 @@ def _tin_triangles(polygon: Polygon) -> Triangles | None:
     return points_surface(np.concatenate(points), max_length)
 
 
-def _unreadable(
-    groups: list[_Group], vertices: np.ndarray, top_of: dict[int, Holder]
-) -> dict[int, str]:
-    """The objects (by ``id`` of their top holder) with a vertex that is not finite or beyond
-    :data:`MAX_MAGNITUDE`, with the reason."""
-    bad = ~(np.abs(vertices) <= MAX_MAGNITUDE).all(axis=1)
-    failed: dict[int, str] = {}
-    if not bad.any():
-        return failed
-    for group in groups:
-        top = top_of[id(group.holder)]
-        if id(top) in failed or not bad[group.vertices].any():
-            continue
-        where = group.holder.where
-        try:
-            checked_vertices(vertices[group.vertices], where)
-        except InputError as exc:
-            failed[id(top)] = str(exc).removeprefix(f"{where}: ")
-    return failed
-
-
 def triangulate_batch(
-    tops: list[Holder], crs: Crs, palette: Palette, tally: InputTally, text_limit: int, source: str
+    tops: list[Holder], crs: Crs, palette: Palette, tally: InputTally
 ) -> list[tuple[Holder, str]]:
     """Read and triangulate the polygons of a batch of top-level objects (and their parts)
     into each holder's :attr:`Holder.surfaces`: one checked :class:`Surface` per LoD and
     semantic type, coloured by it, without faces that have no area (counted in
     :attr:`Holder.dropped`). The objects that could not be read, with the reason."""
-    broken, tops = _coordinates(tops, crs, text_limit, source)
-    top_of = {id(holder): top for top in tops for holder in top.walk()}
+    broken, tops = _coordinates(tops, crs)
     groups, vertices, faces = _groups([holder for top in tops for holder in top.walk()])
-    failed = _unreadable(groups, vertices, top_of)
-    if failed:
-        broken += [(top, failed[id(top)]) for top in tops if id(top) in failed]
-        groups = [g for g in groups if id(top_of[id(g.holder)]) not in failed]
     tally.count(
         sum(g.vertices.stop - g.vertices.start for g in groups),
         sum(g.faces.stop - g.faces.start for g in groups),

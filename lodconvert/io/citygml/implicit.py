@@ -92,5 +92,7 @@ def _numbers(text: str | None, what: str, sizes: tuple[int, ...]) -> np.ndarray:
 
 def placed(local_points: np.ndarray, matrix: np.ndarray, reference: np.ndarray) -> np.ndarray:
     """``local_points`` ((n, 3), the relative geometry's) turned by ``matrix`` and moved to
-    ``reference`` (in metres)."""
-    return local_points @ matrix[:3, :3].T + matrix[:3, 3] + reference
+    ``reference`` (in metres); a point past float64 becomes infinite (without a warning: the
+    caller checks the points placed)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return local_points @ matrix[:3, :3].T + matrix[:3, 3] + reference

@@ -1,20 +1,34 @@
-"""A CityGML document's parser options, and a first look at its root element before the
-document is streamed (opened by :func:`..archive.open_compressed`: the file, or what its ``.gz``
-or ``.zip`` inflates to, capped)."""
+"""A CityGML document's bytes (the file, or what its ``.gz`` or ``.zip`` inflates to, capped:
+:func:`..archive.open_compressed`; every text held to the text limit), its parser options, and
+a first look at its root element before the document is streamed."""
 
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import IO
 
 from lxml import etree
 
 from ...errors import InputError
 from ...limits import Limits
-from ..archive import Capped
+from ..archive import Capped, open_compressed
+from .text_limit import TextLimit
 
 CHUNK = 1 << 16
 """Bytes read from the file at a time."""
+Stream = IO[bytes] | Capped | TextLimit
+"""A document's bytes as :func:`open_document` gives them."""
+
+
+def open_document(path: Path, limits: Limits) -> Stream:
+    """The document's bytes as a stream (:func:`..archive.open_compressed`), every text in
+    them held to ``limits.xml_text_bytes`` (:mod:`.text_limit`) unless the file is a plain
+    one no longer than that."""
+    stream = open_compressed(path, limits)
+    if isinstance(stream, Capped) or path.stat().st_size > limits.xml_text_bytes:
+        return TextLimit(stream, limits.xml_text_bytes, str(path))
+    return stream
 
 
 _LIBXML_TEXT_LIMIT = 10_000_000
@@ -40,7 +54,7 @@ def parser_options(limits: Limits) -> dict[str, bool]:
 class _Replay:
     """A binary stream that gives ``head`` (bytes already read) before the rest of ``stream``."""
 
-    def __init__(self, head: bytes, stream: IO[bytes] | Capped) -> None:
+    def __init__(self, head: bytes, stream: Stream) -> None:
         self.head, self.stream = head, stream
 
     def read(self, size: int = -1) -> bytes:
@@ -53,9 +67,7 @@ class _Replay:
         self.stream.close()
 
 
-def first_look(
-    stream: IO[bytes] | Capped, limits: Limits, source: str
-) -> tuple[_Replay, etree._Element]:
+def first_look(stream: Stream, limits: Limits, source: str) -> tuple[_Replay, etree._Element]:
     """The document's root element (parsed from as few chunks as it takes, without children)
     and a stream that reads the whole document again from its start. :class:`InputError` for
     a document with a DOCTYPE, before any of its content is read (entities are a security

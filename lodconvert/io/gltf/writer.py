@@ -7,11 +7,11 @@ to coarsest) and ``extras.MSFT_screencoverage``. Coarser nodes belong to no scen
 parent: a client without ``MSFT_lod`` loads the finest level only, one with it substitutes them
 for the finest node.
 
-A scene with a CRS (a city model) is written in its scene frame (:mod:`lodconvert.io.frame`):
+A city model's scene or one with a CRS is written in its scene frame (:mod:`lodconvert.io.frame`):
 the object roots are the children of one root node whose ``matrix`` turns z-up into glTF's
 y-up, and their translations are offsets from one scene origin (within 100 km, so float32
-node matrices keep them), recorded in ``asset.extras.lodconvert.frame`` with the CRS. A scene
-without a CRS keeps its axes and absolute translations.
+node matrices keep them), recorded in ``asset.extras.lodconvert.frame`` with the CRS. A plain
+mesh without a CRS keeps its axes and absolute translations.
 
 No viewer switches levels by distance from ``MSFT_lod``, so the switching data (cutoffs, bake
 parameters, point sizes) is also written to ``extras.lodconvert`` on the nodes and the asset.
@@ -260,7 +260,7 @@ def _coverages(chain: LodChain | CellChain, view: ReferenceView) -> list[float]:
 
 
 def _asset_extras(info: OutputInfo, frame: SceneFrame | None) -> dict[str, Any]:
-    """``asset.extras.lodconvert``: provenance, the scene frame (where a CRS gives one) and the
+    """``asset.extras.lodconvert``: provenance, the scene frame (a city's or one with a CRS) and the
     meaning of the coverage values."""
     return _plain(
         {
@@ -478,7 +478,7 @@ class _Document:
     def __init__(self, info: OutputInfo, layout: _Layout) -> None:
         self.reference_view = info.view
         self.info = info
-        self.frame: SceneFrame | None = None  # set by the first item, for a scene with a CRS
+        self.frame: SceneFrame | None = None  # set by the first item, for a framed scene
         self._layout = layout
         self._files = contextlib.ExitStack()
         self.blob = self._spool()
@@ -651,7 +651,7 @@ class _Document:
     def add(self, item: LodChain | CellChain) -> None:
         """Add a chain, or a LOD parent with everything in it, to the scene."""
         if not self.scene_nodes:
-            self.frame = scene_frame(self.info.crs, item)
+            self.frame = scene_frame(self.info.framed, item)
         self.scene_nodes.append(len(self.nodes))
         self._add(item)
 

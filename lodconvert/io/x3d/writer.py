@@ -7,7 +7,7 @@ Layout of a written file (validates against the official x3d-4.0.xsd)::
       <head> components Navigation 2, Rendering 4, Shape 5; meta generator, source, crs,
               vertical-reference, ...
       <Scene>
-        <Transform DEF='scene_frame' rotation='1 0 0 -1.5707963267948966'>   (only with a CRS)
+        <Transform DEF='scene_frame' rotation='1 0 0 -1.5707963267948966'>   (a city or a CRS)
           <MetadataSet name='lodconvert_frame' containerField='metadata'> origin, rotation, ...
         <Transform DEF='id' translation='origin (full float64 precision)'>
           <LOD DEF='id_LOD' center=... range='cutoffs' forceTransitions='true'>
@@ -24,7 +24,7 @@ Layout of a written file (validates against the official x3d-4.0.xsd)::
         <NavigationInfo type='"EXAMINE" "ANY"'/>
         <Viewpoint DEF='lodconvert_view' ...>   (the whole scene, seen obliquely)
 
-A scene with a CRS (a city model) is written in its scene frame (:mod:`lodconvert.io.frame`):
+A city model's scene or one with a CRS is written in its scene frame (:mod:`lodconvert.io.frame`):
 one ``Transform`` turns its z-up coordinates into X3D's y-up, and the objects' translations
 are offsets from the scene origin its ``MetadataSet`` records (float64, with the rotation).
 The ``Viewpoint`` comes last, once every object is written (:mod:`.viewpoint`).
@@ -909,7 +909,7 @@ def write_x3d(
         with out.node("Scene"):
             items = iter(chains)
             first = next(items, None)
-            frame = scene_frame(info.crs, first) if first is not None else None
+            frame = scene_frame(info.framed, first) if first is not None else None
             box = SceneBox(frame)
             shift = frame.origin if frame is not None else np.zeros(3)
             with contextlib.ExitStack() as framed:
