@@ -31,6 +31,7 @@ from typing import Any
 
 from tables import markdown_table
 
+from lodconvert import convert
 from lodconvert.analysis.bench import PAPER_INSTANCES
 from lodconvert.commands.bench import (
     bench_object_text,
@@ -39,7 +40,6 @@ from lodconvert.commands.bench import (
     bench_view_text,
     speedup_of,
 )
-from lodconvert.pipeline import convert
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -63,16 +63,18 @@ def write(
 
 
 def convert(
-    input_path: str | Path,
+    input_path: str | Path | Sequence[str | Path],
     output_path: str | Path,
     options: ChainOptions | None = None,
     **kwargs: Any,
 ) -> dict:
     """Read, bake and write in one call, with every guarantee of the command line; return the
-    report (see :func:`lodconvert.pipeline.convert` for the other keyword arguments)."""
+    report (the other keyword arguments are the fields of :class:`lodconvert.pipeline.RunOptions`:
+    ``workers``, ``report_path``, ``hlod``…)."""
+    from .pipeline import RunOptions
     from .pipeline import convert as run
 
-    return run(input_path, output_path, options, **kwargs)
+    return run(input_path, output_path, RunOptions(options or ChainOptions(), **kwargs))
 
 
 __all__ = [

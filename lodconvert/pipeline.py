@@ -1,9 +1,12 @@
-"""The conversion session: read → bake each object → stream chains into the writer → check →
-commit every output together.
+"""The conversion as stages over data, with one :class:`RunOptions`: read → plan tasks (each
+object's γ, geometry placed by several nodes baked once, batches) → execute them
+(:mod:`.tasks`: in this process or in worker processes) → assemble (records, LOD parents) →
+write → check → commit every output together.
 
-Readers are free of processing and writers of baking; this module joins them, times each step
-and collects what the ``--report`` file records. One object that cannot be baked is reported and
-skipped; when none can, the conversion fails and no output file appears.
+Readers are free of processing and writers of baking; this module joins them, times each stage
+and collects what the ``--report`` file records. The main process takes each object's outcome in
+order: one that cannot be baked is reported and skipped; when none can, the conversion fails
+and no output file appears.
 """
 
 from __future__ import annotations
@@ -12,8 +15,8 @@ import contextlib
 import gc
 import itertools
 import platform
-import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -22,8 +25,9 @@ import numpy as np
 
 from . import __version__
 from .bake import Backend, get_backend
-from .chain import ChainOptions, ChainPlan, bake_chain, plan_chain
-from .errors import InputError
+from .chain import ChainOptions, ChainPlan
+from .clock import Clock
+from .errors import InputError, UsageError
 from .hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
 from .io import OutputInfo, input_format, output_format
 from .io.crs import checked_crs_option
@@ -37,6 +41,15 @@ from .reproject import in_one_crs
 from .sinks import FileSink, Outputs
 from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
+from .tasks import (
+    Baked,
+    BakeTask,
+    Executor,
+    PoolExecutor,
+    SerialExecutor,
+    batches,
+    run_task,
+)
 from .validate import check_written
 
 Message = Callable[[str], None]
@@ -129,19 +142,23 @@ def iter_chains(
     limits: Limits = DEFAULT_LIMITS,
     strict: bool = False,
     hlod: HlodOptions | None = None,
+    executor: Executor | None = None,
+    clock: Clock | None = None,
 ) -> Iterator[LodChain | CellChain]:
-    """Bake the scene's objects one at a time; objects with bad geometry are reported through
-    ``warn`` (unless ``strict``: the caller fails), recorded in ``skipped`` and left out.
-    ``step`` hears how many are done. With ``hlod``, the objects come grouped in LOD parents
-    (:mod:`.hlod`): one :class:`CellChain` per cell of the coarsest tier, in grid order, each
-    followed by the members it left out (objects or finer cells, drawn on their own)."""
-    bake = _ObjectBaker(scene.source, options, backend, progress, warn, skipped, limits, strict)
-    bake.step, bake.total = step, _object_count(scene)
+    """Bake the scene's objects (by ``executor``: in this process by default); objects with bad
+    geometry are reported through ``warn`` (unless ``strict``: the caller fails), recorded in
+    ``skipped`` and left out. ``step`` hears how many are done, ``clock`` how long planning
+    and baking took. With ``hlod``, the objects come grouped in LOD parents (:mod:`.hlod`):
+    one :class:`CellChain` per cell of the coarsest tier, in grid order, each followed by the
+    members it left out (objects or finer cells, drawn on their own)."""
+    bakery = _Bakery(
+        scene.source, options, executor or SerialExecutor(backend, progress), backend, warn,
+        skipped, limits, strict, step, _object_count(scene), clock=clock or Clock(),
+    )  # fmt: skip
     if hlod is not None:
-        yield from _cell_chains(scene, options, hlod, bake)
+        yield from _cell_chains(scene, options, hlod, bakery)
         return
-    for obj, radius in _with_plot_radii(scene, options):
-        chain = bake(obj, radius)
+    for chain in bakery.chains(_with_plot_radii(scene, options)):
         if chain is not None:
             yield chain
 
@@ -154,79 +171,133 @@ def _object_count(scene: Scene) -> int | None:
 
 
 @dataclass
-class _ObjectBaker:
-    """Bakes one object at a time (without a ``backend``: plans it, bakes nothing): geometry
-    placed by several nodes once, objects with bad geometry reported and left out (``None``)."""
+class _Bakery:
+    """Objects sent to an executor in batches and their outcomes taken in, in order, here in
+    the main process: warnings told, skipped objects (bad geometry) reported and left out
+    (``None``), progress stepped, and geometry placed by several nodes baked once (its key is
+    decided here, where the nodes were read)."""
 
     source: str
     options: ChainOptions
-    backend: Backend | None
-    progress: Message
+    executor: Executor
+    backend: Backend
     warn: Message
     skipped: list[dict[str, str]] | None
     limits: Limits
     strict: bool
     step: Step = _no_step
     total: int | None = None
+    plan_only: bool = False
+    clock: Clock = field(default_factory=lambda: Clock())
     done: int = 0
-    shared: dict[int, Any] = field(default_factory=dict)
 
-    def __call__(self, obj: Node, radius: float | None) -> Any:
-        """The chain of ``obj`` (its plan without a backend; γ = ``radius`` where given), or
-        None when it is skipped."""
-        chain: LodChain | ChainPlan
+    def chains(
+        self, objects: Iterable[tuple[Node, float | None]]
+    ) -> Iterator[LodChain | ChainPlan | None]:
+        """The chain (the plan, with ``plan_only``) of each of ``objects`` (each with the plot
+        radius to use as its γ, or ``None``), in order; ``None`` for one that is skipped."""
+        seen: set[int | None] = set()  # keys of geometry placed by a node sent before
+        shared: dict[int, LodChain | ChainPlan] = {}
+        order: deque[tuple[Node, float | None, bool]] = deque()  # each object, and if sent
+        per_object = [0.0]
+
+        def sent() -> Iterator[tuple[Node, ChainOptions]]:
+            for node, radius in objects:
+                key = id(node.geometry) if node.transform is not None else None
+                first = key is None or key not in seen
+                order.append((node, radius, first))
+                if first:
+                    seen.add(key)
+                    yield node, self._options(radius)
+
+        tasks = self.clock.iterate("plan", batches(sent(), per_object, self.limits, self.plan_only))
+        for result in self.clock.iterate("execute", self.executor.results(tasks)):
+            per_object[0] = result.seconds / len(result.outcomes)
+            for outcome in result.outcomes:
+                while not order[0][2]:
+                    yield self._reused(order.popleft(), shared)
+                yield self._taken(order.popleft()[0], outcome, shared)
+        while order:
+            yield self._reused(order.popleft(), shared)
+
+    def _options(self, radius: float | None) -> ChainOptions:
+        """The options of an object whose plot radius is ``radius`` (γ, where given)."""
+        return replace(self.options, gamma=radius) if radius is not None else self.options
+
+    def _taken(
+        self, obj: Node, outcome: Baked, shared: dict[int, LodChain | ChainPlan]
+    ) -> LodChain | ChainPlan | None:
+        """The chain of ``outcome`` for ``obj`` (placed by its transform, kept in ``shared``
+        for other nodes of its geometry), or ``None`` when it was skipped."""
+        for text in outcome.warnings:
+            self.warn(text)
         try:
-            if obj.transform is not None and id(obj.geometry) in self.shared:
-                base = self.shared[id(obj.geometry)]
-                text = obj.written()
-                chain = replace(base, object_id=text.id, metadata=text.attributes, cut=text.cut)
-            else:
-                opts = replace(self.options, gamma=radius) if radius is not None else self.options
-                chain = plan_chain(obj, opts) if self.backend is None else bake_chain(
-                    obj, opts, self.backend, progress=self.progress, warn=self.warn,
-                    limits=self.limits,
-                )  # fmt: skip
+            if outcome.chain is None:
+                return self._skip(obj, outcome.reason or "could not be converted")
+            chain = outcome.chain
             if obj.transform is not None:
-                self.shared.setdefault(id(obj.geometry), chain)
+                shared.setdefault(id(obj.geometry), chain)
                 chain = replace(chain, transform=np.asarray(obj.transform, dtype=np.float64))
-        except InputError as exc:
-            if self.total != 1 and not self.strict:  # with one object, the run's error says it
-                self.warn(f"{self.source}: object {exc} — skipped")
-            if self.skipped is not None:
-                self.skipped.append({"id": obj.id, "reason": str(exc)})
-            return None
+            return chain
         finally:
             self.done += 1
             self.step("converting", self.done, self.total)
-        return chain
+
+    def _reused(
+        self, job: tuple[Node, float | None, bool], shared: dict[int, LodChain | ChainPlan]
+    ) -> LodChain | ChainPlan | None:
+        """The chain of an object whose geometry an earlier node placed: that node's chain
+        with this one's id, attributes and placement (baked here when that node's failed)."""
+        obj, radius, _ = job
+        base = shared.get(id(obj.geometry))
+        if base is None:
+            task = BakeTask(((obj, self._options(radius)),), self.limits, self.plan_only)
+            return self._taken(obj, run_task(task, self.backend).outcomes[0], shared)
+        try:
+            text = obj.written()
+            chain = replace(base, object_id=text.id, metadata=text.attributes, cut=text.cut)
+            return replace(chain, transform=np.asarray(obj.transform, dtype=np.float64))
+        except InputError as exc:
+            return self._skip(obj, str(exc))
+        finally:
+            self.done += 1
+            self.step("converting", self.done, self.total)
+
+    def _skip(self, obj: Node, reason: str) -> None:
+        """Report ``obj`` as skipped for ``reason``."""
+        if self.total != 1 and not self.strict:  # with one object, the run's error says it
+            self.warn(f"{self.source}: object {reason} — skipped")
+        if self.skipped is not None:
+            self.skipped.append({"id": obj.id, "reason": reason})
 
 
 def _cell_chains(
-    scene: Scene, options: ChainOptions, hlod: HlodOptions, bake: _ObjectBaker
+    scene: Scene, options: ChainOptions, hlod: HlodOptions, bakery: _Bakery
 ) -> Iterator[LodChain | CellChain]:
     """The scene's objects baked and grouped into LOD parents, one coarsest cell at a time
-    (the objects wait on disk meanwhile, so memory is bounded by a cell), each followed by
-    the members it left out."""
+    (the objects wait on disk meanwhile, and go to be baked in the cells' order, so memory is
+    bounded by the cells in flight), each followed by the members it left out."""
     hlod.check()
     with NodeSpool() as spool:
         centres, radii = _spooled(scene.with_geometry(), options, spool)
-        sizes = hlod.sizes or (auto_size(centres),)
+        plans = plan_cells(centres, hlod.sizes or (auto_size(centres),))
+        order = (i for plan in plans for i in plan.object_indices())
+        found = bakery.chains((spool.get(i), radii[i]) for i in order)
 
         def baked(plan: CellPlan) -> list[LodChain | CellChain]:
             """The cell of ``plan`` (if it admits any member) and the members it left out."""
             if plan.tier == 1:
-                found = [bake(spool.get(i), radii[i]) for i in plan.objects]
-                members = [m for m in found if m is not None]
+                members = [m for m in itertools.islice(found, len(plan.objects)) if m is not None]
             else:
                 members = [item for cell in plan.cells for item in baked(cell)]
             if not members:
                 return []
             cell, left_out = bake_cell(
-                plan, members, options, hlod.kind, bake.backend, bake.warn, bake.limits
+                plan, members, options, hlod.kind, bakery.backend, bakery.warn, bakery.limits
             )
             return ([cell] if cell is not None else []) + left_out
 
-        for plan in plan_cells(centres, sizes):
+        for plan in plans:
             yield from baked(plan)
 
 
@@ -312,118 +383,200 @@ def _ground_centre(node: Node) -> tuple[float, float]:
     return float(x), float(y)
 
 
+STAGES = ("read", "plan", "execute", "assemble", "write", "validate")
+"""The timed stages of a run, in order (the commit that follows is not in the report it
+writes)."""
+
+Also = Callable[[Outputs, FileSink, dict[str, Any]], None]
+"""``also(outputs, sink, report)``: stage more outputs of the run before its commit."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """How one conversion runs: the chain options, the baker and how many processes bake
+    (``workers``: 1 bakes in this process), the report file, the readers' and writer's
+    options, limits, ``strict`` (a broken object fails the run), LOD parents (``hlod``), what
+    hears of progress, warnings and steps, and ``also`` (more outputs to stage)."""
+
+    chain: ChainOptions = field(default_factory=ChainOptions)
+    backend: str = "auto"
+    workers: int = 1
+    report_path: str | Path | None = None
+    read_options: Mapping[str, Any] = field(default_factory=dict)
+    write_options: Mapping[str, Any] = field(default_factory=dict)
+    limits: Limits = DEFAULT_LIMITS
+    strict: bool = False
+    hlod: HlodOptions | None = None
+    progress: Message = _quiet
+    warn: Message = _quiet
+    step: Step = _no_step
+    also: Also | None = None
+
+    def check(self) -> None:
+        """Raise :class:`UsageError` for options out of range."""
+        self.chain.check()
+        if self.hlod is not None:
+            self.hlod.check()
+        if self.workers < 1:
+            raise UsageError(f"must be at least 1, got {self.workers}", "workers")
+
+
 def convert(
     input_path: str | Path | Sequence[str | Path],
     output_path: str | Path,
-    options: ChainOptions | None = None,
-    backend: str = "auto",
-    progress: Message = _quiet,
-    warn: Message = _quiet,
-    report_path: str | Path | None = None,
-    step: Step = _no_step,
-    read_options: dict[str, Any] | None = None,
-    write_options: dict[str, Any] | None = None,
-    also: Callable[[Outputs, FileSink, dict[str, Any]], None] | None = None,
-    limits: Limits = DEFAULT_LIMITS,
-    strict: bool = False,
-    hlod: HlodOptions | None = None,
+    run: RunOptions | None = None,
 ) -> dict[str, Any]:
-    """Convert ``input_path`` (or several inputs: one scene, see :func:`merged`) into
-    ``output_path`` and return the report (a JSON-able dict); with ``strict``, an object
-    skipped as broken fails the run.
-
-    Every output of the run is staged and committed together (:mod:`~lodconvert.sinks`): the
-    model file, after it passes its format's structural checks; the report at
-    ``report_path`` when given; and whatever ``also`` stages (it is called with the run's
-    :class:`~lodconvert.sinks.Outputs`, the model's sink and the report before the commit).
-    Output paths are checked before any work. Raises
-    :class:`~lodconvert.errors.UsageError` for bad options or an unknown output suffix and
-    :class:`~lodconvert.errors.LodConvertError` for a bad output path, unreadable input, when
-    no object could be baked or when the output fails its checks; then nothing is written and
-    existing files are left as they were.
-    """
-    options = options or ChainOptions()
-    options.check()
-    if hlod is not None:
-        hlod.check()
+    """Convert ``input_path`` (several inputs: one scene, :func:`merged`) into ``output_path``
+    as ``run`` says; return the report. Stages (:data:`STAGES`) stream into one another; every
+    output (the model once it passes its checks, the report, what ``run.also`` stages) is
+    committed together (:mod:`~lodconvert.sinks`). Raises :class:`UsageError` for bad options
+    or output suffix and :class:`~lodconvert.errors.LodConvertError` for a bad output path,
+    unreadable input, no object baked (with ``run.strict``: any skipped) or an output failing
+    its checks; then nothing is written."""
+    run = run or RunOptions()
+    run.check()
     target = output_format(output_path)
     inputs = [input_path] if isinstance(input_path, str | Path) else list(input_path)
     sources = [input_format(path) for path in inputs]
-    timings: dict[str, float] = {}
-    records = Records()
-    skipped: list[dict[str, str]] = []
-    cells: list[dict[str, Any]] = []
-    draw: dict[str, dict[str, int]] = {"without": {}, "with": {}}
-    frames: list[SceneFrame | None] = []  # the writers' scene frame, from the first item
+    named = " + ".join(str(path) for path in inputs)
+    clock = Clock(*STAGES)
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = outputs.file(output_path)
-        report_sink = outputs.file(report_path) if report_path is not None else None
-        start = time.perf_counter()
-        scene, crs_record = read_inputs(inputs, read_options, limits, sources, warn)
-        timings["read"] = time.perf_counter() - start
+        report_sink = outputs.file(run.report_path) if run.report_path is not None else None
+        with clock("read"):
+            scene, crs_record = read_inputs(inputs, run.read_options, run.limits, sources, run.warn)
         stack.enter_context(_input_kept_out_of_gc())
-        baker = get_backend(backend)
-        info = OutputInfo(
-            generator=f"lodconvert {__version__}",
-            source=" + ".join(Path(path).name for path in inputs),
-            crs=scene.crs,
-            vertical=crs_record["vertical"] if scene.city else None,
-            view=options.view,
-            options=options_record(options),
-            city=scene.city,
+        baker = get_backend(run.backend)
+        executor = stack.enter_context(_executor(run, baker, _object_count(scene)))
+        assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
+        skipped: list[dict[str, str]] = []
+        items = iter_chains(
+            scene, run.chain, baker, run.progress, run.warn, skipped, run.step, run.limits,
+            run.strict, run.hlod, executor, clock,
+        )  # fmt: skip
+        with clock("write"):
+            chains = clock.iterate("assemble", assembly.recorded(items))
+            target.write_chains(chains, sink, assembly.info, **run.write_options)
+        tally = _reader_skipped(
+            scene, skipped, run.warn if assembly.records and not run.strict else _quiet
         )
-
-        def recorded(items: Iterator[LodChain | CellChain]) -> Iterator[LodChain | CellChain]:
-            tally = tally_of(scene)
-            dropped = tally.dropped_by_object if tally is not None else {}
-            for item in items:
-                if not frames:
-                    frames.append(scene_frame(info.framed, item))
-                objects = item.objects() if isinstance(item, CellChain) else [item]
-                for chain in objects:
-                    records.append(
-                        {**chain_record(chain), "dropped_faces": dropped.get(chain.object_id, 0)}
-                    )
-                if isinstance(item, CellChain):
-                    cells.extend(cell_record(cell) for cell in item.cells())
-                if hlod is not None:
-                    _add_counts(draw["without"], draw_counts(objects))
-                    _add_counts(draw["with"], draw_counts([item]))
-                yield item
-
-        start = time.perf_counter()
-        chains = recorded(
-            iter_chains(scene, options, baker, progress, warn, skipped, step, limits, strict, hlod)
-        )
-        target.write_chains(chains, sink, info, **(write_options or {}))
-        timings["bake_and_write"] = time.perf_counter() - start
-        tally = _reader_skipped(scene, skipped, warn if records and not strict else _quiet)
-        if strict and skipped:
-            more = f" (and {len(skipped) - 1} more)" if len(skipped) > 1 else ""
-            raise InputError(
-                f"object {skipped[0]['reason']}{more} (--strict: a broken object fails the run)",
-                " + ".join(str(path) for path in inputs),
-            )
-        if not records:
-            raise _none_converted(skipped, " + ".join(str(path) for path in inputs))
-        step("checking", 0, 1)
-        start = time.perf_counter()
-        check_written(sink.staged.temp, output_path)
-        timings["validate"] = time.perf_counter() - start
-        step("checking", 1, 1)
-        named = " + ".join(str(path) for path in inputs)
-        report = _report(named, output_path, baker, options, records, skipped, timings, tally)
-        report["crs"] = crs_record
-        report["frame"] = frames[0].record() if frames[0] is not None else None
-        if hlod is not None:
-            report["hlod"] = {"kind": hlod.kind, "cells": cells, "draw": draw}
-        if also is not None:
-            also(outputs, sink, report)
+        _check_converted(assembly.records, skipped, run.strict, named)
+        with clock("validate"):
+            _checked(sink, output_path, run.step)
+        report = assembly.report(named, output_path, baker, run, skipped, clock, tally, crs_record)
+        if run.also is not None:
+            run.also(outputs, sink, report)
         if report_sink is not None:
-            with report_sink.open() as stream:
-                for piece in report_text(report):
-                    stream.write(piece.encode())
+            _stage_report(report_sink, report)
     return report
+
+
+def _checked(sink: FileSink, output_path: str | Path, step: Step) -> None:
+    """Check the staged output of ``sink`` by its format (``step`` hears when)."""
+    step("checking", 0, 1)
+    check_written(sink.staged.temp, output_path)
+    step("checking", 1, 1)
+
+
+def _stage_report(sink: FileSink, report: dict[str, Any]) -> None:
+    """Stage ``report`` as the run's ``--report`` file."""
+    with sink.open() as stream:
+        for piece in report_text(report):
+            stream.write(piece.encode())
+
+
+def _executor(
+    run: RunOptions, backend: Backend, objects: int | None
+) -> PoolExecutor | SerialExecutor:
+    """Where the run's objects are baked: in ``run.workers`` processes, each with a backend
+    like ``backend``, or in this one with ``backend`` (one worker, or one object)."""
+    if run.workers == 1 or objects == 1:
+        return SerialExecutor(backend, run.progress)
+    return PoolExecutor(run.workers, backend.name, run.progress)
+
+
+def _output_info(
+    inputs: Sequence[str | Path], scene: Scene, crs_record: dict[str, Any], options: ChainOptions
+) -> OutputInfo:
+    """What the writers record of the run."""
+    return OutputInfo(
+        generator=f"lodconvert {__version__}",
+        source=" + ".join(Path(path).name for path in inputs),
+        crs=scene.crs,
+        vertical=crs_record["vertical"] if scene.city else None,
+        view=options.view,
+        options=options_record(options),
+        city=scene.city,
+    )
+
+
+@dataclass
+class _Assembly:
+    """What the run records of each baked item as the writer takes it: the objects' records,
+    the LOD parents and their draw counts, and the writers' scene frame (from the first)."""
+
+    scene: Scene
+    info: OutputInfo
+    hlod: HlodOptions | None
+    records: Records = field(default_factory=Records)
+    cells: list[dict[str, Any]] = field(default_factory=list)
+    draw: dict[str, dict[str, int]] = field(default_factory=lambda: {"without": {}, "with": {}})
+    frame: SceneFrame | None = None
+    started: bool = False
+
+    def recorded(self, items: Iterable[LodChain | CellChain]) -> Iterator[LodChain | CellChain]:
+        """``items``, each recorded as it passes."""
+        tally = tally_of(self.scene)
+        dropped = tally.dropped_by_object if tally is not None else {}
+        for item in items:
+            if not self.started:
+                self.frame, self.started = scene_frame(self.info.framed, item), True
+            objects = item.objects() if isinstance(item, CellChain) else [item]
+            for chain in objects:
+                self.records.append(
+                    {**chain_record(chain), "dropped_faces": dropped.get(chain.object_id, 0)}
+                )
+            if isinstance(item, CellChain):
+                self.cells.extend(cell_record(cell) for cell in item.cells())
+            if self.hlod is not None:
+                _add_counts(self.draw["without"], draw_counts(objects))
+                _add_counts(self.draw["with"], draw_counts([item]))
+            yield item
+
+    def report(
+        self,
+        named: str,
+        output_path: str | Path,
+        baker: Backend,
+        run: RunOptions,
+        skipped: list[dict[str, str]],
+        clock: Clock,
+        tally: InputTally | None,
+        crs_record: dict[str, Any],
+    ) -> dict[str, Any]:
+        """The ``--report`` of the run."""
+        report = _report(
+            named, output_path, baker, run.chain, self.records, skipped, clock.timings, tally
+        )
+        report["crs"] = crs_record
+        report["frame"] = self.frame.record() if self.frame is not None else None
+        if self.hlod is not None:
+            report["hlod"] = {"kind": self.hlod.kind, "cells": self.cells, "draw": self.draw}
+        return report
+
+
+def _check_converted(
+    records: Records, skipped: list[dict[str, str]], strict: bool, named: str
+) -> None:
+    """Raise :class:`InputError` when no object of ``named`` was converted or, with ``strict``,
+    when any was skipped."""
+    if strict and skipped:
+        more = f" (and {len(skipped) - 1} more)" if len(skipped) > 1 else ""
+        raise InputError(
+            f"object {skipped[0]['reason']}{more} (--strict: a broken object fails the run)", named
+        )
+    if not records:
+        raise _none_converted(skipped, named)
 
 
 def read_inputs(
@@ -533,13 +686,16 @@ def object_ranges(
     left out; when none can, :class:`InputError`."""
     options.check()
     skipped: list[dict[str, str]] = []
-    plan = _ObjectBaker(scene.source, options, None, _quiet, warn, skipped, DEFAULT_LIMITS, False)
-    plan.total = _object_count(scene)
-    rows = []
-    for obj, radius in _with_plot_radii(scene, options):
-        planned = plan(obj, radius)
-        if planned is not None:
-            rows.append(_range_record(planned, options))
+    backend = get_backend("numpy")  # plans bake nothing
+    plan = _Bakery(
+        scene.source, options, SerialExecutor(backend), backend, warn, skipped, DEFAULT_LIMITS,
+        strict=False, total=_object_count(scene), plan_only=True,
+    )  # fmt: skip
+    rows = [
+        _range_record(planned, options)
+        for planned in plan.chains(_with_plot_radii(scene, options))
+        if isinstance(planned, ChainPlan)
+    ]
     _reader_skipped(scene, skipped, warn if rows else _quiet)
     if not rows:
         raise _none_converted(skipped, scene.source)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lodconvert import convert
 from lodconvert.analysis.bench import (
     BenchSettings,
     GridRenderer,
@@ -26,7 +27,6 @@ from lodconvert.analysis.bench import (
 from lodconvert.analysis.render import look_at, perspective
 from lodconvert.cli import main
 from lodconvert.errors import InputError
-from lodconvert.pipeline import convert
 from lodconvert.plan import POINT_COST
 
 from .conftest import SAMPLE, gl_renderer

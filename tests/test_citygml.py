@@ -17,11 +17,11 @@ import numpy as np
 import pytest
 from lxml import etree
 
+from lodconvert import convert
 from lodconvert.io import read_chains, read_scene
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.limits import Limits
 from lodconvert.model import Mesh, Node, Surface
-from lodconvert.pipeline import convert
 from lodconvert.semantics import DEFAULT_CLASS_COLORS, TYPE_COLORS
 from lodconvert.validate import errors_of, validate_file
 

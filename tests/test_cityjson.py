@@ -17,11 +17,11 @@ import pytest
 from lxml import etree
 from scipy.spatial import cKDTree
 
+from lodconvert import convert
 from lodconvert.errors import InputError
 from lodconvert.io import read_chains, read_scene
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.model import Node
-from lodconvert.pipeline import convert
 from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.validate import validate_file
 

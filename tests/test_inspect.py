@@ -14,13 +14,13 @@ import numpy as np
 import pytest
 from lxml import etree
 
+from lodconvert import convert
 from lodconvert.chain import ChainOptions
 from lodconvert.errors import InputError
 from lodconvert.io import OutputInfo, read_chains, read_scene
 from lodconvert.io.gltf import write_glb, write_gltf
 from lodconvert.io.x3d import write_x3d
 from lodconvert.model import Level, LodChain, Surface
-from lodconvert.pipeline import convert
 from lodconvert.viewer.config import page_config
 
 from .conftest import SHARED

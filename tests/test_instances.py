@@ -12,8 +12,8 @@ import pytest
 import trimesh
 from lxml import etree
 
+from lodconvert import convert
 from lodconvert.io import read_chains
-from lodconvert.pipeline import convert
 
 PLACEMENTS = [
     trimesh.transformations.translation_matrix([0, 0, 0]),

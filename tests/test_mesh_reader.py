@@ -14,12 +14,12 @@ import pytest
 import trimesh
 from PIL import Image
 
+from lodconvert import convert
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.errors import InputError
 from lodconvert.io import read_scene
 from lodconvert.io.gltf import read_lod_gltf
-from lodconvert.pipeline import convert
 
 FORMATS = ("obj", "ply", "stl", "off", "glb", "gltf")
 

@@ -14,12 +14,12 @@ import pytest
 import trimesh
 from lxml import etree
 
+from lodconvert import convert
 from lodconvert.chain import ChainOptions
 from lodconvert.errors import UsageError
 from lodconvert.io import OutputInfo, read_chains
 from lodconvert.io.x3d import prism_boxes, write_x3d
 from lodconvert.model import LodChain
-from lodconvert.pipeline import convert
 from lodconvert.validate import validate_file
 
 from .conftest import SAMPLE, SHARED, X3D_SCHEMAS

@@ -17,6 +17,7 @@ from lxml import etree
 from scipy.spatial import cKDTree
 
 import lodconvert
+from lodconvert import convert
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
 from lodconvert.errors import LodConvertError
@@ -25,7 +26,7 @@ from lodconvert.io import own_format, read_chains, read_scene
 from lodconvert.io.frame import ROTATION
 from lodconvert.io.x3d.viewpoint import PITCH_DEG
 from lodconvert.model import Node, Surface
-from lodconvert.pipeline import convert, iter_chains
+from lodconvert.pipeline import iter_chains
 from lodconvert.validate import validate_file
 from lodconvert.viewer.config import page_config
 

@@ -11,9 +11,9 @@ import jsonschema
 import numpy as np
 import trimesh
 
+from lodconvert import convert
 from lodconvert.chain import ChainOptions
 from lodconvert.model import Mesh, Surface
-from lodconvert.pipeline import convert
 from lodconvert.sourcelods import unused_levels
 
 from .conftest import ROOT, SHARED, shared_data

@@ -59,6 +59,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     bake = add_bake_options(parser)
     bake.add_argument("--backend", choices=BACKENDS, default="auto", help="baker (default auto)")
+    bake.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="processes baking objects (default: the cores this process may use; 1 bakes in "
+        "the main process)",
+    )
     add_range_options(parser)
     group = parser.add_argument_group("LOD parents (cities)")
     group.add_argument(
@@ -132,7 +139,8 @@ def _hlod_line(hlod: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Convert, print what was made, return the exit code."""
-    from ..pipeline import convert
+    from ..pipeline import RunOptions, convert
+    from ..tasks import default_workers
 
     _check_switching(args)
     options = chain_options(args)
@@ -155,11 +163,10 @@ def run(args: argparse.Namespace, console: Console) -> int:
         outputs.file(page).write_bytes(text.encode("utf-8"))
         report["page"] = str(page)
 
-    report = convert(
-        args.input,
-        args.output,
+    run = RunOptions(
         options,
         backend=args.backend,
+        workers=args.workers if args.workers is not None else default_workers(),
         progress=console.progress,
         step=console.step,
         warn=console.warn,
@@ -171,6 +178,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         also=stage_page if args.html else None,
         limits=limits,
     )
+    report = convert(args.input, args.output, run)
     objects = report["objects"]
     if len(objects) <= OBJECT_LINES or args.verbose:
         for obj in objects:

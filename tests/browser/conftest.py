@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from lodconvert import convert
 from lodconvert.chain import ChainOptions
-from lodconvert.pipeline import convert
 from lodconvert.viewer import LIBRARIES, page_path, serve, write_page
 
 from ..conftest import ROOT, SAMPLE, require

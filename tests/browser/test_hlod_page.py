@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from lodconvert import convert
 from lodconvert.chain import ChainOptions
 from lodconvert.hlod import HlodOptions
 from lodconvert.io import read_chains
-from lodconvert.pipeline import convert
 from lodconvert.viewer import LIBRARIES, page_config, write_page
 
 from ..conftest import SAMPLE, SHARED

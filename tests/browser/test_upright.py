@@ -12,10 +12,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from lodconvert import convert
 from lodconvert.io import read_chains
 from lodconvert.io.frame import ROTATION
 from lodconvert.io.x3d import prism_boxes, read_frame
-from lodconvert.pipeline import convert
 from lodconvert.viewer import LIBRARIES, write_page
 from lodconvert.viewer.config import page_config
 

@@ -1,0 +1,359 @@
+"""Baking as pure work: a :class:`BakeTask` (a batch of objects, each with its options resolved)
+gives a :class:`BakeResult` (each object's chain, or why it was skipped, and its warnings, as
+data), and an :class:`Executor` runs tasks and gives their results back in the order the tasks
+were submitted.
+
+Two executors: :class:`SerialExecutor` runs each task in this process when its result is asked
+for; :class:`PoolExecutor` runs them in worker processes started with ``spawn`` (a forked child
+of a process holding a GL context deadlocks; each worker makes its own backend), with a bounded
+window of tasks in flight, so memory stays bounded and the output is the same as serial. A
+worker that dies mid-task is replaced and its task run once more; when it dies again, the task's
+objects are reported as failed and the run goes on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import queue
+import signal
+import threading
+import time
+from collections import deque
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection, wait
+from typing import Any, Self
+
+from .bake import Backend, get_backend
+from .chain import ChainOptions, ChainPlan, Progress, bake_chain, plan_chain
+from .errors import InputError
+from .limits import DEFAULT_LIMITS, Limits
+from .model import LodChain, Node
+
+TASK_SECONDS = 0.1
+"""Work a batch is sized for: a process pool costs about 0.1 ms a task, so this keeps the
+overhead well under 1 %."""
+DEPTH = 2
+"""Tasks sent to one worker at most: the one it works on and the next."""
+MAX_BATCH = 256
+"""Objects a batch holds at most (memory in flight stays small)."""
+
+
+@dataclass(frozen=True)
+class BakeTask:
+    """Objects to bake, each with the options to bake it with (γ already decided); with
+    ``plan_only``, plan each chain (:func:`~.chain.plan_chain`) and bake nothing."""
+
+    items: tuple[tuple[Node, ChainOptions], ...]
+    limits: Limits = DEFAULT_LIMITS
+    plan_only: bool = False
+
+    def object_ids(self) -> list[str]:
+        """The ids of the task's objects, in order."""
+        return [node.id for node, _ in self.items]
+
+
+@dataclass(frozen=True)
+class Baked:
+    """What became of one object: its chain (or plan), or the ``reason`` it was skipped, and the
+    warnings its baking gave, in order."""
+
+    chain: LodChain | ChainPlan | None
+    reason: str | None = None
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class BakeResult:
+    """The outcome of each object of a task, in the task's order, and the seconds it took."""
+
+    outcomes: tuple[Baked, ...]
+    seconds: float
+
+
+def run_task(task: BakeTask, backend: Backend, progress: Progress | None = None) -> BakeResult:
+    """Bake (or plan) each object of ``task`` with ``backend``; an object whose geometry cannot
+    be baked (:class:`~.errors.InputError`) is an outcome with its reason, not an error.
+    ``progress`` hears what is being baked as it happens."""
+    start = time.perf_counter()
+    outcomes = []
+    for node, options in task.items:
+        warnings: list[str] = []
+        try:
+            chain = plan_chain(node, options) if task.plan_only else bake_chain(
+                node, options, backend, progress=progress, warn=warnings.append,
+                limits=task.limits,
+            )  # fmt: skip
+        except InputError as exc:
+            outcomes.append(Baked(None, str(exc), tuple(warnings)))
+            continue
+        outcomes.append(Baked(chain, None, tuple(warnings)))
+    return BakeResult(tuple(outcomes), time.perf_counter() - start)
+
+
+def failed_result(task: BakeTask, reason: str) -> BakeResult:
+    """The result of a task none of whose objects could be converted, for ``reason``."""
+    return BakeResult(tuple(Baked(None, f"{i}: {reason}") for i in task.object_ids()), 0.0)
+
+
+class Executor:
+    """Runs tasks; their results come back in submission order. Use as a context manager:
+    leaving it stops whatever it started."""
+
+    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+        """The result of each of ``tasks``, in order (tasks are taken as they are needed)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Stop whatever runs tasks (nothing by default)."""
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+@dataclass
+class SerialExecutor(Executor):
+    """Each task run in this process when its result is asked for (``--workers 1``)."""
+
+    backend: Backend
+    progress: Progress | None = None
+
+    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+        """The result of each of ``tasks``, each run as it is taken."""
+        for task in tasks:
+            yield run_task(task, self.backend, self.progress)
+
+
+def _work(conn: Connection, backend_name: str) -> None:
+    """A worker process: run the tasks that arrive on ``conn`` in order, send back what it
+    heard of progress and then each result (or the exception that ended a task) until ``None``
+    arrives. Two threads move tasks and results through ``conn`` meanwhile, so baking goes on
+    while the main process is busy elsewhere. Ctrl-C is the main process's to handle: it stops
+    the workers."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    inbox: queue.SimpleQueue[BakeTask | None] = queue.SimpleQueue()
+    outbox: queue.SimpleQueue[tuple[str, Any] | None] = queue.SimpleQueue()
+    threading.Thread(target=_receive, args=(conn, inbox), daemon=True).start()
+    sender = threading.Thread(target=_send, args=(conn, outbox), daemon=True)
+    sender.start()
+    backend = get_backend(backend_name)  # a GL context, if any, is made here, after spawn
+
+    def progress(text: str) -> None:
+        outbox.put(("progress", text))
+
+    while (task := inbox.get()) is not None:
+        try:
+            outbox.put(("result", run_task(task, backend, progress)))
+        except Exception as exc:  # a bug, not bad input: the main process raises it
+            outbox.put(("error", exc))
+    outbox.put(None)
+    sender.join()
+
+
+def _receive(conn: Connection, inbox: queue.SimpleQueue[BakeTask | None]) -> None:
+    """Move tasks from ``conn`` to ``inbox`` as they arrive, then ``None`` (no more tasks, or
+    the main process is gone)."""
+    while True:
+        try:
+            task = conn.recv()
+        except (EOFError, OSError):
+            task = None
+        inbox.put(task)
+        if task is None:
+            return
+
+
+def _send(conn: Connection, outbox: queue.SimpleQueue[tuple[str, Any] | None]) -> None:
+    """Send what arrives in ``outbox`` through ``conn`` until ``None`` (or the main process is
+    gone); a result that cannot be pickled is sent as the error it raised."""
+    while (message := outbox.get()) is not None:
+        try:
+            conn.send(message)
+        except OSError:
+            return
+        except Exception as exc:
+            conn.send(("error", RuntimeError(f"a worker's {message[0]} cannot be sent: {exc}")))
+
+
+@dataclass
+class _Worker:
+    """One worker process, its end of the pipe and the tasks sent to it (their numbers, in
+    the order it runs them: the first is the one it works on)."""
+
+    process: Any
+    conn: Connection
+    held: deque[int] = field(default_factory=deque)
+
+
+class PoolExecutor(Executor):
+    """Tasks run by ``workers`` processes (``spawn``), each baking with its own backend of
+    ``backend_name``; at most ``window`` tasks are in flight or waiting to be consumed."""
+
+    def __init__(
+        self,
+        workers: int,
+        backend_name: str,
+        progress: Progress | None = None,
+        window: int | None = None,
+    ) -> None:
+        self.workers = workers
+        self.backend_name = backend_name
+        self.progress = progress
+        self.window = window or (DEPTH + 1) * workers
+        self._context = multiprocessing.get_context("spawn")
+        self._workers: list[_Worker] = []
+
+    def __enter__(self) -> Self:
+        """Start the workers now, so that they are ready (imports done, backends made) when the
+        first task comes: that happens while the main process reads."""
+        while len(self._workers) < self.workers:
+            self._workers.append(self._start())
+        return self
+
+    def _start(self) -> _Worker:
+        ours, theirs = self._context.Pipe()
+        process = self._context.Process(
+            target=_work, args=(theirs, self.backend_name), daemon=True, name="lodconvert-worker"
+        )
+        process.start()
+        theirs.close()
+        return _Worker(process, ours)
+
+    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+        """The result of each of ``tasks``, in order; a task whose worker died twice gives a
+        result with each of its objects failed."""
+        pending = iter(tasks)
+        submitted: dict[int, BakeTask] = {}
+        waiting: deque[int] = deque()  # tasks not sent to a worker yet, by number
+        tries: dict[int, int] = {}
+        done: dict[int, BakeResult] = {}
+        workers = self._workers
+        taken = next_number = 0
+        exhausted = False
+        try:
+            while True:
+                while not exhausted and next_number - taken < self.window:
+                    task = next(pending, None)
+                    if task is None:
+                        exhausted = True
+                        break
+                    submitted[next_number] = task
+                    waiting.append(next_number)
+                    next_number += 1
+                if taken in done:
+                    submitted.pop(taken)
+                    yield done.pop(taken)
+                    taken += 1
+                    continue
+                if exhausted and taken == next_number:
+                    return
+                self._dispatch(workers, waiting, submitted)
+                self._collect(workers, waiting, submitted, tries, done)
+        finally:
+            self.close()
+
+    def _dispatch(
+        self, workers: list[_Worker], waiting: deque[int], submitted: dict[int, BakeTask]
+    ) -> None:
+        """Give waiting tasks to the workers holding fewest (up to :data:`DEPTH` each, so
+        that each has the next at hand), starting workers up to the pool's size."""
+        while waiting:
+            if len(workers) < self.workers:
+                workers.append(self._start())
+            worker = min(workers, key=lambda w: len(w.held))
+            if len(worker.held) >= DEPTH:
+                return
+            worker.held.append(waiting.popleft())
+            with contextlib.suppress(BrokenPipeError, ConnectionResetError):  # it died: see
+                worker.conn.send(submitted[worker.held[-1]])  # _collect, which waits on it
+
+    def _collect(
+        self,
+        workers: list[_Worker],
+        waiting: deque[int],
+        submitted: dict[int, BakeTask],
+        tries: dict[int, int],
+        done: dict[int, BakeResult],
+    ) -> None:
+        """Wait until a busy worker sends something or dies, and take it in: a dead worker's
+        first task is charged a try (run again, or after two failed with each object), the
+        others it held wait again."""
+        busy = [w for w in workers if w.held]
+        ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy])
+        for worker in busy:
+            dead = worker.process.sentinel in ready
+            if worker.conn in ready:
+                try:
+                    kind, value = worker.conn.recv()
+                except (EOFError, ConnectionResetError):  # it died
+                    kind, value, dead = "died", None, True
+                if kind == "progress" and self.progress is not None:
+                    self.progress(value)
+                elif kind == "result":
+                    done[worker.held.popleft()] = value
+                elif kind == "error":
+                    raise value
+                if kind != "died":
+                    continue  # if it died too, its sentinel is read on the next wait
+            if not dead:
+                continue
+            worker.process.join()
+            workers.remove(worker)
+            first = worker.held.popleft()
+            waiting.extendleft(reversed(worker.held))
+            tries[first] = tries.get(first, 0) + 1
+            if tries[first] < 2:
+                waiting.appendleft(first)
+            else:
+                done[first] = failed_result(submitted[first], _death(worker.process.exitcode))
+
+    def close(self) -> None:
+        """End every worker: idle ones are told to, busy ones terminated; all are waited for."""
+        workers, self._workers[:] = list(self._workers), []
+        for worker in workers:
+            if not worker.held:
+                try:
+                    worker.conn.send(None)
+                except OSError:
+                    worker.process.terminate()
+            else:
+                worker.process.terminate()
+        for worker in workers:
+            worker.process.join()
+            worker.conn.close()
+
+
+def _death(code: int | None) -> str:
+    """Why a task failed when its worker died with exit ``code`` twice."""
+    how = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else code
+    return f"the worker process converting it died twice ({how})"
+
+
+def default_workers() -> int:
+    """The cores this process may run on."""
+    return len(os.sched_getaffinity(0))
+
+
+def batches(
+    items: Iterable[tuple[Node, ChainOptions]],
+    per_object: list[float],
+    limits: Limits,
+    plan_only: bool = False,
+) -> Iterator[BakeTask]:
+    """``items`` as tasks of about :data:`TASK_SECONDS` of work each, judged by ``per_object``
+    (a one-item list: seconds an object takes so far, updated by the caller; 0: not known yet,
+    a task of one object)."""  # fmt: skip
+    batch: list[tuple[Node, ChainOptions]] = []
+    for item in items:
+        batch.append(item)
+        wanted = int(TASK_SECONDS / per_object[0]) if per_object[0] > 0 else 1
+        if len(batch) >= max(1, min(MAX_BATCH, wanted)):
+            yield BakeTask(tuple(batch), limits, plan_only)
+            batch = []
+    if batch:
+        yield BakeTask(tuple(batch), limits, plan_only)

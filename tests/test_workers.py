@@ -1,0 +1,204 @@
+"""Baking in worker processes (``--workers N``): the same bytes as in one process, broken objects
+reported the same, a killed worker's batch retried once and then reported, an interrupted run
+stopping its workers and leaving nothing."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import trimesh
+
+from lodconvert.bake import get_backend
+from lodconvert.chain import ChainOptions
+from lodconvert.model import Node, Scene
+from lodconvert.pipeline import iter_chains
+from lodconvert.tasks import PoolExecutor, SerialExecutor
+
+from .conftest import ROOT, SHARED, surface_of
+
+TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
+
+
+def _lodconvert(*args: object) -> subprocess.CompletedProcess[str]:
+    command = [sys.executable, "-m", "lodconvert", *map(str, args)]
+    return subprocess.run(command, capture_output=True, text=True, cwd=ROOT, check=False)
+
+
+@pytest.fixture(scope="module")
+def mixed(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A GLB of several objects: a box, a sphere placed by three nodes (one geometry), a ring,
+    and one without area that the reader skips."""
+    scene = trimesh.Scene()
+    scene.add_geometry(trimesh.creation.box(extents=(1, 2, 3)), node_name="box", geom_name="box")
+    flat = trimesh.Trimesh([[1, 1, 1]] * 3, [[0, 1, 2]], process=False)
+    scene.add_geometry(flat, node_name="broken", geom_name="flat")
+    scene.add_geometry(trimesh.creation.icosphere(3), node_name="ball0", geom_name="ball")
+    for i in (1, 2):
+        matrix = trimesh.transformations.translation_matrix([10.0 * i, 0, 0])
+        scene.graph.update(
+            frame_to=f"ball{i}", frame_from=scene.graph.base_frame, matrix=matrix, geometry="ball"
+        )
+    scene.add_geometry(trimesh.creation.torus(2, 0.5), node_name="ring", geom_name="ring")
+    path = tmp_path_factory.mktemp("mixed") / "mixed.glb"
+    scene.export(path)
+    return path
+
+
+def _untimed(report: dict[str, Any]) -> dict[str, Any]:
+    """``report`` without what measures time (the stages' and each point level's seconds) or
+    names the output."""
+    report = {k: v for k, v in report.items() if k not in ("timings", "output")}
+    for record in report["objects"]:
+        for level in record["levels"]:
+            level.pop("bake_seconds", None)
+    return report
+
+
+def _messages(stderr: str) -> list[str]:
+    """The lines of a run's stderr that do not tell time (warnings, objects, cells)."""
+    return [line for line in stderr.splitlines() if "(" not in line or "warning" in line]
+
+
+CASES = [
+    pytest.param("tum", ".x3d", (), id="tum-x3d"),
+    pytest.param("tum", ".glb", (), id="tum-glb"),
+    pytest.param("tum", ".x3d", ("--hlod", "250"), id="tum-hlod-250"),
+    pytest.param("tum", ".x3d", ("--switching", "prism"), id="tum-prism"),
+    pytest.param("mixed", ".x3d", (), id="mesh-x3d"),
+    pytest.param("mixed", ".glb", (), id="mesh-glb"),
+]
+
+
+@pytest.mark.parametrize(("source", "suffix", "options"), CASES)
+def test_two_workers_write_the_bytes_of_one(
+    source: str, suffix: str, options: tuple[str, ...], mixed: Path, tmp_path: Path
+) -> None:
+    path = TUM if source == "tum" else mixed
+    if not path.exists():
+        pytest.skip(f"{path} is not here")
+    runs = {}
+    for workers in (1, 2):
+        out, report = tmp_path / f"w{workers}{suffix}", tmp_path / f"w{workers}.json"
+        run = _lodconvert(path, "-o", out, "--report", report, "--workers", workers, *options)
+        assert run.returncode == 0, run.stderr
+        runs[workers] = (out.read_bytes(), json.loads(report.read_text()), run.stderr)
+    assert runs[2][0] == runs[1][0]
+    assert _untimed(runs[2][1]) == _untimed(runs[1][1])
+    assert _messages(runs[2][2]) == _messages(runs[1][2])
+    timings = runs[2][1]["timings"]
+    assert list(timings) == ["read", "plan", "execute", "assemble", "write", "validate"]
+
+
+class _KillsItsWorker:
+    """An attribute whose unpickling kills the process doing it: a worker taking the task."""
+
+    def __reduce__(self) -> tuple[Any, tuple[int]]:
+        return signal.raise_signal, (signal.SIGKILL,)
+
+
+def _scene(broken: str | None = None, killer: str | None = None) -> Scene:
+    """Eight small objects (``broken``: one with a NaN vertex; ``killer``: one that kills the
+    worker that takes it)."""
+    nodes = []
+    for i in range(8):
+        mesh = trimesh.creation.icosphere(2, radius=1.0 + i / 8)
+        node = Node(f"obj{i}", surface_of(mesh), origin=np.array([5.0 * i, 0.0, 0.0]))
+        if node.id == broken:
+            node.geometry.vertices[0, 0] = np.nan
+        if node.id == killer:
+            node.attributes["trap"] = _KillsItsWorker()
+        nodes.append(node)
+    return Scene("test scene", nodes)
+
+
+def _baked(scene: Scene, workers: int) -> tuple[list[Any], list[str], list[dict[str, str]]]:
+    """The chains, warnings and skipped objects of ``scene`` baked by ``workers`` processes."""
+    warnings: list[str] = []
+    skipped: list[dict[str, str]] = []
+    backend = get_backend("numpy")
+    executor = SerialExecutor(backend) if workers == 1 else PoolExecutor(workers, "numpy")
+    with executor:
+        chains = list(
+            iter_chains(
+                scene,
+                ChainOptions(),
+                backend,
+                warn=warnings.append,
+                skipped=skipped,
+                executor=executor,
+            )
+        )
+    return chains, warnings, skipped
+
+
+def test_a_broken_object_in_a_batch_is_reported_as_with_one_worker() -> None:
+    one = _baked(_scene(broken="obj5"), 1)
+    two = _baked(_scene(broken="obj5"), 2)
+    assert [c.object_id for c in two[0]] == [c.object_id for c in one[0]]
+    assert len(two[0]) == 7
+    assert two[1] == one[1] and any("obj5" in w and "skipped" in w for w in two[1])
+    assert (
+        two[2]
+        == one[2]
+        == [{"id": "obj5", "reason": "obj5: has NaN or infinite vertex coordinates"}]
+    )
+
+
+def test_a_batch_whose_worker_is_killed_twice_is_reported_and_the_rest_convert() -> None:
+    chains, warnings, skipped = _baked(_scene(killer="obj0"), 2)
+    assert [c.object_id for c in chains] == [f"obj{i}" for i in range(1, 8)]
+    assert [entry["id"] for entry in skipped] == ["obj0"]
+    assert "died twice (signal SIGKILL)" in skipped[0]["reason"]
+    assert any("obj0" in w and "skipped" in w for w in warnings)
+
+
+def _workers_of(pid: int) -> list[int]:
+    """The worker processes ``pid`` started (spawned by multiprocessing)."""
+    children = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        children += [int(c) for c in (task / "children").read_text().split()]
+    return [
+        child for child in children if b"spawn_main" in Path(f"/proc/{child}/cmdline").read_bytes()
+    ]
+
+
+@pytest.mark.parametrize(
+    ("sig", "code"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)], ids=["sigterm", "sigint"]
+)
+def test_an_interrupted_run_stops_its_workers_and_leaves_nothing(
+    mixed: Path, tmp_path: Path, sig: signal.Signals, code: int
+) -> None:
+    out = tmp_path / "out" / "mixed.glb"
+    out.parent.mkdir()
+    command = [
+        *(sys.executable, "-m", "lodconvert", str(mixed), "-o", str(out), "-v"),
+        *("--workers", "2", "--resolution", "1024,512,256", "--no-mesh", "--levels", "3"),
+    ]
+    with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=ROOT) as run:
+        assert run.stderr is not None
+        seen: list[str] = []
+        while not any("baking" in line for line in seen[-1:]):  # a worker is baking
+            line = run.stderr.readline()
+            assert line, "".join(seen)
+            seen.append(line)
+        workers = _workers_of(run.pid)
+        assert workers
+        run.send_signal(sig)
+        rest = run.stderr.read()
+        assert run.wait() == code, rest
+    assert list(out.parent.iterdir()) == []
+    assert not [pid for pid in workers if Path(f"/proc/{pid}").exists()]
+
+
+def test_workers_below_one_is_a_usage_error(mixed: Path, tmp_path: Path) -> None:
+    run = _lodconvert(mixed, "-o", tmp_path / "out.glb", "--workers", "0")
+    assert run.returncode == 2
+    assert run.stderr.strip().splitlines()[-1].endswith("--workers must be at least 1, got 0")
+    assert list(tmp_path.iterdir()) == []
