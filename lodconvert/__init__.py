@@ -70,11 +70,12 @@ def convert(
 ) -> dict:
     """Read, bake and write in one call, with every guarantee of the command line; return the
     report (the other keyword arguments are the fields of :class:`lodconvert.pipeline.RunOptions`:
-    ``workers``, ``report_path``, ``hlod``…)."""
+    ``workers``, ``report_path``, ``hlod``…; one given as ``None`` takes its default)."""
     from .pipeline import RunOptions
     from .pipeline import convert as run
 
-    return run(input_path, output_path, RunOptions(options or ChainOptions(), **kwargs))
+    given = {name: value for name, value in kwargs.items() if value is not None}
+    return run(input_path, output_path, RunOptions(options or ChainOptions(), **given))
 
 
 __all__ = [
