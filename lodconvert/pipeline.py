@@ -48,7 +48,6 @@ from .tasks import (
     PoolExecutor,
     SerialExecutor,
     batches,
-    run_task,
 )
 from .validate import check_written
 
@@ -252,7 +251,7 @@ class _Bakery:
         base = shared.get(id(obj.geometry))
         if base is None:
             task = BakeTask(((obj, self._options(radius)),), self.limits, self.plan_only)
-            return self._taken(obj, run_task(task, self.backend).outcomes[0], shared)
+            return self._taken(obj, task.run(self.backend).outcomes[0], shared)
         try:
             text = obj.written()
             chain = replace(base, object_id=text.id, metadata=text.attributes, cut=text.cut)

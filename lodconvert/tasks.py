@@ -54,6 +54,30 @@ class BakeTask:
         """The ids of the task's objects, in order."""
         return [node.id for node, _ in self.items]
 
+    def run(self, backend: Backend, progress: Progress | None = None) -> BakeResult:
+        """Bake (or plan) each object with ``backend``; an object whose geometry cannot be
+        baked (:class:`~.errors.InputError`) is an outcome with its reason, not an error.
+        ``progress`` hears what is being baked as it happens."""
+        start = time.perf_counter()
+        outcomes = []
+        for node, options in self.items:
+            warnings: list[str] = []
+            try:
+                chain = plan_chain(node, options) if self.plan_only else bake_chain(
+                    node, options, backend, progress=progress, warn=warnings.append,
+                    limits=self.limits,
+                )  # fmt: skip
+            except InputError as exc:
+                outcomes.append(Baked(None, str(exc), tuple(warnings)))
+                continue
+            outcomes.append(Baked(chain, None, tuple(warnings)))
+        return BakeResult(tuple(outcomes), time.perf_counter() - start)
+
+    def failed(self, reason: str) -> BakeResult:
+        """The result of this task when none of its objects could be converted, for
+        ``reason``."""
+        return BakeResult(tuple(Baked(None, f"{i}: {reason}") for i in self.object_ids()), 0.0)
+
 
 @dataclass(frozen=True)
 class Baked:
@@ -71,31 +95,6 @@ class BakeResult:
 
     outcomes: tuple[Baked, ...]
     seconds: float
-
-
-def run_task(task: BakeTask, backend: Backend, progress: Progress | None = None) -> BakeResult:
-    """Bake (or plan) each object of ``task`` with ``backend``; an object whose geometry cannot
-    be baked (:class:`~.errors.InputError`) is an outcome with its reason, not an error.
-    ``progress`` hears what is being baked as it happens."""
-    start = time.perf_counter()
-    outcomes = []
-    for node, options in task.items:
-        warnings: list[str] = []
-        try:
-            chain = plan_chain(node, options) if task.plan_only else bake_chain(
-                node, options, backend, progress=progress, warn=warnings.append,
-                limits=task.limits,
-            )  # fmt: skip
-        except InputError as exc:
-            outcomes.append(Baked(None, str(exc), tuple(warnings)))
-            continue
-        outcomes.append(Baked(chain, None, tuple(warnings)))
-    return BakeResult(tuple(outcomes), time.perf_counter() - start)
-
-
-def failed_result(task: BakeTask, reason: str) -> BakeResult:
-    """The result of a task none of whose objects could be converted, for ``reason``."""
-    return BakeResult(tuple(Baked(None, f"{i}: {reason}") for i in task.object_ids()), 0.0)
 
 
 class Executor:
@@ -126,7 +125,7 @@ class SerialExecutor(Executor):
     def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
         """The result of each of ``tasks``, each run as it is taken."""
         for task in tasks:
-            yield run_task(task, self.backend, self.progress)
+            yield task.run(self.backend, self.progress)
 
 
 def _work(conn: Connection, backend_name: str) -> None:
@@ -148,7 +147,7 @@ def _work(conn: Connection, backend_name: str) -> None:
 
     while (task := inbox.get()) is not None:
         try:
-            outbox.put(("result", run_task(task, backend, progress)))
+            outbox.put(("result", task.run(backend, progress)))
         except Exception as exc:  # a bug, not bad input: the main process raises it
             outbox.put(("error", exc))
     outbox.put(None)
@@ -310,7 +309,7 @@ class PoolExecutor(Executor):
             if tries[first] < 2:
                 waiting.appendleft(first)
             else:
-                done[first] = failed_result(submitted[first], _death(worker.process.exitcode))
+                done[first] = submitted[first].failed(_death(worker.process.exitcode))
 
     def close(self) -> None:
         """End every worker: idle ones are told to, busy ones terminated; all are waited for."""
