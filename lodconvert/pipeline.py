@@ -37,8 +37,8 @@ from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
 from .records import Records, report_text
-from .reproject import in_one_crs
-from .sinks import FileSink, Outputs
+from .reproject import Georef, in_one_crs
+from .sinks import DirectorySink, FileSink, Outputs
 from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
 from .tasks import (
@@ -439,8 +439,11 @@ def convert(
     sources = [input_format(path) for path in inputs]
     named = " + ".join(str(path) for path in inputs)
     clock = Clock(*STAGES)
+    folder = target.output_folder(Path(output_path)) if target.output_folder else None
+    if folder is not None and run.hlod is None:
+        run = replace(run, hlod=HlodOptions())
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
-        sink = outputs.file(output_path)
+        sink = outputs.directory(folder) if folder is not None else outputs.file(output_path)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
         with clock("read"):
             scene, crs_record = read_inputs(inputs, run.read_options, run.limits, sources, run.warn)
@@ -470,10 +473,14 @@ def convert(
     return report
 
 
-def _checked(sink: FileSink, output_path: str | Path, step: Step) -> None:
-    """Check the staged output of ``sink`` by its format (``step`` hears when)."""
+def _checked(sink: FileSink | DirectorySink, output_path: str | Path, step: Step) -> None:
+    """Check the staged output of ``sink`` by its format (a folder's: its file named like
+    ``output_path``; ``step`` hears when)."""
     step("checking", 0, 1)
-    check_written(sink.staged.temp, output_path)
+    staged = sink.staged.temp
+    if isinstance(sink, DirectorySink):
+        staged = staged / Path(output_path).name
+    check_written(staged, output_path)
     step("checking", 1, 1)
 
 
@@ -506,7 +513,19 @@ def _output_info(
         view=options.view,
         options=options_record(options),
         city=scene.city,
+        georef=_georef(scene),
     )
+
+
+def _georef(scene: Scene) -> Georef | None:
+    """Where ``scene``'s coordinates lie; ``None`` without a CRS or with one pyproj does not
+    know."""
+    import pyproj
+
+    try:
+        return Georef.of(scene)
+    except pyproj.exceptions.CRSError:
+        return None
 
 
 @dataclass
