@@ -117,7 +117,7 @@ class _Checker:
     def glb(self, path: Path, where: str) -> np.ndarray | None:
         """The positions (glTF coordinates) of a GLB's primitives, its features checked."""
         try:
-            document, blob = _glb_parts(path.read_bytes())
+            document, blob = read_glb(path)
             return self._content(document, blob, where)
         except (ValueError, KeyError, IndexError, TypeError, struct.error) as exc:
             self.findings.error("CONTENT", f"{where}: {path.name} cannot be read ({exc})")
@@ -128,11 +128,11 @@ class _Checker:
         tables = document.get("extensions", {}).get("EXT_structural_metadata", {})
         for mesh in document.get("meshes", []):
             for primitive in mesh["primitives"]:
-                found.append(_accessor(document, blob, primitive["attributes"]["POSITION"]))
+                found.append(accessor(document, blob, primitive["attributes"]["POSITION"]))
                 features = primitive.get("extensions", {}).get("EXT_mesh_features", {})
                 for ids in features.get("featureIds", []):
                     name = f"_FEATURE_ID_{ids['attribute']}"
-                    values = _accessor(document, blob, primitive["attributes"][name])
+                    values = accessor(document, blob, primitive["attributes"][name])
                     if len(values) and values.max() >= ids["featureCount"]:
                         self.findings.error(
                             "FEATURE_ID", f"{where}: feature id {values.max():g} ≥ featureCount"
@@ -205,7 +205,9 @@ def _corners(frame: np.ndarray, box: list[float]) -> np.ndarray:
     return local @ frame[:3, :3].T + frame[:3, 3]
 
 
-def _glb_parts(data: bytes) -> tuple[dict, bytes]:
+def read_glb(path: Path) -> tuple[dict, bytes]:
+    """A GLB's JSON document and binary chunk (``ValueError`` for a file that is not one)."""
+    data = path.read_bytes()
     magic, _, total = struct.unpack_from("<4sII", data)
     if magic != b"glTF" or total != len(data):
         raise ValueError("not a GLB")
@@ -219,7 +221,8 @@ def _glb_parts(data: bytes) -> tuple[dict, bytes]:
     return document, blob
 
 
-def _accessor(document: dict, blob: bytes, index: int) -> np.ndarray:
+def accessor(document: dict, blob: bytes, index: int) -> np.ndarray:
+    """The values of accessor ``index`` ((count,) or (count, width))."""
     accessor = document["accessors"][index]
     view = document["bufferViews"][accessor["bufferView"]]
     dtype = np.dtype(_DTYPES[accessor["componentType"]])

@@ -46,7 +46,8 @@ class Placement:
                 self.transformer = pyproj.Transformer.from_crs(georef.crs, ECEF, always_xy=True)
                 group = pyproj.transformer.TransformerGroup(georef.crs, ECEF, always_xy=True)
         except pyproj.exceptions.ProjError as exc:
-            raise self._refused(str(exc).splitlines()[0]) from None
+            reason = str(exc).splitlines()[0].split("Internal Proj Error: ")[-1].rstrip(")")
+            raise self._refused(reason.removeprefix("proj_create_operations: ")) from None
         self.geodetic = pyproj.Transformer.from_crs(ECEF, GEODETIC, always_xy=True)
         self.ballpark_heights = bool(group.transformers) and all(
             "ballpark vertical" in t.description.lower() for t in group.transformers

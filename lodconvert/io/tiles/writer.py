@@ -106,10 +106,10 @@ class TilesetWriter:
         return self.sse * distance / self.info.view.focal_px
 
     def _write(self, name: str, data: bytes) -> str:
-        uri = f"{TILES}/{name}"
-        with self.sink.file(uri) as handle:
+        """Write the file ``name`` into the tiles folder; returns ``name``."""
+        with self.sink.file(f"{TILES}/{name}") as handle:
             handle.write(data)
-        return uri
+        return name
 
     def _frame_of(self, ecef: np.ndarray) -> np.ndarray:
         return self.placement.enu_frame((ecef.min(axis=0) + ecef.max(axis=0)) / 2.0)
@@ -223,11 +223,9 @@ class TilesetWriter:
         low, high = root.volume()
         largest = max(child.error for child in children)
         root.error = max(2.0 * largest, self.error(float(np.linalg.norm(high - low))))
-        tileset = self._tileset(root, None)
-        text = _dumped(tileset)
+        text = _dumped(self._tileset(root, None, f"{TILES}/"))
         if len(text) > EXTERNAL_BYTES:
-            tileset = self._tileset(root, None, external=True)
-            text = _dumped(tileset)
+            text = _dumped(self._tileset(root, None, f"{TILES}/", external=True))
         with self.sink.file(name) as handle:
             handle.write(text)
 
@@ -255,15 +253,19 @@ class TilesetWriter:
         }
 
     def _tileset(
-        self, root: Tile, parent: np.ndarray | None, external: bool = False
+        self, root: Tile, parent: np.ndarray | None, folder: str, external: bool = False
     ) -> dict[str, Any]:
+        """A tileset JSON of the tree under ``root`` (its transform relative to ``parent``),
+        written in a file from which the tiles folder is ``folder``."""
         return {
             "asset": self._asset(),
             "geometricError": root.error,
-            "root": self._json(root, parent, external),
+            "root": self._json(root, parent, folder, external),
         }
 
-    def _json(self, tile: Tile, parent: np.ndarray | None, external: bool = False) -> dict:
+    def _json(
+        self, tile: Tile, parent: np.ndarray | None, folder: str, external: bool = False
+    ) -> dict[str, Any]:
         """A tile's JSON; with ``external``, its children each an external tileset."""
         low, high = tile.volume()
         centre, half = (low + high) / 2.0, (high - low) / 2.0
@@ -275,10 +277,12 @@ class TilesetWriter:
             "transform": [float(v) for v in relative.T.ravel()],
         }
         if tile.content is not None:
-            out["content"] = {"uri": tile.content}
+            out["content"] = {"uri": folder + tile.content}
         if tile.children:
             out["children"] = [
-                self._reference(child, tile.frame) if external else self._json(child, tile.frame)
+                self._reference(child, tile.frame)
+                if external
+                else self._json(child, tile.frame, folder)
                 for child in tile.children
             ]
         if tile.extras:
@@ -287,10 +291,8 @@ class TilesetWriter:
 
     def _reference(self, tile: Tile, parent: np.ndarray) -> dict[str, Any]:
         """A tile whose content is ``tile``'s subtree as an external tileset."""
-        name = (tile.content or "").removeprefix(f"{TILES}/").removesuffix(".glb") or "tile"
-        uri = f"{TILES}/{name}.json"
-        with self.sink.file(uri) as handle:
-            handle.write(_dumped(self._tileset(tile, parent)))
+        name = f"{(tile.content or 'tile').removesuffix('.glb')}.json"
+        self._write(name, _dumped(self._tileset(tile, parent, "")))
         inside = world_to_frame(parent, tile.corners())
         low, high = inside.min(axis=0), inside.max(axis=0)
         centre, half = (low + high) / 2.0, (high - low) / 2.0
@@ -300,7 +302,7 @@ class TilesetWriter:
                 "boundingVolume": {"box": box},
                 "geometricError": tile.error,
                 "refine": "REPLACE",
-                "content": {"uri": uri},
+                "content": {"uri": f"{TILES}/{name}"},
             }
         )
 
