@@ -283,6 +283,8 @@ class Outputs:
                 done.append((staged, backup))
                 if staged.temp.is_file():
                     staged.temp.chmod(0o644)
+                elif staged.temp.is_dir():  # made private by mkdtemp
+                    staged.temp.chmod(0o755)
                 os.replace(staged.temp, staged.target)
         except BaseException:
             for staged, backup in reversed(done):

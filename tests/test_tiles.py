@@ -340,3 +340,36 @@ def test_a_crs_that_cannot_be_placed_on_the_globe_is_refused(tmp_path: Path) -> 
     errors = [line for line in result.stderr.splitlines() if "error" in line]
     assert len(errors) == 1 and "cannot be placed on the globe" in errors[0], errors
     assert list(tmp_path.iterdir()) == []
+
+
+def test_the_tileset_folder_is_readable_by_others_as_a_web_server_needs(
+    converted: Callable[[str], Path],
+) -> None:
+    folder = converted("multi_lod").parent
+    assert folder.stat().st_mode & 0o777 == 0o755
+    assert (folder / "tiles").stat().st_mode & 0o005 == 0o005
+
+
+def test_the_current_folder_is_not_replaced(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    result = run(*inputs("multi_lod"), "-o", "tileset.json", *RD_NAP, *FAST)
+    assert_one_line_error(result, 2, "current folder", "tiles/tileset.json")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("output", "flags", "words"),
+    [
+        ("model.glb", ("--sse", "8"), ("--sse is for 3D Tiles",)),
+        ("out/tileset.json", ("--sse", "0"), ("positive",)),
+        ("out/tileset.json", ("--html",), ("--html", "not tilesets")),
+    ],
+)
+def test_tileset_options_are_checked_before_any_work(
+    tmp_path: Path, output: str, flags: tuple[str, ...], words: tuple[str, ...]
+) -> None:
+    result = run(*inputs("multi_lod"), "-o", tmp_path / output, *RD_NAP, *FAST, *flags)
+    assert_one_line_error(result, 2, *words)
+    assert list(tmp_path.iterdir()) == []

@@ -30,7 +30,12 @@ def output_folder(path: Path) -> Path:
             f"{path}: a .json output is a 3D Tiles tileset and must be named {NAME} "
             f"(e.g. {path.parent / path.stem / NAME})"
         )
-    folder = path.parent if str(path.parent) else Path(".")
+    folder = path.parent
+    if folder.resolve() == Path.cwd().resolve():
+        raise UsageError(
+            f"{path}: a tileset replaces its whole folder, and this one is the current folder; "
+            f"name a folder of its own (e.g. -o tiles/{NAME})"
+        )
     if folder.is_dir():
         entries = sorted(entry.name for entry in folder.iterdir())
         if entries and (not _ours(folder / NAME) or set(entries) - {NAME, TILES}):

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from ...errors import UsageError
 from ...model import CellChain, LodChain, Mesh
 from .. import OutputInfo
 from .content import mesh_glb, points_glb
@@ -330,5 +331,5 @@ def write_tileset(
     """The registry's ``write``: the tileset of ``chains`` (LOD parents and objects, as
     :func:`~lodconvert.pipeline.iter_chains` yields them with cells) into ``sink``."""
     if not (math.isfinite(sse) and sse > 0):
-        raise ValueError(f"sse must be positive, got {sse}")
+        raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
     TilesetWriter(sink, info, sse).write(chains, "tileset.json")
