@@ -302,6 +302,27 @@ def test_a_folder_holding_the_input_is_refused(tmp_path: Path) -> None:
     unchanged()
 
 
+def test_a_tileset_of_ours_holding_the_input_is_not_replaced(tmp_path: Path) -> None:
+    out = convert("multi_lod", tmp_path / "out").parent
+    moved = out / "tiles" / "district.city.json"
+    shutil.copy(inputs("multi_lod")[0], moved)
+    unchanged = _unchanged(out)
+    result = run(moved, "-o", out / "tileset.json", *RD_NAP, *FAST)
+    assert_one_line_error(result, 1, "district.city.json", "an input of this run")
+    unchanged()
+
+
+def test_a_city_of_one_building_is_one_cell_over_its_blocks_and_leaf(
+    converted: Callable[[str], Path],
+) -> None:
+    tileset = converted("plateau")  # one building, in geographic coordinates (JGD2011)
+    root = json.loads(tileset.read_text())["root"]
+    uris = [tile.get("content", {}).get("uri") for tile, _, _ in tiles(root, np.eye(4), tileset)]
+    assert uris[0] is None and uris[1].endswith(".glb") and uris[-1].endswith("_finest.glb")
+    document, blob = read_glb(tileset.parent / uris[-1])
+    assert len(features(document, blob)) == 1
+
+
 def test_an_unwritable_folder_is_refused(tmp_path: Path) -> None:
     if os.geteuid() == 0:
         pytest.skip("root writes into any folder")
