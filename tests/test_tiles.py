@@ -394,3 +394,49 @@ def test_tileset_options_are_checked_before_any_work(
     result = run(*inputs("multi_lod"), "-o", tmp_path / output, *RD_NAP, *FAST, *flags)
     assert_one_line_error(result, 2, *words)
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("tamper", "code"),
+    [
+        ("child_error", "GEOMETRIC_ERROR"),
+        ("tileset_error", "GEOMETRIC_ERROR"),
+        ("shrunk_box", "VOLUME"),
+        ("missing_tile", "URI"),
+        ("not_json", "JSON"),
+    ],
+)
+def test_validate_finds_what_the_official_validator_does_not(
+    converted: Callable[[str], Path], tmp_path: Path, tamper: str, code: str
+) -> None:
+    out = tmp_path / "copy"
+    shutil.copytree(converted("kit").parent, out)
+    tileset = out / "tileset.json"
+    data = json.loads(tileset.read_text())
+    cell = data["root"]["children"][0]
+    if tamper == "child_error":
+        cell["children"][0]["geometricError"] = cell["geometricError"] * 2
+    elif tamper == "tileset_error":
+        data["geometricError"] = data["root"]["geometricError"] / 2
+    elif tamper == "shrunk_box":
+        cell["boundingVolume"]["box"][3:] = [0.5, 0, 0, 0, 0.5, 0, 0, 0, 0.5]
+    elif tamper == "missing_tile":
+        (out / cell["content"]["uri"]).unlink()
+    tileset.write_text("{" if tamper == "not_json" else json.dumps(data))
+    result = run("validate", tileset)
+    assert result.returncode == 1
+    assert f"error {code}" in result.stdout, result.stdout
+    assert "Traceback" not in result.stdout + result.stderr
+
+
+def test_point_far_levels_are_points_tiles_sized_for_cesium(tmp_path: Path) -> None:
+    tileset = convert("multi_lod", tmp_path / "out", "--hlod-kind", "points")
+    data = json.loads(tileset.read_text())
+    cell = data["root"]["children"][0]
+    document, _ = read_glb(tileset.parent / cell["content"]["uri"])
+    primitive = document["meshes"][0]["primitives"][0]
+    assert primitive["mode"] == 0 and set(primitive["attributes"]) == {"POSITION", "COLOR_0"}
+    shading = data["asset"]["extras"]["lodconvert"]["point_cloud_shading"]
+    assert shading["geometricErrorScale"] == cell["extras"]["point_size_px"] / 16
+    report = official(tileset, tmp_path / "report.json")
+    assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]

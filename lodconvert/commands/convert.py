@@ -170,7 +170,10 @@ def run(args: argparse.Namespace, console: Console) -> int:
     _check_switching(args)
     _check_tiles(args)
     options = chain_options(args)
-    hlod = HlodOptions(parse_sizes(args.hlod), args.hlod_kind) if args.hlod else None
+    tiles = output_format(args.output).output_folder is not None  # always with LOD parents
+    hlod = None
+    if args.hlod or tiles:
+        hlod = HlodOptions(parse_sizes(args.hlod or "auto"), args.hlod_kind)
     if args.hlod_kind != "auto" and hlod is None:
         raise UsageError("--hlod-kind is for the cells that --hlod makes")
     limits = DEFAULT_LIMITS.with_text(args.limit)

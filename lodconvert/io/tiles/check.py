@@ -29,12 +29,16 @@ _GLTF_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 _DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
            5126: np.float32}  # fmt: skip
 _WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
-_BYTES = {"INT64": 8, "FLOAT64": 8, "SCALAR": 8}
+_BYTES = {"INT8": 1, "UINT8": 1, "INT16": 2, "UINT16": 2, "INT32": 4, "UINT32": 4, "INT64": 8,
+          "UINT64": 8, "FLOAT32": 4, "FLOAT64": 8}  # fmt: skip
 
 
 def check_tileset(path: Path, findings: Findings, _options: Any = None) -> None:
     """Check the tileset ``path`` (its external tilesets and contents too) into ``findings``."""
-    _Checker(path.parent.resolve(), findings).tileset(path, np.eye(4), None)
+    try:
+        _Checker(path.parent.resolve(), findings).tileset(path, np.eye(4), None)
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
+        findings.error("JSON", f"not a tileset as lodconvert writes them ({type(exc).__name__})")
 
 
 class _Checker:
@@ -67,7 +71,8 @@ class _Checker:
             )
         if parent_error is not None and float(root.get("geometricError", 0.0)) > parent_error:
             self.findings.error(
-                "GEOMETRIC_ERROR", f"{path.name}: root geometricError above the tile refering it"
+                "GEOMETRIC_ERROR",
+                f"{path.name}: root geometricError above the tile referring to it",
             )
         self.tile(path, root, frame, None, "root")
 
@@ -167,7 +172,10 @@ class _Checker:
                     if views[column["stringOffsets"]]["byteLength"] < wanted:
                         self.findings.error("PROPERTY_TABLE", f"{where}: {name} offsets short")
                     continue
-                wanted = (count + 7) // 8 if kind == "BOOLEAN" else _BYTES[kind] * count
+                if kind == "BOOLEAN":
+                    wanted = (count + 7) // 8
+                else:
+                    wanted = _BYTES.get(definition.get("componentType", ""), 1) * count
                 if length < wanted:
                     self.findings.error("PROPERTY_TABLE", f"{where}: column {name} too short")
 
