@@ -27,6 +27,7 @@ from lodconvert.io.tiles.check import frame_points, read_glb
 from lodconvert.ranges import REFERENCE_VIEW
 from lodconvert.validate import validate_file
 from tests.conftest import SHARED, require, shared_data
+from tests.test_cityjson import city
 from tests.test_cli import assert_one_line_error, run
 
 DATA = SHARED / "data"
@@ -440,3 +441,18 @@ def test_point_far_levels_are_points_tiles_sized_for_cesium(tmp_path: Path) -> N
     assert shading["geometricErrorScale"] == cell["extras"]["point_size_px"] / 16
     report = official(tileset, tmp_path / "report.json")
     assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]
+
+
+def test_a_city_of_broken_buildings_only_writes_no_tileset(tmp_path: Path) -> None:
+    broken = {"type": "MultiSurface", "lod": "2", "boundaries": [[[0, 1, 2]]]}
+    document = city(
+        {"a": {"type": "Building", "geometry": [broken]}},
+        [[8500.0, 44600.0, 0.0], [8501.0, 44600.0, 0.0], [1e308, 44601.0, 0.0]],
+        transform={"scale": [10, 10, 10], "translate": [0, 0, 0]},  # 1e308 · 10: past float64
+        metadata={"referenceSystem": "https://www.opengis.net/def/crs/EPSG/0/7415"},
+    )
+    source = tmp_path / "broken.city.json"
+    source.write_text(json.dumps(document))
+    result = run(source, "-o", tmp_path / "out" / "tileset.json", *FAST)
+    assert_one_line_error(result, 1, "broken.city.json", "vertex 2")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.city.json"]

@@ -87,6 +87,11 @@ def _colors(mesh: Mesh) -> np.ndarray:
     )
 
 
+def _bounds(local: np.ndarray) -> np.ndarray:
+    """Min and max corners of points (n, 3)."""
+    return np.stack([local.min(axis=0), local.max(axis=0)])
+
+
 def _feature(chain: LodChain) -> Feature:
     attributes = {k: v for k, v in chain.metadata.items() if k not in ("id", "type")}
     kind = chain.metadata.get("type")
@@ -113,67 +118,51 @@ class TilesetWriter:
         return name
 
     def _frame_of(self, ecef: np.ndarray) -> np.ndarray:
+        """The ENU frame at the centre of ECEF points' bounding box."""
         return self.placement.enu_frame((ecef.min(axis=0) + ecef.max(axis=0)) / 2.0)
+
+    def _local(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """A tile's frame for scene points (n, 3), and the points in it (ENU, float64)."""
+        ecef = self.placement.ecef(points)
+        frame = self._frame_of(ecef)
+        return frame, world_to_frame(frame, ecef)
 
     def mesh_tile(self, name: str, entries: list[tuple[LodChain, Mesh]], error: float) -> Tile:
         """A tile of the meshes of ``entries`` (each a chain and one of its levels' meshes),
         one feature per chain."""
-        vertices, faces, colors, ids = [], [], [], []
-        base = 0
-        for index, (chain, mesh) in enumerate(entries):
-            placed = chain.in_scene(mesh)
-            vertices.append(placed.vertices)
-            faces.append(placed.faces + base)
-            colors.append(_colors(placed))
-            ids.append(np.full(placed.vertex_count, index))
-            base += placed.vertex_count
-        ecef = self.placement.ecef(np.concatenate(vertices))
-        frame = self._frame_of(ecef)
-        local = world_to_frame(frame, ecef)
+        placed = [chain.in_scene(mesh) for chain, mesh in entries]
+        starts = np.cumsum([0] + [mesh.vertex_count for mesh in placed])
+        frame, local = self._local(np.concatenate([mesh.vertices for mesh in placed]))
         data = mesh_glb(
             local @ _ENU_TO_GLTF.T,
-            np.concatenate(faces),
-            np.concatenate(colors),
-            np.concatenate(ids),
+            np.concatenate(
+                [mesh.faces + start for mesh, start in zip(placed, starts[:-1], strict=True)]
+            ),
+            np.concatenate([_colors(mesh) for mesh in placed]),
+            np.repeat(np.arange(len(placed)), np.diff(starts)),
             [_feature(chain) for chain, _ in entries],
             self.info.generator,
         )
-        box = np.stack([local.min(axis=0), local.max(axis=0)])
-        return Tile(frame, box, error, self._write(f"{name}.glb", data))
+        return Tile(frame, _bounds(local), error, self._write(f"{name}.glb", data))
 
     def far_tile(self, cell: CellChain, children: list[Tile]) -> Tile:
         """A cell's tile: its far level, switching to ``children`` at its first cutoff."""
-        error = self.error(cell.cutoffs[0])
         far = cell.far
+        extras: dict[str, Any] = {"cell": cell.cell_id, "tier": cell.tier, "kind": far.kind}
         if far.points is not None:
-            ecef = self.placement.ecef(far.points.positions + cell.origin)
-            frame = self._frame_of(ecef)
-            local = world_to_frame(frame, ecef)
+            frame, local = self._local(far.points.positions + cell.origin)
             data = points_glb(local @ _ENU_TO_GLTF.T, far.points.colors, self.info.generator)
-            tile = Tile(frame, np.stack([local.min(axis=0), local.max(axis=0)]), error)
-            tile.content = self._write(f"{cell.cell_id}.glb", data)
             if far.params is not None:
                 scale = far.params.point_size / self.sse
                 self.point_scale = max(self.point_scale or 0.0, scale)
-                tile.extras = {"point_size_px": far.params.point_size, "spacing": far.spacing}
+                extras.update(point_size_px=far.params.point_size, spacing=far.spacing)
         else:
             assert far.mesh is not None
-            ecef = self.placement.ecef(far.mesh.vertices + cell.origin)
-            frame = self._frame_of(ecef)
-            local = world_to_frame(frame, ecef)
-            data = mesh_glb(
-                local @ _ENU_TO_GLTF.T,
-                far.mesh.faces,
-                _colors(far.mesh),
-                None,
-                [],
-                self.info.generator,
-            )
-            tile = Tile(frame, np.stack([local.min(axis=0), local.max(axis=0)]), error)
-            tile.content = self._write(f"{cell.cell_id}.glb", data)
-        tile.children = children
-        tile.extras = {"cell": cell.cell_id, "tier": cell.tier, "kind": far.kind, **tile.extras}
-        return tile
+            frame, local = self._local(far.mesh.vertices + cell.origin)
+            gltf = local @ _ENU_TO_GLTF.T
+            data = mesh_glb(gltf, far.mesh.faces, _colors(far.mesh), None, [], self.info.generator)
+        content = self._write(f"{cell.cell_id}.glb", data)
+        return Tile(frame, _bounds(local), self.error(cell.cutoffs[0]), content, children, extras)
 
     def objects_tile(self, name: str, chains: list[LodChain]) -> Tile:
         """The tile of objects drawn with their own levels: their coarsest mesh levels, refined
@@ -219,6 +208,8 @@ class TilesetWriter:
     def write(self, items: Iterable[LodChain | CellChain], name: str) -> None:
         """Every item's tiles, then the tileset JSON (``name``) and its external tilesets."""
         children = list(self.tops(items))
+        if not children:  # nothing converted: the run fails and says why
+            return
         ecef = np.stack([c.frame[:3, 3] for c in children])
         root = Tile(self._frame_of(ecef), None, 0.0, children=children)
         low, high = root.volume()
