@@ -37,7 +37,7 @@ from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
 from .records import Records, report_text
-from .reproject import Georef, in_one_crs
+from .reproject import SOURCE_CRS_KEYS, Georef, in_one_crs
 from .sinks import DirectorySink, FileSink, Outputs
 from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
@@ -305,8 +305,8 @@ def merged(scenes: Sequence[Scene]) -> Scene:
     are one object whose LoDs are merged: the first keeps its attributes and children, takes
     the LoD labels it lacks from the later ones, and its geometry is its finest LoD. Other
     objects all stay, in input order (the writers keep their names apart). The first declared
-    CRS is the scene's (:func:`~.reproject.in_one_crs` puts every input in it first); a scene
-    of one input is returned as it is."""
+    CRS is the scene's, with its vertical CRS and local frame (:func:`~.reproject.in_one_crs`
+    puts every input in it first); a scene of one input is returned as it is."""
     if len(scenes) == 1:
         return scenes[0]
     nodes: list[Node] = []
@@ -321,8 +321,13 @@ def merged(scenes: Sequence[Scene]) -> Scene:
                 first.lods.setdefault(label, mesh)
             levels = source_levels(first.lods)
             first.geometry = levels[max(levels)][1] if levels else first.geometry
-    crs = next((scene.crs for scene in scenes if scene.crs), None)
+    declaring = next((scene for scene in scenes if scene.crs), None)
+    crs = declaring.crs if declaring is not None else None
     whole = Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+    if declaring is not None:  # its vertical CRS and local frame, where the reader found them
+        whole.attributes.update(
+            {k: v for k, v in declaring.attributes.items() if k in SOURCE_CRS_KEYS}
+        )
     whole.city = any(scene.city for scene in scenes)
     tallies = [tally for scene in scenes if (tally := tally_of(scene)) is not None]
     if tallies:  # complete: every input's nodes have been read

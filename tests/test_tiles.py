@@ -456,3 +456,12 @@ def test_a_city_of_broken_buildings_only_writes_no_tileset(tmp_path: Path) -> No
     result = run(source, "-o", tmp_path / "out" / "tileset.json", *FAST)
     assert_one_line_error(result, 1, "broken.city.json", "vertex 2")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.city.json"]
+
+
+def test_the_tileset_states_the_vertical_datum_of_several_inputs(
+    converted: Callable[[str], Path],
+) -> None:
+    """SIG3D's five files declare EPSG:25832 + EPSG:5783 (DHHN92): one scene keeps both."""
+    extras = json.loads(converted("sig3d").read_text())["asset"]["extras"]["lodconvert"]
+    assert extras["crs"] == "EPSG:25832 + EPSG:5783"
+    assert extras["heights"].startswith("DHHN92 height (EPSG:5783): taken as heights above")

@@ -19,6 +19,7 @@ from ..crs import NOT_DECLARED, frame_pipeline, vertical_reference
 
 ECEF = "EPSG:4978"
 GEODETIC = "EPSG:4979"
+UNDECLARED = "heights of no declared vertical CRS"
 
 
 class Placement:
@@ -90,13 +91,15 @@ class Placement:
                 f"{self.vertical}: taken as heights above the WGS 84 ellipsoid (PROJ has "
                 "no geoid grid here): content sits lower or higher by the geoid undulation"
             )
+        if self.vertical == UNDECLARED:
+            return f"{UNDECLARED}, taken as heights above the ellipsoid"
         return f"{self.vertical}, converted to ECEF by PROJ"
 
 
 def _vertical(crs: Any) -> str:
     """The vertical reference of a pyproj CRS's heights, as the tileset names it."""
     found = vertical_reference(crs)
-    return "heights of an undeclared datum" if found == NOT_DECLARED else found
+    return UNDECLARED if found == NOT_DECLARED else found
 
 
 def world_to_frame(frame: np.ndarray, ecef: np.ndarray) -> np.ndarray:
