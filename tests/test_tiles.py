@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 from lodconvert.io import read_scene
 from lodconvert.io.crs import pyproj_crs
 from lodconvert.io.tiles import writer as tiles_writer
-from lodconvert.io.tiles.check import frame_points, read_glb
+from lodconvert.io.tiles.check import accessor, frame_points, read_glb
 from lodconvert.ranges import REFERENCE_VIEW
 from lodconvert.validate import validate_file
 from tests.conftest import SHARED, require, shared_data
@@ -176,8 +176,6 @@ def test_content_lies_within_a_millimetre_of_pyprojs_ecef_of_the_source(
 
 
 def _positions(document: dict, blob: bytes) -> np.ndarray:
-    from lodconvert.io.tiles.check import accessor
-
     return np.concatenate(
         [
             accessor(document, blob, primitive["attributes"]["POSITION"])

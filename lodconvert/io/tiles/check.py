@@ -42,10 +42,14 @@ def check_tileset(path: Path, findings: Findings, _options: Any = None) -> None:
 
 
 class _Checker:
+    """The checks of one tileset folder (``folder``, resolved), reported into ``findings``."""
+
     def __init__(self, folder: Path, findings: Findings) -> None:
         self.folder, self.findings = folder, findings
 
     def _resolved(self, base: Path, uri: Any, where: str) -> Path | None:
+        """The file a content ``uri`` of the JSON file ``base`` names, if it lies in the
+        folder; else an error and ``None``."""
         if not isinstance(uri, str) or not uri or "://" in uri or uri.startswith("/"):
             self.findings.error("URI", f"{where}: content uri {uri!r} is not a relative path")
             return None
@@ -56,6 +60,8 @@ class _Checker:
         return target
 
     def tileset(self, path: Path, frame: np.ndarray, parent_error: float | None) -> None:
+        """Check the tileset JSON ``path`` whose root lies in ``frame`` (ECEF), under a tile of
+        geometric error ``parent_error`` (``None``: the top tileset)."""
         try:
             data = json.loads(path.read_bytes())
             root = data["root"]
@@ -79,6 +85,8 @@ class _Checker:
     def tile(
         self, base: Path, tile: dict, frame: np.ndarray, parent: dict | None, where: str
     ) -> None:
+        """Check ``tile`` (of the JSON file ``base``, in its parent's ``frame``) and every
+        tile under it."""
         transform = tile.get("transform")
         if transform is not None:
             frame = frame @ np.asarray(transform, dtype=np.float64).reshape(4, 4).T
@@ -129,6 +137,7 @@ class _Checker:
             return None
 
     def _content(self, document: dict, blob: bytes, where: str) -> np.ndarray:
+        """A GLB's positions; its feature ids and property tables checked."""
         found = []
         tables = document.get("extensions", {}).get("EXT_structural_metadata", {})
         for mesh in document.get("meshes", []):
@@ -152,6 +161,8 @@ class _Checker:
         return np.concatenate(found) if found else np.zeros((0, 3))
 
     def _tables(self, document: dict, metadata: dict, where: str) -> None:
+        """Each property table: columns of its class's properties, required ones present,
+        each long enough for its ``count``."""
         classes = metadata["schema"]["classes"]
         views = document["bufferViews"]
         for table in metadata["propertyTables"]:
@@ -181,6 +192,7 @@ class _Checker:
 
 
 def _external(tile: dict) -> bool:
+    """Whether ``tile``'s content is an external tileset."""
     return str(tile.get("content", {}).get("uri", "")).endswith(".json")
 
 
@@ -191,6 +203,7 @@ class _BoxTest:
         self.frame, self.centre, self.axes = frame, centre, axes
 
     def __call__(self, ecef: np.ndarray) -> bool:
+        """Whether every point lies in the box (within :data:`TOLERANCE`)."""
         if not len(ecef):
             return True
         local = (ecef - self.frame[:3, 3]) @ np.linalg.inv(self.frame[:3, :3]).T - self.centre
@@ -207,6 +220,7 @@ def frame_points(frame: np.ndarray, gltf_positions: np.ndarray) -> np.ndarray:
 
 
 def _corners(frame: np.ndarray, box: list[float]) -> np.ndarray:
+    """The 8 corners (ECEF) of a ``box`` in ``frame``."""
     centre, axes = np.asarray(box[:3], float), np.asarray(box[3:], float).reshape(3, 3)
     signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
     local = centre + signs @ axes

@@ -101,6 +101,7 @@ def _colors(rgba: np.ndarray) -> np.ndarray:
 
 
 def _document(generator: str, primitive: dict[str, Any], material: dict[str, Any]) -> dict:
+    """A glTF document of one node drawing one primitive with one material."""
     return {
         "asset": {"version": "2.0", "generator": generator},
         "scene": 0,

@@ -46,6 +46,7 @@ def _kind(values: list[Any]) -> str:
 
 
 def _text(value: Any) -> str:
+    """A STRING property's text of ``value``: strings as they are, others as JSON."""
     if isinstance(value, str):
         return value
     return json.dumps(value, sort_keys=True, ensure_ascii=False, default=str)

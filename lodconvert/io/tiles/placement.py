@@ -56,6 +56,7 @@ class Placement:
         self.vertical = _vertical(georef.crs)
 
     def _refused(self, reason: str) -> LodConvertError:
+        """The one-line error of a CRS that cannot be placed in ECEF, for ``reason``."""
         return LodConvertError(
             f"its CRS {self.label} cannot be placed on the globe (ECEF, {ECEF}): {reason}",
             self.source,

@@ -93,6 +93,7 @@ def _bounds(local: np.ndarray) -> np.ndarray:
 
 
 def _feature(chain: LodChain) -> Feature:
+    """An object's feature: its id, its ``type`` attribute and its other attributes."""
     attributes = {k: v for k, v in chain.metadata.items() if k not in ("id", "type")}
     kind = chain.metadata.get("type")
     return chain.object_id, kind if isinstance(kind, str) else "", attributes
@@ -222,6 +223,8 @@ class TilesetWriter:
             handle.write(text)
 
     def _asset(self) -> dict[str, Any]:
+        """The tileset's ``asset``: version, generator, and in ``extras.lodconvert`` the
+        source, CRS, heights, --sse, reference view, options and point shading."""
         view = self.info.view
         extras: dict[str, Any] = {
             "source": self.info.source,
@@ -300,6 +303,7 @@ class TilesetWriter:
 
 
 def _plain(value: Any) -> Any:
+    """``value`` as JSON data: numpy scalars unpacked, no negative zero."""
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, list | tuple):
@@ -312,6 +316,7 @@ def _plain(value: Any) -> Any:
 
 
 def _dumped(tileset: dict[str, Any]) -> bytes:
+    """A tileset JSON's compact UTF-8 bytes."""
     text = json.dumps(tileset, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
     return text.encode("utf-8")
 
