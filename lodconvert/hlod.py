@@ -42,7 +42,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -261,14 +261,7 @@ def _silhouette_f(source: Mesh, level: Level, distance: float, options: ChainOpt
 
 def _placed(chain: LodChain, mesh: Mesh) -> Mesh:
     """``mesh`` (a level of ``chain``) in scene coordinates."""
-    if chain.transform is None:
-        return mesh.translated(chain.origin)
-    matrix = np.asarray(chain.transform, dtype=np.float64)
-    parts = []
-    for part in mesh.parts:
-        local = part.vertices + chain.origin
-        parts.append(replace(part, vertices=local @ matrix[:3, :3].T + matrix[:3, 3]))
-    return Mesh(parts)
+    return chain.in_scene(mesh)
 
 
 def _finest_mesh(chain: LodChain) -> Mesh:

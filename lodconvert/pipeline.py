@@ -37,8 +37,8 @@ from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
 from .records import Records, report_text
-from .reproject import in_one_crs
-from .sinks import FileSink, Outputs
+from .reproject import SOURCE_CRS_KEYS, Georef, in_one_crs
+from .sinks import DirectorySink, FileSink, Outputs
 from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
 from .tasks import (
@@ -305,8 +305,8 @@ def merged(scenes: Sequence[Scene]) -> Scene:
     are one object whose LoDs are merged: the first keeps its attributes and children, takes
     the LoD labels it lacks from the later ones, and its geometry is its finest LoD. Other
     objects all stay, in input order (the writers keep their names apart). The first declared
-    CRS is the scene's (:func:`~.reproject.in_one_crs` puts every input in it first); a scene
-    of one input is returned as it is."""
+    CRS is the scene's, with its vertical CRS and local frame (:func:`~.reproject.in_one_crs`
+    puts every input in it first); a scene of one input is returned as it is."""
     if len(scenes) == 1:
         return scenes[0]
     nodes: list[Node] = []
@@ -321,8 +321,13 @@ def merged(scenes: Sequence[Scene]) -> Scene:
                 first.lods.setdefault(label, mesh)
             levels = source_levels(first.lods)
             first.geometry = levels[max(levels)][1] if levels else first.geometry
-    crs = next((scene.crs for scene in scenes if scene.crs), None)
+    declaring = next((scene for scene in scenes if scene.crs), None)
+    crs = declaring.crs if declaring is not None else None
     whole = Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+    if declaring is not None:  # its vertical CRS and local frame, where the reader found them
+        whole.attributes.update(
+            {k: v for k, v in declaring.attributes.items() if k in SOURCE_CRS_KEYS}
+        )
     whole.city = any(scene.city for scene in scenes)
     tallies = [tally for scene in scenes if (tally := tally_of(scene)) is not None]
     if tallies:  # complete: every input's nodes have been read
@@ -439,8 +444,11 @@ def convert(
     sources = [input_format(path) for path in inputs]
     named = " + ".join(str(path) for path in inputs)
     clock = Clock(*STAGES)
+    folder = target.output_folder(Path(output_path)) if target.output_folder else None
+    if folder is not None and run.hlod is None:
+        run = replace(run, hlod=HlodOptions())
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
-        sink = outputs.file(output_path)
+        sink = outputs.directory(folder) if folder is not None else outputs.file(output_path)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
         with clock("read"):
             scene, crs_record = read_inputs(inputs, run.read_options, run.limits, sources, run.warn)
@@ -470,10 +478,14 @@ def convert(
     return report
 
 
-def _checked(sink: FileSink, output_path: str | Path, step: Step) -> None:
-    """Check the staged output of ``sink`` by its format (``step`` hears when)."""
+def _checked(sink: FileSink | DirectorySink, output_path: str | Path, step: Step) -> None:
+    """Check the staged output of ``sink`` by its format (a folder's: its file named like
+    ``output_path``; ``step`` hears when)."""
     step("checking", 0, 1)
-    check_written(sink.staged.temp, output_path)
+    staged = sink.staged.temp
+    if isinstance(sink, DirectorySink):
+        staged = staged / Path(output_path).name
+    check_written(staged, output_path)
     step("checking", 1, 1)
 
 
@@ -506,7 +518,19 @@ def _output_info(
         view=options.view,
         options=options_record(options),
         city=scene.city,
+        georef=_georef(scene),
     )
+
+
+def _georef(scene: Scene) -> Georef | None:
+    """Where ``scene``'s coordinates lie; ``None`` without a CRS or with one pyproj does not
+    know."""
+    import pyproj
+
+    try:
+        return Georef.of(scene)
+    except pyproj.exceptions.CRSError:
+        return None
 
 
 @dataclass

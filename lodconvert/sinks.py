@@ -197,7 +197,8 @@ class Outputs:
     def target(self, path: str | Path, directory: bool = False) -> Path:
         """``path`` checked as an output: raise :class:`InputError` naming it when its folder is
         missing or not writable, when it is a directory (a file, for a directory output), when
-        it is one of the run's inputs, or when this run already writes it."""
+        it is one of the run's inputs (holds one, for a directory output), or when this run
+        already writes it."""
         path = Path(path)
         where = str(path)
         folder = path.parent if str(path.parent) else Path(".")
@@ -211,6 +212,10 @@ class Outputs:
         for source in self.inputs:
             if Path(source).exists() and path.exists() and _same_file(Path(source), path):
                 raise InputError("is an input of this run; it would be overwritten", where)
+            if directory and Path(source).resolve().is_relative_to(path.resolve()):
+                raise InputError(
+                    f"holds {source}, an input of this run; it would be replaced", where
+                )
         for staged in self._staged:
             if staged.target.resolve() == path.resolve():
                 raise InputError("is written twice by this run", where)
@@ -278,6 +283,8 @@ class Outputs:
                 done.append((staged, backup))
                 if staged.temp.is_file():
                     staged.temp.chmod(0o644)
+                elif staged.temp.is_dir():  # made private by mkdtemp
+                    staged.temp.chmod(0o755)
                 os.replace(staged.temp, staged.target)
         except BaseException:
             for staged, backup in reversed(done):
