@@ -31,10 +31,14 @@ draw call, and it reduces what decimation cannot (a block is hundreds of separat
 ``mesh``: the members' coarsest mesh levels merged into one mesh with vertex colours (one
 draw call as well); where that mesh's silhouette F at ``Y_cell`` stays below
 :data:`MIN_CELL_F` (a block of LOD1 prisms against its LoD2 roofs), the members' next finer
-mesh levels in turn, their finest at most. ``auto`` bakes both and keeps the cheaper (points at
-:data:`~.plan.POINT_COST`) of those whose silhouette F against the members' finest geometry at
-``Y_cell`` (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when neither
-is, the one with the higher F.
+mesh levels in turn, their finest at most. The merge is then simplified by quadric edge
+collapse to within :data:`SIMPLIFY_PX` pixel at ``Y_cell`` in the reference view
+(``Y_cell / focal_px`` metres, :func:`~.bake.qem.simplify_within`), and the simplified mesh
+kept where its F still reaches :data:`MIN_CELL_F` (or is no lower than the merge's).
+``auto`` bakes both and keeps the cheaper (points at :data:`~.plan.POINT_COST`; then the
+fewer bytes) of those whose silhouette F against the members' finest geometry at ``Y_cell``
+(:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when neither is, the one
+with the higher F.
 """
 
 from __future__ import annotations
@@ -47,11 +51,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .bake import Backend
+from .bake.qem import simplify_within
 from .chain import ChainOptions, point_level_at
 from .errors import UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import WHITE, CellChain, Level, LodChain, Mesh, Surface
-from .plan import level_cost, mesh_silhouette_estimate, silhouette_estimate
+from .plan import level_bytes, level_cost, mesh_silhouette_estimate, silhouette_estimate
 from .ranges import cutoff, diagonal
 
 KINDS = ("auto", "points", "mesh")
@@ -68,6 +73,10 @@ SEAM_MARGIN = 1e-9
 """Relative margin that keeps a far level's switch strictly beyond its members'."""
 ADMISSION_ROUNDS = 4
 """Times a cell's admitted members (and so its centre) are found again."""
+SIMPLIFY_PX = 1.0
+"""Tolerance of a far mesh's simplification: pixels at the cell's switch distance in the
+reference view (one pixel at d is 2·d·tan(fov/2)/height_px metres: 0.77 m at 1 km, 1080 px,
+45°)."""
 
 Member = LodChain | CellChain
 Warn = Callable[[str], None]
@@ -196,9 +205,10 @@ def bake_cell(
         level = point_level_at(source, "FAR", switch, options, backend, plan.cell_id, warn, limits)
         if level is not None:
             candidates["points"] = (level, _silhouette_f(source, level, switch, options))
-    finer = 0
+    finer, simplified = 0, None
     if kind in ("mesh", "auto") or not candidates:
-        level, f, finer = _merged_level(objects, origin, source, switch, options)
+        merged, f, finer = _merged_level(objects, origin, source, switch, options)
+        level, f, simplified = _simplified(merged, f, source, switch, options)
         candidates["mesh"] = (level, f)
     chosen, why = _choice(candidates, kind)
     cutoffs = [switch]
@@ -209,7 +219,9 @@ def bake_cell(
         "why": why,
         "silhouette_f": {name: round(f, 4) for name, (_, f) in candidates.items()},
         "counts": {name: level.count for name, (level, _) in candidates.items()},
+        "bytes": {name: level_bytes(level) for name, (level, _) in candidates.items()},
         "mesh_levels_finer": finer,
+        **({"simplified": simplified} if simplified is not None else {}),
         "members": len(members),
         "objects": len(objects),
         "seam": seam,
@@ -242,7 +254,9 @@ def _choice(candidates: dict[str, tuple[Level, float]], kind: str) -> tuple[str,
         return name, "asked" if name == kind else "no point level could be baked"
     faithful = [name for name, (_, f) in candidates.items() if f >= MIN_CELL_F]
     if faithful:
-        name = min(faithful, key=lambda n: (level_cost(candidates[n][0]), n))
+        name = min(
+            faithful, key=lambda n: (level_cost(candidates[n][0]), level_bytes(candidates[n][0]), n)
+        )
         return name, f"cheapest with silhouette F ≥ {MIN_CELL_F}"
     name = max(candidates, key=lambda n: (candidates[n][1], n))
     return name, f"none reaches silhouette F {MIN_CELL_F}: the most faithful"
@@ -305,6 +319,29 @@ def _merged_level(
         if f >= MIN_CELL_F:
             break
     return level, f, finer
+
+
+def _simplified(
+    merged: Level, f: float, source: Mesh, distance: float, options: ChainOptions
+) -> tuple[Level, float, dict[str, float | int | bool]]:
+    """``merged`` (a far mesh of silhouette F ``f`` against ``source``) simplified to within
+    :data:`SIMPLIFY_PX` pixel at ``distance``, where its F reaches :data:`MIN_CELL_F` or is no
+    lower than ``f``, else ``merged``; the level kept, its F, and the counts and F before and
+    after."""
+    assert merged.mesh is not None
+    tolerance = SIMPLIFY_PX * distance / options.view.focal_px
+    level = Level(name="FAR", kind="merged", mesh=Mesh([simplify_within(merged.mesh, tolerance)]))
+    after = _silhouette_f(source, level, distance, options) if level.count else 0.0
+    kept = after >= min(MIN_CELL_F, f)
+    facts = {
+        "tolerance_m": round(tolerance, 4),
+        "vertices_before": merged.count,
+        "vertices_after": level.count,
+        "silhouette_f_before": round(f, 4),
+        "silhouette_f_after": round(after, 4),
+        "kept": kept,
+    }
+    return (level, after, facts) if kept else (merged, f, facts)
 
 
 def _merged(meshes: Sequence[Mesh]) -> Mesh:

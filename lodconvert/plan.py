@@ -45,6 +45,13 @@ def level_cost(level: Level) -> float:
     return level.count * (POINT_COST if level.is_points else 1.0)
 
 
+def level_bytes(level: Level) -> int:
+    """Bytes of a level's geometry as written to a GPU buffer: a float32 position and an RGBA8
+    colour per vertex or point, and three uint32 indices per triangle."""
+    triangles = len(level.mesh.faces) if level.mesh is not None else 0
+    return level.count * 16 + triangles * 12
+
+
 def surface_area(mesh: Mesh) -> float:
     """Total triangle area of ``mesh``."""
 

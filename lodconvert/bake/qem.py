@@ -1,4 +1,5 @@
-"""Quadric edge-collapse decimation (``fast-simplification``) as a level kind.
+"""Quadric edge-collapse decimation (``fast-simplification``): to a vertex count, as a level
+kind, or within a distance, for LOD parents' far meshes.
 
 A ``qem`` level is the source mesh decimated to a target vertex count: a mesh level, drawn as
 triangles, where a ``pcd`` level would be drawn as points. ``fast-simplification`` targets a
@@ -6,29 +7,41 @@ face count; the vertex count that comes out is checked and the face target lower
 is at most the vertex target. Colours (vertex colours or texture, modulated by the base colour)
 are sampled from the source surface at each new vertex, on a face of a source vertex that
 collapsed into it; the texture itself is not kept.
+
+:func:`simplify_within` bounds the error instead of the count. Its quadrics are those of
+Garland & Heckbert: a vertex's error is the sum of its squared distances to the planes of the
+source faces it stands for, so an error below t² keeps it within t of each of those planes.
+``fast-simplification`` collapses, in pass i of its :data:`PASSES`, the edges whose error is
+below :data:`THRESHOLD_SCALE`·(i + 3)^agg; with no face target it runs every pass, and agg is
+chosen so that the last pass's threshold is the tolerance squared.
 """
 
 from __future__ import annotations
 
+import math
 from types import ModuleType
 
 import numpy as np
 
 from ..errors import LodConvertError
-from ..model import Mesh, Surface
+from ..model import WHITE, Mesh, Surface
 
 PIP_INSTALL = "pip install fast-simplification"
 # Face targets tried before giving up on reaching the vertex target.
 MAX_TRIES = 6
 AIM = 0.99
+PASSES = 100
+"""Collapse passes of ``fast-simplification`` (its ``Simplify.h``)."""
+THRESHOLD_SCALE = 1e-9
+"""Factor of its pass thresholds (squared metres for a mesh in metres)."""
 
 
-def _simplifier() -> ModuleType:
+def _simplifier(user: str = "--level-kind qem") -> ModuleType:
     try:
         import fast_simplification
     except ImportError as exc:
         raise LodConvertError(
-            f"--level-kind qem needs fast-simplification ({exc}); run: {PIP_INSTALL}"
+            f"{user} needs fast-simplification ({exc}); run: {PIP_INSTALL}"
         ) from exc
     return fast_simplification
 
@@ -61,10 +74,42 @@ def _coloured(
     single = surface.single
     if single is not None and single.texture is None and single.vertex_colors is None:
         return Surface(points, faces, base_color=single.base_color)
-    _, _, mapping = fs.replay_simplification(surface.vertices, surface.faces, collapses)
-    # A source face for each new vertex: one that uses a source vertex collapsed into it.
-    corners = surface.faces.ravel()
-    face_of_new = np.zeros(len(points), dtype=np.int64)
-    face_of_new[mapping[corners]] = np.arange(len(corners)) // 3
+    face_of_new = _source_faces(fs, surface.vertices, surface.faces, collapses, len(points))
     colors = surface.colors_at(face_of_new, points)
     return Surface(points, faces, vertex_colors=colors)
+
+
+def _source_faces(
+    fs: ModuleType, vertices: np.ndarray, faces: np.ndarray, collapses: np.ndarray, count: int
+) -> np.ndarray:
+    """For each of the ``count`` new vertices, a face of (``vertices``, ``faces``) that uses a
+    source vertex collapsed into it."""
+    _, _, mapping = fs.replay_simplification(vertices, faces, collapses)
+    corners = faces.ravel()
+    face_of_new = np.zeros(count, dtype=np.int64)
+    face_of_new[mapping[corners]] = np.arange(len(corners)) // 3
+    return face_of_new
+
+
+def simplify_within(surface: Mesh, tolerance: float) -> Surface:
+    """``surface`` (all its parts as one) simplified while each vertex stays within
+    ``tolerance`` of the planes of the source faces it stands for: vertices at one position are
+    welded first (so that separate polygons of one solid collapse together), faces of no area
+    left out. Colours are sampled as for :func:`decimate`, as vertex colours on a white base."""
+    fs = _simplifier("a simplified far mesh")
+    points, corners = np.unique(surface.vertices, axis=0, return_inverse=True)
+    welded = corners.reshape(-1)[surface.faces]
+    tri = points[welded]
+    kept = np.flatnonzero(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]).any(axis=1))
+    welded = welded[kept]
+    if not len(welded):
+        return Surface(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    agg = max(0.0, math.log(tolerance**2 / THRESHOLD_SCALE) / math.log(PASSES + 2))
+    out_points, out_faces, collapses = fs.simplify(
+        points, welded, target_count=0, agg=agg, return_collapses=True
+    )
+    face_of_new = kept[_source_faces(fs, points, welded, collapses, len(out_points))]
+    colors = surface.colors_at(face_of_new, out_points)
+    return Surface(
+        out_points, out_faces.astype(np.int64), vertex_colors=colors, base_color=WHITE.copy()
+    )
