@@ -32,9 +32,10 @@ draw call, and it reduces what decimation cannot (a block is hundreds of separat
 draw call as well); where that mesh's silhouette F at ``Y_cell`` stays below
 :data:`MIN_CELL_F` (a block of LOD1 prisms against its LoD2 roofs), the members' next finer
 mesh levels in turn, their finest at most. The merge is then simplified by quadric edge
-collapse to within :data:`SIMPLIFY_PX` pixel at ``Y_cell`` in the reference view
-(``Y_cell / focal_px`` metres, :func:`~.bake.qem.simplify_within`), and the simplified mesh
-kept where its F still reaches :data:`MIN_CELL_F` (or is no lower than the merge's).
+collapse (:func:`~.bake.qem.simplify_within`) to within a tolerance of a few pixels at
+``Y_cell`` in the reference view (:data:`SIMPLIFY_PX`; a pixel is ``Y_cell / focal_px``
+metres there): the coarsest whose F still reaches :data:`MIN_CELL_F` (or is no lower than the
+merge's), else the merge stays as it is.
 ``auto`` bakes both and keeps the cheaper (points at :data:`~.plan.POINT_COST`; then the
 fewer bytes) of those whose silhouette F against the members' finest geometry at ``Y_cell``
 (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when neither is, the one
@@ -73,10 +74,11 @@ SEAM_MARGIN = 1e-9
 """Relative margin that keeps a far level's switch strictly beyond its members'."""
 ADMISSION_ROUNDS = 4
 """Times a cell's admitted members (and so its centre) are found again."""
-SIMPLIFY_PX = 1.0
-"""Tolerance of a far mesh's simplification: pixels at the cell's switch distance in the
-reference view (one pixel at d is 2·d·tan(fov/2)/height_px metres: 0.77 m at 1 km, 1080 px,
-45°)."""
+SIMPLIFY_PX = (4.0, 2.0, 1.0)
+"""Tolerances tried for a far mesh's simplification, coarsest first: pixels at the cell's
+switch distance in the reference view (one pixel at d is 2·d·tan(fov/2)/height_px metres:
+0.77 m at 1 km, 1080 px, 45°), all well within the 16 px screen-space error at which CesiumJS
+refines a tile by default."""
 
 Member = LodChain | CellChain
 Warn = Callable[[str], None]
@@ -324,16 +326,22 @@ def _merged_level(
 def _simplified(
     merged: Level, f: float, source: Mesh, distance: float, options: ChainOptions
 ) -> tuple[Level, float, dict[str, float | int | bool]]:
-    """``merged`` (a far mesh of silhouette F ``f`` against ``source``) simplified to within
-    :data:`SIMPLIFY_PX` pixel at ``distance``, where its F reaches :data:`MIN_CELL_F` or is no
-    lower than ``f``, else ``merged``; the level kept, its F, and the counts and F before and
-    after."""
+    """``merged`` (a far mesh of silhouette F ``f`` against ``source``) simplified to within the
+    coarsest tolerance of :data:`SIMPLIFY_PX` at ``distance`` whose F reaches
+    :data:`MIN_CELL_F` or is no lower than ``f``; ``merged`` itself when none does. The level
+    kept, its F, and the tolerance, counts and F before and after (of the last tried)."""
     assert merged.mesh is not None
-    tolerance = SIMPLIFY_PX * distance / options.view.focal_px
-    level = Level(name="FAR", kind="merged", mesh=Mesh([simplify_within(merged.mesh, tolerance)]))
-    after = _silhouette_f(source, level, distance, options) if level.count else 0.0
-    kept = after >= min(MIN_CELL_F, f)
+    floor = min(MIN_CELL_F, f)
+    for px in SIMPLIFY_PX:
+        tolerance = px * distance / options.view.focal_px
+        mesh = Mesh([simplify_within(merged.mesh, tolerance)])
+        level = Level(name="FAR", kind="merged", mesh=mesh)
+        after = _silhouette_f(source, level, distance, options) if level.count else 0.0
+        if after >= floor:
+            break
+    kept = after >= floor
     facts = {
+        "tolerance_px": px,
         "tolerance_m": round(tolerance, 4),
         "vertices_before": merged.count,
         "vertices_after": level.count,
