@@ -10,23 +10,30 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
+import trimesh
 from lxml import etree
 
 from lodconvert.bake import get_backend
+from lodconvert.bake.qem import simplify_within
 from lodconvert.chain import ChainOptions
 from lodconvert.errors import UsageError
 from lodconvert.hlod import (
     AUTO_SIZES,
     CELL_EXPONENT,
     MIN_CELL_F,
+    SIMPLIFY_PX,
     HlodOptions,
+    _finest_mesh,
+    _merged,
+    _merged_level,
+    _one_part,
     auto_size,
     draw_counts,
     parse_sizes,
     plan_cells,
 )
 from lodconvert.io import read_chains, read_scene
-from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene
+from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene, Surface
 from lodconvert.pipeline import iter_chains
 from lodconvert.ranges import cutoff
 from tests.conftest import ROOT
@@ -134,7 +141,6 @@ def test_auto_keeps_the_cheaper_faithful_far_level(tum_items: list[Item]) -> Non
 def test_a_merged_far_mesh_takes_finer_levels_until_it_is_faithful(tum_items: list[Item]) -> None:
     """Where the buildings' merged coarsest levels miss F 0.95 against them (slabs a tenth of
     their height here), the cell's far mesh merges their next finer levels, and reaches it."""
-    from lodconvert.hlod import _merged_level
     from lodconvert.model import Level
 
     for cell in _cells(tum_items):
@@ -149,6 +155,62 @@ def test_a_merged_far_mesh_takes_finer_levels_until_it_is_faithful(tum_items: li
     level, f, finer = _merged_level(chains, np.zeros(3), source, 300.0, ChainOptions())
     assert finer == 1 and f >= MIN_CELL_F
     assert level.count == sum(chain.levels[0].count for chain in chains)
+
+
+def _merged_vertices(cell: CellChain) -> int:
+    return cell.facts["simplified"]["vertices_before"]
+
+
+def test_far_meshes_are_simplified_to_a_third_of_the_merge_and_stay_faithful(
+    tum_items: list[Item],
+) -> None:
+    """TUM Munich's 250 m blocks: the far meshes keep under a third of the merged buildings'
+    vertices at silhouette F ≥ 0.95, each within a few pixels where it switches in."""
+    tier1 = [cell for cell in _cells(tum_items) if cell.tier == 1]
+    for cell in _cells(tum_items):
+        simplified = cell.facts["simplified"]
+        assert simplified["kept"] and cell.facts["kind"] == "mesh"
+        assert cell.far.count == simplified["vertices_after"] < simplified["vertices_before"]
+        assert simplified["silhouette_f_after"] == cell.facts["silhouette_f"]["mesh"] >= MIN_CELL_F
+        pixel = cell.cutoffs[0] / ChainOptions().view.focal_px
+        assert simplified["tolerance_m"] == pytest.approx(simplified["tolerance_px"] * pixel, 1e-3)
+        assert simplified["tolerance_px"] in SIMPLIFY_PX
+    before = sum(cell.facts["simplified"]["vertices_before"] for cell in tier1)
+    assert sum(cell.far.count for cell in tier1) <= before / 3
+    block_cell = max(tier1, key=_merged_vertices)  # the heaviest block
+    assert block_cell.far.count <= block_cell.facts["simplified"]["vertices_before"] / 3
+
+
+def test_a_simplified_far_mesh_is_the_same_every_time(tum_items: list[Item]) -> None:
+    cell = max((c for c in _cells(tum_items) if c.tier == 1), key=_merged_vertices)
+    objects = cell.objects()
+    source = _merged([_finest_mesh(chain) for chain in objects]).translated(-cell.origin)
+    merged, _, _ = _merged_level(objects, cell.origin, source, cell.cutoffs[0], ChainOptions())
+    tolerance = (
+        cell.facts["simplified"]["tolerance_px"] * cell.cutoffs[0] / ChainOptions().view.focal_px
+    )
+    first, again = (simplify_within(merged.mesh, tolerance) for _ in range(2))
+    for name in ("vertices", "faces", "vertex_colors"):
+        assert getattr(first, name).tobytes() == getattr(again, name).tobytes(), name
+
+
+def test_simplification_keeps_each_part_s_colour_and_its_shape() -> None:
+    """Two finely tessellated boxes, red and blue, become two boxes of eight corners each, every
+    corner in its own box's colour."""
+    red, blue = (np.array(c, dtype=np.uint8) for c in ([200, 30, 30, 255], [30, 30, 200, 255]))
+    parts = []
+    for x, color in ((0.0, red), (30.0, blue)):
+        box = trimesh.creation.box((10, 8, 6))
+        box.apply_translation((x, 0, 3))
+        for _ in range(3):
+            box = box.subdivide()
+        parts.append(Surface(box.vertices, np.asarray(box.faces, np.int64), base_color=color))
+    merged = _one_part(Mesh(parts))
+    simple = simplify_within(merged, 0.05)
+    assert len(merged.vertices) > 700 and len(simple.vertices) == 16
+    assert np.allclose(Mesh([simple]).bounds, Mesh(parts).bounds, atol=0.05)
+    left = simple.vertices[:, 0] < 15
+    assert (simple.vertex_colors[left] == red).all() and (simple.vertex_colors[~left] == blue).all()
 
 
 @pytest.mark.parametrize("kind", ["points", "mesh"])
