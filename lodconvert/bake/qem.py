@@ -19,6 +19,7 @@ chosen so that the last pass's threshold is the tolerance squared.
 from __future__ import annotations
 
 import math
+import threading
 from types import ModuleType
 
 import numpy as np
@@ -34,6 +35,9 @@ PASSES = 100
 """Collapse passes of ``fast-simplification`` (its ``Simplify.h``)."""
 THRESHOLD_SCALE = 1e-9
 """Factor of its pass thresholds (squared metres for a mesh in metres)."""
+ONE_AT_A_TIME = threading.Lock()
+"""Held around each use of ``fast-simplification``: it keeps the mesh it works on in module
+state between calls, so threads baking at once would mix their meshes."""
 
 
 def _simplifier(user: str = "--level-kind qem") -> ModuleType:
@@ -57,9 +61,10 @@ def decimate(surface: Mesh, vertices: int) -> Surface:
     # A closed mesh has about two faces per vertex; aim a little low, the count overshoots.
     target_faces = max(1, int(len(faces) * vertices / max(used, 1) * AIM))
     for _ in range(MAX_TRIES):
-        out_points, out_faces, collapses = fs.simplify(
-            points, faces, target_count=min(target_faces, len(faces)), return_collapses=True
-        )
+        with ONE_AT_A_TIME:
+            out_points, out_faces, collapses = fs.simplify(
+                points, faces, target_count=min(target_faces, len(faces)), return_collapses=True
+            )
         if len(out_points) <= vertices or target_faces == 1:
             break
         target_faces = max(1, int(target_faces * vertices / len(out_points) * 0.98))
@@ -84,7 +89,8 @@ def _source_faces(
 ) -> np.ndarray:
     """For each of the ``count`` new vertices, a face of (``vertices``, ``faces``) that uses a
     source vertex collapsed into it."""
-    _, _, mapping = fs.replay_simplification(vertices, faces, collapses)
+    with ONE_AT_A_TIME:
+        _, _, mapping = fs.replay_simplification(vertices, faces, collapses)
     corners = faces.ravel()
     face_of_new = np.zeros(count, dtype=np.int64)
     face_of_new[mapping[corners]] = np.arange(len(corners)) // 3
@@ -105,9 +111,10 @@ def simplify_within(surface: Mesh, tolerance: float) -> Surface:
     if not len(welded):
         return Surface(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
     agg = max(0.0, math.log(tolerance**2 / THRESHOLD_SCALE) / math.log(PASSES + 2))
-    out_points, out_faces, collapses = fs.simplify(
-        points, welded, target_count=0, agg=agg, return_collapses=True
-    )
+    with ONE_AT_A_TIME:
+        out_points, out_faces, collapses = fs.simplify(
+            points, welded, target_count=0, agg=agg, return_collapses=True
+        )
     face_of_new = kept[_source_faces(fs, points, welded, collapses, len(out_points))]
     colors = surface.colors_at(face_of_new, out_points)
     return Surface(
