@@ -33,6 +33,7 @@ from lodconvert.hlod import (
     plan_cells,
 )
 from lodconvert.io import read_chains, read_scene
+from lodconvert.io.gltf.rules import COMPONENT_SIZES, WIDTHS
 from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene, Surface
 from lodconvert.pipeline import iter_chains
 from lodconvert.ranges import cutoff
@@ -314,6 +315,16 @@ def test_glb_chains_cells_with_msft_lod_validly(tmp_path: Path, gltf_validator) 
         assert near["extras"]["lodconvert"]["cutoffs"] == pytest.approx(cell["cutoffs"])
         assert len(near["extras"]["MSFT_screencoverage"]) == 2  # far level, then nothing
         assert nodes[far]["name"] == f"{cell['id']}_FAR" and "mesh" in nodes[far]
+        # the welded far mesh has no normals (shaded flat); its bytes are as the report says
+        (primitive,) = doc["meshes"][nodes[far]["mesh"]]["primitives"]
+        assert "NORMAL" not in primitive["attributes"] and "COLOR_0" in primitive["attributes"]
+        accessors = [
+            doc["accessors"][i] for i in [*primitive["attributes"].values(), primitive["indices"]]
+        ]
+        size = sum(
+            a["count"] * WIDTHS[a["type"]] * COMPONENT_SIZES[a["componentType"]] for a in accessors
+        )
+        assert size == cell["bytes"][cell["kind"]]
     # every building is read back, from inside its cells, with its attributes
     chains = read_chains(out)
     assert len(chains) == 290 and all("measuredHeight" in c.metadata for c in chains[:5])
