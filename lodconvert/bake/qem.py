@@ -89,19 +89,32 @@ def _source_faces(
 ) -> np.ndarray:
     """For each of the ``count`` new vertices, a face of (``vertices``, ``faces``) that uses a
     source vertex collapsed into it."""
-    with ONE_AT_A_TIME:
-        _, _, mapping = fs.replay_simplification(vertices, faces, collapses)
     corners = faces.ravel()
     face_of_new = np.zeros(count, dtype=np.int64)
-    face_of_new[mapping[corners]] = np.arange(len(corners)) // 3
+    face_of_new[_new_vertex_of(fs, vertices, faces, collapses)[corners]] = (
+        np.arange(len(corners)) // 3
+    )
     return face_of_new
+
+
+def _new_vertex_of(
+    fs: ModuleType, vertices: np.ndarray, faces: np.ndarray, collapses: np.ndarray
+) -> np.ndarray:
+    """The new vertex each source vertex collapsed into."""
+    with ONE_AT_A_TIME:
+        _, _, mapping = fs.replay_simplification(vertices, faces, collapses)
+    return mapping
 
 
 def simplify_within(surface: Mesh, tolerance: float) -> Surface:
     """``surface`` (all its parts as one) simplified while each vertex stays within
     ``tolerance`` of the planes of the source faces it stands for: vertices at one position are
     welded first (so that separate polygons of one solid collapse together), faces of no area
-    left out. Colours are sampled as for :func:`decimate`, as vertex colours on a white base."""
+    left out. Open borders stay as they are: the quadrics hold a vertex to its faces' planes,
+    not to a border's line, along which it would slide. Each face keeps the colour of the
+    source face it was (at that face's centre), as vertex colours on a white base; a vertex
+    where faces of different colours meet is one per colour, so that no colour runs across an
+    edge."""
     fs = _simplifier("a simplified far mesh")
     points, corners = np.unique(surface.vertices, axis=0, return_inverse=True)
     welded = corners.reshape(-1)[surface.faces]
@@ -113,10 +126,38 @@ def simplify_within(surface: Mesh, tolerance: float) -> Surface:
     agg = max(0.0, math.log(tolerance**2 / THRESHOLD_SCALE) / math.log(PASSES + 2))
     with ONE_AT_A_TIME:
         out_points, out_faces, collapses = fs.simplify(
-            points, welded, target_count=0, agg=agg, return_collapses=True
+            points, welded, target_count=0, agg=agg, return_collapses=True, preserve_border=True
         )
-    face_of_new = kept[_source_faces(fs, points, welded, collapses, len(out_points))]
-    colors = surface.colors_at(face_of_new, out_points)
+    out_faces = out_faces.astype(np.int64)
+    moved = _new_vertex_of(fs, points, welded, collapses)[welded]
+    source = kept[_same_faces(moved, out_faces)]
+    colors = surface.colors_at(source, surface.triangles[source].mean(axis=1))
+    return _split_by_colour(out_points, out_faces, colors)
+
+
+def _same_faces(moved: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """For each of ``faces``, the first of the source faces ``moved`` (their corners moved to
+    the new vertices they collapsed into) with the same corners: the face it was."""
+    triples, ids = np.unique(
+        np.sort(np.concatenate([moved, faces]), axis=1), axis=0, return_inverse=True
+    )
+    ids = ids.reshape(-1)
+    first = np.full(len(triples), -1, dtype=np.int64)
+    first[ids[: len(moved)][::-1]] = np.arange(len(moved))[::-1]
+    found = first[ids[len(moved) :]]
+    assert (found >= 0).all(), "a simplified face that no source face became"
+    return found
+
+
+def _split_by_colour(points: np.ndarray, faces: np.ndarray, colors: np.ndarray) -> Surface:
+    """A surface of ``faces`` over ``points``, each face of its own colour (``colors``, RGBA
+    per face): a vertex for each point and colour of the faces around it."""
+    rgba = np.repeat(np.ascontiguousarray(colors, dtype=np.uint8), 3, axis=0)
+    keys = np.column_stack([faces.ravel(), rgba.view(np.uint32).ravel()])
+    unique, first, corners = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     return Surface(
-        out_points, out_faces.astype(np.int64), vertex_colors=colors, base_color=WHITE.copy()
+        points[unique[:, 0]],
+        corners.reshape(-1, 3),
+        vertex_colors=rgba[first],
+        base_color=WHITE.copy(),
     )
