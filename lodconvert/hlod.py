@@ -31,7 +31,8 @@ draw call, and it reduces what decimation cannot (a block is hundreds of separat
 ``mesh``: the members' coarsest mesh levels merged into one mesh with vertex colours (one
 draw call as well); where that mesh's silhouette F at ``Y_cell`` stays below
 :data:`MIN_CELL_F` (a block of LOD1 prisms against its LoD2 roofs), the members' next finer
-mesh levels in turn, their finest at most. The merge is then simplified by quadric edge
+mesh levels in turn, their finest at most, each without its floor on the ground (seen from
+no viewpoint above it). The merge is then simplified by quadric edge
 collapse (:func:`~.bake.qem.simplify_within`) to within a tolerance of a few pixels at
 ``Y_cell`` in the reference view (:data:`SIMPLIFY_PX`; a pixel is ``Y_cell / focal_px``
 metres there): the coarsest whose F still reaches :data:`MIN_CELL_F` (or is no lower than the
@@ -74,6 +75,11 @@ SEAM_MARGIN = 1e-9
 """Relative margin that keeps a far level's switch strictly beyond its members'."""
 ADMISSION_ROUNDS = 4
 """Times a cell's admitted members (and so its centre) are found again."""
+DOWN = -0.99
+"""Unit normal z below which a face looks straight down."""
+FLOOR_MARGIN = 0.01
+"""Metres above an object's lowest point within which a face looking down is its floor on the
+ground, left out of far meshes."""
 SIMPLIFY_PX = (4.0, 2.0, 1.0)
 """Tolerances tried for a far mesh's simplification, coarsest first: pixels at the cell's
 switch distance in the reference view (one pixel at d is 2·d·tan(fov/2)/height_px metres:
@@ -301,7 +307,8 @@ def _merged_level(
     distance: float,
     options: ChainOptions,
 ) -> tuple[Level, float, int]:
-    """The objects' coarsest mesh levels merged into one far level, or, where its silhouette
+    """The objects' coarsest mesh levels (without their floors, :func:`_floorless`) merged into
+    one far level, or, where its silhouette
     F against ``source`` (the objects' finest geometry about ``origin``) from ``distance``
     stays below :data:`MIN_CELL_F`, their next finer mesh levels in turn (their finest at
     most); the level, its F and how many levels finer than the coarsest it took."""
@@ -312,7 +319,7 @@ def _merged_level(
     for finer in range(depth):
         merged = _merged(
             [
-                _placed(chain, levels[min(finer, len(levels) - 1)])
+                _floorless(_placed(chain, levels[min(finer, len(levels) - 1)]))
                 for chain, levels in zip(objects, meshes, strict=True)
             ]
         )
@@ -350,6 +357,36 @@ def _simplified(
         "kept": kept,
     }
     return (level, after, facts) if kept else (merged, f, facts)
+
+
+def _floorless(mesh: Mesh) -> Mesh:
+    """``mesh`` (an object's level, z up) without its floor on the ground: the faces looking
+    straight down (:data:`DOWN`) that lie within :data:`FLOOR_MARGIN` of its lowest point,
+    which no viewpoint above the ground sees; ``mesh`` itself when that is all of it."""
+    low = mesh.bounds[0, 2] + FLOOR_MARGIN
+    parts = []
+    for part in mesh.parts:
+        faces = np.arange(len(part.faces))
+        floor = (part.face_normals(faces)[:, 2] < DOWN) & (
+            part.triangles[:, :, 2].max(axis=1) <= low
+        )
+        if not floor.any():
+            parts.append(part)
+        elif not floor.all():
+            parts.append(_with_faces(part, faces[~floor]))
+    return Mesh(parts) if parts else mesh
+
+
+def _with_faces(part: Surface, faces: np.ndarray) -> Surface:
+    """``part`` with only the given faces and the vertices they use."""
+    used, corners = np.unique(part.faces[faces], return_inverse=True)
+    return replace(
+        part,
+        vertices=part.vertices[used],
+        faces=corners.reshape(-1, 3),
+        vertex_colors=None if part.vertex_colors is None else part.vertex_colors[used],
+        uv=None if part.uv is None else part.uv[used],
+    )
 
 
 def _merged(meshes: Sequence[Mesh]) -> Mesh:
