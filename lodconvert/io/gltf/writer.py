@@ -635,10 +635,10 @@ class _Document:
     def _level_mesh(self, name: str, level: Level, shared: bool = False) -> int | None:
         """The mesh of one level's geometry (``None`` when the level is empty). The levels of
         instances of one geometry (``shared``) share their meshes. A LOD parent's merged far
-        mesh has no normals: its corners are welded (:func:`~lodconvert.bake.qem.simplify_within`),
-        where normals per vertex would round every building's edges, and glTF clients shade a
-        primitive without normals flat (three.js from screen-space derivatives, with no vertex
-        split)."""
+        mesh has no normals: its corners are welded
+        (:func:`~lodconvert.bake.qem.simplify_within`), where normals per vertex would round
+        every building's edges, and glTF clients shade a primitive without normals flat
+        (three.js from screen-space derivatives, with no vertex split)."""
         if not level.count:
             return None
         if id(level) in self._shared:
