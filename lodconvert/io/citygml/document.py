@@ -1,7 +1,7 @@
 """A CityGML document streamed a batch of city objects at a time: the root checked first, then
-only the root's children (members) reach Python, each member's objects are collected, and a
-batch of them is triangulated together before their nodes are handed on and their elements
-freed."""
+only the root's children (members) reach Python, each member's objects are collected (their
+coordinates read and their elements freed a part at a time), and a batch of them is
+triangulated together before their nodes are handed on."""
 
 from __future__ import annotations
 
@@ -29,6 +29,7 @@ from .geometry import (
     collect,
     gml_id_of,
     holders_of,
+    read_coordinates,
     triangulate_batch,
 )
 from .implicit import Templates
@@ -44,7 +45,7 @@ from .names import (
 from .source import first_look, open_document, parser_options
 
 BATCH = 64
-"""City objects triangulated together (their elements are held until then)."""
+"""City objects triangulated together (their coordinates are held until then)."""
 _ROOT_CHILDREN = tuple(f"{{*}}{name}" for name in sorted(MEMBERS | {"boundedBy"}))
 """Tags of the root's children that reach Python (any namespace; nested ones are passed)."""
 
@@ -137,7 +138,8 @@ class Document:
 
     def _collected(self, element: etree._Element) -> tuple[Node, Holder] | None:
         """A top-level city object's node (parts as children, without geometry) and its
-        holder with the polygons found in it; None when the object is not read (or skipped:
+        holder with the polygons found in it and their coordinates read (its elements freed,
+        a part at a time); None when the object is not read (or skipped:
         parts nested too deep, no polygon; an object with no element in it is only counted).
         :class:`InputError` when it nests deeper than the ``xml_depth`` limit, checked before
         it is walked."""
@@ -167,7 +169,9 @@ class Document:
                 self.stats["unresolved_links"][node_id] = unresolved
             self._skip(node_id, "has no surface geometry")
             return None
-        return self._node(top), top
+        node = self._node(top)
+        read_coordinates(top)
+        return node, top
 
     def _node(self, holder: Holder) -> Node:
         """The node of a holder and, as its children, of its parts (ids taken in document
