@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import gzip
 import io
+import json
 import subprocess
 import sys
 import time
@@ -254,6 +255,23 @@ def test_an_object_with_nothing_in_it_is_counted_not_skipped(tmp_path: Path) -> 
     assert scene.attributes["citygml"]["empty"] == {"Building": 1}
     (skipped,) = tally_of(scene).skipped
     assert skipped["id"] == "nameonly" and "has no surface geometry" in skipped["reason"]
+
+
+def test_skipped_objects_past_the_listed_ones_are_counted(tmp_path: Path) -> None:
+    """3,000 objects with a name but no geometry: the report lists the first 1,000 (id and
+    reason, each warned) and counts all 3,000; the rest are one line (they were 3,000 records
+    and 3,000 lines, a million of them some 500 MB)."""
+    names = [gml.building("<gml:name>n</gml:name>", f"n{i}") for i in range(3_000)]
+    path = write(tmp_path, "city.gml", gml.document(*names, gml.box_building("good")))
+    report = tmp_path / "report.json"
+    run = run_cli(path, "-o", tmp_path / "out.glb", "--report", report)
+    assert run.code == 0, run.stderr
+    data = json.loads(report.read_text())
+    assert len(data["skipped"]) == 1_000 and data["skipped"][-1]["id"] == "n999"
+    assert data["totals"]["skipped"] == 3_000 and data["totals"]["objects"] == 1
+    assert "2,000 more objects skipped (not listed)" in run.stderr
+    assert len(run.stderr.splitlines()) < 1_010
+    assert "3,000 skipped" in run.stderr
 
 
 # --- a building of many parts ---------------------------------------------------------------------

@@ -249,7 +249,7 @@ class Document:
 
     def _skip(self, node_id: str, reason: str) -> None:
         """Record object ``node_id`` as skipped for ``reason``."""
-        self.tally.skipped.append({"id": node_id, "reason": str(InputError(reason, node_id))})
+        self.tally.add_skipped(node_id, str(InputError(reason, node_id)))
 
 
 def _free(element: etree._Element) -> None:
