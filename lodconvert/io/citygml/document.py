@@ -26,10 +26,9 @@ from .geometry import (
     BrokenObject,
     Holder,
     check_depth,
-    collect,
+    gather,
     gml_id_of,
     holders_of,
-    read_coordinates,
     triangulate_batch,
 )
 from .implicit import Templates
@@ -162,16 +161,16 @@ class Document:
         except BrokenObject as exc:
             self._skip(object_id(gml_id_of(element) or kind, self.taken), str(exc))
             return None
-        collect(top, self.gml, self.templates)
-        if not any(holder.polygons for holder in top.walk()):
+        for holder in top.walk():
+            holder.attributes = attributes_of(holder.element, holder.kind, holder.gml_id)
+        gather(top, self.gml, self.templates)
+        if not top.broken and not any(holder.polygons for holder in top.walk()):
             node_id = object_id(top.gml_id or kind, self.taken)
             if unresolved := sum(holder.unresolved for holder in top.walk()):
                 self.stats["unresolved_links"][node_id] = unresolved
             self._skip(node_id, "has no surface geometry")
             return None
-        node = self._node(top)
-        read_coordinates(top)
-        return node, top
+        return self._node(top), top
 
     def _node(self, holder: Holder) -> Node:
         """The node of a holder and, as its children, of its parts (ids taken in document
@@ -179,7 +178,7 @@ class Document:
         node = Node(
             id=object_id(holder.gml_id or holder.kind, self.taken),
             type=holder.kind,
-            attributes=attributes_of(holder.element, holder.kind, holder.gml_id),
+            attributes=holder.attributes,
         )
         holder.where = f"{self.source}: {node.id}"
         node.children = [self._node(part) for part in holder.parts]

@@ -83,6 +83,11 @@ _ITEMS = {
 }
 """By GML namespace: the polygons, the TINs given by their control points alone (no
 triangles) and the elements with an ``xlink:href`` below an element, in document order."""
+_LINKED = etree.XPath(
+    "boolean(descendant-or-self::*/@xlink:href)",
+    namespaces={"xlink": XLINK_HREF[1:].partition("}")[0]},
+)
+"""Whether an element or one below it links (``xlink:href``) to another."""
 _EXTERIOR = frozenset({"exterior", "outerBoundaryIs"})
 _INTERIOR = frozenset({"interior", "innerBoundaryIs"})
 
@@ -130,6 +135,8 @@ class Holder:
     degenerate: int = 0
     dropped: int = 0
     surfaces: dict[str, list[Surface]] = field(default_factory=dict)
+    attributes: dict[str, Any] = field(default_factory=dict)
+    """Its attributes, taken before its elements are freed."""
     read: _Read | None = None
     """A top-level object's coordinates, once read (:func:`read_coordinates`)."""
     broken: str = ""
@@ -145,7 +152,7 @@ class Holder:
             yield from part.walk()
 
     def forget_walk(self) -> None:
-        """Let go of what :func:`collect` remembered of the elements walked."""
+        """Let go of what :func:`gather` remembered of the elements walked."""
         self._ids = None
         self._reached = set()
 
@@ -243,11 +250,13 @@ class _Place(NamedTuple):
 
 @dataclass
 class _Walker:
-    """Finds where elements lie below a top-level object (:meth:`place`), remembering what lies
-    above each geometry property met."""
+    """Finds where elements lie below a holder (:meth:`place`; a top-level object, or a part
+    collected alone), remembering what lies above each geometry property met."""
 
     top: Holder
     holders: dict[Any, Holder]
+    root: etree._Element
+    """The top-level object's element (a terrain component's LoD may be its relief's)."""
     places: dict[Any, _Place | None] = field(default_factory=dict)
 
     def place(self, element: etree._Element) -> _Place | None:
@@ -299,7 +308,7 @@ class _Walker:
             return _Place(holder, f"lod{match.group(1)}", semantic, False)
         if name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)):
             above = self._above(element)
-            lod = _relief_lod(parent, self.top.element)
+            lod = _relief_lod(parent, self.root)
             return None if above is None or lod is None else _Place(above[0], lod, "", False)
         if name == "interior" and local(parent) == "Solid":
             return None
@@ -375,14 +384,46 @@ def _deeper_than(levels: int) -> etree.XPath:
     return etree.XPath(f"boolean({'/'.join(['*'] * (levels + 1))})")
 
 
-def collect(top: Holder, gml: str, templates: Templates | None = None) -> None:
+def gather(top: Holder, gml: str, templates: Templates | None = None) -> None:
     """Find the polygons of ``top`` (a top-level object of a document whose GML namespace is
     ``gml``) and of its parts, each put in the holder it belongs to in document order,
     following links (an implicit geometry's also to the relative geometries of ``templates``,
-    where this object's are added)."""
+    where this object's are added), and read their coordinates (:func:`read_coordinates`).
+    An object without links (``xlink:href``) is gathered a part at a time, innermost parts
+    first, each part's elements freed before the next: its polygons then lie in its own
+    elements and nothing else refers to them, so only one part's elements are walked at a
+    time."""
     if templates is not None:
         templates.register(top.element)
-    walker = _Walker(top, {holder.element: holder for holder in top.walk()})
+    if _LINKED(top.element):
+        _collect(top, top.element, gml, templates)
+        read_coordinates(top)
+        return
+    rings = _Rings()
+    read = _Read(top, [], [], np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
+    try:
+        _gathered(top, top.element, gml, rings, read)
+    except BrokenObject as exc:
+        _broken(top, str(exc))
+        return
+    _finish(top, rings, read)
+
+
+def _gathered(holder: Holder, root: etree._Element, gml: str, rings: _Rings, read: _Read) -> None:
+    """Collect and read ``holder``'s parts (each freed), then ``holder`` itself, its elements
+    freed once read (an object without links; ``root``: its element)."""
+    for part in holder.parts:
+        _gathered(part, root, gml, rings, read)
+    _collect(holder, root, gml, None)
+    holder.forget_walk()
+    _read_holder(holder, rings, read)
+    holder.element.clear(keep_tail=False)
+
+
+def _collect(top: Holder, root: etree._Element, gml: str, templates: Templates | None) -> None:
+    """Find the polygons below holder ``top`` (``root``: its top-level object's element), as
+    :func:`gather` says."""
+    walker = _Walker(top, {holder.element: holder for holder in top.walk()}, root)
     items = _ITEMS[gml](top.element)
     polygon_ids: dict[str, etree._Element] = {}
     for item in items:
@@ -513,11 +554,23 @@ def read_coordinates(top: Holder) -> None:
     try:
         _holder_rings(top, rings, read)
     except BrokenObject as exc:
-        top.broken = str(exc)
-        for holder in reversed(list(top.walk())):  # parts before what holds them
-            holder.polygons = []
-            holder.element.clear(keep_tail=False)
+        _broken(top, str(exc))
         return
+    _finish(top, rings, read)
+
+
+def _broken(top: Holder, reason: str) -> None:
+    """Note why ``top``'s coordinates cannot be read; let go of its polygons and elements."""
+    top.broken = reason
+    for holder in reversed(list(top.walk())):  # parts before what holds them
+        holder.polygons = []
+        holder.element.clear(keep_tail=False)
+
+
+def _finish(top: Holder, rings: _Rings, read: _Read) -> None:
+    """Put the ``rings`` read of ``top``'s polygons into ``read`` as points, and that into
+    :attr:`Holder.read` (or why they cannot be read into :attr:`Holder.broken`); free the
+    object's elements."""
     top.element.clear(keep_tail=False)
     flat = np.concatenate(rings.values) if rings.values else np.zeros(0)
     del rings.values[:]
@@ -549,9 +602,18 @@ def read_coordinates(top: Holder) -> None:
 
 
 def _holder_rings(holder: Holder, rings: _Rings, read: _Read) -> None:
+    """Add the rings of ``holder``'s polygons (:func:`_read_holder`), then those of its parts,
+    each part's elements freed once read."""
+    _read_holder(holder, rings, read)
+    for part in holder.parts:
+        _holder_rings(part, rings, read)
+        part.element.clear(keep_tail=False)
+
+
+def _read_holder(holder: Holder, rings: _Rings, read: _Read) -> None:
     """Add the rings of ``holder``'s polygons to ``rings`` and ``read`` (their layout, and the
-    placements of implicit ones), then those of its parts, each part's elements freed once
-    read; :class:`BrokenObject` when a ring or a placement cannot be read."""
+    placements of implicit ones), the polygons letting go of their elements;
+    :class:`BrokenObject` when a ring or a placement cannot be read."""
     serials: dict[int, int] = {}
     placed: dict[int, int] = {}
     for polygon in holder.polygons:  # numbered while every element is held
@@ -572,9 +634,6 @@ def _holder_rings(holder: Holder, rings: _Rings, read: _Read) -> None:
         polygon.element = polygon.implicit = None
     read.placements += [each for each in placements if each is not None]
     read.polygons += holder.polygons
-    for part in holder.parts:
-        _holder_rings(part, rings, read)
-        part.element.clear(keep_tail=False)
 
 
 # --- a batch of objects ---------------------------------------------------------------------------
