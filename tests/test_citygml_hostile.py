@@ -317,7 +317,7 @@ def gml_cube_surface() -> Surface:
 def test_peak_memory_per_part_is_bounded(tmp_path: Path) -> None:
     """Converting a building of 4,000 one-metre parts peaks less than 20 KB a part above one
     of 1,000 (some 14 KB here: the object's XML tree and its collection, then its coordinates
-    and the batch's triangulation; 100,000 parts peak at 1.4 GB)."""
+    and the batch's triangulation; 100,000 parts peak at 1.3 GB)."""
 
     def peak(parts: int) -> int:
         path = write(tmp_path, f"parts{parts}.gml", gml.many_parts(parts))
@@ -330,8 +330,8 @@ def test_peak_memory_per_part_is_bounded(tmp_path: Path) -> None:
 
 def test_reading_many_parts_frees_each_part_once_read(tmp_path: Path) -> None:
     """Reading a building of 8,000 one-metre parts peaks less than 16 KB a part above one of
-    1,000 (some 13.4 KB here: each part's elements are freed once its coordinates are read,
-    and its polygons triangulated 4,096 at a time; holding the whole tree and every polygon's
+    1,000 (some 11.6 KB here: each part is collected, read and freed before the next, and
+    its polygons triangulated 4,096 at a time; holding the whole tree and every polygon's
     triangles until the building was triangulated took 19.3 KB)."""
     code = (
         "import sys; from lodconvert.io import read_scene\n"

@@ -111,7 +111,7 @@ class Polygon:
     """The ``ImplicitGeometry`` that places it (its rings are read in its frame), or None."""
     rings: list[np.ndarray] = field(default_factory=list)
     serial: int = 0
-    """Its element's number in its object (a polygon met twice has one), once read."""
+    """Its element's number in its holder (a polygon met twice has one), once read."""
     placed_by: int | None = None
     """Its placement's key in :attr:`_Read.placements` (implicit geometry), once read."""
     tin: bool = False
