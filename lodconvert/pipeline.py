@@ -335,7 +335,9 @@ def merged(scenes: Sequence[Scene]) -> Scene:
         for part in tallies:
             tally.dropped_faces += part.dropped_faces
             tally.dropped_by_object.update(part.dropped_by_object)
-            tally.skipped += part.skipped
+            for entry in part.skipped:
+                tally.add_skipped(entry["id"], entry["reason"])
+            tally.unlisted += part.unlisted
         attach_tally(whole, tally)
     return whole
 
@@ -633,11 +635,14 @@ def _reader_skipped(
     scene: Scene, skipped: list[dict[str, str]], warn: Message
 ) -> InputTally | None:
     """Add the objects the reader of ``scene`` skipped to ``skipped``, each told to ``warn``
-    (with nothing converted, the run's error says it); ``scene``'s tally."""
+    (with nothing converted, the run's error says it), those past the listed ones in one
+    line; ``scene``'s tally."""
     tally = tally_of(scene)
     for entry in tally.skipped if tally is not None else ():
         warn(f"{scene.source}: object {entry['reason']} — skipped")
         skipped.append(entry)
+    if tally is not None and tally.unlisted:
+        warn(f"{scene.source}: {tally.unlisted:,} more objects skipped (not listed)")
     return tally
 
 
@@ -691,6 +696,7 @@ def _report(
         "skipped": skipped,
         "totals": {
             "objects": len(records),
+            "skipped": len(skipped) + (tally.unlisted if tally is not None else 0),
             "fewer_levels": reduced,
             "dropped_faces": tally.dropped_faces if tally is not None else 0,
             "points": int(points),

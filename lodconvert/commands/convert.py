@@ -234,7 +234,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     plural = "s" if len(moved) > 1 else ""
     for each in moved:
         console.info(f"{each['input']}: reprojected from {each['from']} into {each['to']}")
-    skipped = len(report["skipped"])
+    skipped = report["totals"]["skipped"]
     dropped = report["totals"]["dropped_faces"]
     console.summary(
         f"wrote {args.output} ({report['totals']['objects']:,} object(s)"
