@@ -110,13 +110,16 @@ def test_changed_options_or_input_start_over(tmp_path: Path, change: str) -> Non
     assert (out / "tileset.json").exists()
 
 
-def test_a_damaged_staged_tile_is_written_again(tmp_path: Path, clean: dict[str, bytes]) -> None:
+def test_a_damaged_staged_tile_is_written_again_and_a_stray_one_removed(
+    tmp_path: Path, clean: dict[str, bytes]
+) -> None:
     [source] = inputs("multi_lod")
     out = tmp_path / "out"
     folder = killed(source, out, 1)
     [tile] = (folder / "tiles").glob("*.glb")
     data = tile.read_bytes()
     tile.write_bytes(data[: len(data) // 2])  # as a run killed while writing it leaves it
+    (folder / "tiles" / "cell9_9_9.glb").write_bytes(data)  # no tile of this run's tree
     said = resumed(source, out)
     assert f"0 of {len(clean) - 1} tiles kept from an interrupted run" in said
     assert files(out) == clean
