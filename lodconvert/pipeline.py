@@ -497,10 +497,9 @@ def _resume_key(inputs: Sequence[str | Path], run: RunOptions) -> str:
     """The key under which a folder output is staged, so that an interrupted run's folder is
     taken up again by the same command: a hash of the inputs (path, size, modification time)
     and of every option that changes the output (not of ``workers``, which does not)."""
-    stats = [(str(Path(p).resolve()), os.stat(p).st_size, os.stat(p).st_mtime_ns) for p in inputs]
     what = {
         "version": __version__,
-        "inputs": stats,
+        "inputs": [(str(Path(path).resolve()), _stat(path)) for path in inputs],
         "chain": options_record(run.chain),
         "hlod": asdict(run.hlod) if run.hlod is not None else None,
         "backend": run.backend,
@@ -511,6 +510,16 @@ def _resume_key(inputs: Sequence[str | Path], run: RunOptions) -> str:
     }
     text = json.dumps(what, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _stat(path: str | Path) -> tuple[int, int] | None:
+    """Size and modification time (ns) of ``path``; ``None`` where it cannot be read (its
+    reader says why)."""
+    try:
+        found = os.stat(path)
+    except OSError:
+        return None
+    return found.st_size, found.st_mtime_ns
 
 
 def _checked(sink: FileSink | DirectorySink, output_path: str | Path, step: Step) -> None:

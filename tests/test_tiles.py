@@ -350,6 +350,12 @@ def test_other_json_names_are_a_usage_error(tmp_path: Path) -> None:
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_missing_input_is_one_line_with_nothing_written(tmp_path: Path) -> None:
+    result = run(tmp_path / "none.city.json", "-o", tmp_path / "out" / "tileset.json")
+    assert_one_line_error(result, 1, "none.city.json", "no such file")
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_a_city_without_a_crs_is_refused_with_nothing_written(tmp_path: Path) -> None:
     result = run(*inputs("multi_lod"), "-o", tmp_path / "out" / "tileset.json", *FAST)
     assert result.returncode == 1
