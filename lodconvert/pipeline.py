@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import hashlib
 import itertools
+import json
+import os
 import platform
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -450,13 +453,22 @@ def convert(
     if folder is not None and run.hlod is None:
         run = replace(run, hlod=HlodOptions())
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
-        sink = outputs.directory(folder) if folder is not None else outputs.file(output_path)
+        sink = (
+            outputs.directory(folder, resume=_resume_key(inputs, run))
+            if folder is not None
+            else outputs.file(output_path)
+        )
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
         with clock("read"):
             scene, crs_record = read_inputs(inputs, run.read_options, run.limits, sources, run.warn)
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(run.backend)
         executor = stack.enter_context(_executor(run, baker, _object_count(scene)))
+        writer = (  # a folder's files (tiles) are made by tasks too, in processes of their own
+            stack.enter_context(_executor(run, get_backend("numpy"), _object_count(scene)))
+            if folder is not None
+            else None
+        )
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         skipped: list[dict[str, str]] = []
         items = iter_chains(
@@ -465,7 +477,10 @@ def convert(
         )  # fmt: skip
         with clock("write"):
             chains = clock.iterate("assemble", assembly.recorded(items))
-            target.write_chains(chains, sink, assembly.info, **run.write_options)
+            target.write_chains(
+                chains, sink, assembly.info, executor=writer, progress=run.progress,
+                **run.write_options,
+            )  # fmt: skip
         tally = _reader_skipped(
             scene, skipped, run.warn if assembly.records and not run.strict else _quiet
         )
@@ -478,6 +493,35 @@ def convert(
         if report_sink is not None:
             _stage_report(report_sink, report)
     return report
+
+
+def _resume_key(inputs: Sequence[str | Path], run: RunOptions) -> str:
+    """The key under which a folder output is staged, so that an interrupted run's folder is
+    taken up again by the same command: a hash of the inputs (path, size, modification time)
+    and of every option that changes the output (not of ``workers``, which does not)."""
+    what = {
+        "version": __version__,
+        "inputs": [(str(Path(path).resolve()), _stat(path)) for path in inputs],
+        "chain": options_record(run.chain),
+        "hlod": asdict(run.hlod) if run.hlod is not None else None,
+        "backend": run.backend,
+        "read": dict(run.read_options),
+        "write": dict(run.write_options),
+        "limits": asdict(run.limits),
+        "strict": run.strict,
+    }
+    text = json.dumps(what, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _stat(path: str | Path) -> tuple[int, int] | None:
+    """Size and modification time (ns) of ``path``; ``None`` where it cannot be read (its
+    reader says why)."""
+    try:
+        found = os.stat(path)
+    except OSError:
+        return None
+    return found.st_size, found.st_mtime_ns
 
 
 def _checked(sink: FileSink | DirectorySink, output_path: str | Path, step: Step) -> None:

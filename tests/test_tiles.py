@@ -249,14 +249,23 @@ def test_a_large_tree_is_split_into_external_tilesets(
     assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]
 
 
-def test_output_is_byte_identical_across_runs_and_worker_counts(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    "name, flags",
+    [("multi_lod", ()), pytest.param("kit", ("--hlod", "50"), marks=pytest.mark.slow)],
+)
+def test_output_is_byte_identical_across_runs_and_worker_counts(
+    tmp_path: Path, name: str, flags: tuple[str, ...]
+) -> None:
+    """The same files for any worker count, tiles made in worker processes included (KIT in
+    50 m cells: 8 tiles, some made while others are in flight)."""
+
     def files(out: Path) -> dict[str, bytes]:
         return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*"))
                 if p.is_file()}  # fmt: skip
 
-    one = convert("multi_lod", tmp_path / "one").parent
-    again = convert("multi_lod", tmp_path / "again").parent
-    two = convert("multi_lod", tmp_path / "two", "--workers", "2").parent
+    one = convert(name, tmp_path / "one", *flags).parent
+    again = convert(name, tmp_path / "again", *flags).parent
+    two = convert(name, tmp_path / "two", *flags, "--workers", "2").parent
     assert files(one) == files(again) == files(two)
     assert len(files(one)) > 2
 
@@ -338,6 +347,12 @@ def test_an_unwritable_folder_is_refused(tmp_path: Path) -> None:
 def test_other_json_names_are_a_usage_error(tmp_path: Path) -> None:
     result = run(*inputs("multi_lod"), "-o", tmp_path / "city.json", *RD_NAP, *FAST)
     assert_one_line_error(result, 2, "tileset.json")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_missing_input_is_one_line_with_nothing_written(tmp_path: Path) -> None:
+    result = run(tmp_path / "none.city.json", "-o", tmp_path / "out" / "tileset.json")
+    assert_one_line_error(result, 1, "none.city.json", "no such file")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -463,3 +478,47 @@ def test_the_tileset_states_the_vertical_datum_of_several_inputs(
     extras = json.loads(converted("sig3d").read_text())["asset"]["extras"]["lodconvert"]
     assert extras["crs"] == "EPSG:25832 + EPSG:5783"
     assert extras["heights"].startswith("DHHN92 height (EPSG:5783): taken as heights above")
+
+
+def test_a_district_over_two_utm_zones_is_placed_within_a_millimetre(tmp_path: Path) -> None:
+    """Buildings either side of 12° E, in files of UTM 32 and UTM 33 (EPSG:25832/25833): the
+    second file is reprojected into the first's zone, past its edge, and every vertex still
+    lies within 1 mm of pyproj's ECEF of its own file's coordinates."""
+    expected, paths = [], []
+    for zone, lon in (("25832", 11.9995), ("25833", 12.0005)):
+        to_utm = pyproj.Transformer.from_crs("EPSG:4326", f"EPSG:{zone}", always_xy=True)
+        x0, y0 = to_utm.transform(lon, 48.1)
+        vertices = []
+        objects = {}
+        for k in range(3):
+            x, y = round(x0) + 30 * k, round(y0)
+            base = len(vertices)
+            corners = [(x, y), (x + 10, y), (x + 10, y + 8), (x, y + 8)]
+            vertices += [[cx, cy, 520] for cx, cy in corners]
+            vertices += [[cx, cy, 532] for cx, cy in corners]
+            rings = [[[base + i for i in ring]] for ring in (
+                (0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)
+            )]  # fmt: skip
+            objects[f"b{zone}_{k}"] = {"type": "Building", "geometry": [
+                {"type": "Solid", "lod": "1", "boundaries": [rings]}
+            ]}  # fmt: skip
+        metadata = {"referenceSystem": f"https://www.opengis.net/def/crs/EPSG/0/{zone}"}
+        path = tmp_path / f"utm{zone}.city.json"
+        path.write_text(json.dumps(city(objects, vertices, metadata=metadata)))
+        paths.append(path)
+        to_ecef = pyproj.Transformer.from_crs(pyproj_crs(f"EPSG:{zone}", None), "EPSG:4978",
+                                              always_xy=True)  # fmt: skip
+        expected.append(np.stack(to_ecef.transform(*np.array(vertices, float).T), axis=1))
+    tileset = tmp_path / "out" / "tileset.json"
+    result = run(*paths, "-o", tileset, *FAST)
+    assert result.returncode == 0, result.stderr
+    placed, ids = [], []
+    for tile, frame, _ in tiles(json.loads(tileset.read_text())["root"], np.eye(4), tileset):
+        if tile.get("content", {}).get("uri", "").endswith("_finest.glb"):
+            document, blob = read_glb(tileset.parent / tile["content"]["uri"])
+            placed.append(frame_points(frame, _positions(document, blob)))
+            ids += [row["id"] for row in features(document, blob)]
+    assert sorted(ids) == [f"b{zone}_{k}" for zone in ("25832", "25833") for k in range(3)]
+    ours, wanted = np.concatenate(placed), np.concatenate(expected)
+    assert cKDTree(wanted).query(ours)[0].max() <= 1e-3
+    assert cKDTree(ours).query(wanted)[0].max() <= 1e-3

@@ -63,7 +63,7 @@ FORMAT = Format(
     suffixes=(".json",),
     write=write_tileset,
     check=check_tileset,
-    write_options=("sse",),
+    write_options=("sse", "executor", "progress"),
     output_folder=output_folder,
 )
 

@@ -1,5 +1,9 @@
 """The tileset writer: LOD parents and objects (:func:`~lodconvert.pipeline.iter_chains` with
 cells) → a tile tree, one GLB per tile (:mod:`.content`), placed in ECEF (:mod:`.placement`).
+Each tile's GLB is a :class:`~.task.TileTask` run by the run's executor (in worker processes
+with ``--workers``); results come back in order, so the tree is the same for any worker count.
+In a staging folder an interrupted run of the same inputs and options left, each tile whose
+file is whole and of the same key is kept (:mod:`.task`).
 
 Tree: the root (no content) holds one tile per coarsest cell and, beside them, the objects no
 cell admitted. A cell's tile shows its far level; its children are its finer cells' tiles and,
@@ -15,18 +19,20 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Iterator
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ...errors import UsageError
+from ...errors import LodConvertError, UsageError
 from ...model import CellChain, LodChain, Mesh
 from .. import OutputInfo
-from .content import mesh_glb, points_glb
 from .metadata import Feature
 from .placement import Placement, world_to_frame
+from .task import TileResult, TileTask, Where
 
 DEFAULT_SSE = 16.0
 """CesiumJS's default maximumScreenSpaceError."""
@@ -36,17 +42,15 @@ tileset of its own (``tiles/NAME.json``)."""
 MARGIN = 0.001
 """Metres a bounding box is grown by on every side (float32 content rounding, flat content)."""
 TILES = "tiles"
-# glTF content is y-up; 3D Tiles turns it z-up: (x, y, z) -> (x, -z, y). ENU (e, n, u) is
-# therefore written as (e, u, -n).
-_ENU_TO_GLTF = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 
 
 @dataclass
 class Tile:
-    """One tile: its ENU frame in ECEF (``frame``, 4×4), its content's box in that frame
-    (``box``: min and max corners; ``None``: no content), its children and geometric error."""
+    """One tile: its ENU frame in ECEF (``frame``, 4×4; ``None`` until its content's task has
+    run), its content's box in that frame (``box``: min and max corners; ``None``: no
+    content), its children and geometric error."""
 
-    frame: np.ndarray
+    frame: np.ndarray | None
     box: np.ndarray | None
     error: float
     content: str | None = None
@@ -56,6 +60,7 @@ class Tile:
     def corners(self) -> np.ndarray:
         """The 8 corners (ECEF) of this tile's bounding volume."""
         low, high = self.volume()
+        assert self.frame is not None
         grid = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
         local = low + grid * (high - low)
         return local @ self.frame[:3, :3].T + self.frame[:3, 3]
@@ -63,6 +68,7 @@ class Tile:
     def volume(self) -> np.ndarray:
         """Min and max corners (in this frame) enclosing the content and every child."""
         boxes = [] if self.box is None else [self.box]
+        assert self.frame is not None
         for child in self.children:
             inside = world_to_frame(self.frame, child.corners())
             boxes.append(np.stack([inside.min(axis=0), inside.max(axis=0)]))
@@ -87,11 +93,6 @@ def _colors(mesh: Mesh) -> np.ndarray:
     )
 
 
-def _bounds(local: np.ndarray) -> np.ndarray:
-    """Min and max corners of points (n, 3)."""
-    return np.stack([local.min(axis=0), local.max(axis=0)])
-
-
 def _feature(chain: LodChain) -> Feature:
     """An object's feature: its id, its ``type`` attribute and its other attributes."""
     attributes = {k: v for k, v in chain.metadata.items() if k not in ("id", "type")}
@@ -101,12 +102,26 @@ def _feature(chain: LodChain) -> Feature:
 
 class TilesetWriter:
     """Writes the tiles of the items it is given into a :class:`~lodconvert.sinks.DirectorySink`
-    and, at the end, ``tileset.json``."""
+    (each tile's GLB by ``executor``; in this process without one) and, at the end,
+    ``tileset.json``; ``progress`` hears how many tiles an interrupted run's folder gave."""
 
-    def __init__(self, sink: Any, info: OutputInfo, sse: float) -> None:
+    def __init__(
+        self,
+        sink: Any,
+        info: OutputInfo,
+        sse: float,
+        executor: Any = None,
+        progress: Callable[[str], None] | None = None,
+    ) -> None:
         self.sink, self.info, self.sse = sink, info, sse
+        self.executor, self.progress = executor, progress
         self.placement = Placement(info.georef, info.crs, info.source)
+        georef = info.georef
+        named = f"{self.placement.label}|{georef.frame}|{georef.crs.to_wkt()}"
+        self.where = Where(georef, info.crs, info.source, named)
+        self.folder = Path(sink.staged.temp) / TILES
         self.point_scale: float | None = None
+        self._queued: list[tuple[Tile, TileTask]] = []
 
     def error(self, distance: float) -> float:
         """The geometric error of content that switches at ``distance``."""
@@ -122,48 +137,63 @@ class TilesetWriter:
         """The ENU frame at the centre of ECEF points' bounding box."""
         return self.placement.enu_frame((ecef.min(axis=0) + ecef.max(axis=0)) / 2.0)
 
-    def _local(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """A tile's frame for scene points (n, 3), and the points in it (ENU, float64)."""
-        ecef = self.placement.ecef(points)
-        frame = self._frame_of(ecef)
-        return frame, world_to_frame(frame, ecef)
+    def _tile(
+        self,
+        name: str,
+        error: float,
+        vertices: np.ndarray,
+        colors: np.ndarray,
+        faces: np.ndarray | None = None,
+        feature_ids: np.ndarray | None = None,
+        features: tuple[Feature, ...] = (),
+    ) -> Tile:
+        """A tile whose content ``name`` (``.glb``) is made by a task queued for the executor
+        (its frame and box are filled in from the task's result); see :class:`TileTask`."""
+        task = TileTask(
+            f"{name}.glb", str(self.folder), self.where, vertices, colors, faces, feature_ids,
+            features, self.info.generator,
+        )  # fmt: skip
+        tile = Tile(None, None, error, task.name)
+        self._queued.append((tile, task))
+        return tile
 
     def mesh_tile(self, name: str, entries: list[tuple[LodChain, Mesh]], error: float) -> Tile:
         """A tile of the meshes of ``entries`` (each a chain and one of its levels' meshes),
         one feature per chain."""
         placed = [chain.in_scene(mesh) for chain, mesh in entries]
         starts = np.cumsum([0] + [mesh.vertex_count for mesh in placed])
-        frame, local = self._local(np.concatenate([mesh.vertices for mesh in placed]))
-        data = mesh_glb(
-            local @ _ENU_TO_GLTF.T,
+        return self._tile(
+            name,
+            error,
+            np.concatenate([mesh.vertices for mesh in placed]),
+            np.concatenate([_colors(mesh) for mesh in placed]),
             np.concatenate(
                 [mesh.faces + start for mesh, start in zip(placed, starts[:-1], strict=True)]
             ),
-            np.concatenate([_colors(mesh) for mesh in placed]),
             np.repeat(np.arange(len(placed)), np.diff(starts)),
-            [_feature(chain) for chain, _ in entries],
-            self.info.generator,
+            tuple(_feature(chain) for chain, _ in entries),
         )
-        return Tile(frame, _bounds(local), error, self._write(f"{name}.glb", data))
 
     def far_tile(self, cell: CellChain, children: list[Tile]) -> Tile:
         """A cell's tile: its far level, switching to ``children`` at its first cutoff."""
         far = cell.far
         extras: dict[str, Any] = {"cell": cell.cell_id, "tier": cell.tier, "kind": far.kind}
+        error = self.error(cell.cutoffs[0])
         if far.points is not None:
-            frame, local = self._local(far.points.positions + cell.origin)
-            data = points_glb(local @ _ENU_TO_GLTF.T, far.points.colors, self.info.generator)
+            tile = self._tile(cell.cell_id, error, far.points.positions + cell.origin,
+                              far.points.colors)  # fmt: skip
             if far.params is not None:
                 scale = far.params.point_size / self.sse
                 self.point_scale = max(self.point_scale or 0.0, scale)
                 extras.update(point_size_px=far.params.point_size, spacing=far.spacing)
         else:
             assert far.mesh is not None
-            frame, local = self._local(far.mesh.vertices + cell.origin)
-            gltf = local @ _ENU_TO_GLTF.T
-            data = mesh_glb(gltf, far.mesh.faces, _colors(far.mesh), None, [], self.info.generator)
-        content = self._write(f"{cell.cell_id}.glb", data)
-        return Tile(frame, _bounds(local), self.error(cell.cutoffs[0]), content, children, extras)
+            tile = self._tile(
+                cell.cell_id, error, far.mesh.vertices + cell.origin, _colors(far.mesh),
+                far.mesh.faces,
+            )  # fmt: skip
+        tile.children, tile.extras = children, extras
+        return tile
 
     def objects_tile(self, name: str, chains: list[LodChain]) -> Tile:
         """The tile of objects drawn with their own levels: their coarsest mesh levels, refined
@@ -206,9 +236,38 @@ class TilesetWriter:
         if pending:
             yield self.objects_tile(f"{last}_beside", pending)
 
+    def _placed(self, items: Iterable[LodChain | CellChain]) -> list[Tile]:
+        """The root's children (:meth:`tops`), every tile's content made by its task."""
+        children: list[Tile] = []
+        waiting: deque[Tile] = deque()
+
+        def tasks() -> Iterator[TileTask]:
+            for top in self.tops(items):
+                children.append(top)
+                for tile, task in self._queued:
+                    waiting.append(tile)
+                    yield task
+                self._queued.clear()
+
+        results: Iterable[TileResult] = (
+            self.executor.results(tasks())
+            if self.executor is not None
+            else (task.run() for task in tasks())
+        )
+        made = reused = 0
+        for result in results:
+            if result.error is not None:
+                raise LodConvertError(result.error)
+            tile = waiting.popleft()
+            tile.frame, tile.box = result.frame, result.box
+            made, reused = made + 1, reused + result.reused
+        if self.sink.resumed and self.progress is not None:
+            self.progress(f"{reused} of {made} tiles kept from an interrupted run's folder")
+        return children
+
     def write(self, items: Iterable[LodChain | CellChain], name: str) -> None:
         """Every item's tiles, then the tileset JSON (``name``) and its external tilesets."""
-        children = list(self.tops(items))
+        children = self._placed(items)
         if not children:  # nothing converted: the run fails and says why
             return
         ecef = np.stack([c.frame[:3, 3] for c in children])
@@ -221,6 +280,22 @@ class TilesetWriter:
             text = _dumped(self._tileset(root, None, f"{TILES}/", external=True))
         with self.sink.file(name) as handle:
             handle.write(text)
+        if self.sink.resumed:
+            self._drop_stale(children)
+
+    def _drop_stale(self, children: list[Tile]) -> None:
+        """Remove the files of the tiles folder that an interrupted run wrote and this one
+        does not refer to."""
+        kept: set[str] = set()
+        stack = list(children)
+        while stack:
+            tile = stack.pop()
+            kept.update([tile.content] if tile.content else [])
+            kept.add(f"{(tile.content or 'tile').removesuffix('.glb')}.json")
+            stack.extend(tile.children)
+        for path in self.folder.iterdir():
+            if path.name not in kept:
+                path.unlink()
 
     def _asset(self) -> dict[str, Any]:
         """The tileset's ``asset``: version, generator, and in ``extras.lodconvert`` the
@@ -322,10 +397,16 @@ def _dumped(tileset: dict[str, Any]) -> bytes:
 
 
 def write_tileset(
-    chains: Iterable[LodChain | CellChain], sink: Any, info: OutputInfo, sse: float = DEFAULT_SSE
+    chains: Iterable[LodChain | CellChain],
+    sink: Any,
+    info: OutputInfo,
+    sse: float = DEFAULT_SSE,
+    executor: Any = None,
+    progress: Callable[[str], None] | None = None,
 ) -> None:
     """The registry's ``write``: the tileset of ``chains`` (LOD parents and objects, as
-    :func:`~lodconvert.pipeline.iter_chains` yields them with cells) into ``sink``."""
+    :func:`~lodconvert.pipeline.iter_chains` yields them with cells) into ``sink``, each tile's
+    GLB made by ``executor`` (an :class:`~lodconvert.tasks.Executor`; ``None``: here)."""
     if not (math.isfinite(sse) and sse > 0):
         raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
-    TilesetWriter(sink, info, sse).write(chains, "tileset.json")
+    TilesetWriter(sink, info, sse, executor, progress).write(chains, "tileset.json")
