@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 from collections import Counter
 from typing import Any
 
@@ -65,6 +66,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="processes baking objects (default: the cores this process may use; 1 bakes in "
         "the main process)",
+    )
+    bake.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="bake on the workers of a dask.distributed cluster: its scheduler's address "
+        "(tcp://host:port) or scheduler file; instead of --workers (see README)",
     )
     add_range_options(parser)
     group = parser.add_argument_group("LOD parents (cities)")
@@ -137,10 +144,17 @@ def _hlod_line(hlod: dict[str, Any]) -> str:
     )
 
 
+def _default_workers(args: argparse.Namespace) -> int:
+    """``--workers`` when not given: none of this machine's with ``--scheduler`` (1: the
+    main process only reads and writes), else the cores this process may use."""
+    from ..tasks import default_workers
+
+    return 1 if args.scheduler else default_workers()
+
+
 def run(args: argparse.Namespace, console: Console) -> int:
     """Convert, print what was made, return the exit code."""
     from ..pipeline import RunOptions, convert
-    from ..tasks import default_workers
 
     _check_switching(args)
     options = chain_options(args)
@@ -163,10 +177,13 @@ def run(args: argparse.Namespace, console: Console) -> int:
         outputs.file(page).write_bytes(text.encode("utf-8"))
         report["page"] = str(page)
 
+    if args.scheduler and not args.debug:
+        logging.disable()  # dask.distributed logs what goes wrong: the error line says it
     run = RunOptions(
         options,
         backend=args.backend,
-        workers=args.workers if args.workers is not None else default_workers(),
+        workers=args.workers if args.workers is not None else _default_workers(args),
+        scheduler=args.scheduler,
         progress=console.progress,
         step=console.step,
         warn=console.warn,
