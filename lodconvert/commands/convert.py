@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 from collections import Counter
+from collections.abc import Iterator
 from typing import Any
 
 from ..bake import BACKENDS
@@ -144,6 +146,19 @@ def _hlod_line(hlod: dict[str, Any]) -> str:
     )
 
 
+@contextlib.contextmanager
+def _logs_off(off: bool) -> Iterator[None]:
+    """Log records (dask.distributed's, of what goes wrong: the error line says it) dropped
+    meanwhile, when ``off``."""
+    previous = logging.root.manager.disable
+    if off:
+        logging.disable()
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+
+
 def _default_workers(args: argparse.Namespace) -> int:
     """``--workers`` when not given: none of this machine's with ``--scheduler`` (1: the
     main process only reads and writes), else the cores this process may use."""
@@ -177,8 +192,6 @@ def run(args: argparse.Namespace, console: Console) -> int:
         outputs.file(page).write_bytes(text.encode("utf-8"))
         report["page"] = str(page)
 
-    if args.scheduler and not args.debug:
-        logging.disable()  # dask.distributed logs what goes wrong: the error line says it
     run = RunOptions(
         options,
         backend=args.backend,
@@ -195,7 +208,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
         also=stage_page if args.html else None,
         limits=limits,
     )
-    report = convert(args.input, args.output, run)
+    with _logs_off(bool(args.scheduler) and not args.debug):
+        report = convert(args.input, args.output, run)
     objects = report["objects"]
     if len(objects) <= OBJECT_LINES or args.verbose:
         for obj in objects:
