@@ -403,13 +403,15 @@ Also = Callable[[Outputs, FileSink, dict[str, Any]], None]
 @dataclass(frozen=True)
 class RunOptions:
     """How one conversion runs: the chain options, the baker and how many processes bake
-    (``workers``: 1 bakes in this process), the report file, the readers' and writer's
+    (``workers``: 1 bakes in this process) or the dask scheduler whose workers do
+    (``scheduler``: an address or a scheduler file), the report file, the readers' and writer's
     options, limits, ``strict`` (a broken object fails the run), LOD parents (``hlod``), what
     hears of progress, warnings and steps, and ``also`` (more outputs to stage)."""
 
     chain: ChainOptions = field(default_factory=ChainOptions)
     backend: str = "auto"
     workers: int = 1
+    scheduler: str | None = None
     report_path: str | Path | None = None
     read_options: Mapping[str, Any] = field(default_factory=dict)
     write_options: Mapping[str, Any] = field(default_factory=dict)
@@ -428,6 +430,8 @@ class RunOptions:
             self.hlod.check()
         if self.workers < 1:
             raise UsageError(f"must be at least 1, got {self.workers}", "workers")
+        if self.scheduler is not None:
+            _check_scheduler(self.scheduler, self.workers)
 
 
 def convert(
@@ -542,11 +546,30 @@ def _stage_report(sink: FileSink, report: dict[str, Any]) -> None:
             stream.write(piece.encode())
 
 
-def _executor(
-    run: RunOptions, backend: Backend, objects: int | None
-) -> PoolExecutor | SerialExecutor:
-    """Where the run's objects are baked: in ``run.workers`` processes, each with a backend
-    like ``backend``, or in this one with ``backend`` (one worker, or one object)."""
+def _check_scheduler(scheduler: str, workers: int) -> None:
+    """:class:`UsageError` unless dask.distributed is installed, ``scheduler`` is an address or
+    a scheduler file, and ``workers`` is 1 (the cluster's workers bake)."""
+    if workers != 1:
+        raise UsageError(
+            "is for this machine's processes; with a dask scheduler, its workers bake", "workers"
+        )
+    try:
+        from .dask_executor import scheduler_address
+    except ImportError:
+        raise UsageError(
+            "needs dask.distributed: pip install 'lodconvert[dask]'", "scheduler"
+        ) from None
+    scheduler_address(scheduler)
+
+
+def _executor(run: RunOptions, backend: Backend, objects: int | None) -> Executor:
+    """Where the run's objects are baked: by the workers of ``run.scheduler``, in
+    ``run.workers`` processes, each with a backend like ``backend``, or in this one with
+    ``backend`` (one worker, or one object)."""
+    if run.scheduler is not None:
+        from .dask_executor import DaskExecutor
+
+        return DaskExecutor(run.scheduler, backend.name)
     if run.workers == 1 or objects == 1:
         return SerialExecutor(backend, run.progress)
     return PoolExecutor(run.workers, backend.name, run.progress)

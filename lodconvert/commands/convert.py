@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
+import logging
 import math
 from collections import Counter
+from collections.abc import Iterator
 from typing import Any
 
 from ..bake import BACKENDS
@@ -71,6 +74,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="N",
         help="processes baking objects (default: the cores this process may use; 1 bakes in "
         "the main process)",
+    )
+    bake.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="bake on the workers of a dask.distributed cluster: its scheduler's address "
+        "(tcp://host:port) or scheduler file; instead of --workers (see README)",
     )
     add_range_options(parser)
     group = parser.add_argument_group("LOD parents (cities)")
@@ -162,10 +171,30 @@ def _hlod_line(hlod: dict[str, Any]) -> str:
     )
 
 
+@contextlib.contextmanager
+def _logs_off(off: bool) -> Iterator[None]:
+    """Log records (dask.distributed's, of what goes wrong: the error line says it) dropped
+    meanwhile, when ``off``."""
+    previous = logging.root.manager.disable
+    if off:
+        logging.disable()
+    try:
+        yield
+    finally:
+        logging.disable(previous)
+
+
+def _default_workers(args: argparse.Namespace) -> int:
+    """``--workers`` when not given: none of this machine's with ``--scheduler`` (1: the
+    main process only reads and writes), else the cores this process may use."""
+    from ..tasks import default_workers
+
+    return 1 if args.scheduler else default_workers()
+
+
 def run(args: argparse.Namespace, console: Console) -> int:
     """Convert, print what was made, return the exit code."""
     from ..pipeline import RunOptions, convert
-    from ..tasks import default_workers
 
     _check_switching(args)
     _check_tiles(args)
@@ -195,7 +224,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
     run = RunOptions(
         options,
         backend=args.backend,
-        workers=args.workers if args.workers is not None else default_workers(),
+        workers=args.workers if args.workers is not None else _default_workers(args),
+        scheduler=args.scheduler,
         progress=console.progress,
         step=console.step,
         warn=console.warn,
@@ -207,7 +237,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
         also=stage_page if args.html else None,
         limits=limits,
     )
-    report = convert(args.input, args.output, run)
+    with _logs_off(bool(args.scheduler) and not args.debug):
+        report = convert(args.input, args.output, run)
     objects = report["objects"]
     if len(objects) <= OBJECT_LINES or args.verbose:
         for obj in objects:

@@ -1,0 +1,321 @@
+"""Baking on a dask.distributed cluster (``--scheduler ADDRESS``): the bytes of one worker on a
+2-worker ``LocalCluster``, broken objects reported the same, a killed worker's task run again
+and then reported, an unreachable scheduler or a bad scheduler file failing at once, an
+interrupted run cancelling its tasks and leaving nothing."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+import trimesh
+
+from lodconvert.bake import get_backend
+from lodconvert.chain import ChainOptions
+from lodconvert.errors import LodConvertError
+from lodconvert.model import Scene
+from lodconvert.pipeline import iter_chains
+from lodconvert.tasks import Executor, SerialExecutor
+
+from .conftest import ROOT, SHARED, shared_data
+from .test_workers import TUM, _KillsItsWorker, _lodconvert, _messages, _scene, _untimed
+
+distributed = pytest.importorskip("distributed")
+dask = pytest.importorskip("dask")
+
+from lodconvert import dask_executor  # noqa: E402  (needs distributed)
+from lodconvert.dask_executor import DaskExecutor  # noqa: E402
+
+CITYJSON = SHARED / "data" / "cityjson" / "multi_lod_10bldg.city.json"
+
+
+@pytest.fixture(scope="module")
+def cluster() -> Iterator[Any]:
+    """Two worker processes of one thread on 127.0.0.1; the scheduler gives a task up after
+    its second worker dies (as ``--workers`` does) and sends each worker one task at a time."""
+    settings = {
+        "distributed.scheduler.allowed-failures": 1,
+        "distributed.scheduler.worker-saturation": 1.0,
+    }
+    with (
+        dask.config.set(settings),
+        distributed.LocalCluster(
+            processes=True,
+            n_workers=2,
+            threads_per_worker=1,
+            host="127.0.0.1",
+            dashboard_address=":0",
+        ) as local,
+    ):
+        yield local
+
+
+@pytest.fixture(scope="module")
+def address(cluster: Any) -> str:
+    return cluster.scheduler_address
+
+
+CASES = [
+    pytest.param(CITYJSON, ".x3d", (), id="cityjson-x3d"),
+    pytest.param(TUM, ".glb", (), id="tum-glb"),
+    pytest.param(TUM, ".x3d", ("--hlod", "250", "--switching", "prism"), id="tum-hlod-prism"),
+]
+
+
+@pytest.mark.parametrize(("source", "suffix", "options"), CASES)
+def test_a_cluster_writes_the_bytes_of_one_worker(
+    source: Path, suffix: str, options: tuple[str, ...], address: str, tmp_path: Path
+) -> None:
+    shared_data(source)
+    runs = {}
+    for where in (("--workers", "1"), ("--scheduler", address)):
+        out, report = tmp_path / f"{where[0][2:]}{suffix}", tmp_path / f"{where[0][2:]}.json"
+        run = _lodconvert(source, "-o", out, "--report", report, *where, *options)
+        assert run.returncode == 0, run.stderr
+        runs[where[0]] = (out.read_bytes(), json.loads(report.read_text()), run.stderr)
+    one, cluster = runs["--workers"], runs["--scheduler"]
+    assert cluster[0] == one[0]
+    assert _untimed(cluster[1]) == _untimed(one[1])
+    assert _messages(cluster[2]) == _messages(one[2])
+
+
+def _closed_port() -> int:
+    """A port on 127.0.0.1 that nothing listens on."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_an_unreachable_scheduler_fails_in_seconds_naming_it(tmp_path: Path) -> None:
+    address = f"tcp://127.0.0.1:{_closed_port()}"
+    started = time.monotonic()
+    run = _lodconvert(shared_data(CITYJSON), "-o", tmp_path / "out.x3d", "--scheduler", address)
+    assert time.monotonic() - started < 30
+    assert run.returncode == 1, run.stderr
+    last = run.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"lodconvert: error: {address}: cannot reach the dask scheduler")
+    assert "Traceback" not in run.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_scheduler_file_gives_the_address(address: str, tmp_path: Path) -> None:
+    scheduler_file = tmp_path / "scheduler.json"
+    scheduler_file.write_text(json.dumps({"type": "Scheduler", "address": address}))
+    out = tmp_path / "out.x3d"
+    run = _lodconvert(shared_data(CITYJSON), "-o", out, "--scheduler", scheduler_file, "-q")
+    assert run.returncode == 0, run.stderr
+    assert out.stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("text", "options", "says"),
+    [
+        ("absent.json", (), "absent.json: neither a scheduler address"),
+        ("notes.txt", (), "notes.txt: a scheduler file must be JSON"),
+        ("other.json", (), "other.json: the scheduler file names no address"),
+        ("tcp://127.0.0.1:1", ("--workers", "2"), "--workers is for this machine's processes"),
+    ],
+    ids=["absent", "not-json", "no-address", "with-workers"],
+)
+def test_a_bad_scheduler_option_is_a_usage_error(
+    text: str, options: tuple[str, ...], says: str, tmp_path: Path
+) -> None:
+    (tmp_path / "notes.txt").write_text("tcp://127.0.0.1:8786\n")
+    (tmp_path / "other.json").write_text('{"type": "Scheduler"}')
+    before = sorted(tmp_path.iterdir())
+    value = text if "://" in text else tmp_path / text
+    run = _lodconvert(
+        shared_data(CITYJSON), "-o", tmp_path / "out.x3d", "--scheduler", value, *options
+    )
+    assert run.returncode == 2, run.stderr
+    assert says in run.stderr.strip().splitlines()[-1]
+    assert sorted(tmp_path.iterdir()) == before
+
+
+def _baked(scene: Scene, executor: Executor) -> tuple[list[Any], list[str], list[dict[str, str]]]:
+    """The chains, warnings and skipped objects of ``scene`` baked by ``executor``."""
+    warnings: list[str] = []
+    skipped: list[dict[str, str]] = []
+    with executor:
+        chains = list(
+            iter_chains(
+                scene,
+                ChainOptions(),
+                get_backend("numpy"),
+                warn=warnings.append,
+                skipped=skipped,
+                executor=executor,
+            )
+        )
+    return chains, warnings, skipped
+
+
+def _levels(chains: list[Any]) -> list[tuple[str, list[int]]]:
+    """Each chain's object and its levels' counts."""
+    return [(chain.object_id, [level.count for level in chain.levels]) for chain in chains]
+
+
+def test_a_broken_object_in_a_batch_is_reported_as_with_one_worker(address: str) -> None:
+    one = _baked(_scene(broken="obj5"), SerialExecutor(get_backend("numpy")))
+    cluster = _baked(_scene(broken="obj5"), DaskExecutor(address, "numpy"))
+    assert _levels(cluster[0]) == _levels(one[0])
+    assert len(cluster[0]) == 7
+    assert cluster[1] == one[1] and any("obj5" in w and "skipped" in w for w in cluster[1])
+    assert (
+        cluster[2]
+        == one[2]
+        == [{"id": "obj5", "reason": "obj5: has NaN or infinite vertex coordinates"}]
+    )
+
+
+def _kill_first_taker(marker: str) -> None:
+    """Kill the process unpickling this (a worker taking the task) unless ``marker`` exists;
+    create it first, so that the task's next try runs."""
+    try:
+        os.close(os.open(marker, os.O_CREAT | os.O_EXCL))
+    except FileExistsError:
+        return
+    signal.raise_signal(signal.SIGKILL)
+
+
+class _KillsItsFirstWorker:
+    """An attribute whose first unpickling kills the worker doing it."""
+
+    def __init__(self, marker: Path) -> None:
+        self.marker = marker
+
+    def __reduce__(self) -> tuple[Any, tuple[str]]:
+        return _kill_first_taker, (str(self.marker),)
+
+
+def test_a_task_whose_worker_is_killed_runs_again_with_the_same_result(
+    address: str, tmp_path: Path
+) -> None:
+    one = _baked(_scene(), SerialExecutor(get_backend("numpy")))
+    scene = _scene()
+    scene.nodes[3].attributes["trap"] = _KillsItsFirstWorker(tmp_path / "killed")
+    cluster = _baked(scene, DaskExecutor(address, "numpy"))
+    assert (tmp_path / "killed").exists()  # a worker was killed
+    assert _levels(cluster[0]) == _levels(one[0])
+    assert cluster[2] == []
+
+
+def test_a_task_whose_workers_are_killed_twice_is_reported_and_the_rest_convert(
+    address: str,
+) -> None:
+    scene = _scene()
+    scene.nodes[0].attributes["trap"] = _KillsItsWorker()
+    chains, warnings, skipped = _baked(scene, DaskExecutor(address, "numpy"))
+    assert [c.object_id for c in chains] == [f"obj{i}" for i in range(1, 8)]
+    assert [entry["id"] for entry in skipped] == ["obj0"]
+    assert "the dask workers converting it died (2 tries)" in skipped[0]["reason"]
+    assert any("obj0" in w and "skipped" in w for w in warnings)
+
+
+def _scheduler_tasks(client: Any) -> list[str]:
+    """The keys of the tasks the scheduler holds."""
+    return client.run_on_scheduler(lambda dask_scheduler: list(dask_scheduler.tasks))
+
+
+@pytest.mark.parametrize(
+    ("sig", "code"), [(signal.SIGTERM, 143), (signal.SIGINT, 130)], ids=["sigterm", "sigint"]
+)
+def test_an_interrupted_run_cancels_its_tasks_and_leaves_nothing(
+    address: str, tmp_path: Path, sig: signal.Signals, code: int
+) -> None:
+    command, out = _slow_spheres(tmp_path, address)
+    with distributed.Client(address, set_as_default=False) as client:
+        with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=ROOT) as run:
+            _until_baking(client, run)
+            assert any(out.parent.iterdir())  # its staged output exists
+            run.send_signal(sig)
+            assert run.stderr is not None
+            rest = run.stderr.read()
+            assert run.wait() == code, rest
+        assert "Traceback" not in rest
+        assert list(out.parent.iterdir()) == []
+        deadline = time.monotonic() + 10
+        while _scheduler_tasks(client):  # cancelled: the scheduler forgets them
+            assert time.monotonic() < deadline, _scheduler_tasks(client)
+            time.sleep(0.1)
+
+
+def _slow_spheres(tmp_path: Path, scheduler: str) -> tuple[list[str], Path]:
+    """A command line baking two spheres slowly (seconds a level) on ``scheduler``, and the
+    output it writes into a folder of its own."""
+    source = tmp_path / "sphere.ply"
+    trimesh.creation.icosphere(subdivisions=5).export(source)
+    out = tmp_path / "out" / "spheres.glb"
+    out.parent.mkdir()
+    command = [
+        *(sys.executable, "-m", "lodconvert", str(source), str(source), "-o", str(out)),
+        *("--resolution", "1024,512,256", "--no-mesh", "--levels", "3", "--scheduler", scheduler),
+    ]
+    return command, out
+
+
+def _until_baking(client: Any, run: subprocess.Popen[str]) -> None:
+    """Wait until a worker of ``client``'s cluster runs a task of ``run``."""
+    deadline = time.monotonic() + 60
+    while not any(client.processing().values()):
+        assert run.poll() is None and time.monotonic() < deadline
+        time.sleep(0.05)
+
+
+@contextlib.contextmanager
+def _dask_command(*args: object) -> Iterator[subprocess.Popen[bytes]]:
+    """``dask ARGS`` (as the README starts a scheduler or a worker) running, killed at the
+    end."""
+    command = [sys.executable, "-m", "dask", *map(str, args)]
+    with subprocess.Popen(command, stderr=subprocess.DEVNULL, cwd=ROOT) as process:
+        try:
+            yield process
+        finally:
+            process.kill()
+
+
+def test_a_scheduler_lost_mid_run_ends_it_with_one_line(tmp_path: Path) -> None:
+    scheduler_file = tmp_path / "scheduler.json"
+    with (
+        _dask_command("scheduler", "--host", "127.0.0.1", "--port", 0, "--no-dashboard",
+                      "--scheduler-file", scheduler_file) as scheduler,
+        _dask_command("worker", "--scheduler-file", scheduler_file, "--nthreads", 1,
+                      "--no-dashboard"),
+        distributed.Client(scheduler_file=str(scheduler_file), timeout=30) as client,
+    ):  # fmt: skip
+        client.wait_for_workers(1, timeout=30)
+        command, out = _slow_spheres(tmp_path, str(scheduler_file))
+        with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=ROOT) as run:
+            _until_baking(client, run)
+            scheduler.kill()
+            assert run.stderr is not None
+            stderr = run.stderr.read()
+            assert run.wait(60) == 1, stderr
+    address = json.loads(scheduler_file.read_text())["address"]
+    assert stderr.splitlines() == [f"lodconvert: error: {address}: lost the dask scheduler"]
+    assert list(out.parent.iterdir()) == []
+
+
+def test_a_scheduler_without_workers_fails_naming_it(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(dask_executor, "WORKERS_SECONDS", 0.5)
+    with (
+        distributed.LocalCluster(
+            processes=False, n_workers=0, host="127.0.0.1", protocol="tcp", dashboard_address=":0"
+        ) as empty,
+        pytest.raises(LodConvertError) as failed,
+        DaskExecutor(empty.scheduler_address, "numpy"),
+    ):
+        pass
+    assert str(failed.value) == (
+        f"{empty.scheduler_address}: the dask scheduler has no worker (none joined in 0.5 s)"
+    )
