@@ -4,7 +4,7 @@
 #   Python: lodconvert[test] in .venv
 #   npm, in ./node_modules: gltf-validator; playwright-core and the viewers the browser tests
 #   drive (x_ite, x3dom, three, @babylonjs/core + loaders; @babylonjs/loaders has no 9.34.0)
-# Extra arguments go to pytest, e.g. scripts/test.sh -m 'not slow' for the quick suite only.
+# pytest lists the 40 slowest tests at the end. Extra arguments go to pytest, e.g. scripts/test.sh -m 'not slow' for the quick suite only.
 # LODCONVERT_FUZZ_SECONDS (default 3) is how long tests/fuzz fuzzes the readers (.ci/run: 150).
 source "$(dirname "$0")/_env.sh"
 apt_install libegl1 libgl1 libgl1-mesa-dri chromium
@@ -15,7 +15,7 @@ npm_install_pinned gltf-validator@2.0.0-dev.3.10 playwright-core@1.65.1 x_ite@15
 export LODCONVERT_REQUIRE_VALIDATORS=1 LODCONVERT_REQUIRE_GL=1 LODCONVERT_REQUIRE_BROWSER=1
 set +e
 if [ $# -eq 0 ]; then set -- -m "slow or not slow"; fi
-.venv/bin/python -m pytest "$@"
+.venv/bin/python -m pytest --durations=40 "$@"
 status=$?
 [ $status -eq 5 ] && { echo "pytest collected no tests" >&2; exit 1; }
 exit $status
