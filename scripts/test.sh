@@ -4,7 +4,8 @@
 #   Python: lodconvert[test] in .venv
 #   npm, in ./node_modules: gltf-validator; playwright-core and the viewers the browser tests
 #   drive (x_ite, x3dom, three, @babylonjs/core + loaders; @babylonjs/loaders has no 9.34.0)
-# pytest lists the 40 slowest tests at the end. Extra arguments go to pytest, e.g. scripts/test.sh -m 'not slow' for the quick suite only.
+# pytest lists the 40 slowest tests at the end. Extra arguments go to pytest, e.g.
+# scripts/test.sh -m 'not slow' for the quick suite only.
 # LODCONVERT_FUZZ_SECONDS (default 3) is how long tests/fuzz fuzzes the readers (.ci/run: 150).
 source "$(dirname "$0")/_env.sh"
 apt_install libegl1 libgl1 libgl1-mesa-dri chromium
