@@ -253,8 +253,9 @@ class PoolExecutor(Executor):
                     return
                 self._dispatch(workers, waiting, submitted)
                 self._collect(workers, waiting, submitted, tries, done)
-        finally:
+        except BaseException:  # an error, or the results left unread: stop the workers
             self.close()
+            raise
 
     def _dispatch(
         self, workers: list[_Worker], waiting: deque[int], submitted: dict[int, BakeTask]
