@@ -442,11 +442,16 @@ def convert(
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = outputs.file(output_path)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
+        spread = {"spread": run.workers > 1 and len(inputs) == 1}
         with clock("read"):
-            scene, crs_record = read_inputs(inputs, run.read_options, run.limits, sources, run.warn)
+            scene, crs_record = read_inputs(
+                inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
+            )
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(run.backend)
         executor = stack.enter_context(_executor(run, baker, _object_count(scene)))
+        if scene.spread is not None:
+            scene.spread(executor.results, run.progress)
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         skipped: list[dict[str, str]] = []
         items = iter_chains(

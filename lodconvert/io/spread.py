@@ -1,0 +1,49 @@
+"""What the readers that read a city in worker processes share: how many bytes of input a task
+holds (sized for :data:`TASK_SECONDS` of reading, as measured so far) and how what a worker
+counted is added to the file's tally. The tasks themselves hold bytes only (no path, so that a
+worker needs no shared file system): :mod:`.citygml.parallel`, :mod:`.cityjson.parallel`."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Iterator
+from typing import Any
+
+from .geometry_checks import InputTally
+
+TASK_SECONDS = 0.1
+"""Reading a task is sized for."""
+MIN_BYTES, MAX_BYTES = 1 << 16, 1 << 24
+"""Bytes of input a task holds at least (but for the last) and at most."""
+
+Results = Callable[[Iterable[Any]], Iterator[Any]]
+"""An executor's ``results``: tasks in, their results out, in order."""
+
+
+class Sizer:
+    """The bytes a task should hold, from the seconds a byte took to read so far."""
+
+    def __init__(self) -> None:
+        self.seconds_per_byte = 0.0
+
+    @property
+    def timed(self) -> bool:
+        return self.seconds_per_byte > 0
+
+    def took(self, seconds: float, size: int) -> None:
+        """Reading ``size`` bytes took ``seconds``."""
+        self.seconds_per_byte = seconds / size
+
+    def wanted(self) -> int:
+        """The bytes a task should hold (1 until reading has been timed)."""
+        if not self.seconds_per_byte:
+            return 1
+        return int(min(MAX_BYTES, max(MIN_BYTES, TASK_SECONDS / self.seconds_per_byte)))
+
+
+def add_tally(tally: InputTally, part: InputTally) -> None:
+    """Add what a worker's reading counted (``part``) to the file's ``tally``; the file's
+    limits are checked against the sum (:class:`~lodconvert.errors.InputError`)."""
+    tally.count(part.vertices, part.faces)
+    tally.dropped_faces += part.dropped_faces
+    tally.dropped_by_object.update(part.dropped_by_object)
+    tally.skipped.extend(part.skipped)
