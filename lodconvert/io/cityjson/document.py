@@ -18,6 +18,7 @@ from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
 from .objects import Objects, checked_node, checked_nodes
+from .parallel import SequenceReading
 from .sequence import sequence_lines
 from .source import (
     Context,
@@ -154,9 +155,16 @@ def _finished_features(waiting: list[_Feature], tally: InputTally) -> Iterator[N
 
 
 def read_sequence(
-    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
+    path: Path,
+    limits: Limits,
+    types: frozenset[str] | None,
+    palette: Palette,
+    crs: str | None,
+    spread: bool = False,
 ) -> Scene:
-    """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
+    """A CityJSONSeq file: the header read now, the features' nodes yielded lazily (with
+    ``spread``, by workers once the scene's :attr:`~.model.Scene.spread` is given an
+    executor: :mod:`.parallel`)."""
     lines = sequence_lines(path, limits)
     try:
         _, first = next(lines, (1, b""))
@@ -172,13 +180,21 @@ def read_sequence(
     except InputError:
         lines.close()
         raise
-    nodes = _feature_nodes(lines, header, ctx, types)
+    reading = None
+    if spread:
+
+        def again() -> Iterator[Node]:
+            return iter(read_sequence(path, limits, types, palette, crs).nodes)
+
+        reading = SequenceReading(lines, header, ctx, types, _feature_nodes, again)
+    nodes = reading.nodes() if reading is not None else _feature_nodes(lines, header, ctx, types)
     first_node = next(nodes, None)  # its vertices centre a geographic CRS's local frame
     scene = Scene(
         source=str(path),
         nodes=chain(() if first_node is None else (first_node,), nodes),
         crs=ctx.crs,
         city=True,
+        spread=reading.use if reading is not None else None,
     )
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))
