@@ -450,8 +450,9 @@ def convert(
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(run.backend)
         executor = stack.enter_context(_executor(run, baker, _object_count(scene)))
-        if scene.spread is not None:
-            scene.spread(executor.results, run.progress)
+        if scene.spread is not None:  # reading (its rest, or all of it) by the executor
+            with clock("read"):
+                scene.spread(executor.results, run.progress)
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         skipped: list[dict[str, str]] = []
         items = iter_chains(

@@ -20,9 +20,11 @@ Results = Callable[[Iterable[Any]], Iterator[Any]]
 
 
 class Sizer:
-    """The bytes a task should hold, from the seconds a byte took to read so far."""
+    """The bytes (or other units: objects) a task should hold, from the seconds one took to
+    read so far, between ``least`` and ``most``."""
 
-    def __init__(self) -> None:
+    def __init__(self, least: int = MIN_BYTES, most: int = MAX_BYTES) -> None:
+        self.least, self.most = least, most
         self.seconds_per_byte = 0.0
 
     @property
@@ -37,7 +39,7 @@ class Sizer:
         """The bytes a task should hold (1 until reading has been timed)."""
         if not self.seconds_per_byte:
             return 1
-        return int(min(MAX_BYTES, max(MIN_BYTES, TASK_SECONDS / self.seconds_per_byte)))
+        return int(min(self.most, max(self.least, TASK_SECONDS / self.seconds_per_byte)))
 
 
 def add_tally(tally: InputTally, part: InputTally) -> None:

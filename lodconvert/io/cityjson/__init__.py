@@ -96,8 +96,8 @@ def read_cityjson(
     ``.zip``, into a Scene (see the module docstring); :class:`InputError` with a one-line
     reason when it cannot be. ``types``: keep only CityObjects of these types (and their
     descendants); ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`);
-    ``crs`` replaces the CRS the file declares; with ``spread``, a CityJSONSeq file's features
-    can be read by workers (:attr:`~.model.Scene.spread`).
+    ``crs`` replaces the CRS the file declares; with ``spread``, the objects can be read by
+    workers (:attr:`~.model.Scene.spread`).
     The scene carries an :class:`~..geometry_checks.InputTally` of dropped faces and skipped
     objects."""
     path = Path(path)
@@ -109,7 +109,7 @@ def read_cityjson(
     name = name.removesuffix(".gz")
     if name.endswith(".jsonl"):
         return read_sequence(path, limits, _types(types), colors, crs, spread)
-    return read_document(path, limits, _types(types), colors, crs)
+    return read_document(path, limits, _types(types), colors, crs, spread)
 
 
 FORMAT = Format(
