@@ -18,6 +18,7 @@ from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
 from ..spread import Results
+from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_node, checked_nodes
 from .parallel import ObjectsReading, SequenceReading
 from .sequence import sequence_lines
@@ -78,7 +79,7 @@ def read_document(
             raise InputError(f"has no CityObject {which}with surfaces", str(path))
         return size
 
-    if spread:
+    if spread and _any_surface(objects, types):
         reading = ObjectsReading(
             objects, ctx, types, lambda: _object_nodes(objects, ctx, types), checked,
             lambda: read_document(path, limits, types, palette, crs),
@@ -97,6 +98,22 @@ def read_document(
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(data.get("version"))
     return attach_tally(scene, tally)
+
+
+def _any_surface(objects: dict[str, Any], types: frozenset[str] | None) -> bool:
+    """Whether any of ``objects`` (of ``types``, where given) holds a surface geometry with
+    boundaries: a file with none is read at once, so that its error comes as it is read."""
+    for obj in objects.values():
+        if not isinstance(obj, dict) or not isinstance(obj.get("geometry"), list):
+            continue
+        kind = obj.get("type")
+        if types is not None and not (isinstance(kind, str) and kind in types):
+            continue
+        for geometry in obj["geometry"]:
+            shape = geometry.get("type") if isinstance(geometry, dict) else None
+            if isinstance(shape, str) and shape in SURFACE_DEPTH and geometry.get("boundaries"):
+                return True
+    return False
 
 
 @dataclass
