@@ -32,7 +32,8 @@ city object's nesting depth before it is walked, and what a ``.gz`` or ``.zip`` 
 Nothing is walked by recursion deeper than :data:`~.geometry.MAX_PART_DEPTH` parts. Only the
 root's children reach Python as the document streams; city objects are read
 :data:`~.document.BATCH` at a time and their elements freed once converted, so memory follows
-the batch, not the file.
+the batch, not the file. With workers, runs of members are read in worker processes, as one
+process reads them (:mod:`.parallel`).
 
 What a reader must check passes :mod:`..geometry_checks`: a polygon whose ring is degenerate
 (fewer than three distinct points, no area) is dropped and counted with the object's dropped
