@@ -173,7 +173,7 @@ def test_a_document_broken_in_a_late_member_fails_as_in_one_process(tmp_path: Pa
 
 
 @pytest.mark.parametrize("chunk", [7, 1 << 20])
-def test_members_are_cut_past_comments_cdata_instructions_and_nesting(
+def test_members_are_cut_past_comments_cdata_instructions_text_and_nesting(
     monkeypatch: pytest.MonkeyPatch, chunk: int
 ) -> None:
     monkeypatch.setattr(members_module, "CHUNK", chunk)
@@ -181,7 +181,11 @@ def test_members_are_cut_past_comments_cdata_instructions_and_nesting(
         "<bldg:Building", "<cityObjectMember/><bldg:Building", 1
     )
     text = _city(
-        "<!-- a comment between members -->", _tricky(), "\n<?pi?>\n", nested, "<featureMember/>"
+        "<!-- a comment between members -->",
+        _tricky(),
+        "\n<?pi?> stray text > ",
+        nested,
+        "<featureMember/>",
     ).encode()
     found = Members(io.BytesIO(text))
     pieces = list(found)

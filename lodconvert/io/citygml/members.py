@@ -28,7 +28,6 @@ _MARKUP = re.compile(
 )
 """One piece of markup: a comment, CDATA, a processing instruction, a DOCTYPE, an end tag or a
 start tag (``empty``: ``/`` for an element without content)."""
-_SPACE = re.compile(rb"\s*")
 
 
 class Readable(Protocol):
@@ -84,16 +83,14 @@ class Members:
         return dropped
 
     def _markup(self, start_only: bool = False) -> re.Match[bytes]:
-        """The next piece of markup from :attr:`position` (only text-free space before it at
-        the root's level; with ``start_only``, the first start tag), moving past it."""
+        """The next piece of markup from :attr:`position` (text before it, which the reader
+        does not read, passed; with ``start_only``, the first start tag), moving past it."""
         while True:
             at = self.buffer.find(b"<", self.position)
             piece = _MARKUP.match(self.buffer, at) if at >= 0 else None
             if piece is None:
                 self._more()
                 continue
-            if not start_only and _SPACE.fullmatch(self.buffer, self.position, at) is None:
-                raise NotSplit("text beside the root's children")
             self.position = piece.end()
             if start_only and piece["start"] is None:
                 continue
