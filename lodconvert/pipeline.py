@@ -442,7 +442,7 @@ def convert(
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = outputs.file(output_path)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
-        spread = {"spread": run.workers > 1 and len(inputs) == 1}
+        spread = {"spread": run.workers > 1 and len(inputs) == 1 and _read_through(run)}
         with clock("read"):
             scene, crs_record = read_inputs(
                 inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
@@ -474,6 +474,13 @@ def convert(
         if report_sink is not None:
             _stage_report(report_sink, report)
     return report
+
+
+def _read_through(run: RunOptions) -> bool:
+    """Whether a city is read through before its first object is baked (its plot radii or
+    its LOD parents need every object): then the executor can read it first (with γ given,
+    objects are baked as they are read, so reading stays in the main process)."""
+    return run.chain.gamma is None or run.hlod is not None
 
 
 def _checked(sink: FileSink, output_path: str | Path, step: Step) -> None:

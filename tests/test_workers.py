@@ -84,6 +84,7 @@ CASES = [
     pytest.param("mixed", ".x3d", (), id="mesh-x3d"),
     pytest.param("mixed", ".glb", (), id="mesh-glb"),
     pytest.param("kit", ".x3d", (), id="kit-x3d"),
+    pytest.param("kit", ".glb", ("--plot-radius", "12"), id="kit-plot-radius"),
     pytest.param("sequence", ".glb", ("--hlod", "250"), id="cityjsonseq-hlod-250"),
     pytest.param("plateau", ".glb", (), id="plateau-glb", marks=pytest.mark.slow),
     pytest.param(
