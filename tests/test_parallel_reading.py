@@ -7,6 +7,7 @@ from __future__ import annotations
 import gzip
 import io
 import json
+import signal
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -107,9 +108,26 @@ def _facts(node: Node) -> Any:
     )
 
 
-def _read(path: Path, spread: bool) -> tuple[Scene, list[Any], list[Any], list[str]]:
-    """The scene of ``path`` read in one process or by two workers, each member a task; the
-    facts of its nodes, the workers' results and what was told of reading in this process."""
+class _Kills:
+    """A task whose unpickling kills the process doing it (a worker taking it), and that
+    fails as ``task`` fails."""
+
+    def __init__(self, task: Any) -> None:
+        self.task = task
+
+    def __reduce__(self) -> tuple[Any, tuple[int]]:
+        return signal.raise_signal, (signal.SIGKILL,)
+
+    def failed(self, reason: str) -> Any:
+        return self.task.failed(reason)
+
+
+def _read(
+    path: Path, spread: bool, killer: int | None = None
+) -> tuple[Scene, list[Any], list[Any], list[str]]:
+    """The scene of ``path`` read in one process or by two workers, each member a task
+    (``killer``: that task kills the workers that take it); the facts of its nodes, the
+    workers' results and what was told of reading in this process."""
     scene = read_scene(path, spread=spread)
     results: list[Any] = []
     told: list[str] = []
@@ -118,7 +136,8 @@ def _read(path: Path, spread: bool) -> tuple[Scene, list[Any], list[Any], list[s
     with PoolExecutor(2, "numpy") as executor:
 
         def kept(tasks: Iterable[Any]) -> Iterator[Any]:
-            for result in executor.results(tasks):
+            sent = (_Kills(task) if i == killer else task for i, task in enumerate(tasks))
+            for result in executor.results(sent):
                 results.append(result)
                 yield result
 
@@ -263,3 +282,17 @@ def test_a_geographic_city_read_by_workers_is_projected_on_the_frame_of_one_proc
     assert two_facts == one_facts and len(one_facts) == 5
     assert sum(len(result.nodes) for result in results) == 4
     assert two.crs == one.crs and "+proj=tmerc" in str(two.crs)
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+@pytest.mark.parametrize("name", ["town.gml", "ten.city.json"])
+def test_a_task_whose_workers_die_is_read_in_the_main_process(tmp_path: Path, name: str) -> None:
+    path = tmp_path / name
+    if name.endswith(".gml"):
+        path.write_text(_town())
+    else:
+        path.write_bytes(multi_lod().read_bytes())
+    _, one_facts, _, _ = _read(path, spread=False)
+    _, two_facts, _, told = _read(path, spread=True, killer=1)
+    assert two_facts == one_facts
+    assert any("died twice (signal SIGKILL)" in line and "main process" in line for line in told)

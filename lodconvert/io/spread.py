@@ -19,6 +19,10 @@ Results = Callable[[Iterable[Any]], Iterator[Any]]
 """An executor's ``results``: tasks in, their results out, in order."""
 
 
+def quiet(_: str) -> None:
+    """Discard a message."""
+
+
 class Sizer:
     """The bytes (or other units: objects) a task should hold, from the seconds one took to
     read so far, between ``least`` and ``most``."""

@@ -9,9 +9,9 @@ counts are those of reading in one process.
 
 What depends on the members before a run is kept exact: ids made unique across the document
 are checked against those taken before, and a run whose ids would differ is read again in the
-main process; a run holding implicit geometry (whose templates later objects link to) is read
-in the main process; a run a worker cannot read is read by the one-process reader from the
-start of the document, so that the error is the one it gives.
+main process (so is a run whose workers died); a run holding implicit geometry (whose templates
+later objects link to) is read in the main process; a run a worker cannot read is read by the
+one-process reader from the start of the document, so that the error is the one it gives.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ from ...model import Node
 from ...semantics import Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally
-from ..spread import Results, Sizer, add_tally
+from ..spread import Results, Sizer, add_tally, quiet
 from .document import Document
 from .members import Members, NotSplit
 from .names import MEMBERS
@@ -41,10 +41,6 @@ from .source import Stream, first_look, open_document
 _READ = MEMBERS | {"boundedBy"}
 """The root's children the reader reads (others are not shipped)."""
 _IMPLICIT = b"ImplicitGeometry"
-
-
-def _quiet(_: str) -> None:
-    """Discard a message."""
 
 
 class _Taken(set[str]):
@@ -70,6 +66,8 @@ class ReadResult:
     tally: InputTally | None = None
     stats: dict[str, dict[str, int]] = field(default_factory=dict)
     error: str | None = None
+    died: str | None = None
+    """Why no worker could read the run (they died): then this process reads it."""
     seconds: float = 0.0
 
 
@@ -111,7 +109,7 @@ class ReadTask:
 
     def failed(self, reason: str) -> ReadResult:
         """The result of a run no worker could read, for ``reason``."""
-        return ReadResult(error=reason)
+        return ReadResult(died=reason)
 
 
 class SpreadReading:
@@ -122,7 +120,7 @@ class SpreadReading:
     def __init__(self, make: Callable[[], Document]) -> None:
         self.make = make
         self.document = make()
-        self.progress: Callable[[str], None] = _quiet
+        self.progress: Callable[[str], None] = quiet
         self.results: Results | None = None
         self.sizer = Sizer()
         self.told = False
@@ -215,7 +213,14 @@ class SpreadReading:
         document = self.document
         if result.error is not None:
             raise self._one_process_error(InputError(result.error))
-        if task.in_main or result.collided or not document.taken.isdisjoint(result.ids):
+        if result.died is not None:
+            self.progress(f"{document.source}: {result.died}; its run is read in the main process")
+        if (
+            task.in_main
+            or result.died is not None
+            or result.collided
+            or not document.taken.isdisjoint(result.ids)
+        ):
             if task.in_main and not self.told:
                 self.progress(f"{document.source}: implicit geometry is read in the main process")
                 self.told = True

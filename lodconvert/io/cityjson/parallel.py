@@ -6,8 +6,9 @@ process, batches of CityObjects with the vertices (:class:`ObjectsTask`); the ma
 parts to their objects once all are read. Each worker reads as one process reads and gives back
 the nodes and what it counted; the main process takes the results in order, so nodes, skipped
 objects and counts are those of one process. A file with geometry templates is read in the main
-process (its instances share one mesh per template); a task a worker cannot read has the file
-read by the one-process reader, so that the error is the one it gives."""
+process (its instances share one mesh per template); a task whose workers died is read in the
+main process; one a worker cannot read has the file read by the one-process reader, so that
+the error is the one it gives."""
 
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from ...limits import Limits
 from ...model import Node
 from ..crs import Crs
 from ..geometry_checks import InputTally
-from ..spread import Results, Sizer, add_tally
+from ..spread import Results, Sizer, add_tally, quiet
 from .objects import Objects, checked_nodes, read_kept
 from .source import Context, context_of
 
@@ -42,6 +43,8 @@ class LinesResult:
     nodes: tuple[Node, ...] = ()
     tally: InputTally | None = None
     error: str | None = None
+    died: str | None = None
+    """Why no worker could read the task (they died): then this process reads it."""
     seconds: float = 0.0
 
 
@@ -72,7 +75,7 @@ class LinesTask:
 
     def failed(self, reason: str) -> LinesResult:
         """The result of a run no worker could read, for ``reason``."""
-        return LinesResult(error=reason)
+        return LinesResult(died=reason)
 
 
 class SequenceReading:
@@ -92,6 +95,7 @@ class SequenceReading:
         self.lines, self.header, self.ctx, self.types = lines, header, ctx, types
         self.read, self.again = read, again
         self.results: Results | None = None
+        self.progress: Callable[[str], None] = quiet
         self.sizer = Sizer()
 
     def use(self, results: Results, progress: Callable[[str], None]) -> None:
@@ -100,7 +104,7 @@ class SequenceReading:
         if self.ctx.templates:
             progress(f"{self.ctx.tally.source}: geometry templates are read in the main process")
             return
-        self.results = results
+        self.results, self.progress = results, progress
 
     def nodes(self) -> Iterator[Node]:
         """The file's nodes, in line order."""
@@ -119,6 +123,10 @@ class SequenceReading:
             sent: deque[LinesTask] = deque()
             for result in self.results(self._tasks(runs, sent)):
                 task = sent.popleft()
+                if result.died is not None:
+                    self.progress(_read_here(self.ctx, result.died))
+                    yield from self._read_here(task.lines)
+                    continue
                 if result.error is not None:
                     raise self._one_process_error(InputError(result.error))
                 if result.nodes:
@@ -173,6 +181,11 @@ class SequenceReading:
         return error
 
 
+def _read_here(ctx: Context, died: str) -> str:
+    """What ``-v`` tells of a task read here because its workers died (``died``: how)."""
+    return f"{ctx.tally.source}: {died}; its objects are read in the main process"
+
+
 def _each(lines: Lines) -> Iterator[tuple[int, bytes]]:
     """``lines`` as the generator the reader takes (and closes)."""
     yield from lines
@@ -186,6 +199,8 @@ class ObjectsResult:
     nodes: tuple[Node | None, ...] = ()
     tally: InputTally | None = None
     error: str | None = None
+    died: str | None = None
+    """Why no worker could read the task (they died): then this process reads it."""
     seconds: float = 0.0
 
 
@@ -218,7 +233,7 @@ class ObjectsTask:
 
     def failed(self, reason: str) -> ObjectsResult:
         """The result of objects no worker could read, for ``reason``."""
-        return ObjectsResult(error=reason)
+        return ObjectsResult(died=reason)
 
 
 class ObjectsReading:
@@ -240,6 +255,7 @@ class ObjectsReading:
         self.tree = Objects(objects, types)
         self.ctx, self.read_here, self.check, self.again = ctx, read_here, check, again
         self.roots: list[Node] | None = None
+        self.progress: Callable[[str], None] = quiet
         self.sizer = Sizer(1, MAX_OBJECTS)
 
     def use(self, results: Results, progress: Callable[[str], None]) -> None:
@@ -248,6 +264,7 @@ class ObjectsReading:
         if self.ctx.templates:
             progress(f"{self.ctx.tally.source}: geometry templates are read in the main process")
             return
+        self.progress = progress
         self.roots = self._read(results)
         self.check(self.roots)
 
@@ -272,6 +289,11 @@ class ObjectsReading:
         sent: deque[list[str]] = deque()
         for result in results(self._tasks(keys, sent)):
             batch = sent.popleft()
+            if result.died is not None:
+                self.progress(_read_here(ctx, result.died))
+                reads = [tree.read(key, ctx) for key in batch]
+                nodes.update(zip(batch, checked_nodes(reads), strict=True))
+                continue
             if result.error is not None:
                 raise self._one_process_error(InputError(result.error))
             self.sizer.took(result.seconds, len(batch))
