@@ -49,20 +49,27 @@ class Run:
     timings: dict[str, float]
 
     @property
+    def reading(self) -> float:
+        """Seconds of the ``read`` and ``plan`` stages: the main process reading the city (or
+        taking what workers read) and parking it."""
+        return self.timings["read"] + self.timings["plan"]
+
+    @property
     def main_only(self) -> float:
         """Seconds of the stages only the main process works in (all but ``execute``)."""
         return sum(v for k, v in self.timings.items() if k != "execute")
 
 
-def convert_once(source: Path, output: Path, workers: int) -> Run:
-    """Convert ``source`` into ``output`` with ``--workers`` in a child process."""
+def convert_once(source: Path, output: Path, workers: int, root: Path = ROOT) -> Run:
+    """Convert ``source`` into ``output`` with ``--workers`` in a child process, by the
+    lodconvert of checkout ``root``."""
     output.unlink(missing_ok=True)
     report = output.with_suffix(".json")
     command = [*LODCONVERT, str(source), "-o", str(output), "-qq", "--workers", str(workers)]
     command += ["--report", str(report)]
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    env = {**os.environ, "PYTHONPATH": str(root)}
     started = time.perf_counter()
-    child = subprocess.Popen(command, env=env, cwd=ROOT)
+    child = subprocess.Popen(command, env=env, cwd=root)
     _, status, usage = os.wait4(child.pid, 0)
     wall = time.perf_counter() - started
     if os.waitstatus_to_exitcode(status):
@@ -78,32 +85,38 @@ def benchmark(args: argparse.Namespace) -> str:
     load = os.getloadavg()[0]
     template = Template(tum_document())
     rows = []
+    codes = ["", "before"] if args.baseline is not None else [""]
+    configurations = [(workers, code) for code in codes for workers in WORKERS]
     with tempfile.TemporaryDirectory(prefix="lodconvert-scale-") as tmp:
         folder = Path(tmp)
         for factor in args.factors:
             sample = write_district(template, factor, folder / f"tum_{factor}x.gml")
             for fmt in FORMATS:
-                runs: dict[int, list[Run]] = {w: [] for w in WORKERS}
+                runs: dict[tuple[int, str], list[Run]] = {c: [] for c in configurations}
                 for i in range(args.runs):
-                    for workers in WORKERS:
-                        print(f"{factor}× → {fmt}, {workers} worker(s), run {i + 1}", flush=True)
-                        out = folder / f"out_{workers}.{fmt}"
-                        runs[workers].append(convert_once(sample.path, out, workers))
-                same = len({run.output for w in WORKERS for run in runs[w]}) == 1
-                one = statistics.median(r.wall for r in runs[1])
-                for workers in WORKERS:
-                    wall = statistics.median(r.wall for r in runs[workers])
+                    for workers, code in configurations:
+                        label = f"{factor}× → {fmt}, {workers} worker(s) {code}, run {i + 1}"
+                        print(label, flush=True)
+                        out = folder / f"out_{workers}{code}.{fmt}"
+                        root = args.baseline if code else ROOT
+                        runs[workers, code].append(convert_once(sample.path, out, workers, root))
+                same = len({run.output for each in runs.values() for run in each}) == 1
+                for workers, code in configurations:
+                    one = statistics.median(r.wall for r in runs[1, code])
+                    each = runs[workers, code]
+                    wall = statistics.median(r.wall for r in each)
                     rows.append(
                         [
                             f"{factor}× TUM ({sample.buildings:,} buildings)",
                             fmt,
-                            str(workers),
+                            f"{workers}{f' ({code})' if code else ''}",
                             f"{wall:.2f}",
-                            f"{statistics.median(r.cpu for r in runs[workers]):.2f}",
+                            f"{statistics.median(r.cpu for r in each):.2f}",
                             f"{sample.buildings / wall:,.0f}",
-                            f"{max(r.peak_mib for r in runs[workers]):.0f}",
-                            f"{statistics.median(r.main_only for r in runs[workers]):.2f}",
-                            f"{statistics.median(r.timings['execute'] for r in runs[workers]):.2f}",
+                            f"{max(r.peak_mib for r in each):.0f}",
+                            f"{statistics.median(r.reading for r in each):.2f}",
+                            f"{statistics.median(r.main_only for r in each):.2f}",
+                            f"{statistics.median(r.timings['execute'] for r in each):.2f}",
                             f"{one / wall:.2f}×",
                             "yes" if same else "**NO**",
                         ]
@@ -111,9 +124,10 @@ def benchmark(args: argparse.Namespace) -> str:
             sample.path.unlink()
     header = [
         "input", "format", "workers", "wall s", "CPU s", "buildings/s", "peak RSS MiB",
-        "main-only s", "execute s", "speed-up", "same bytes",
+        "read+plan s", "main-only s", "execute s", "speed-up", "same bytes",
     ]  # fmt: skip
     cores = len(os.sched_getaffinity(0))
+    baseline = f" --baseline {args.baseline}" if args.baseline is not None else ""
     return "\n".join(
         [
             "# Worker processes: --workers 1 vs 2",
@@ -122,15 +136,23 @@ def benchmark(args: argparse.Namespace) -> str:
             f"{sys.version.split()[0]}), shared; load average {load:.1f} at the start, "
             f"{os.getloadavg()[0]:.1f} at the end; {time.perf_counter() - started:.0f} s in all.",
             f"Command: `python benchmarks/scale.py --runs {args.runs} --factors "
-            f"{','.join(map(str, args.factors))}`; medians of {args.runs} interleaved runs each, "
+            f"{','.join(map(str, args.factors))}"
+            f"{baseline}`; medians of {args.runs} interleaved runs each, "
             "CPU s of the whole process tree, peak RSS of the largest process.",
             "",
             markdown_table(header, rows, 3),
             "",
-            "Main-only s: the report's stages that only the main process works in (reading and"
-            " parking the city: `read` + `plan`; `assemble`, `write`, `validate`); execute s: the"
-            " time it spent baking (1 worker) or waiting for the workers' results (2). Baking in"
-            " workers can shorten only `execute`: the main-only part bounds the speed-up.",
+            "Read+plan s: the main process reading the city (with 2 workers: cutting it into"
+            " runs of members and taking what the workers read) and parking it; main-only s:"
+            " that and the other stages only the main process works in (`assemble`, `write`,"
+            " `validate`); execute s: the time it spent baking (1 worker) or waiting for the"
+            " workers' results (2). Speed-up: wall of 1 worker over this row's, same code."
+            + (
+                f" Rows marked (before): the checkout at `{args.baseline}`, which reads in the"
+                " main process whatever the workers, run interleaved with this one's."
+                if args.baseline is not None
+                else ""
+            ),
             "",
         ]
     )
@@ -146,6 +168,11 @@ def main(argv: list[str] | None = None) -> int:
         help="district sizes in copies of TUM Munich (default 1,10)",
     )
     parser.add_argument("--out", type=Path, default=HERE / "results" / "scale.md")
+    parser.add_argument(
+        "--baseline",
+        type=Path,
+        help="another checkout of lodconvert whose runs are interleaved with these (before)",
+    )
     args = parser.parse_args(argv)
     if not TUM.is_file():
         raise SystemExit(f"{TUM} is absent")
