@@ -124,7 +124,7 @@ class SequenceReading:
             for result in self.results(self._tasks(runs, sent)):
                 task = sent.popleft()
                 if result.died is not None:
-                    self.progress(_read_here(self.ctx, result.died))
+                    self.progress(_died_here(self.ctx, result.died))
                     yield from self._read_here(task.lines)
                     continue
                 if result.error is not None:
@@ -181,7 +181,7 @@ class SequenceReading:
         return error
 
 
-def _read_here(ctx: Context, died: str) -> str:
+def _died_here(ctx: Context, died: str) -> str:
     """What ``-v`` tells of a task read here because its workers died (``died``: how)."""
     return f"{ctx.tally.source}: {died}; its objects are read in the main process"
 
@@ -290,7 +290,7 @@ class ObjectsReading:
         for result in results(self._tasks(keys, sent)):
             batch = sent.popleft()
             if result.died is not None:
-                self.progress(_read_here(ctx, result.died))
+                self.progress(_died_here(ctx, result.died))
                 reads = [tree.read(key, ctx) for key in batch]
                 nodes.update(zip(batch, checked_nodes(reads), strict=True))
                 continue
