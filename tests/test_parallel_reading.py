@@ -69,7 +69,8 @@ def _tricky() -> str:
 
 def _town() -> str:
     """Buildings, trees linking a crown defined in an earlier member, ids taken twice, a
-    building whose coordinates cannot be read, members of their own namespace prefixes."""
+    building whose coordinates cannot be read, one linking a polygon of another member (left
+    unresolved, as links resolve within an object), members of their own namespace prefixes."""
     bad = building("bad", [*box(500.0), "0 0 0 10 0 0 10 ten 0 0 0 0"])
     return _city(
         *(building(f"b{i}", box(20.0 * i)) for i in range(6)),
@@ -78,6 +79,7 @@ def _town() -> str:
         _anonymous(220.0),
         tree(1, (710.0, 3.0, 1.0)),
         bad,
+        building("linker", box(280.0), extra='<gml:surfaceMember xlink:href="#b0_0"/>'),
         _tricky(),
         building("dup", box(240.0)),
         _anonymous(260.0),
@@ -171,6 +173,7 @@ def test_a_town_read_by_workers_is_the_town_read_in_one_process(
     assert tally_of(two).skipped == tally_of(one).skipped
     assert [entry["id"] for entry in tally_of(two).skipped] == ["bad"]
     assert two.attributes["citygml"] == one.attributes["citygml"]
+    assert one.attributes["citygml"]["unresolved_links"] == {"linker": 1}  # across members
     assert two.crs == one.crs == "EPSG:25832"
     by_workers = sum(len(result.nodes) for result in results)
     assert by_workers >= 10  # buildings b1… read by workers (b0 by this process, first)
