@@ -92,7 +92,7 @@ class ReadTask:
         """Read the run (``backend`` and ``progress`` are not used)."""
         if self.in_main:
             return ReadResult()
-        start = time.perf_counter()
+        start = time.process_time()
         tally = InputTally(self.source, self.limits)
         document = Document(Path(self.source), self.limits, self.types, tally, self.palette)
         document.crs, document.taken = self.crs, _Taken()
@@ -104,7 +104,7 @@ class ReadTask:
         assert isinstance(taken, _Taken)
         return ReadResult(
             nodes, frozenset(taken), taken.collided, tally, document.stats,
-            seconds=time.perf_counter() - start,
+            seconds=time.process_time() - start,
         )  # fmt: skip
 
     def failed(self, reason: str) -> ReadResult:
@@ -186,10 +186,10 @@ class SpreadReading:
 
     def _read_here(self, prolog: bytes, members: bytes, root_end: bytes) -> Iterator[Node]:
         """The nodes of ``members``, read in this process into the document's state."""
-        start = time.perf_counter()
+        start = time.process_time()
         nodes = list(self.document.read(io.BytesIO(prolog + members + root_end)))
         if nodes:
-            self.sizer.took(time.perf_counter() - start, len(members))
+            self.sizer.took(time.process_time() - start, len(members))
         yield from nodes
 
     def _tasks(

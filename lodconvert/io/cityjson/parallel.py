@@ -64,14 +64,14 @@ class LinesTask:
 
     def run(self, backend: Any = None, progress: Any = None) -> LinesResult:
         """Read the lines (``backend`` and ``progress`` are not used)."""
-        start = time.perf_counter()
+        start = time.process_time()
         tally = InputTally(self.source, self.limits)
         try:
             ctx = context_of(self.header, tally, self.declared, self.palette)
             nodes = tuple(self.read(_each(self.lines), self.header, ctx, self.types))
         except InputError as exc:
             return LinesResult(error=str(exc))
-        return LinesResult(nodes, tally, seconds=time.perf_counter() - start)
+        return LinesResult(nodes, tally, seconds=time.process_time() - start)
 
     def failed(self, reason: str) -> LinesResult:
         """The result of a run no worker could read, for ``reason``."""
@@ -154,10 +154,10 @@ class SequenceReading:
 
     def _read_here(self, run: Lines) -> Iterator[Node]:
         """The nodes of ``run``, read in this process."""
-        start = time.perf_counter()
+        start = time.process_time()
         nodes = list(self.read(_each(run), self.header, self.ctx, self.types))
         if nodes:
-            self.sizer.took(time.perf_counter() - start, sum(len(line) for _, line in run))
+            self.sizer.took(time.process_time() - start, sum(len(line) for _, line in run))
         yield from nodes
 
     def _tasks(self, runs: Iterator[Lines], sent: deque[LinesTask]) -> Iterator[LinesTask]:
@@ -221,7 +221,7 @@ class ObjectsTask:
 
     def run(self, backend: Any = None, progress: Any = None) -> ObjectsResult:
         """Read the objects (``backend`` and ``progress`` are not used)."""
-        start = time.perf_counter()
+        start = time.process_time()
         tally = InputTally(self.source, self.limits)
         ctx = Context(tally, self.vertices, self.declared, self.materials, palette=self.palette)
         try:
@@ -229,7 +229,7 @@ class ObjectsTask:
             nodes = tuple(checked_nodes(reads))
         except InputError as exc:
             return ObjectsResult(error=str(exc))
-        return ObjectsResult(nodes, tally, seconds=time.perf_counter() - start)
+        return ObjectsResult(nodes, tally, seconds=time.process_time() - start)
 
     def failed(self, reason: str) -> ObjectsResult:
         """The result of objects no worker could read, for ``reason``."""
@@ -256,7 +256,7 @@ class ObjectsReading:
         self.ctx, self.read_here, self.check, self.again = ctx, read_here, check, again
         self.roots: list[Node] | None = None
         self.progress: Callable[[str], None] = quiet
-        self.sizer = Sizer(1, MAX_OBJECTS)
+        self.sizer = Sizer(MIN_OBJECTS, MAX_OBJECTS)
 
     def use(self, results: Results, progress: Callable[[str], None]) -> None:
         """Read the objects now by ``results`` (an executor's); a file with geometry
@@ -282,9 +282,9 @@ class ObjectsReading:
         keys = iter(tree.order)
         nodes: dict[str, Node | None] = {}
         for key in keys:
-            start = time.perf_counter()
+            start = time.process_time()
             nodes[key] = next(checked_nodes([tree.read(key, ctx)]))
-            self.sizer.took(time.perf_counter() - start, 1)
+            self.sizer.took(time.process_time() - start, 1)
             break
         sent: deque[list[str]] = deque()
         for result in results(self._tasks(keys, sent)):
@@ -336,5 +336,5 @@ class ObjectsReading:
         return error
 
 
-MAX_OBJECTS = 256
-"""Objects a task holds at most."""
+MIN_OBJECTS, MAX_OBJECTS = 32, 256
+"""Objects a task holds at least (but for the last) and at most."""
