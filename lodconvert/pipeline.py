@@ -476,13 +476,6 @@ def convert(
     return report
 
 
-def _read_through(run: RunOptions) -> bool:
-    """Whether a city is read through before its first object is baked (its plot radii or
-    its LOD parents need every object): then the executor can read it first (with γ given,
-    objects are baked as they are read, so reading stays in the main process)."""
-    return run.chain.gamma is None or run.hlod is not None
-
-
 def _checked(sink: FileSink, output_path: str | Path, step: Step) -> None:
     """Check the staged output of ``sink`` by its format (``step`` hears when)."""
     step("checking", 0, 1)
@@ -505,6 +498,13 @@ def _executor(
     if run.workers == 1 or objects == 1:
         return SerialExecutor(backend, run.progress)
     return PoolExecutor(run.workers, backend.name, run.progress)
+
+
+def _read_through(run: RunOptions) -> bool:
+    """Whether a city is read through before its first object is baked (its plot radii or
+    its LOD parents need every object): then the executor can read it first (with γ given,
+    objects are baked as they are read, so reading stays in the main process)."""
+    return run.chain.gamma is None or run.hlod is not None
 
 
 def _output_info(
