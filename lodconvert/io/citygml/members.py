@@ -44,10 +44,10 @@ class Members:
 
     def __init__(self, stream: Readable) -> None:
         self.stream = stream
-        self.buffer = b""
+        self.buffer = bytearray()
         self.position = self.kept = 0
         piece = self._markup(start_only=True)
-        self.prolog = self.buffer[: piece.end()]
+        self.prolog = bytes(self.buffer[: piece.end()])
         self.root_end = b"</" + piece["start"] + b">"
         self.empty = bool(piece["empty"])
         self.kept = self.position
@@ -68,7 +68,7 @@ class Members:
                 start, self.position = self._end_of(name, start, piece.end())
             yield (
                 name.rpartition(b":")[2].decode("ascii", "replace"),
-                self.buffer[start : self.position],
+                bytes(self.buffer[start : self.position]),
             )
 
     def _more(self) -> int:
@@ -78,7 +78,8 @@ class Members:
         if not chunk:
             raise NotSplit("the document ends inside its root element")
         dropped, self.kept = self.kept, 0
-        self.buffer = self.buffer[dropped:] + chunk
+        del self.buffer[:dropped]
+        self.buffer += chunk  # in place: a long member is read in time linear in its bytes
         self.position -= dropped
         return dropped
 
@@ -101,12 +102,14 @@ class Members:
         ends (past its end tag), reading on as it takes (which moves the bytes kept)."""
         close = b"</" + name
         nested = re.compile(rb"<" + re.escape(name) + rb"[\s/>]|<!|<\?")
+        searched = after  # where the end tag is looked for (each byte once, chunk by chunk)
         while True:
-            at = self.buffer.find(close, after)
+            at = self.buffer.find(close, searched)
             end = self.buffer.find(b">", at) if at >= 0 else -1
             if end < 0:
+                searched = at if at >= 0 else max(after, len(self.buffer) - len(close))
                 moved = self._more()
-                start, after = start - moved, after - moved
+                start, after, searched = start - moved, after - moved, searched - moved
                 continue
             if nested.search(self.buffer, after, at) is None:
                 return start, end + 1
