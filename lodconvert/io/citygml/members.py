@@ -72,13 +72,15 @@ class Members:
             )
 
     def _more(self) -> int:
-        """Read another chunk (dropping what is done with, before :attr:`kept`); how far the
-        bytes kept moved back. :class:`NotSplit` when the document has ended."""
-        chunk = self.stream.read(CHUNK)
-        if not chunk:
-            raise NotSplit("the document ends inside its root element")
+        """Read more (dropping what is done with, before :attr:`kept`): a chunk, or as much
+        as is kept, so that markup looked at again as it grows (a long comment) is looked at
+        a few times, not once per chunk; how far the bytes kept moved back.
+        :class:`NotSplit` when the document has ended."""
         dropped, self.kept = self.kept, 0
         del self.buffer[:dropped]
+        chunk = self.stream.read(max(CHUNK, len(self.buffer)))
+        if not chunk:
+            raise NotSplit("the document ends inside its root element")
         self.buffer += chunk  # in place: a long member is read in time linear in its bytes
         self.position -= dropped
         return dropped
