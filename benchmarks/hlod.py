@@ -1,4 +1,4 @@
-"""LOD parents side by side: far levels of points against merged meshes (and ``auto``).
+"""LOD parents side by side: far levels of points against simplified merged meshes (and ``auto``).
 
 Bakes TUM Munich (and ``--factors`` larger districts of shifted copies, made as
 ``benchmarks/city.py`` makes them) with ``--hlod`` cells of each size set in ``--sizes``, once
@@ -13,6 +13,11 @@ cell's far level against its buildings' finest geometry where it switches in (th
 estimate, :func:`lodconvert.plan.silhouette_estimate`; minimum and median over cells), how many
 cells reach F ≥ 0.95, and the bake time. Frame times of the same districts along flight paths
 are in ``city_render.md`` (``benchmarks/city_render.py``).
+
+Per tier, whether a parent pays (3D Tiles REPLACE: the far level is loaded instead of its
+children): the far levels' vertices + points and bytes against their children's — each member's
+coarsest content (a finer cell's far level, a building's coarsest level) and the buildings'
+finest levels — with the merged meshes' vertices before simplification and the far levels' F.
 """
 
 from __future__ import annotations
@@ -36,8 +41,48 @@ RESULTS = HERE / "results" / "hlod.md"
 KINDS = ("points", "mesh", "auto")
 
 
-def measure(path: Path, sizes: str, kind: str) -> list[str]:
-    """One table row: ``path`` baked into cells of ``sizes`` with far levels of ``kind``."""
+def tier_rows(sizes: str, kind: str, cells: list) -> list[list[str]]:
+    """Rows of the per-tier table: the far content of ``cells`` (every cell baked) against
+    their children's."""
+    from lodconvert.model import CellChain
+    from lodconvert.plan import level_bytes
+
+    rows = []
+    for tier in sorted({cell.tier for cell in cells}):
+        found = [cell for cell in cells if cell.tier == tier]
+        far = [cell.far for cell in found]
+        coarse = [
+            m.far if isinstance(m, CellChain) else m.levels[-1] for c in found for m in c.members
+        ]
+        fine = [chain.levels[0] for cell in found for chain in cell.objects()]
+        merged = [
+            c.facts["simplified"]["vertices_before"] for c in found if "simplified" in c.facts
+        ]
+        counts = [sum(level.count for level in group) for group in (far, coarse, fine)]
+        sizes_b = [sum(level_bytes(level) for level in group) for group in (far, coarse, fine)]
+        scores = [cell.facts["silhouette_f"][cell.facts["kind"]] for cell in found]
+        rows.append(
+            [
+                sizes,
+                kind,
+                str(tier),
+                f"{len(found):,}",
+                f"{sum(merged):,}" if merged else "–",
+                f"{counts[0]:,}",
+                f"{counts[1]:,} / {counts[2]:,}",
+                f"{counts[0] / counts[1]:.2f} / {counts[0] / counts[2]:.2f}",
+                f"{sizes_b[0] / 1e3:,.0f}",
+                f"{sizes_b[1] / 1e3:,.0f} / {sizes_b[2] / 1e3:,.0f}",
+                f"{sizes_b[0] / sizes_b[1]:.2f} / {sizes_b[0] / sizes_b[2]:.2f}",
+                f"{min(scores):.3f}",
+            ]
+        )
+    return rows
+
+
+def measure(path: Path, sizes: str, kind: str) -> tuple[list[str], list[list[str]]]:
+    """One table row (``path`` baked into cells of ``sizes`` with far levels of ``kind``) and
+    its rows of the per-tier table."""
     from lodconvert.bake import get_backend
     from lodconvert.chain import ChainOptions
     from lodconvert.hlod import MIN_CELL_F, HlodOptions, draw_counts, parse_sizes
@@ -61,12 +106,11 @@ def measure(path: Path, sizes: str, kind: str) -> list[str]:
             if key in without:
                 without[key] += value
         alone += 0 if is_cell else 1
-        found = item.cells() if is_cell else []
-        cells += [(cell.facts["kind"], cell.facts["silhouette_f"]) for cell in found]
+        cells += item.cells() if is_cell else []
     seconds = time.process_time() - start
-    chosen = [f[k] for k, f in cells]
-    kinds = {k: sum(1 for c, _ in cells if c == k) for k in ("points", "mesh")}
-    return [
+    chosen = [cell.facts["silhouette_f"][cell.facts["kind"]] for cell in cells]
+    kinds = {k: sum(1 for cell in cells if cell.facts["kind"] == k) for k in ("points", "mesh")}
+    row = [
         sizes,
         kind,
         f"{len(cells):,}",
@@ -79,6 +123,7 @@ def measure(path: Path, sizes: str, kind: str) -> list[str]:
         f"{sum(f >= MIN_CELL_F for f in chosen)}/{len(chosen)}",
         f"{seconds:.1f}",
     ]
+    return row, tier_rows(sizes, kind, cells)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -98,6 +143,11 @@ def main(argv: list[str] | None = None) -> int:
         "far draw calls (without → with)", "far vertices + points (without → with)", "min F",
         "median F", "F ≥ 0.95", "CPU s",
     ]  # fmt: skip
+    tier_header = [
+        "cells (m)", "far kind", "tier", "cells", "merged vertices", "far vertices + points",
+        "children's (coarsest / finest)", "far / children", "far kB",
+        "children's kB (coarsest / finest)", "far / children (bytes)", "min F",
+    ]  # fmt: skip
     sections = []
     started = time.perf_counter()
     template = Template(tum_document())
@@ -105,16 +155,21 @@ def main(argv: list[str] | None = None) -> int:
         for factor in (int(f) for f in args.factors.split(",")):
             path = Path(tmp) / f"district_{factor}.gml"
             write_district(template, factor, path)
-            rows = []
+            rows, tiers = [], []
             for sizes in args.sizes:
                 for kind in KINDS:
-                    rows.append(measure(path, sizes, kind))
-                    print(" | ".join(rows[-1]), flush=True)
+                    row, more = measure(path, sizes, kind)
+                    rows.append(row)
+                    tiers += more
+                    print(" | ".join(row), flush=True)
             title = f"## {factor}× TUM Munich ({factor * template.buildings:,} buildings)"
             sections.append(f"{title}\n\n{markdown_table(header, rows, 2)}\n")
+            sections.append(
+                f"### Far content per tier, {factor}×\n\n{markdown_table(tier_header, tiers, 2)}\n"
+            )
     text = "\n".join(
         [
-            "# LOD parents: far levels of points against merged meshes",
+            "# LOD parents: far levels of points against simplified merged meshes",
             "",
             *one_core_facts(
                 f"python benchmarks/hlod.py {' '.join(argv or sys.argv[1:])}".rstrip(),
@@ -126,6 +181,14 @@ def main(argv: list[str] | None = None) -> int:
             "of the kept far level against the cell's buildings (finest geometry) at its "
             "switch-in distance, 1080-px reference view (the planner's estimate). CPU s: "
             "reading, baking every building and every cell.",
+            "- Far content per tier: the far levels of the tier's cells against their children's "
+            "content: each member's coarsest (a finer cell's far level, a building's coarsest "
+            "level: what a REPLACE parent is loaded instead of) and the buildings' finest levels. "
+            "Merged vertices: the merged far meshes before simplification (to within 4, 2 or 1 "
+            "px at the switch distance, the coarsest that keeps F ≥ 0.95). Bytes: geometry as the "
+            "glTF writer lays it out (`lodconvert.plan.level_bytes`: float32 positions and "
+            "normals, none on merged far meshes; uint16 colours and indices). Numpy baker, no "
+            "GPU; a 2-core shared AMD EPYC.",
             "",
             *sections,
             "",

@@ -31,10 +31,16 @@ draw call, and it reduces what decimation cannot (a block is hundreds of separat
 ``mesh``: the members' coarsest mesh levels merged into one mesh with vertex colours (one
 draw call as well); where that mesh's silhouette F at ``Y_cell`` stays below
 :data:`MIN_CELL_F` (a block of LOD1 prisms against its LoD2 roofs), the members' next finer
-mesh levels in turn, their finest at most. ``auto`` bakes both and keeps the cheaper (points at
-:data:`~.plan.POINT_COST`) of those whose silhouette F against the members' finest geometry at
-``Y_cell`` (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when neither
-is, the one with the higher F.
+mesh levels in turn, their finest at most, each without its floor on the ground (seen from
+no viewpoint above it). The merge is then simplified by quadric edge
+collapse (:func:`~.bake.qem.simplify_within`) to within a tolerance of a few pixels at
+``Y_cell`` in the reference view (:data:`SIMPLIFY_PX`; a pixel is ``Y_cell / focal_px``
+metres there): the coarsest whose F still reaches :data:`MIN_CELL_F` (or is no lower than the
+merge's), else the merge stays as it is.
+``auto`` bakes both and keeps the cheaper (points at :data:`~.plan.POINT_COST`; then the
+fewer bytes) of those whose silhouette F against the members' finest geometry at ``Y_cell``
+(:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when neither is, the one
+with the higher F.
 """
 
 from __future__ import annotations
@@ -47,11 +53,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .bake import Backend
+from .bake.qem import simplify_within
 from .chain import ChainOptions, point_level_at
 from .errors import UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import WHITE, CellChain, Level, LodChain, Mesh, Surface
-from .plan import level_cost, mesh_silhouette_estimate, silhouette_estimate
+from .plan import level_bytes, level_cost, mesh_silhouette_estimate, silhouette_estimate
 from .ranges import cutoff, diagonal
 
 KINDS = ("auto", "points", "mesh")
@@ -68,6 +75,16 @@ SEAM_MARGIN = 1e-9
 """Relative margin that keeps a far level's switch strictly beyond its members'."""
 ADMISSION_ROUNDS = 4
 """Times a cell's admitted members (and so its centre) are found again."""
+DOWN = -0.99
+"""Unit normal z below which a face looks straight down."""
+FLOOR_MARGIN = 0.01
+"""Metres above an object's lowest point within which a face looking down is its floor on the
+ground, left out of far meshes."""
+SIMPLIFY_PX = (4.0, 2.0, 1.0)
+"""Tolerances tried for a far mesh's simplification, coarsest first: pixels at the cell's
+switch distance in the reference view (one pixel at d is 2·d·tan(fov/2)/height_px metres:
+0.77 m at 1 km, 1080 px, 45°), all well within the 16 px screen-space error at which CesiumJS
+refines a tile by default."""
 
 Member = LodChain | CellChain
 Warn = Callable[[str], None]
@@ -196,9 +213,10 @@ def bake_cell(
         level = point_level_at(source, "FAR", switch, options, backend, plan.cell_id, warn, limits)
         if level is not None:
             candidates["points"] = (level, _silhouette_f(source, level, switch, options))
-    finer = 0
+    finer, simplified = 0, None
     if kind in ("mesh", "auto") or not candidates:
-        level, f, finer = _merged_level(objects, origin, source, switch, options)
+        merged, f, finer = _merged_level(objects, origin, source, switch, options)
+        level, f, simplified = _simplified(merged, f, source, switch, options)
         candidates["mesh"] = (level, f)
     chosen, why = _choice(candidates, kind)
     cutoffs = [switch]
@@ -209,7 +227,9 @@ def bake_cell(
         "why": why,
         "silhouette_f": {name: round(f, 4) for name, (_, f) in candidates.items()},
         "counts": {name: level.count for name, (level, _) in candidates.items()},
+        "bytes": {name: level_bytes(level) for name, (level, _) in candidates.items()},
         "mesh_levels_finer": finer,
+        **({"simplified": simplified} if simplified is not None else {}),
         "members": len(members),
         "objects": len(objects),
         "seam": seam,
@@ -242,7 +262,9 @@ def _choice(candidates: dict[str, tuple[Level, float]], kind: str) -> tuple[str,
         return name, "asked" if name == kind else "no point level could be baked"
     faithful = [name for name, (_, f) in candidates.items() if f >= MIN_CELL_F]
     if faithful:
-        name = min(faithful, key=lambda n: (level_cost(candidates[n][0]), n))
+        name = min(
+            faithful, key=lambda n: (level_cost(candidates[n][0]), level_bytes(candidates[n][0]), n)
+        )
         return name, f"cheapest with silhouette F ≥ {MIN_CELL_F}"
     name = max(candidates, key=lambda n: (candidates[n][1], n))
     return name, f"none reaches silhouette F {MIN_CELL_F}: the most faithful"
@@ -261,14 +283,7 @@ def _silhouette_f(source: Mesh, level: Level, distance: float, options: ChainOpt
 
 def _placed(chain: LodChain, mesh: Mesh) -> Mesh:
     """``mesh`` (a level of ``chain``) in scene coordinates."""
-    if chain.transform is None:
-        return mesh.translated(chain.origin)
-    matrix = np.asarray(chain.transform, dtype=np.float64)
-    parts = []
-    for part in mesh.parts:
-        local = part.vertices + chain.origin
-        parts.append(replace(part, vertices=local @ matrix[:3, :3].T + matrix[:3, 3]))
-    return Mesh(parts)
+    return chain.in_scene(mesh)
 
 
 def _finest_mesh(chain: LodChain) -> Mesh:
@@ -285,7 +300,8 @@ def _merged_level(
     distance: float,
     options: ChainOptions,
 ) -> tuple[Level, float, int]:
-    """The objects' coarsest mesh levels merged into one far level, or, where its silhouette
+    """The objects' coarsest mesh levels (without their floors, :func:`_floorless`) merged into
+    one far level, or, where its silhouette
     F against ``source`` (the objects' finest geometry about ``origin``) from ``distance``
     stays below :data:`MIN_CELL_F`, their next finer mesh levels in turn (their finest at
     most); the level, its F and how many levels finer than the coarsest it took."""
@@ -296,7 +312,7 @@ def _merged_level(
     for finer in range(depth):
         merged = _merged(
             [
-                _placed(chain, levels[min(finer, len(levels) - 1)])
+                _floorless(_placed(chain, levels[min(finer, len(levels) - 1)]))
                 for chain, levels in zip(objects, meshes, strict=True)
             ]
         )
@@ -305,6 +321,65 @@ def _merged_level(
         if f >= MIN_CELL_F:
             break
     return level, f, finer
+
+
+def _simplified(
+    merged: Level, f: float, source: Mesh, distance: float, options: ChainOptions
+) -> tuple[Level, float, dict[str, float | int | bool]]:
+    """``merged`` (a far mesh of silhouette F ``f`` against ``source``) simplified to within the
+    coarsest tolerance of :data:`SIMPLIFY_PX` at ``distance`` whose F reaches
+    :data:`MIN_CELL_F` or is no lower than ``f``; ``merged`` itself when none does. The level
+    kept, its F, and the tolerance, counts and F before and after (of the last tried)."""
+    assert merged.mesh is not None
+    floor = min(MIN_CELL_F, f)
+    for px in SIMPLIFY_PX:
+        tolerance = px * distance / options.view.focal_px
+        mesh = Mesh([simplify_within(merged.mesh, tolerance)])
+        level = Level(name="FAR", kind="merged", mesh=mesh)
+        after = _silhouette_f(source, level, distance, options) if level.count else 0.0
+        if after >= floor:
+            break
+    kept = after >= floor
+    facts = {
+        "tolerance_px": px,
+        "tolerance_m": round(tolerance, 4),
+        "vertices_before": merged.count,
+        "vertices_after": level.count,
+        "silhouette_f_before": round(f, 4),
+        "silhouette_f_after": round(after, 4),
+        "kept": kept,
+    }
+    return (level, after, facts) if kept else (merged, f, facts)
+
+
+def _floorless(mesh: Mesh) -> Mesh:
+    """``mesh`` (an object's level, z up) without its floor on the ground: the faces looking
+    straight down (:data:`DOWN`) that lie within :data:`FLOOR_MARGIN` of its lowest point,
+    which no viewpoint above the ground sees; ``mesh`` itself when that is all of it."""
+    low = mesh.bounds[0, 2] + FLOOR_MARGIN
+    parts = []
+    for part in mesh.parts:
+        faces = np.arange(len(part.faces))
+        floor = (part.face_normals(faces)[:, 2] < DOWN) & (
+            part.triangles[:, :, 2].max(axis=1) <= low
+        )
+        if not floor.any():
+            parts.append(part)
+        elif not floor.all():
+            parts.append(_with_faces(part, faces[~floor]))
+    return Mesh(parts) if parts else mesh
+
+
+def _with_faces(part: Surface, faces: np.ndarray) -> Surface:
+    """``part`` with only the given faces and the vertices they use."""
+    used, corners = np.unique(part.faces[faces], return_inverse=True)
+    return replace(
+        part,
+        vertices=part.vertices[used],
+        faces=corners.reshape(-1, 3),
+        vertex_colors=None if part.vertex_colors is None else part.vertex_colors[used],
+        uv=None if part.uv is None else part.uv[used],
+    )
 
 
 def _merged(meshes: Sequence[Mesh]) -> Mesh:

@@ -13,7 +13,10 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import hashlib
 import itertools
+import json
+import os
 import platform
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
@@ -37,8 +40,8 @@ from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
 from .plots import plot_radii
 from .records import Records, report_text
-from .reproject import in_one_crs
-from .sinks import FileSink, Outputs
+from .reproject import SOURCE_CRS_KEYS, Georef, in_one_crs
+from .sinks import DirectorySink, FileSink, Outputs
 from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
 from .tasks import (
@@ -305,8 +308,8 @@ def merged(scenes: Sequence[Scene]) -> Scene:
     are one object whose LoDs are merged: the first keeps its attributes and children, takes
     the LoD labels it lacks from the later ones, and its geometry is its finest LoD. Other
     objects all stay, in input order (the writers keep their names apart). The first declared
-    CRS is the scene's (:func:`~.reproject.in_one_crs` puts every input in it first); a scene
-    of one input is returned as it is."""
+    CRS is the scene's, with its vertical CRS and local frame (:func:`~.reproject.in_one_crs`
+    puts every input in it first); a scene of one input is returned as it is."""
     if len(scenes) == 1:
         return scenes[0]
     nodes: list[Node] = []
@@ -321,8 +324,13 @@ def merged(scenes: Sequence[Scene]) -> Scene:
                 first.lods.setdefault(label, mesh)
             levels = source_levels(first.lods)
             first.geometry = levels[max(levels)][1] if levels else first.geometry
-    crs = next((scene.crs for scene in scenes if scene.crs), None)
+    declaring = next((scene for scene in scenes if scene.crs), None)
+    crs = declaring.crs if declaring is not None else None
     whole = Scene(" + ".join(scene.source for scene in scenes), nodes, crs)
+    if declaring is not None:  # its vertical CRS and local frame, where the reader found them
+        whole.attributes.update(
+            {k: v for k, v in declaring.attributes.items() if k in SOURCE_CRS_KEYS}
+        )
     whole.city = any(scene.city for scene in scenes)
     tallies = [tally for scene in scenes if (tally := tally_of(scene)) is not None]
     if tallies:  # complete: every input's nodes have been read
@@ -330,7 +338,9 @@ def merged(scenes: Sequence[Scene]) -> Scene:
         for part in tallies:
             tally.dropped_faces += part.dropped_faces
             tally.dropped_by_object.update(part.dropped_by_object)
-            tally.skipped += part.skipped
+            for entry in part.skipped:
+                tally.add_skipped(entry["id"], entry["reason"])
+            tally.unlisted += part.unlisted
         attach_tally(whole, tally)
     return whole
 
@@ -439,8 +449,15 @@ def convert(
     sources = [input_format(path) for path in inputs]
     named = " + ".join(str(path) for path in inputs)
     clock = Clock(*STAGES)
+    folder = target.output_folder(Path(output_path)) if target.output_folder else None
+    if folder is not None and run.hlod is None:
+        run = replace(run, hlod=HlodOptions())
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
-        sink = outputs.file(output_path)
+        sink = (
+            outputs.directory(folder, resume=_resume_key(inputs, run))
+            if folder is not None
+            else outputs.file(output_path)
+        )
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
         spread = {"spread": run.workers > 1 and len(inputs) == 1 and _read_through(run)}
         with clock("read"):
@@ -453,6 +470,11 @@ def convert(
         if scene.spread is not None:  # reading (its rest, or all of it) by the executor
             with clock("read"):
                 scene.spread(executor.results, run.progress)
+        writer = (  # a folder's files (tiles) are made by tasks too, in processes of their own
+            stack.enter_context(_executor(run, get_backend("numpy"), _object_count(scene)))
+            if folder is not None
+            else None
+        )
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         skipped: list[dict[str, str]] = []
         items = iter_chains(
@@ -461,7 +483,10 @@ def convert(
         )  # fmt: skip
         with clock("write"):
             chains = clock.iterate("assemble", assembly.recorded(items))
-            target.write_chains(chains, sink, assembly.info, **run.write_options)
+            target.write_chains(
+                chains, sink, assembly.info, executor=writer, progress=run.progress,
+                **run.write_options,
+            )  # fmt: skip
         tally = _reader_skipped(
             scene, skipped, run.warn if assembly.records and not run.strict else _quiet
         )
@@ -476,10 +501,43 @@ def convert(
     return report
 
 
-def _checked(sink: FileSink, output_path: str | Path, step: Step) -> None:
-    """Check the staged output of ``sink`` by its format (``step`` hears when)."""
+def _resume_key(inputs: Sequence[str | Path], run: RunOptions) -> str:
+    """The key under which a folder output is staged, so that an interrupted run's folder is
+    taken up again by the same command: a hash of the inputs (path, size, modification time)
+    and of every option that changes the output (not of ``workers``, which does not)."""
+    what = {
+        "version": __version__,
+        "inputs": [(str(Path(path).resolve()), _stat(path)) for path in inputs],
+        "chain": options_record(run.chain),
+        "hlod": asdict(run.hlod) if run.hlod is not None else None,
+        "backend": run.backend,
+        "read": dict(run.read_options),
+        "write": dict(run.write_options),
+        "limits": asdict(run.limits),
+        "strict": run.strict,
+    }
+    text = json.dumps(what, sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def _stat(path: str | Path) -> tuple[int, int] | None:
+    """Size and modification time (ns) of ``path``; ``None`` where it cannot be read (its
+    reader says why)."""
+    try:
+        found = os.stat(path)
+    except OSError:
+        return None
+    return found.st_size, found.st_mtime_ns
+
+
+def _checked(sink: FileSink | DirectorySink, output_path: str | Path, step: Step) -> None:
+    """Check the staged output of ``sink`` by its format (a folder's: its file named like
+    ``output_path``; ``step`` hears when)."""
     step("checking", 0, 1)
-    check_written(sink.staged.temp, output_path)
+    staged = sink.staged.temp
+    if isinstance(sink, DirectorySink):
+        staged = staged / Path(output_path).name
+    check_written(staged, output_path)
     step("checking", 1, 1)
 
 
@@ -519,7 +577,19 @@ def _output_info(
         view=options.view,
         options=options_record(options),
         city=scene.city,
+        georef=_georef(scene),
     )
+
+
+def _georef(scene: Scene) -> Georef | None:
+    """Where ``scene``'s coordinates lie; ``None`` without a CRS or with one pyproj does not
+    know."""
+    import pyproj
+
+    try:
+        return Georef.of(scene)
+    except pyproj.exceptions.CRSError:
+        return None
 
 
 @dataclass
@@ -622,11 +692,14 @@ def _reader_skipped(
     scene: Scene, skipped: list[dict[str, str]], warn: Message
 ) -> InputTally | None:
     """Add the objects the reader of ``scene`` skipped to ``skipped``, each told to ``warn``
-    (with nothing converted, the run's error says it); ``scene``'s tally."""
+    (with nothing converted, the run's error says it), those past the listed ones in one
+    line; ``scene``'s tally."""
     tally = tally_of(scene)
     for entry in tally.skipped if tally is not None else ():
         warn(f"{scene.source}: object {entry['reason']} — skipped")
         skipped.append(entry)
+    if tally is not None and tally.unlisted:
+        warn(f"{scene.source}: {tally.unlisted:,} more objects skipped (not listed)")
     return tally
 
 
@@ -680,6 +753,7 @@ def _report(
         "skipped": skipped,
         "totals": {
             "objects": len(records),
+            "skipped": len(skipped) + (tally.unlisted if tally is not None else 0),
             "fewer_levels": reduced,
             "dropped_faces": tally.dropped_faces if tally is not None else 0,
             "points": int(points),

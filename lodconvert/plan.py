@@ -45,6 +45,22 @@ def level_cost(level: Level) -> float:
     return level.count * (POINT_COST if level.is_points else 1.0)
 
 
+def level_bytes(level: Level) -> int:
+    """Bytes of a level's geometry as the glTF writer lays it out (textures aside): per vertex
+    or point a float32 position, a float32 normal (none for a merged far mesh) and, where it
+    has them, colours as four normalised uint16; per triangle three uint16 indices (uint32 in a
+    part of 65,536 vertices or more)."""
+    if level.mesh is None:
+        return level.count * 32
+    normal = 0 if level.kind == "merged" else 12
+    total = 0
+    for part in level.mesh.parts:
+        per_vertex = 12 + normal + (8 if part.vertex_colors is not None else 0)
+        per_triangle = 6 if len(part.vertices) < 65536 else 12
+        total += len(part.vertices) * per_vertex + len(part.faces) * per_triangle
+    return total
+
+
 def surface_area(mesh: Mesh) -> float:
     """Total triangle area of ``mesh``."""
 

@@ -37,6 +37,8 @@ ROOF_PERCENTILE = 90.0
 """The prism's top: this percentile of the roof's heights. Of 50, 70, 80, 90 and 100 it keeps
 the most prisms at silhouette F ≥ :data:`MIN_PRISM_F` on TUM Munich, and the lightest
 (``benchmarks/results/city_levels.md``)."""
+_POLYGON = 3
+"""Shapely's type id of a polygon."""
 FOOTPRINT_TOLERANCE_PX = 0.5
 """The footprint's simplification tolerance, in pixels of the reference view where the prism
 switches in."""
@@ -209,7 +211,7 @@ def _without_slivers(
         merged = _merged(points, corners[keep], extent)
         if merged is not None:
             return _traced(*_used(points, corners[keep]), *merged, extent)
-    return _outline(shapely.union_all([rest[1], *_closed(tri[slivers[outside]])]), extent)
+    return _outline(_union(np.array([rest[1], *_closed(tri[slivers[outside]])])), extent)
 
 
 def _outline(union: Any, extent: float) -> list[FootprintPart]:
@@ -247,7 +249,6 @@ def footprint(lods: dict[str, Mesh], finest: Mesh) -> list[FootprintPart]:
     """The object's footprint as polygons to extrude: the union of its lod0 surfaces if it has
     any, else of its finest geometry, seen from above. Triangles that merge into one polygon
     (slivers of walls aside) are traced along their outer edges; shapely joins the others."""
-    import shapely
 
     base = source_levels(lods).get(0, (None, finest))[1]
     extent = _extent(base)
@@ -259,7 +260,28 @@ def footprint(lods: dict[str, Mesh], finest: Mesh) -> list[FootprintPart]:
     if merged is not None:
         return _traced(points, corners, *merged, extent)
     parts = _without_slivers(_steep(base, seen, twice), tri, points, corners, extent)
-    return parts if parts is not None else _outline(shapely.union_all(_closed(tri)), extent)
+    return parts if parts is not None else _outline(_union(_closed(tri)), extent)
+
+
+def _union(polygons: np.ndarray) -> Any:
+    """The union of shapely ``polygons``: where they fall into groups whose bounding boxes
+    neither overlap nor touch across groups (a building's separate parts), the polygons of
+    each group's union, in the order the groups first come, as one multipolygon (they are
+    disjoint: shapely's union of many thousands of them took seconds); else the union of all
+    at once."""
+    import shapely
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    pairs = shapely.STRtree(polygons).query(polygons)  # bounding boxes that meet
+    graph = coo_matrix((np.ones(pairs.shape[1]), pairs), shape=(len(polygons),) * 2)
+    count, labels = connected_components(graph, directed=False)
+    if count == 1:
+        return shapely.union_all(polygons)
+    order = np.argsort(labels, kind="stable")
+    groups = np.split(polygons[order], np.cumsum(np.bincount(labels))[:-1])
+    parts = shapely.get_parts([shapely.union_all(group) for group in groups])
+    return shapely.multipolygons(parts[shapely.get_type_id(parts) == _POLYGON])
 
 
 def prism_height(

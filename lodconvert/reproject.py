@@ -24,7 +24,7 @@ from .io.crs import CrsError, frame_pipeline, pyproj_crs, vertical_reference
 from .model import Mesh, Node, Scene, Surface
 
 Message = Callable[[str], None]
-_SOURCE_CRS_KEYS = ("local_frame", "vertical_crs")
+SOURCE_CRS_KEYS = ("local_frame", "vertical_crs")
 """Scene attributes that describe the CRS a reader found (:func:`~.io.crs.crs_attributes`)."""
 _STEP = 1.0
 """Metres either side of a placement's point where its local linear part is measured."""
@@ -170,7 +170,7 @@ def _reprojected(scene: Scene, reprojection: Reprojection) -> Scene:
     )
     if isinstance(scene.nodes, list):
         nodes = list(nodes)
-    attributes = {k: v for k, v in scene.attributes.items() if k not in _SOURCE_CRS_KEYS}
+    attributes = {k: v for k, v in scene.attributes.items() if k not in SOURCE_CRS_KEYS}
     return replace(scene, nodes=nodes, crs=reprojection.target.name, attributes=attributes)
 
 

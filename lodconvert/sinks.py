@@ -11,6 +11,12 @@ A run holds an exclusive ``flock`` on each file or directory it stages until it 
 or discarded it. A run killed before that (SIGKILL, the out-of-memory killer, a power cut) leaves
 its staged names behind, unlocked, since the kernel drops a dead process's locks: the next run
 to the same target removes those, and never a staged name whose lock a live run holds.
+
+A directory staged with a ``resume`` key (a hash of the run's inputs and options) has a name
+of its own, ``.name.KEY8.tmp``: a run killed before its commit leaves it, and the next run with
+the same key takes it over as it is (:attr:`DirectorySink.resumed`) so that its writer can keep
+what is already there; one of another key is removed like any dead run's. Its key sits in
+:data:`RESUME` inside it, which the commit removes with everything else a writer kept there.
 """
 
 from __future__ import annotations
@@ -31,6 +37,9 @@ from .errors import InputError, LodConvertError
 
 Check = Callable[[Path], None]
 """Called with a complete staged file (or directory) before the commit; raises to refuse it."""
+RESUME = ".resume"
+"""The folder inside a resumable staged directory holding its run's key (``run``) and what its
+writer records to resume; removed before the directory is checked and committed."""
 WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
 """Errors of a write that no input or option causes: a full disk, a full quota, a file too
 large for its file system, a file system turned read-only. (Not EIO: input read lazily while
@@ -71,6 +80,8 @@ class _Staged:
     check: Check | None = None
     lock: int | None = None
     """A descriptor of ``temp`` holding its ``flock`` while this run lives."""
+    resumed: bool = False
+    """Whether ``temp`` is a killed run's staged directory of the same key, taken over."""
 
 
 def _staged_pattern(target: Path) -> re.Pattern[str]:
@@ -105,14 +116,16 @@ def _held(path: Path) -> int | None:
     return None
 
 
-def _clear_dead_runs(target: Path) -> None:
+def _clear_dead_runs(target: Path, resume: str | None = None) -> int | None:
     """Remove what runs that are no longer alive staged for ``target``: its staged names in its
-    folder that no process holds locked."""
+    folder that no process holds locked. A staged directory of the ``resume`` key is kept
+    instead, and a descriptor holding its lock returned (``None``: there is none)."""
     pattern = _staged_pattern(target)
     try:
         names = [name for name in os.listdir(target.parent) if pattern.fullmatch(name)]
     except OSError:
-        return
+        return None
+    kept = None
     for name in names:
         path = target.parent / name
         try:
@@ -124,8 +137,25 @@ def _clear_dead_runs(target: Path) -> None:
         except OSError:  # locked by a live run (or locks unsupported here): leave it
             os.close(fd)
             continue
+        if kept is None and resume is not None and _resumable(path, resume):
+            kept = fd
+            continue
         _remove(path)
         os.close(fd)
+    return kept
+
+
+def _resume_name(target: Path, resume: str) -> Path:
+    """The staged name of the directory ``target`` for the run of key ``resume``."""
+    return target.parent / f".{target.name}.{resume[:8]}.tmp"
+
+
+def _resumable(path: Path, resume: str) -> bool:
+    """Whether ``path`` is a staged directory of the run of key ``resume``."""
+    try:
+        return (path / RESUME / "run").read_text() == resume
+    except (OSError, UnicodeDecodeError):
+        return False
 
 
 @dataclass
@@ -164,6 +194,12 @@ class DirectorySink:
     path: Path
     staged: _Staged
 
+    @property
+    def resumed(self) -> bool:
+        """Whether the staged directory is an interrupted run's of the same key, taken over
+        with what it holds (see :meth:`Outputs.directory`)."""
+        return self.staged.resumed
+
     @contextlib.contextmanager
     def file(self, relative: str | Path) -> Iterator[BinaryIO]:
         """A file at ``relative`` inside the staged directory (folders made as needed)."""
@@ -197,7 +233,8 @@ class Outputs:
     def target(self, path: str | Path, directory: bool = False) -> Path:
         """``path`` checked as an output: raise :class:`InputError` naming it when its folder is
         missing or not writable, when it is a directory (a file, for a directory output), when
-        it is one of the run's inputs, or when this run already writes it."""
+        it is one of the run's inputs (holds one, for a directory output), or when this run
+        already writes it."""
         path = Path(path)
         where = str(path)
         folder = path.parent if str(path.parent) else Path(".")
@@ -211,6 +248,10 @@ class Outputs:
         for source in self.inputs:
             if Path(source).exists() and path.exists() and _same_file(Path(source), path):
                 raise InputError("is an input of this run; it would be overwritten", where)
+            if directory and Path(source).resolve().is_relative_to(path.resolve()):
+                raise InputError(
+                    f"holds {source}, an input of this run; it would be replaced", where
+                )
         for staged in self._staged:
             if staged.target.resolve() == path.resolve():
                 raise InputError("is written twice by this run", where)
@@ -223,11 +264,43 @@ class Outputs:
         staged = self._stage(target, check, directory=False)
         return FileSink(self, target, staged)
 
-    def directory(self, path: str | Path, check: Check | None = None) -> DirectorySink:
-        """Stage the output directory ``path`` (replacing an existing one on commit)."""
+    def directory(
+        self, path: str | Path, check: Check | None = None, resume: str | None = None
+    ) -> DirectorySink:
+        """Stage the output directory ``path`` (replacing an existing one on commit). With a
+        ``resume`` key, a staged directory a killed run of the same key left is taken over
+        (:attr:`DirectorySink.resumed`), and the new one is staged where the next run of that
+        key finds it."""
         target = self.target(path, directory=True)
-        staged = self._stage(target, check, directory=True)
+        staged = None
+        if resume is not None:
+            staged = self._resumed(target, check, resume)
+        if staged is None:
+            staged = self._stage(target, check, directory=True)
         return DirectorySink(self, target, staged)
+
+    def _resumed(self, target: Path, check: Check | None, resume: str) -> _Staged | None:
+        """The staged directory of ``target`` for the run of key ``resume``: a dead run's,
+        taken over, or a new one with the key recorded (``None``: a live run holds the name)."""
+        lock = _clear_dead_runs(target, resume)
+        temp = _resume_name(target, resume)
+        resumed = lock is not None
+        if lock is None:
+            try:
+                temp.mkdir(mode=0o700)
+            except FileExistsError:  # a live run of the same key stages it
+                return None
+            except OSError:
+                return None  # :meth:`_stage` says why in one line
+            lock = _held(temp)
+            if lock is None:
+                return None
+            with writing(target):
+                (temp / RESUME).mkdir()
+                (temp / RESUME / "run").write_text(resume)
+        staged = _Staged(target, temp, check, lock, resumed)
+        self._staged.append(staged)
+        return staged
 
     def _stage(self, target: Path, check: Check | None, directory: bool) -> _Staged:
         """A locked staged name beside ``target``: ``.name.XXXX.tmp.suffix`` for a file
@@ -263,6 +336,8 @@ class Outputs:
         left changed. Returns the targets written."""
         try:
             for staged in self._staged:
+                if staged.temp.is_dir():
+                    _remove(staged.temp / RESUME)
                 if staged.check is not None:
                     staged.check(staged.temp)
         except BaseException:
@@ -278,6 +353,8 @@ class Outputs:
                 done.append((staged, backup))
                 if staged.temp.is_file():
                     staged.temp.chmod(0o644)
+                elif staged.temp.is_dir():  # made private by mkdtemp
+                    staged.temp.chmod(0o755)
                 os.replace(staged.temp, staged.target)
         except BaseException:
             for staged, backup in reversed(done):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import subprocess
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -22,6 +23,14 @@ SHARED = ROOT.parent / "shared"
 STANFORD = SHARED / "data" / "stanford"
 X3D_SCHEMAS = SHARED / "schemas" / "x3d"
 SAMPLE = ROOT / "samples" / "torus_knot.ply"
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Let Ctrl-C reach the commands the tests run: a suite started in the background of a
+    non-interactive shell inherits SIGINT ignored, and its children would too (the tests that
+    interrupt a run would wait for it forever)."""
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def require(condition: bool, reason: str, env: str = "LODCONVERT_REQUIRE_VALIDATORS") -> None:

@@ -10,23 +10,31 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
+import trimesh
 from lxml import etree
 
 from lodconvert.bake import get_backend
+from lodconvert.bake.qem import simplify_within
 from lodconvert.chain import ChainOptions
 from lodconvert.errors import UsageError
 from lodconvert.hlod import (
     AUTO_SIZES,
     CELL_EXPONENT,
     MIN_CELL_F,
+    SIMPLIFY_PX,
     HlodOptions,
+    _finest_mesh,
+    _merged,
+    _merged_level,
+    _one_part,
     auto_size,
     draw_counts,
     parse_sizes,
     plan_cells,
 )
 from lodconvert.io import read_chains, read_scene
-from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene
+from lodconvert.io.gltf.rules import COMPONENT_SIZES, WIDTHS
+from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene, Surface
 from lodconvert.pipeline import iter_chains
 from lodconvert.ranges import cutoff
 from tests.conftest import ROOT
@@ -134,7 +142,6 @@ def test_auto_keeps_the_cheaper_faithful_far_level(tum_items: list[Item]) -> Non
 def test_a_merged_far_mesh_takes_finer_levels_until_it_is_faithful(tum_items: list[Item]) -> None:
     """Where the buildings' merged coarsest levels miss F 0.95 against them (slabs a tenth of
     their height here), the cell's far mesh merges their next finer levels, and reaches it."""
-    from lodconvert.hlod import _merged_level
     from lodconvert.model import Level
 
     for cell in _cells(tum_items):
@@ -149,6 +156,84 @@ def test_a_merged_far_mesh_takes_finer_levels_until_it_is_faithful(tum_items: li
     level, f, finer = _merged_level(chains, np.zeros(3), source, 300.0, ChainOptions())
     assert finer == 1 and f >= MIN_CELL_F
     assert level.count == sum(chain.levels[0].count for chain in chains)
+
+
+def _merged_vertices(cell: CellChain) -> int:
+    return cell.facts["simplified"]["vertices_before"]
+
+
+def test_far_meshes_are_simplified_below_the_merge_and_stay_faithful(
+    tum_items: list[Item],
+) -> None:
+    """TUM Munich's 250 m blocks: the far meshes keep under 60 % of the merged buildings'
+    vertices (about a third of their finest levels') at silhouette F ≥ 0.95, each within a few
+    pixels where it switches in."""
+    tier1 = [cell for cell in _cells(tum_items) if cell.tier == 1]
+    for cell in _cells(tum_items):
+        simplified = cell.facts["simplified"]
+        assert simplified["kept"] and cell.facts["kind"] == "mesh"
+        assert cell.far.count == simplified["vertices_after"] < simplified["vertices_before"]
+        assert simplified["silhouette_f_after"] == cell.facts["silhouette_f"]["mesh"] >= MIN_CELL_F
+        pixel = cell.cutoffs[0] / ChainOptions().view.focal_px
+        assert simplified["tolerance_m"] == pytest.approx(simplified["tolerance_px"] * pixel, 1e-3)
+        assert simplified["tolerance_px"] in SIMPLIFY_PX
+    merged = sum(_merged_vertices(cell) for cell in tier1)
+    finest = sum(chain.levels[0].count for cell in tier1 for chain in cell.objects())
+    far = sum(cell.far.count for cell in tier1)
+    assert far <= 0.6 * merged and far <= 0.35 * finest
+    block_cell = max(tier1, key=_merged_vertices)  # the heaviest block
+    assert block_cell.far.count <= 0.6 * _merged_vertices(block_cell)
+
+
+def test_far_meshes_leave_out_the_floors_on_the_ground(tum_items: list[Item]) -> None:
+    for cell in _cells(tum_items):
+        assert cell.far.mesh is not None
+        low = cell.far.mesh.bounds[0, 2] + 0.01
+        (part,) = cell.far.mesh.parts
+        normals = part.face_normals(np.arange(len(part.faces)))
+        assert not ((normals[:, 2] < -0.99) & (part.triangles[:, :, 2].max(axis=1) <= low)).any()
+
+
+def test_a_simplified_far_mesh_is_the_same_every_time(tum_items: list[Item]) -> None:
+    cell = max((c for c in _cells(tum_items) if c.tier == 1), key=_merged_vertices)
+    objects = cell.objects()
+    source = _merged([_finest_mesh(chain) for chain in objects]).translated(-cell.origin)
+    merged, _, _ = _merged_level(objects, cell.origin, source, cell.cutoffs[0], ChainOptions())
+    tolerance = (
+        cell.facts["simplified"]["tolerance_px"] * cell.cutoffs[0] / ChainOptions().view.focal_px
+    )
+    first, again = (simplify_within(merged.mesh, tolerance) for _ in range(2))
+    for name in ("vertices", "faces", "vertex_colors"):
+        assert getattr(first, name).tobytes() == getattr(again, name).tobytes(), name
+
+
+def test_simplification_keeps_each_face_s_colour_without_bleeding() -> None:
+    """Two finely tessellated boxes, one red-roofed, become two boxes of eight corners, each
+    face in its source's colour: a red roof's corners are four vertices of their own, so that
+    no wall turns pink towards it."""
+    red, white = (np.array(c, dtype=np.uint8) for c in ([200, 30, 30, 255], [230, 225, 210, 255]))
+    parts = []
+    for x in (0.0, 30.0):
+        box = trimesh.creation.box((10, 8, 6))
+        box.apply_translation((x, 0, 3))
+        for _ in range(3):
+            box = box.subdivide()
+        roof = box.face_normals[:, 2] > 0.5 if x else np.zeros(len(box.faces), bool)
+        for faces, color in ((roof, red), (~roof, white)):
+            piece = box.submesh([np.flatnonzero(faces)], append=True) if faces.any() else None
+            if piece is not None:
+                parts.append(
+                    Surface(piece.vertices, np.asarray(piece.faces, np.int64), base_color=color)
+                )
+    merged = _one_part(Mesh(parts))
+    simple = simplify_within(merged, 0.05)
+    assert len(merged.vertices) > 700 and len(simple.vertices) == 8 + 8 + 4
+    assert np.allclose(Mesh([simple]).bounds, Mesh(parts).bounds, atol=0.05)
+    corners = simple.vertex_colors[simple.faces]
+    assert (corners == corners[:, :1]).all()  # one colour per face
+    up = simple.face_normals(np.arange(len(simple.faces)))[:, 2] > 0.5
+    right = simple.triangles[:, :, 0].min(axis=1) > 15
+    assert (corners[up & right, 0] == red).all() and (corners[~(up & right), 0] == white).all()
 
 
 @pytest.mark.parametrize("kind", ["points", "mesh"])
@@ -252,6 +337,16 @@ def test_glb_chains_cells_with_msft_lod_validly(tmp_path: Path, gltf_validator) 
         assert near["extras"]["lodconvert"]["cutoffs"] == pytest.approx(cell["cutoffs"])
         assert len(near["extras"]["MSFT_screencoverage"]) == 2  # far level, then nothing
         assert nodes[far]["name"] == f"{cell['id']}_FAR" and "mesh" in nodes[far]
+        # the welded far mesh has no normals (shaded flat); its bytes are as the report says
+        (primitive,) = doc["meshes"][nodes[far]["mesh"]]["primitives"]
+        assert "NORMAL" not in primitive["attributes"] and "COLOR_0" in primitive["attributes"]
+        accessors = [
+            doc["accessors"][i] for i in [*primitive["attributes"].values(), primitive["indices"]]
+        ]
+        size = sum(
+            a["count"] * WIDTHS[a["type"]] * COMPONENT_SIZES[a["componentType"]] for a in accessors
+        )
+        assert size == cell["bytes"][cell["kind"]]
     # every building is read back, from inside its cells, with its attributes
     chains = read_chains(out)
     assert len(chains) == 290 and all("measuredHeight" in c.metadata for c in chains[:5])

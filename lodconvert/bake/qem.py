@@ -1,4 +1,5 @@
-"""Quadric edge-collapse decimation (``fast-simplification``) as a level kind.
+"""Quadric edge-collapse decimation (``fast-simplification``): to a vertex count, as a level
+kind, or within a distance, for LOD parents' far meshes.
 
 A ``qem`` level is the source mesh decimated to a target vertex count: a mesh level, drawn as
 triangles, where a ``pcd`` level would be drawn as points. ``fast-simplification`` targets a
@@ -6,29 +7,45 @@ face count; the vertex count that comes out is checked and the face target lower
 is at most the vertex target. Colours (vertex colours or texture, modulated by the base colour)
 are sampled from the source surface at each new vertex, on a face of a source vertex that
 collapsed into it; the texture itself is not kept.
+
+:func:`simplify_within` bounds the error instead of the count. Its quadrics are those of
+Garland & Heckbert: a vertex's error is the sum of its squared distances to the planes of the
+source faces it stands for, so an error below t² keeps it within t of each of those planes.
+``fast-simplification`` collapses, in pass i of its :data:`PASSES`, the edges whose error is
+below :data:`THRESHOLD_SCALE`·(i + 3)^agg; with no face target it runs every pass, and agg is
+chosen so that the last pass's threshold is the tolerance squared.
 """
 
 from __future__ import annotations
 
+import math
+import threading
 from types import ModuleType
 
 import numpy as np
 
 from ..errors import LodConvertError
-from ..model import Mesh, Surface
+from ..model import WHITE, Mesh, Surface
 
 PIP_INSTALL = "pip install fast-simplification"
 # Face targets tried before giving up on reaching the vertex target.
 MAX_TRIES = 6
 AIM = 0.99
+PASSES = 100
+"""Collapse passes of ``fast-simplification`` (its ``Simplify.h``)."""
+THRESHOLD_SCALE = 1e-9
+"""Factor of its pass thresholds (squared metres for a mesh in metres)."""
+ONE_AT_A_TIME = threading.Lock()
+"""Held around each use of ``fast-simplification``: it keeps the mesh it works on in module
+state between calls, so threads baking at once would mix their meshes."""
 
 
-def _simplifier() -> ModuleType:
+def _simplifier(user: str = "--level-kind qem") -> ModuleType:
     try:
         import fast_simplification
     except ImportError as exc:
         raise LodConvertError(
-            f"--level-kind qem needs fast-simplification ({exc}); run: {PIP_INSTALL}"
+            f"{user} needs fast-simplification ({exc}); run: {PIP_INSTALL}"
         ) from exc
     return fast_simplification
 
@@ -44,9 +61,10 @@ def decimate(surface: Mesh, vertices: int) -> Surface:
     # A closed mesh has about two faces per vertex; aim a little low, the count overshoots.
     target_faces = max(1, int(len(faces) * vertices / max(used, 1) * AIM))
     for _ in range(MAX_TRIES):
-        out_points, out_faces, collapses = fs.simplify(
-            points, faces, target_count=min(target_faces, len(faces)), return_collapses=True
-        )
+        with ONE_AT_A_TIME:
+            out_points, out_faces, collapses = fs.simplify(
+                points, faces, target_count=min(target_faces, len(faces)), return_collapses=True
+            )
         if len(out_points) <= vertices or target_faces == 1:
             break
         target_faces = max(1, int(target_faces * vertices / len(out_points) * 0.98))
@@ -61,10 +79,85 @@ def _coloured(
     single = surface.single
     if single is not None and single.texture is None and single.vertex_colors is None:
         return Surface(points, faces, base_color=single.base_color)
-    _, _, mapping = fs.replay_simplification(surface.vertices, surface.faces, collapses)
-    # A source face for each new vertex: one that uses a source vertex collapsed into it.
-    corners = surface.faces.ravel()
-    face_of_new = np.zeros(len(points), dtype=np.int64)
-    face_of_new[mapping[corners]] = np.arange(len(corners)) // 3
+    face_of_new = _source_faces(fs, surface.vertices, surface.faces, collapses, len(points))
     colors = surface.colors_at(face_of_new, points)
     return Surface(points, faces, vertex_colors=colors)
+
+
+def _source_faces(
+    fs: ModuleType, vertices: np.ndarray, faces: np.ndarray, collapses: np.ndarray, count: int
+) -> np.ndarray:
+    """For each of the ``count`` new vertices, a face of (``vertices``, ``faces``) that uses a
+    source vertex collapsed into it."""
+    corners = faces.ravel()
+    face_of_new = np.zeros(count, dtype=np.int64)
+    face_of_new[_new_vertex_of(fs, vertices, faces, collapses)[corners]] = (
+        np.arange(len(corners)) // 3
+    )
+    return face_of_new
+
+
+def _new_vertex_of(
+    fs: ModuleType, vertices: np.ndarray, faces: np.ndarray, collapses: np.ndarray
+) -> np.ndarray:
+    """The new vertex each source vertex collapsed into."""
+    with ONE_AT_A_TIME:
+        _, _, mapping = fs.replay_simplification(vertices, faces, collapses)
+    return mapping
+
+
+def simplify_within(surface: Mesh, tolerance: float) -> Surface:
+    """``surface`` (all its parts as one) simplified while each vertex stays within
+    ``tolerance`` of the planes of the source faces it stands for: vertices at one position are
+    welded first (so that separate polygons of one solid collapse together), faces of no area
+    left out. Open borders stay as they are: the quadrics hold a vertex to its faces' planes,
+    not to a border's line, along which it would slide. Each face keeps the colour of the
+    source face it was (at that face's centre), as vertex colours on a white base; a vertex
+    where faces of different colours meet is one per colour, so that no colour runs across an
+    edge."""
+    fs = _simplifier("a simplified far mesh")
+    points, corners = np.unique(surface.vertices, axis=0, return_inverse=True)
+    welded = corners.reshape(-1)[surface.faces]
+    tri = points[welded]
+    kept = np.flatnonzero(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]).any(axis=1))
+    welded = welded[kept]
+    if not len(welded):
+        return Surface(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
+    agg = max(0.0, math.log(tolerance**2 / THRESHOLD_SCALE) / math.log(PASSES + 2))
+    with ONE_AT_A_TIME:
+        out_points, out_faces, collapses = fs.simplify(
+            points, welded, target_count=0, agg=agg, return_collapses=True, preserve_border=True
+        )
+    out_faces = out_faces.astype(np.int64)
+    moved = _new_vertex_of(fs, points, welded, collapses)[welded]
+    source = kept[_same_faces(moved, out_faces)]
+    colors = surface.colors_at(source, surface.triangles[source].mean(axis=1))
+    return _split_by_colour(out_points, out_faces, colors)
+
+
+def _same_faces(moved: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """For each of ``faces``, the first of the source faces ``moved`` (their corners moved to
+    the new vertices they collapsed into) with the same corners: the face it was."""
+    triples, ids = np.unique(
+        np.sort(np.concatenate([moved, faces]), axis=1), axis=0, return_inverse=True
+    )
+    ids = ids.reshape(-1)
+    first = np.full(len(triples), -1, dtype=np.int64)
+    first[ids[: len(moved)][::-1]] = np.arange(len(moved))[::-1]
+    found = first[ids[len(moved) :]]
+    assert (found >= 0).all(), "a simplified face that no source face became"
+    return found
+
+
+def _split_by_colour(points: np.ndarray, faces: np.ndarray, colors: np.ndarray) -> Surface:
+    """A surface of ``faces`` over ``points``, each face of its own colour (``colors``, RGBA
+    per face): a vertex for each point and colour of the faces around it."""
+    rgba = np.repeat(np.ascontiguousarray(colors, dtype=np.uint8), 3, axis=0)
+    keys = np.column_stack([faces.ravel(), rgba.view(np.uint32).ravel()])
+    unique, first, corners = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    return Surface(
+        points[unique[:, 0]],
+        corners.reshape(-1, 3),
+        vertex_colors=rgba[first],
+        base_color=WHITE.copy(),
+    )

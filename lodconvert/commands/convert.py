@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from collections import Counter
 from typing import Any
 
@@ -49,7 +50,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="OBJ, PLY, STL, OFF, GLB or glTF file (optionally .gz), or city models; several "
         "inputs are one scene, objects of the same id one object with all their LoDs",
     )
-    parser.add_argument("-o", "--output", required=True, help="output .x3d, .glb or .gltf")
+    parser.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="output .x3d, .glb or .gltf, or DIR/tileset.json (a 3D Tiles 1.1 tileset in DIR)",
+    )
     parser.add_argument("--version", action="version", version=f"lodconvert {__version__}")
     read = add_read_options(parser)
     read.add_argument(
@@ -102,6 +108,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     add_viewer_lib_option(out)
     out.add_argument(
+        "--sse",
+        type=float,
+        metavar="PX",
+        help="3D Tiles only: the maximumScreenSpaceError the tiles' geometricError is made for: "
+        "a viewer with it refines each tile at our switch distance (default 16, CesiumJS's)",
+    )
+    out.add_argument(
         "-q",
         "--quiet",
         action="count",
@@ -119,6 +132,18 @@ def _check_switching(args: argparse.Namespace) -> None:
         raise UsageError(
             f"--switching {args.switching} is X3D-only; write an .x3d output, not {args.output}"
         )
+
+
+def _check_tiles(args: argparse.Namespace) -> None:
+    """:class:`UsageError` for ``--sse`` with an output other than a tileset, ``--html`` with
+    a tileset, or an ``--sse`` that is not a positive number, before any work."""
+    tiles = output_format(args.output).output_folder is not None
+    if args.sse is not None and not tiles:
+        raise UsageError(f"--sse is for 3D Tiles; write DIR/tileset.json, not {args.output}")
+    if args.sse is not None and not (math.isfinite(args.sse) and args.sse > 0):
+        raise UsageError(f"--sse must be a positive number of pixels, got {args.sse:g}")
+    if tiles and args.html:
+        raise UsageError("--html writes a page for .x3d, .glb and .gltf outputs, not tilesets")
 
 
 def _hlod_line(hlod: dict[str, Any]) -> str:
@@ -143,8 +168,12 @@ def run(args: argparse.Namespace, console: Console) -> int:
     from ..tasks import default_workers
 
     _check_switching(args)
+    _check_tiles(args)
     options = chain_options(args)
-    hlod = HlodOptions(parse_sizes(args.hlod), args.hlod_kind) if args.hlod else None
+    tiles = output_format(args.output).output_folder is not None  # always with LOD parents
+    hlod = None
+    if args.hlod or tiles:
+        hlod = HlodOptions(parse_sizes(args.hlod or "auto"), args.hlod_kind)
     if args.hlod_kind != "auto" and hlod is None:
         raise UsageError("--hlod-kind is for the cells that --hlod makes")
     limits = DEFAULT_LIMITS.with_text(args.limit)
@@ -174,7 +203,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         read_options=read_options(args),
         strict=args.strict,
         hlod=hlod,
-        write_options={"switching": args.switching},
+        write_options={"switching": args.switching, "sse": args.sse},
         also=stage_page if args.html else None,
         limits=limits,
     )
@@ -205,7 +234,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     plural = "s" if len(moved) > 1 else ""
     for each in moved:
         console.info(f"{each['input']}: reprojected from {each['from']} into {each['to']}")
-    skipped = len(report["skipped"])
+    skipped = report["totals"]["skipped"]
     dropped = report["totals"]["dropped_faces"]
     console.summary(
         f"wrote {args.output} ({report['totals']['objects']:,} object(s)"

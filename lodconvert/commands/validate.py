@@ -8,15 +8,18 @@ from ..cli import EXIT_ERROR, EXIT_OK, Console
 from ..validate import errors_of, validate_file
 
 DESCRIPTION = (
-    "Check .x3d, .glb and .gltf files: X3D structure (LOD ranges and children, PointSet counts; "
-    "the official XSD with --x3d-schema), glTF MSFT_lod rules, accessor bounds and counts. "
+    "Check .x3d, .glb and .gltf files and tileset.json: X3D structure (LOD ranges and children, "
+    "PointSet counts; the official XSD with --x3d-schema), glTF MSFT_lod rules, accessor bounds "
+    "and counts, 3D Tiles geometricError, bounding volumes, feature ids and property tables. "
     "Prints one line per finding; exit status 1 when any file has an error."
 )
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``lodconvert validate``."""
-    parser.add_argument("files", nargs="+", metavar="FILE", help=".x3d, .glb or .gltf")
+    parser.add_argument(
+        "files", nargs="+", metavar="FILE", help=".x3d, .glb, .gltf or tileset.json"
+    )
     parser.add_argument(
         "--x3d-schema",
         metavar="PATH",

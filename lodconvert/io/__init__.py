@@ -19,7 +19,11 @@ whichever of these it offers —
   turned them y-up about a scene origin, :mod:`lodconvert.io.frame`), or ``None``; read-back
   origins and centres are in the source's coordinates, the file's scene in the frame's;
 - ``check(path, findings, options)``: the structural checks ``validate`` runs, and every
-  conversion runs on its staged output before committing it.
+  conversion runs on its staged output before committing it;
+- ``output_folder(path) -> Path``: for a format written as a folder of files (3D Tiles), the
+  folder that the output path names, checked to be one the run may replace; the writer's sink
+  is then that folder (:class:`~lodconvert.sinks.DirectorySink`), and the run groups objects
+  into LOD parents (``--hlod auto`` unless given).
 
 ``read_options`` and ``write_options`` name the keyword options the format takes; the others
 are not passed to it. No other module parses our files or looks at suffixes.
@@ -44,6 +48,7 @@ FORMAT_MODULES = (
     "lodconvert.io.x3d",
     "lodconvert.io.gltf",
     "lodconvert.io.citygml",
+    "lodconvert.io.tiles",
 )
 """Modules that declare a ``FORMAT`` (or ``FORMATS``), in lookup order."""
 
@@ -61,6 +66,9 @@ class OutputInfo:
     options: dict[str, Any] = field(default_factory=dict)
     city: bool = False
     """Whether the scene is a city model's (z-up, with or without a CRS)."""
+    georef: Any = None
+    """Where the scene's coordinates lie (:class:`~lodconvert.reproject.Georef`; ``None``
+    without a CRS, or with one pyproj does not know), for outputs placed on the globe."""
 
     @property
     def framed(self) -> bool:
@@ -81,6 +89,7 @@ class Format:
     read_cells: Callable[..., list[dict[str, Any]]] | None = None
     read_frame: Callable[..., Any] | None = None
     check: Callable[..., None] | None = None
+    output_folder: Callable[[Path], Path] | None = None
     read_options: tuple[str, ...] = ()
     write_options: tuple[str, ...] = ()
 

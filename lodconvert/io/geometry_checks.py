@@ -40,6 +40,10 @@ SLIVER = 1e-12
 this (exactly zero in exact arithmetic, up to float64 rounding)."""
 _CHUNK = 1 << 20
 """Faces checked at once (bounds the check's working memory to some 100 MB)."""
+SKIPPED_LISTED = 1000
+"""Skipped objects listed by id and reason per input; past them, skipped objects are only
+counted (:attr:`InputTally.unlisted`), so a file of millions of broken objects keeps a short
+report."""
 TALLY_KEY = "input_checks"
 """Key of the :class:`InputTally` in :attr:`Scene.attributes`."""
 
@@ -48,7 +52,7 @@ TALLY_KEY = "input_checks"
 class InputTally:
     """What the checks of one input file counted: vertices and faces read (against ``limits``),
     faces dropped (in all, and by the id of each object read) and objects skipped (``id``,
-    ``reason``)."""
+    ``reason``: the first :data:`SKIPPED_LISTED`, the rest counted in :attr:`unlisted`)."""
 
     source: str
     limits: Limits
@@ -57,6 +61,21 @@ class InputTally:
     dropped_faces: int = 0
     dropped_by_object: dict[str, int] = field(default_factory=dict)
     skipped: list[dict[str, str]] = field(default_factory=list)
+    unlisted: int = 0
+    """Objects skipped past the :data:`SKIPPED_LISTED` listed."""
+
+    @property
+    def skipped_count(self) -> int:
+        """Objects skipped, listed or not."""
+        return len(self.skipped) + self.unlisted
+
+    def add_skipped(self, object_id: str, reason: str) -> None:
+        """Record object ``object_id`` as skipped for ``reason`` (a whole line, naming it):
+        listed while fewer than :data:`SKIPPED_LISTED` are, else counted."""
+        if len(self.skipped) < SKIPPED_LISTED:
+            self.skipped.append({"id": object_id, "reason": reason})
+        else:
+            self.unlisted += 1
 
     def count(self, vertices: int, faces: int, declared: bool = False) -> None:
         """Add ``vertices`` and ``faces`` read (or, ``declared``, claimed by a header before
@@ -78,7 +97,7 @@ class InputTally:
         """Record that object ``object_id`` is left out: all its ``dropped`` faces had no
         area (they are counted in :attr:`dropped_faces` where they are dropped)."""
         reason = f"all its {dropped:,} faces have no area (zero area or a repeated vertex)"
-        self.skipped.append({"id": object_id, "reason": str(InputError(reason, object_id))})
+        self.add_skipped(object_id, str(InputError(reason, object_id)))
 
     def nothing_left(self) -> InputError:
         """The error for a file none of whose faces has area."""

@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -109,6 +109,19 @@ class LodChain:
     cut: tuple[str, ...] = ()
     """What was cut from the object's id and attributes so that every output holds them
     (:mod:`.safe_text`), one note per kind of cut."""
+
+    def in_scene(self, mesh: Mesh) -> Mesh:
+        """``mesh`` (one of this chain's levels) in scene coordinates."""
+        if self.transform is None:
+            return mesh.translated(self.origin)
+        matrix = np.asarray(self.transform, dtype=np.float64)
+        rotation, shift = matrix[:3, :3].T, matrix[:3, 3]
+        return Mesh(
+            [
+                replace(part, vertices=(part.vertices + self.origin) @ rotation + shift)
+                for part in mesh.parts
+            ]
+        )
 
 
 @dataclass

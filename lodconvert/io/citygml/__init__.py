@@ -102,11 +102,11 @@ def read_citygml(
     tally = document.tally
     nodes = reading.nodes() if reading is not None else document.nodes()
     first = next(nodes, None)
-    if first is None and len(tally.skipped) == 1:
+    if first is None and tally.skipped_count == 1:
         raise InputError(tally.skipped[0]["reason"], source)
     if first is None and tally.skipped:
         reason = tally.skipped[0]["reason"]
-        raise InputError(f"none of its {len(tally.skipped):,} objects is left ({reason}…)", source)
+        raise InputError(f"none of its {tally.skipped_count:,} objects is left ({reason}…)", source)
     if first is None:
         wanted = f" of type {', '.join(sorted(types))}" if types else ""
         raise InputError(f"has no city objects{wanted} with surface geometry", source)

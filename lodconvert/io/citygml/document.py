@@ -1,7 +1,7 @@
 """A CityGML document streamed a batch of city objects at a time: the root checked first, then
-only the root's children (members) reach Python, each member's objects are collected, and a
-batch of them is triangulated together before their nodes are handed on and their elements
-freed."""
+only the root's children (members) reach Python, each member's objects are collected (their
+coordinates read and their elements freed a part at a time), and a batch of them is
+triangulated together before their nodes are handed on."""
 
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ from .geometry import (
     BrokenObject,
     Holder,
     check_depth,
-    collect,
+    gather,
     gml_id_of,
     holders_of,
     triangulate_batch,
@@ -44,7 +44,7 @@ from .names import (
 from .source import Stream, first_look, open_document, parser_options
 
 BATCH = 64
-"""City objects triangulated together (their elements are held until then)."""
+"""City objects triangulated together (their coordinates are held until then)."""
 _ROOT_CHILDREN = tuple(f"{{*}}{name}" for name in sorted(MEMBERS | {"boundedBy"}))
 """Tags of the root's children that reach Python (any namespace; nested ones are passed)."""
 
@@ -143,7 +143,8 @@ class Document:
 
     def _collected(self, element: etree._Element) -> tuple[Node, Holder] | None:
         """A top-level city object's node (parts as children, without geometry) and its
-        holder with the polygons found in it; None when the object is not read (or skipped:
+        holder with the polygons found in it and their coordinates read (its elements freed,
+        a part at a time); None when the object is not read (or skipped:
         parts nested too deep, no polygon; an object with no element in it is only counted).
         :class:`InputError` when it nests deeper than the ``xml_depth`` limit, checked before
         it is walked."""
@@ -166,8 +167,10 @@ class Document:
         except BrokenObject as exc:
             self._skip(object_id(gml_id_of(element) or kind, self.taken), str(exc))
             return None
-        collect(top, self.gml, self.templates)
-        if not any(holder.polygons for holder in top.walk()):
+        for holder in top.walk():
+            holder.attributes = attributes_of(holder.element, holder.kind, holder.gml_id)
+        gather(top, self.gml, self.templates)
+        if not top.broken and not any(holder.polygons for holder in top.walk()):
             node_id = object_id(top.gml_id or kind, self.taken)
             if unresolved := sum(holder.unresolved for holder in top.walk()):
                 self.stats["unresolved_links"][node_id] = unresolved
@@ -181,7 +184,7 @@ class Document:
         node = Node(
             id=object_id(holder.gml_id or holder.kind, self.taken),
             type=holder.kind,
-            attributes=attributes_of(holder.element, holder.kind, holder.gml_id),
+            attributes=holder.attributes,
         )
         holder.where = f"{self.source}: {node.id}"
         node.children = [self._node(part) for part in holder.parts]
@@ -251,7 +254,7 @@ class Document:
 
     def _skip(self, node_id: str, reason: str) -> None:
         """Record object ``node_id`` as skipped for ``reason``."""
-        self.tally.skipped.append({"id": node_id, "reason": str(InputError(reason, node_id))})
+        self.tally.add_skipped(node_id, str(InputError(reason, node_id)))
 
 
 def _free(element: etree._Element) -> None:

@@ -64,6 +64,9 @@ PARSER_DEPTH = 2048
 MAX_PART_DEPTH = 32
 """Parts nested in parts below a top-level object (a building's parts' parts…) read; an object
 whose parts nest deeper is skipped."""
+TRIANGULATED = 4096
+"""Polygons triangulated together at most, but for one holder's (a batch's per-polygon
+arrays cost some 1 KB a polygon; thousands together already run as array operations)."""
 _DEDUP_DECIMALS = 6
 """A polygon whose exterior ring repeats another's of the same LoD to this many decimals is
 read once (a solid's copy of a thematic surface's polygon)."""
@@ -80,6 +83,11 @@ _ITEMS = {
 }
 """By GML namespace: the polygons, the TINs given by their control points alone (no
 triangles) and the elements with an ``xlink:href`` below an element, in document order."""
+_LINKED = etree.XPath(
+    "boolean(descendant-or-self::*/@xlink:href)",
+    namespaces={"xlink": XLINK_HREF[1:].partition("}")[0]},
+)
+"""Whether an element or one below it links (``xlink:href``) to another."""
 _EXTERIOR = frozenset({"exterior", "outerBoundaryIs"})
 _INTERIOR = frozenset({"interior", "innerBoundaryIs"})
 
@@ -91,16 +99,25 @@ class BrokenObject(ValueError):
 @dataclass(eq=False, slots=True)
 class Polygon:
     """One polygon met in an object: its LoD, semantic type (``""``: none), whether an
-    ``OrientableSurface`` reversed it, its element, what places it, and its rings (exterior
-    first; (k, 3) float64 in metres) once the batch's coordinates are read."""
+    ``OrientableSurface`` reversed it, its element and what places it (until its coordinates
+    are read, :func:`read_coordinates`), and its rings (exterior first; (k, 3) float64 in
+    metres) once the batch's coordinates are in metres."""
 
     lod: str
     semantic: str
     flip: bool
-    element: etree._Element
+    element: etree._Element | None
     implicit: etree._Element | None = None
     """The ``ImplicitGeometry`` that places it (its rings are read in its frame), or None."""
     rings: list[np.ndarray] = field(default_factory=list)
+    serial: int = 0
+    """Its element's number in its holder (a polygon met twice has one), once read."""
+    placed_by: int | None = None
+    """Its placement's key in :attr:`_Read.placements` (implicit geometry), once read."""
+    tin: bool = False
+    """Whether it is a ``Tin`` given by its control points (triangulated in plan)."""
+    max_length: float | None = None
+    """Such a ``Tin``'s ``maxLength`` (longer triangles are left out), when one is given."""
 
 
 @dataclass(eq=False)
@@ -118,6 +135,12 @@ class Holder:
     degenerate: int = 0
     dropped: int = 0
     surfaces: dict[str, list[Surface]] = field(default_factory=dict)
+    attributes: dict[str, Any] = field(default_factory=dict)
+    """Its attributes, taken before its elements are freed."""
+    read: _Read | None = None
+    """A top-level object's coordinates, once read (:func:`read_coordinates`)."""
+    broken: str = ""
+    """Why a top-level object's coordinates cannot be read, if they cannot."""
     _ids: dict[str, etree._Element] | None = None
     _reached: set[tuple[str, bool, etree._Element]] = field(default_factory=set)
     """Elements walked, by LoD and whether a semantic type was given (see :meth:`reach`)."""
@@ -127,6 +150,11 @@ class Holder:
         yield self
         for part in self.parts:
             yield from part.walk()
+
+    def forget_walk(self) -> None:
+        """Let go of what :func:`gather` remembered of the elements walked."""
+        self._ids = None
+        self._reached = set()
 
     def target(self, href: str) -> etree._Element | None:
         """The element of this holder that ``href`` (``#id``) refers to, or None."""
@@ -222,11 +250,13 @@ class _Place(NamedTuple):
 
 @dataclass
 class _Walker:
-    """Finds where elements lie below a top-level object (:meth:`place`), remembering what lies
-    above each geometry property met."""
+    """Finds where elements lie below a holder (:meth:`place`; a top-level object, or a part
+    collected alone), remembering what lies above each geometry property met."""
 
     top: Holder
     holders: dict[Any, Holder]
+    root: etree._Element
+    """The top-level object's element (a terrain component's LoD may be its relief's)."""
     places: dict[Any, _Place | None] = field(default_factory=dict)
 
     def place(self, element: etree._Element) -> _Place | None:
@@ -278,7 +308,7 @@ class _Walker:
             return _Place(holder, f"lod{match.group(1)}", semantic, False)
         if name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)):
             above = self._above(element)
-            lod = _relief_lod(parent, self.top.element)
+            lod = _relief_lod(parent, self.root)
             return None if above is None or lod is None else _Place(above[0], lod, "", False)
         if name == "interior" and local(parent) == "Solid":
             return None
@@ -354,14 +384,46 @@ def _deeper_than(levels: int) -> etree.XPath:
     return etree.XPath(f"boolean({'/'.join(['*'] * (levels + 1))})")
 
 
-def collect(top: Holder, gml: str, templates: Templates | None = None) -> None:
+def gather(top: Holder, gml: str, templates: Templates | None = None) -> None:
     """Find the polygons of ``top`` (a top-level object of a document whose GML namespace is
     ``gml``) and of its parts, each put in the holder it belongs to in document order,
     following links (an implicit geometry's also to the relative geometries of ``templates``,
-    where this object's are added)."""
+    where this object's are added), and read their coordinates (:func:`read_coordinates`).
+    An object without links (``xlink:href``) is gathered a part at a time, innermost parts
+    first, each part's elements freed before the next: its polygons then lie in its own
+    elements and nothing else refers to them, so only one part's elements are walked at a
+    time."""
     if templates is not None:
         templates.register(top.element)
-    walker = _Walker(top, {holder.element: holder for holder in top.walk()})
+    if _LINKED(top.element):
+        _collect(top, top.element, gml, templates)
+        read_coordinates(top)
+        return
+    rings = _Rings()
+    read = _Read(top, [], [], np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
+    try:
+        _gathered(top, top.element, gml, rings, read)
+    except BrokenObject as exc:
+        _broken(top, str(exc))
+        return
+    _finish(top, rings, read)
+
+
+def _gathered(holder: Holder, root: etree._Element, gml: str, rings: _Rings, read: _Read) -> None:
+    """Collect and read ``holder``'s parts (each freed), then ``holder`` itself, its elements
+    freed once read (an object without links; ``root``: its element)."""
+    for part in holder.parts:
+        _gathered(part, root, gml, rings, read)
+    _collect(holder, root, gml, None)
+    holder.forget_walk()
+    _read_holder(holder, rings, read)
+    holder.element.clear(keep_tail=False)
+
+
+def _collect(top: Holder, root: etree._Element, gml: str, templates: Templates | None) -> None:
+    """Find the polygons below holder ``top`` (``root``: its top-level object's element), as
+    :func:`gather` says."""
+    walker = _Walker(top, {holder.element: holder for holder in top.walk()}, root)
     items = _ITEMS[gml](top.element)
     polygon_ids: dict[str, etree._Element] = {}
     for item in items:
@@ -389,13 +451,13 @@ def collect(top: Holder, gml: str, templates: Templates | None = None) -> None:
         holder.add_linked(item, place, templates)
 
 
-# --- a batch of objects ---------------------------------------------------------------------------
+# --- an object's coordinates, read a part at a time -----------------------------------------------
 
 
 @dataclass
 class _Rings:
-    """The coordinates of a batch's rings (an array per ``posList`` or ``pos``) and, per ring,
-    its value count and width."""
+    """The coordinates of an object's rings (an array per ``posList`` or ``pos``) and, per
+    ring, its value count and width."""
 
     values: list[np.ndarray] = field(default_factory=list)
     counts: list[int] = field(default_factory=list)
@@ -429,59 +491,46 @@ def _ring_values(ring: etree._Element, rings: _Rings) -> None:
     rings.widths.append(width)
 
 
-def _read_rings(polygons: list[Polygon], rings: _Rings) -> list[int]:
-    """Add the rings of ``polygons``; per polygon, its rings' order (exterior first)."""
-    layout: list[int] = []
-    for polygon in polygons:
-        exterior: list[int] = []
-        interior: list[int] = []
-        if local(polygon.element) == "Tin":  # its control points, triangulated later
-            for points in polygon.element:
-                if local(points) == "controlPoint":
-                    exterior.append(len(rings.counts))
-                    _ring_values(points, rings)
-        for boundary in polygon.element:
-            kind = local(boundary)
-            into = exterior if kind in _EXTERIOR else interior if kind in _INTERIOR else None
-            if into is None:
-                continue
-            for ring in boundary:
-                into.append(len(rings.counts))
-                _ring_values(ring, rings)
-        layout.append(len(exterior) + len(interior))
-        layout += exterior[::-1] + interior
-    return layout
+def _polygon_rings(polygon: Polygon, element: etree._Element, rings: _Rings) -> list[int]:
+    """Add the rings of ``polygon`` (its ``element``; a ``Tin``'s control points, noted with
+    its ``maxLength``); its layout: its number of rings, then their indices, exterior first."""
+    exterior: list[int] = []
+    interior: list[int] = []
+    if local(element) == "Tin":  # its control points, triangulated later
+        polygon.tin = True
+        polygon.max_length = _max_length(element)
+        for points in element:
+            if local(points) == "controlPoint":
+                exterior.append(len(rings.counts))
+                _ring_values(points, rings)
+    for boundary in element:
+        kind = local(boundary)
+        into = exterior if kind in _EXTERIOR else interior if kind in _INTERIOR else None
+        if into is None:
+            continue
+        for ring in boundary:
+            into.append(len(rings.counts))
+            _ring_values(ring, rings)
+    return [len(exterior) + len(interior), *exterior[::-1], *interior]
 
 
-def _top_rings(top: Holder) -> tuple[list[Polygon], list[int], np.ndarray, np.ndarray]:
-    """The polygons of ``top`` and its parts, their rings' layout (per polygon: its number of
-    rings, then their indices, exterior first), the rings' points ((n, 3) float64, 2-D rings
-    with z = 0) and each ring's number of points. :class:`BrokenObject` when a ring cannot be
-    read, or holds a coordinate that is not finite or too large (:func:`_range_problem`)."""
-    rings = _Rings()
-    polygons = [polygon for holder in top.walk() for polygon in holder.polygons]
-    layout = _read_rings(polygons, rings)
-    flat = np.concatenate(rings.values) if rings.values else np.zeros(0)
-    del rings.values[:]
-    if problem := _range_problem(flat):
-        raise BrokenObject(problem)
-    widths = np.array(rings.widths, dtype=np.int64)
-    lengths = np.array(rings.counts, dtype=np.int64) // np.maximum(widths, 1)
-    if (widths == 3).all():
-        return polygons, layout, flat.reshape(-1, 3), lengths
-    pieces = np.split(flat, np.cumsum(rings.counts)[:-1])
-    padded = [
-        np.pad(v.reshape(-1, 2), ((0, 0), (0, 1))) if w == 2 else v.reshape(-1, 3)
-        for v, w in zip(pieces, rings.widths, strict=True)
-    ]
-    return polygons, layout, np.concatenate(padded), lengths
+def _max_length(tin: etree._Element) -> float | None:
+    """A ``Tin``'s ``maxLength`` when it gives a positive number, else None."""
+    limit = next((e.text for e in tin if local(e) == "maxLength"), None)
+    try:
+        max_length = float(limit) if limit is not None else None
+    except ValueError:
+        return None
+    return max_length if max_length is not None and max_length > 0 else None
 
 
 @dataclass
 class _Read:
-    """An object whose rings were read: its polygons, their rings' layout (as
-    :func:`_top_rings` gives it), and, for its implicit geometry, which points are in a frame
-    of their own (a mask) and the placement of each polygon placed."""
+    """An object whose rings were read: its polygons, their rings' layout (per polygon: its
+    number of rings, then their indices, exterior first), the rings' points ((n, 3) float64 in
+    the document's CRS, 2-D rings with z = 0) and each ring's number of points, and, for its
+    implicit geometry, which points are in a frame of their own (a mask) and the placements
+    (matrix, reference point) that :attr:`Polygon.placed_by` indexes."""
 
     top: Holder
     polygons: list[Polygon]
@@ -489,25 +538,105 @@ class _Read:
     points: np.ndarray
     lengths: np.ndarray
     relative: np.ndarray | None = None
-    placements: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    placements: list[tuple[np.ndarray, np.ndarray]] = field(default_factory=list)
 
 
-def _relative_points(read: _Read) -> None:
-    """Mark the points of ``read``'s implicit polygons and parse their placements;
-    :class:`BrokenObject` when one cannot be read."""
-    ring_relative = np.zeros(len(read.lengths), dtype=bool)
-    cursor = 0
-    for polygon in read.polygons:
-        n = read.layout[cursor]
+def read_coordinates(top: Holder) -> None:
+    """Read the coordinates of the polygons of ``top`` (a collected top-level object) and of
+    its parts into :attr:`Holder.read`, or why they cannot be read into
+    :attr:`Holder.broken`. A part at a time: each part's elements are freed once its polygons
+    are read, and the polygons let go of their elements, so that an object of many parts
+    never holds its whole tree and all its coordinates at once."""
+    for holder in top.walk():
+        holder.forget_walk()
+    rings = _Rings()
+    read = _Read(top, [], [], np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
+    try:
+        _holder_rings(top, rings, read)
+    except BrokenObject as exc:
+        _broken(top, str(exc))
+        return
+    _finish(top, rings, read)
+
+
+def _broken(top: Holder, reason: str) -> None:
+    """Note why ``top``'s coordinates cannot be read; let go of its polygons and elements."""
+    top.broken = reason
+    for holder in reversed(list(top.walk())):  # parts before what holds them
+        holder.polygons = []
+        holder.element.clear(keep_tail=False)
+
+
+def _finish(top: Holder, rings: _Rings, read: _Read) -> None:
+    """Put the ``rings`` read of ``top``'s polygons into ``read`` as points, and that into
+    :attr:`Holder.read` (or why they cannot be read into :attr:`Holder.broken`); free the
+    object's elements."""
+    top.element.clear(keep_tail=False)
+    flat = np.concatenate(rings.values) if rings.values else np.zeros(0)
+    del rings.values[:]
+    if problem := _range_problem(flat):
+        top.broken = problem
+        return
+    widths = np.array(rings.widths, dtype=np.int64)
+    read.lengths = np.array(rings.counts, dtype=np.int64) // np.maximum(widths, 1)
+    if (widths == 3).all():
+        read.points = flat.reshape(-1, 3)
+    else:
+        pieces = np.split(flat, np.cumsum(rings.counts)[:-1])
+        read.points = np.concatenate(
+            [
+                np.pad(v.reshape(-1, 2), ((0, 0), (0, 1))) if w == 2 else v.reshape(-1, 3)
+                for v, w in zip(pieces, rings.widths, strict=True)
+            ]
+        )
+    if read.placements:
+        ring_relative = np.zeros(len(read.lengths), dtype=bool)
+        cursor = 0
+        for polygon in read.polygons:
+            n = read.layout[cursor]
+            if polygon.placed_by is not None:
+                ring_relative[read.layout[cursor + 1 : cursor + 1 + n]] = True
+            cursor += 1 + n
+        read.relative = np.repeat(ring_relative, read.lengths)
+    top.read = read
+
+
+def _holder_rings(holder: Holder, rings: _Rings, read: _Read) -> None:
+    """Add the rings of ``holder``'s polygons (:func:`_read_holder`), then those of its parts,
+    each part's elements freed once read."""
+    _read_holder(holder, rings, read)
+    for part in holder.parts:
+        _holder_rings(part, rings, read)
+        part.element.clear(keep_tail=False)
+
+
+def _read_holder(holder: Holder, rings: _Rings, read: _Read) -> None:
+    """Add the rings of ``holder``'s polygons to ``rings`` and ``read`` (their layout, and the
+    placements of implicit ones), the polygons letting go of their elements;
+    :class:`BrokenObject` when a ring or a placement cannot be read."""
+    serials: dict[int, int] = {}
+    placed: dict[int, int] = {}
+    for polygon in holder.polygons:  # numbered while every element is held
+        polygon.serial = serials.setdefault(id(polygon.element), len(serials))
         if polygon.implicit is not None:
-            ring_relative[read.layout[cursor + 1 : cursor + 1 + n]] = True
-            if id(polygon.implicit) not in read.placements:
+            polygon.placed_by = placed.setdefault(id(polygon.implicit), len(placed))
+    placements: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(placed)
+    for polygon in holder.polygons:
+        assert polygon.element is not None  # not read before
+        read.layout += _polygon_rings(polygon, polygon.element, rings)
+        if polygon.implicit is not None and polygon.placed_by is not None:
+            if placements[polygon.placed_by] is None:
                 try:
-                    read.placements[id(polygon.implicit)] = placement(polygon.implicit)
+                    placements[polygon.placed_by] = placement(polygon.implicit)
                 except ValueError as exc:
                     raise BrokenObject(str(exc)) from None
-        cursor += 1 + n
-    read.relative = np.repeat(ring_relative, read.lengths)
+            polygon.placed_by += len(read.placements)
+        polygon.element = polygon.implicit = None
+    read.placements += [each for each in placements if each is not None]
+    read.polygons += holder.polygons
+
+
+# --- a batch of objects ---------------------------------------------------------------------------
 
 
 def _metric(reads: list[_Read], crs: Crs) -> np.ndarray:
@@ -520,7 +649,7 @@ def _metric(reads: list[_Read], crs: Crs) -> np.ndarray:
     relative = np.concatenate(
         [r.relative if r.relative is not None else np.zeros(len(r.points), bool) for r in reads]
     )
-    references = [(read, key) for read in reads for key in read.placements]
+    references = [(read, key) for read in reads for key in range(len(read.placements))]
     absolute = points[~relative]
     first = int((~relative[: len(reads[0].points)]).sum()) or None
     together = np.vstack([absolute, [read.placements[key][1] for read, key in references]])
@@ -533,20 +662,18 @@ def _metric(reads: list[_Read], crs: Crs) -> np.ndarray:
 
 
 def _coordinates(tops: list[Holder], crs: Crs) -> tuple[list[tuple[Holder, str]], list[Holder]]:
-    """Read the rings of every polygon of ``tops`` into ``Polygon.rings`` (in metres, a
-    geographic CRS's frame centred on the first object read; implicit geometry placed); the
-    objects that could not be read (with the reason) and those that were."""
+    """Put the rings of every polygon of ``tops`` (as :func:`read_coordinates` read them) into
+    ``Polygon.rings`` in metres (a geographic CRS's frame centred on the first object read;
+    implicit geometry placed); the objects that could not be read (with the reason) and those
+    that were."""
     broken: list[tuple[Holder, str]] = []
     reads: list[_Read] = []
     for top in tops:
-        try:
-            read = _Read(top, *_top_rings(top))
-            if any(polygon.implicit is not None for polygon in read.polygons):
-                _relative_points(read)
-        except BrokenObject as exc:
-            broken.append((top, str(exc)))
-            continue
-        reads.append(read)
+        if top.read is None:
+            broken.append((top, top.broken))
+        else:
+            reads.append(top.read)
+            top.read = None
     if not reads:
         return broken, []
     metric = _metric(reads, crs)
@@ -560,8 +687,8 @@ def _coordinates(tops: list[Holder], crs: Crs) -> tuple[list[tuple[Holder, str]]
         for polygon in read.polygons:
             n = read.layout[cursor]
             polygon.rings = [pieces[offset + i] for i in read.layout[cursor + 1 : cursor + 1 + n]]
-            if polygon.implicit is not None:
-                matrix, reference = read.placements[id(polygon.implicit)]
+            if polygon.placed_by is not None:
+                matrix, reference = read.placements[polygon.placed_by]
                 polygon.rings = [placed(ring, matrix, reference) for ring in polygon.rings]
                 problem = problem or next(filter(None, map(_range_problem, polygon.rings)), None)
             cursor += 1 + n
@@ -625,7 +752,7 @@ def _kept(holder: Holder) -> list[Polygon]:
     seen: set[Any] = set()
     kept = []
     for polygon, key in zip(with_rings, _dedup_keys(with_rings), strict=True):
-        by_element = (polygon.lod, polygon.element)
+        by_element = (polygon.lod, polygon.serial)
         if by_element in seen or key in seen:
             continue
         seen.add(by_element)
@@ -652,7 +779,7 @@ def _groups(holders: list[Holder]) -> tuple[list[_Group], np.ndarray, np.ndarray
     faces indexing the batch's vertices)."""
     kept = [(holder, _kept(holder)) for holder in holders]
     polygons = [polygon for _, polygons in kept for polygon in polygons]
-    tin = [local(polygon.element) == "Tin" for polygon in polygons]
+    tin = [polygon.tin for polygon in polygons]
     rings = iter(triangulate_many([p.rings for p, t in zip(polygons, tin, strict=True) if not t]))
     results = (
         _tin_triangles(polygon) if t else next(rings)
@@ -710,25 +837,40 @@ def _tin_triangles(polygon: Polygon) -> Triangles | None:
     points = [ring for ring in polygon.rings if len(ring)]
     if not points:
         return None
-    limit = next((e.text for e in polygon.element if local(e) == "maxLength"), None)
-    try:
-        max_length = float(limit) if limit is not None else None
-    except ValueError:
-        max_length = None
-    if max_length is not None and not max_length > 0:
-        max_length = None
-    return points_surface(np.concatenate(points), max_length)
+    return points_surface(np.concatenate(points), polygon.max_length)
 
 
 def triangulate_batch(
     tops: list[Holder], crs: Crs, palette: Palette, tally: InputTally
 ) -> list[tuple[Holder, str]]:
-    """Read and triangulate the polygons of a batch of top-level objects (and their parts)
-    into each holder's :attr:`Holder.surfaces`: one checked :class:`Surface` per LoD and
-    semantic type, coloured by it, without faces that have no area (counted in
-    :attr:`Holder.dropped`). The objects that could not be read, with the reason."""
+    """Triangulate the polygons of a batch of top-level objects (and their parts), their
+    coordinates read (:func:`read_coordinates`) and put in metres here, into each holder's
+    :attr:`Holder.surfaces`: one checked :class:`Surface` per LoD and semantic type, coloured
+    by it, without faces that have no area (counted in :attr:`Holder.dropped`). The objects
+    that could not be read, with the reason. The holders are triangulated
+    :data:`TRIANGULATED` polygons at a time (each one's polygons let go once it has its
+    surfaces), which bounds the per-polygon arrays held at once."""
     broken, tops = _coordinates(tops, crs)
-    groups, vertices, faces = _groups([holder for top in tops for holder in top.walk()])
+    chunk: list[Holder] = []
+    polygons = 0
+    for holder in (holder for top in tops for holder in top.walk()):
+        chunk.append(holder)
+        polygons += len(holder.polygons)
+        if polygons >= TRIANGULATED:
+            _triangulated(chunk, palette, tally)
+            chunk, polygons = [], 0
+    _triangulated(chunk, palette, tally)
+    return broken
+
+
+def _triangulated(holders: list[Holder], palette: Palette, tally: InputTally) -> None:
+    """Triangulate the polygons of ``holders`` into their :attr:`Holder.surfaces` (as
+    :func:`triangulate_batch` says); their polygons are let go."""
+    if not holders:
+        return
+    groups, vertices, faces = _groups(holders)
+    for holder in holders:
+        holder.polygons = []
     tally.count(
         sum(g.vertices.stop - g.vertices.start for g in groups),
         sum(g.faces.stop - g.faces.start for g in groups),
@@ -747,7 +889,6 @@ def triangulate_batch(
             )
             surface.derived("bounds", lambda box=box: box)  # what Surface.bounds computes
             group.holder.surfaces.setdefault(group.lod, []).append(surface)
-    return broken
 
 
 def _group_bounds(groups: list[_Group], vertices: np.ndarray, kept: np.ndarray) -> np.ndarray:

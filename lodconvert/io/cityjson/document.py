@@ -192,7 +192,7 @@ def _finished_features(waiting: list[_Feature], tally: InputTally) -> Iterator[N
     triangulate_batch([lod for each in reads for read in each for lod in read.lods])
     for feature, each in zip(waiting, reads, strict=True):
         if feature.ctx is None or feature.tree is None:
-            tally.skipped.append({"id": feature.where, "reason": str(feature.problem)})
+            tally.add_skipped(feature.where, str(feature.problem))
             continue
         tally.count(len(feature.ctx.vertices), 0, declared=True)
         nodes = {read.key: checked_node(read) for read in each}

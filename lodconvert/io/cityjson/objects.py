@@ -129,13 +129,13 @@ def checked_node(read: Read) -> Node | None:
         node, dropped = _node(read)
     except InputError as exc:
         read.problem = None  # its traceback holds the read: no cycle left for the collector
-        tally.skipped.append({"id": key, "reason": str(exc)})
+        tally.add_skipped(key, str(exc))
         return None
     except _MALFORMED as exc:
         # JSON of an unexpected shape somewhere in the object: leave the object out
         read.problem = None
         error = InputError(f"has malformed content ({type(exc).__name__}: {exc})", key)
-        tally.skipped.append({"id": key, "reason": str(error)})
+        tally.add_skipped(key, str(error))
         return None
     tally.dropped_faces += dropped
     if dropped and node.geometry is None and not node.children:

@@ -1,6 +1,7 @@
-"""Reading a CityJSON file: its bytes (what a ``.gz`` or ``.zip`` inflates to) read in chunks
-up to the limit, its JSON parsed and checked to be CityJSON of a version read, its CRS, and the
-:class:`Context` its geometry is read against (vertices: :mod:`.vertices`)."""
+"""Reading a CityJSON file: its bytes (what a ``.gz`` or ``.zip`` inflates to, counted before
+any is kept) read in chunks up to the limit, its JSON parsed and checked to be CityJSON of a
+version read, its CRS, and the :class:`Context` its geometry is read against (vertices:
+:mod:`.vertices`)."""
 
 from __future__ import annotations
 
@@ -77,21 +78,37 @@ def unreadable(path: Path, exc: Exception) -> InputError:
 
 def read_bytes(path: Path, limits: Limits) -> bytearray:
     """The bytes of ``path`` (what it inflates to, for ``.gz``/``.zip``:
-    :func:`..archive.open_compressed`), read :data:`CHUNK` bytes at a time into a buffer that
-    grows with them: :class:`InputError` as soon as they pass ``limits.decompressed_bytes``."""
+    :func:`..archive.open_compressed`) in a buffer of their size, read :data:`CHUNK` bytes at
+    a time. :class:`InputError` when they pass ``limits.decompressed_bytes``, known before any
+    is kept: a compressed file is inflated once to count its bytes (a chunk held at a time),
+    then again into the buffer."""
     limit = limits.decompressed_bytes
-    buffer = bytearray()
     try:
-        if not is_compressed(path) and path.stat().st_size > limit:
+        size = _inflated_size(path, limits) if is_compressed(path) else path.stat().st_size
+        if size > limit:
             raise too_large(path, limit)
+        buffer = bytearray(size)
+        filled = 0
         with open_compressed(path, limits) as stream:
             while chunk := stream.read(CHUNK):
-                if len(buffer) + len(chunk) > limit:
+                if filled + len(chunk) > limit:  # grown since it was measured
                     raise too_large(path, limit)
-                buffer += chunk
+                buffer[filled : filled + len(chunk)] = chunk
+                filled += len(chunk)
+        del buffer[filled:]
     except (OSError, EOFError, zlib.error) as exc:
         raise unreadable(path, exc) from None
     return buffer
+
+
+def _inflated_size(path: Path, limits: Limits) -> int:
+    """How many bytes compressed ``path`` inflates to, counted a chunk at a time (none kept);
+    :class:`InputError` once they pass ``limits.decompressed_bytes``."""
+    size = 0
+    with open_compressed(path, limits) as stream:
+        while chunk := stream.read(CHUNK):
+            size += len(chunk)
+    return size
 
 
 def load_document(path: Path, limits: Limits, tally: InputTally) -> dict[str, Any]:

@@ -568,9 +568,9 @@ class _Document:
             {"sampler": self.samplers.append(sampler), "source": self.images.append(image)}
         )
 
-    def _mesh_primitive(self, surface: Surface) -> dict[str, Any]:
+    def _mesh_primitive(self, surface: Surface, normals: bool = True) -> dict[str, Any]:
         position = self._accessor(float32_positions(surface.vertices), bounds=True)
-        normal = self._accessor(vertex_normals(surface))
+        normal = self._accessor(vertex_normals(surface)) if normals else None
         color = None
         if surface.vertex_colors is not None:
             color = self._colors(surface.vertex_colors)
@@ -634,13 +634,18 @@ class _Document:
 
     def _level_mesh(self, name: str, level: Level, shared: bool = False) -> int | None:
         """The mesh of one level's geometry (``None`` when the level is empty). The levels of
-        instances of one geometry (``shared``) share their meshes."""
+        instances of one geometry (``shared``) share their meshes. A LOD parent's merged far
+        mesh has no normals: its corners are welded
+        (:func:`~lodconvert.bake.qem.simplify_within`), where normals per vertex would round
+        every building's edges, and glTF clients shade a primitive without normals flat
+        (three.js from screen-space derivatives, with no vertex split)."""
         if not level.count:
             return None
         if id(level) in self._shared:
             return self._shared[id(level)][1]
         if level.mesh is not None:
-            primitives = [self._mesh_primitive(part) for part in level.mesh.parts]
+            flat = level.kind == "merged"
+            primitives = [self._mesh_primitive(part, not flat) for part in level.mesh.parts]
         else:
             primitives = [self._point_primitive(level.points)]
         mesh = self.meshes.append({"primitives": primitives, "name": name})

@@ -1,0 +1,255 @@
+"""Our own checks of a tileset (``lodconvert validate DIR/tileset.json``, and every conversion
+on its staged folder): what the official validator does not check, and what lodconvert
+promises.
+
+- every URI resolves to a file inside the tileset's folder (external tilesets checked in turn);
+- geometricError: the tileset's ≥ its root's, strictly decreasing from parent to child (equal
+  only from a tile to the root of the external tileset it refers to), 0 at leaves;
+  ``refine`` ``REPLACE`` everywhere;
+- each tile's bounding ``box`` encloses its content's positions (in the tile's frame: the
+  transforms multiplied down the tree, content turned y-up → z-up) and its children's boxes;
+- GLB content: ``_FEATURE_ID_0`` values below their ``featureCount``; every property table
+  with as many rows as its ``count``, its columns of the class's properties, long enough.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..findings import Findings
+
+TOLERANCE = 1e-3
+"""Metres a position or a child's corner may lie outside a box (float rounding)."""
+_GLTF_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+_DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
+           5126: np.float32}  # fmt: skip
+_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+_BYTES = {"INT8": 1, "UINT8": 1, "INT16": 2, "UINT16": 2, "INT32": 4, "UINT32": 4, "INT64": 8,
+          "UINT64": 8, "FLOAT32": 4, "FLOAT64": 8}  # fmt: skip
+
+
+def check_tileset(path: Path, findings: Findings, _options: Any = None) -> None:
+    """Check the tileset ``path`` (its external tilesets and contents too) into ``findings``."""
+    try:
+        _Checker(path.parent.resolve(), findings).tileset(path, np.eye(4), None)
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
+        findings.error("JSON", f"not a tileset as lodconvert writes them ({type(exc).__name__})")
+
+
+class _Checker:
+    """The checks of one tileset folder (``folder``, resolved), reported into ``findings``."""
+
+    def __init__(self, folder: Path, findings: Findings) -> None:
+        self.folder, self.findings = folder, findings
+
+    def _resolved(self, base: Path, uri: Any, where: str) -> Path | None:
+        """The file a content ``uri`` of the JSON file ``base`` names, if it lies in the
+        folder; else an error and ``None``."""
+        if not isinstance(uri, str) or not uri or "://" in uri or uri.startswith("/"):
+            self.findings.error("URI", f"{where}: content uri {uri!r} is not a relative path")
+            return None
+        target = (base.parent / uri).resolve()
+        if not target.is_relative_to(self.folder) or not target.is_file():
+            self.findings.error("URI", f"{where}: content uri {uri!r} resolves to no file here")
+            return None
+        return target
+
+    def tileset(self, path: Path, frame: np.ndarray, parent_error: float | None) -> None:
+        """Check the tileset JSON ``path`` whose root lies in ``frame`` (ECEF), under a tile of
+        geometric error ``parent_error`` (``None``: the top tileset)."""
+        try:
+            data = json.loads(path.read_bytes())
+            root = data["root"]
+            error = float(data["geometricError"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            self.findings.error("JSON", f"{path.name}: not a tileset ({exc})")
+            return
+        if error < float(root.get("geometricError", 0.0)):
+            self.findings.error(
+                "GEOMETRIC_ERROR",
+                f"{path.name}: the tileset's geometricError {error} is below its root's "
+                f"{root.get('geometricError')}",
+            )
+        if parent_error is not None and float(root.get("geometricError", 0.0)) > parent_error:
+            self.findings.error(
+                "GEOMETRIC_ERROR",
+                f"{path.name}: root geometricError above the tile referring to it",
+            )
+        self.tile(path, root, frame, None, "root")
+
+    def tile(
+        self, base: Path, tile: dict, frame: np.ndarray, parent: dict | None, where: str
+    ) -> None:
+        """Check ``tile`` (of the JSON file ``base``, in its parent's ``frame``) and every
+        tile under it."""
+        transform = tile.get("transform")
+        if transform is not None:
+            frame = frame @ np.asarray(transform, dtype=np.float64).reshape(4, 4).T
+        error = float(tile.get("geometricError", -1.0))
+        if tile.get("refine", "REPLACE" if parent is not None else None) != "REPLACE":
+            self.findings.error("REFINE", f"{where}: refine is not REPLACE")
+        if parent is not None and not error < float(parent["geometricError"]):
+            self.findings.error(
+                "GEOMETRIC_ERROR",
+                f"{where}: geometricError {error} is not below its parent's "
+                f"{parent['geometricError']}",
+            )
+        children = tile.get("children", [])
+        if not children and error != 0.0 and "content" in tile and not _external(tile):
+            self.findings.error("GEOMETRIC_ERROR", f"{where}: a leaf's geometricError is {error}")
+        box = tile.get("boundingVolume", {}).get("box")
+        if box is None:
+            self.findings.error("VOLUME", f"{where}: no bounding box")
+            return
+        centre, axes = np.asarray(box[:3], float), np.asarray(box[3:], float).reshape(3, 3)
+        inside = _BoxTest(frame, centre, axes)
+        content = tile.get("content")
+        if content is not None:
+            target = self._resolved(base, content.get("uri"), where)
+            if target is not None and target.suffix == ".json":
+                self.tileset(target, frame, error)
+            elif target is not None:
+                positions = self.glb(target, where)
+                if positions is not None and not inside(frame_points(frame, positions)):
+                    self.findings.error("VOLUME", f"{where}: content lies outside its box")
+        for index, child in enumerate(children):
+            child_frame = frame
+            if child.get("transform") is not None:
+                matrix = np.asarray(child["transform"], dtype=np.float64).reshape(4, 4).T
+                child_frame = frame @ matrix
+            child_box = child.get("boundingVolume", {}).get("box")
+            if child_box is not None and not inside(_corners(child_frame, child_box)):
+                self.findings.error("VOLUME", f"{where}: child {index}'s box lies outside its own")
+            self.tile(base, child, frame, tile, f"{where}/{index}")
+
+    def glb(self, path: Path, where: str) -> np.ndarray | None:
+        """The positions (glTF coordinates) of a GLB's primitives, its features checked."""
+        try:
+            document, blob = read_glb(path)
+            return self._content(document, blob, where)
+        except (ValueError, KeyError, IndexError, TypeError, struct.error) as exc:
+            self.findings.error("CONTENT", f"{where}: {path.name} cannot be read ({exc})")
+            return None
+
+    def _content(self, document: dict, blob: bytes, where: str) -> np.ndarray:
+        """A GLB's positions; its feature ids and property tables checked."""
+        found = []
+        tables = document.get("extensions", {}).get("EXT_structural_metadata", {})
+        for mesh in document.get("meshes", []):
+            for primitive in mesh["primitives"]:
+                found.append(accessor(document, blob, primitive["attributes"]["POSITION"]))
+                features = primitive.get("extensions", {}).get("EXT_mesh_features", {})
+                for ids in features.get("featureIds", []):
+                    name = f"_FEATURE_ID_{ids['attribute']}"
+                    values = accessor(document, blob, primitive["attributes"][name])
+                    if len(values) and values.max() >= ids["featureCount"]:
+                        self.findings.error(
+                            "FEATURE_ID", f"{where}: feature id {values.max():g} ≥ featureCount"
+                        )
+                    table = tables["propertyTables"][ids["propertyTable"]]
+                    if table["count"] != ids["featureCount"]:
+                        self.findings.error(
+                            "PROPERTY_TABLE", f"{where}: table count is not featureCount"
+                        )
+        if tables:
+            self._tables(document, tables, where)
+        return np.concatenate(found) if found else np.zeros((0, 3))
+
+    def _tables(self, document: dict, metadata: dict, where: str) -> None:
+        """Each property table: columns of its class's properties, required ones present,
+        each long enough for its ``count``."""
+        classes = metadata["schema"]["classes"]
+        views = document["bufferViews"]
+        for table in metadata["propertyTables"]:
+            properties = classes[table["class"]]["properties"]
+            count = table["count"]
+            if set(table["properties"]) - set(properties):
+                self.findings.error("PROPERTY_TABLE", f"{where}: columns not in the class")
+            for name, definition in properties.items():
+                column = table["properties"].get(name)
+                if column is None:
+                    if definition.get("required"):
+                        self.findings.error("PROPERTY_TABLE", f"{where}: no column {name}")
+                    continue
+                length = views[column["values"]]["byteLength"]
+                kind = definition["type"]
+                if kind == "STRING":
+                    wanted = 4 * (count + 1)
+                    if views[column["stringOffsets"]]["byteLength"] < wanted:
+                        self.findings.error("PROPERTY_TABLE", f"{where}: {name} offsets short")
+                    continue
+                if kind == "BOOLEAN":
+                    wanted = (count + 7) // 8
+                else:
+                    wanted = _BYTES.get(definition.get("componentType", ""), 1) * count
+                if length < wanted:
+                    self.findings.error("PROPERTY_TABLE", f"{where}: column {name} too short")
+
+
+def _external(tile: dict) -> bool:
+    """Whether ``tile``'s content is an external tileset."""
+    return str(tile.get("content", {}).get("uri", "")).endswith(".json")
+
+
+class _BoxTest:
+    """Whether ECEF points lie in an oriented box of a tile's frame."""
+
+    def __init__(self, frame: np.ndarray, centre: np.ndarray, axes: np.ndarray) -> None:
+        self.frame, self.centre, self.axes = frame, centre, axes
+
+    def __call__(self, ecef: np.ndarray) -> bool:
+        """Whether every point lies in the box (within :data:`TOLERANCE`)."""
+        if not len(ecef):
+            return True
+        local = (ecef - self.frame[:3, 3]) @ np.linalg.inv(self.frame[:3, :3]).T - self.centre
+        lengths = np.linalg.norm(self.axes, axis=1)
+        safe = np.where(lengths > 0, lengths, 1.0)
+        along = np.abs(local @ (self.axes / safe[:, None] ** 2).T) * safe
+        return bool((along <= lengths + TOLERANCE).all())
+
+
+def frame_points(frame: np.ndarray, gltf_positions: np.ndarray) -> np.ndarray:
+    """ECEF of a tile's glTF content positions (y-up) under the tile's ``frame``."""
+    local = np.asarray(gltf_positions, dtype=np.float64) @ _GLTF_TO_Z_UP.T
+    return local @ frame[:3, :3].T + frame[:3, 3]
+
+
+def _corners(frame: np.ndarray, box: list[float]) -> np.ndarray:
+    """The 8 corners (ECEF) of a ``box`` in ``frame``."""
+    centre, axes = np.asarray(box[:3], float), np.asarray(box[3:], float).reshape(3, 3)
+    signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float)
+    local = centre + signs @ axes
+    return local @ frame[:3, :3].T + frame[:3, 3]
+
+
+def read_glb(path: Path) -> tuple[dict, bytes]:
+    """A GLB's JSON document and binary chunk (``ValueError`` for a file that is not one)."""
+    data = path.read_bytes()
+    magic, _, total = struct.unpack_from("<4sII", data)
+    if magic != b"glTF" or total != len(data):
+        raise ValueError("not a GLB")
+    length, _ = struct.unpack_from("<I4s", data, 12)
+    document = json.loads(data[20 : 20 + length])
+    rest = 20 + length
+    blob = b""
+    if rest < len(data):
+        size, _ = struct.unpack_from("<I4s", data, rest)
+        blob = data[rest + 8 : rest + 8 + size]
+    return document, blob
+
+
+def accessor(document: dict, blob: bytes, index: int) -> np.ndarray:
+    """The values of accessor ``index`` ((count,) or (count, width))."""
+    accessor = document["accessors"][index]
+    view = document["bufferViews"][accessor["bufferView"]]
+    dtype = np.dtype(_DTYPES[accessor["componentType"]])
+    width = _WIDTHS[accessor["type"]]
+    start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
+    count = accessor["count"]
+    values = np.frombuffer(blob, dtype=dtype, count=count * width, offset=start)
+    return values.reshape(count, width) if width > 1 else values

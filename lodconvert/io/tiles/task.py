@@ -1,0 +1,154 @@
+"""One tile's content as a picklable task, run by any executor (:mod:`lodconvert.tasks`): its
+vertices (scene coordinates) placed in ECEF and in the tile's ENU frame, encoded as a GLB and
+written into the staged tileset folder; the result is the tile's frame and content box.
+
+Resuming: a task is keyed by a hash of everything that makes its file (:meth:`TileTask.key`:
+the placement, the geometry, colours and features, the generator). Beside the file it records
+the key, the file's SHA-256, frame and box (``.resume/tiles/NAME.json`` in the staged folder);
+a task that finds its record of the same key, and the file there with the recorded hash,
+returns the record instead of doing the work again. A file a killed run left half-written has
+no record yet, or another hash, and is written again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...errors import LodConvertError
+from ...sinks import RESUME, writing
+from .content import mesh_glb, points_glb
+from .metadata import Feature
+from .placement import Placement, world_to_frame
+
+# glTF content is y-up; 3D Tiles turns it z-up: (x, y, z) -> (x, -z, y). ENU (e, n, u) is
+# therefore written as (e, u, -n).
+ENU_TO_GLTF = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+RECORDS = f"{RESUME}/tiles"
+"""Where tasks record what they wrote, inside the staged folder."""
+
+
+@dataclass(frozen=True)
+class Where:
+    """What places a scene on the globe (:class:`Placement`'s arguments) and a text naming it
+    for tile keys."""
+
+    georef: Any
+    crs_name: str | None
+    source: str
+    key: str
+
+
+_placements: dict[str, Placement] = {}
+"""This process's placements, by :attr:`Where.key`."""
+
+
+def placement(where: Where) -> Placement:
+    """The placement of ``where``, made once per process."""
+    if where.key not in _placements:
+        _placements[where.key] = Placement(where.georef, where.crs_name, where.source)
+    return _placements[where.key]
+
+
+@dataclass(frozen=True)
+class TileResult:
+    """A tile's ENU frame (4×4, ECEF) and content box (min and max corners in it), whether its
+    file was kept from an interrupted run, or why it could not be made (``error``)."""
+
+    frame: np.ndarray | None
+    box: np.ndarray | None
+    reused: bool = False
+    error: str | None = None
+
+
+@dataclass(frozen=True)
+class TileTask:
+    """The GLB ``name`` in ``folder`` (the staged ``tiles/``): a triangle mesh (``faces``; with
+    ``feature_ids`` into ``features``, or none for a merged far level) or, without ``faces``,
+    points; ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes."""
+
+    name: str
+    folder: str
+    where: Where
+    vertices: np.ndarray
+    colors: np.ndarray
+    faces: np.ndarray | None
+    feature_ids: np.ndarray | None
+    features: tuple[Feature, ...]
+    generator: str
+
+    def key(self) -> str:
+        """The hash of everything that makes this tile's file, frame and box."""
+        digest = hashlib.sha256()
+        head = [self.name, self.where.key, self.generator, self.features]
+        digest.update(json.dumps(head, sort_keys=True, default=str).encode())
+        for array in (self.vertices, self.colors, self.faces, self.feature_ids):
+            if array is None:
+                digest.update(b"-")
+                continue
+            digest.update(f"{array.dtype.str}{array.shape}".encode())
+            digest.update(np.ascontiguousarray(array).tobytes())
+        return digest.hexdigest()
+
+    def run(self, backend: Any = None, progress: Any = None) -> TileResult:
+        """Write the tile (or keep the one an interrupted run wrote); a scene that cannot be
+        placed, or a failed write, is the result's ``error``."""
+        key = self.key()
+        path = Path(self.folder) / self.name
+        record = Path(self.folder).parent / RECORDS / f"{self.name}.json"
+        kept = _kept(path, record, key)
+        if kept is not None:
+            return kept
+        try:
+            place = placement(self.where)
+            ecef = place.ecef(self.vertices)
+            frame = place.enu_frame((ecef.min(axis=0) + ecef.max(axis=0)) / 2.0)
+            local = world_to_frame(frame, ecef)
+            data = self._glb(local @ ENU_TO_GLTF.T)
+            with writing(path):
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_bytes(data)
+                box = np.stack([local.min(axis=0), local.max(axis=0)])
+                _record(record, key, hashlib.sha256(data).hexdigest(), frame, box)
+        except LodConvertError as exc:
+            return self.failed(str(exc))
+        return TileResult(frame, box)
+
+    def _glb(self, gltf: np.ndarray) -> bytes:
+        """The GLB of the tile's content at glTF coordinates ``gltf``."""
+        if self.faces is None:
+            return points_glb(gltf, self.colors, self.generator)
+        return mesh_glb(
+            gltf, self.faces, self.colors, self.feature_ids, self.features, self.generator
+        )
+
+    def failed(self, reason: str) -> TileResult:
+        """The result of this task when it could not run, for ``reason``."""
+        return TileResult(None, None, error=reason)
+
+
+def _record(path: Path, key: str, sha256: str, frame: np.ndarray, box: np.ndarray) -> None:
+    """Record a written tile (its key, its file's hash, frame and box) at ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    text = json.dumps({"key": key, "sha256": sha256, "frame": frame.tolist(), "box": box.tolist()})
+    path.write_text(text)
+
+
+def _kept(path: Path, record: Path, key: str) -> TileResult | None:
+    """The result recorded at ``record`` for the tile file ``path`` when its key is ``key``
+    and the file is whole (its recorded hash); ``None`` otherwise."""
+    try:
+        found = json.loads(record.read_text())
+        if found["key"] != key or hashlib.sha256(path.read_bytes()).hexdigest() != found["sha256"]:
+            return None
+        frame, box = np.array(found["frame"], dtype=np.float64), np.array(found["box"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if frame.shape != (4, 4) or box.shape != (2, 3):
+        return None
+    return TileResult(frame, box.astype(np.float64), reused=True)

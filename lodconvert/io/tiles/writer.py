@@ -1,0 +1,412 @@
+"""The tileset writer: LOD parents and objects (:func:`~lodconvert.pipeline.iter_chains` with
+cells) → a tile tree, one GLB per tile (:mod:`.content`), placed in ECEF (:mod:`.placement`).
+Each tile's GLB is a :class:`~.task.TileTask` run by the run's executor (in worker processes
+with ``--workers``); results come back in order, so the tree is the same for any worker count.
+In a staging folder an interrupted run of the same inputs and options left, each tile whose
+file is whole and of the same key is kept (:mod:`.task`).
+
+Tree: the root (no content) holds one tile per coarsest cell and, beside them, the objects no
+cell admitted. A cell's tile shows its far level; its children are its finer cells' tiles and,
+for the objects among its members, one tile of their coarsest mesh levels whose child, a leaf,
+holds their finest. Refinement is ``REPLACE`` everywhere.
+
+geometricError: a tile whose content switches to its children at distance d has
+GE = sse·d / focal_px (focal_px = h / (2·tan(fov/2)) of the reference view), so that CesiumJS,
+refining where GE·focal/distance exceeds its maximumScreenSpaceError (= sse), refines at d.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ...errors import LodConvertError, UsageError
+from ...model import CellChain, LodChain, Mesh
+from .. import OutputInfo
+from .metadata import Feature
+from .placement import Placement, world_to_frame
+from .task import TileResult, TileTask, Where
+
+DEFAULT_SSE = 16.0
+"""CesiumJS's default maximumScreenSpaceError."""
+EXTERNAL_BYTES = 2_000_000
+"""Largest tileset JSON written as one file: past it, each child of the root is an external
+tileset of its own (``tiles/NAME.json``)."""
+MARGIN = 0.001
+"""Metres a bounding box is grown by on every side (float32 content rounding, flat content)."""
+TILES = "tiles"
+
+
+@dataclass
+class Tile:
+    """One tile: its ENU frame in ECEF (``frame``, 4×4; ``None`` until its content's task has
+    run), its content's box in that frame (``box``: min and max corners; ``None``: no
+    content), its children and geometric error."""
+
+    frame: np.ndarray | None
+    box: np.ndarray | None
+    error: float
+    content: str | None = None
+    children: list[Tile] = field(default_factory=list)
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    def corners(self) -> np.ndarray:
+        """The 8 corners (ECEF) of this tile's bounding volume."""
+        low, high = self.volume()
+        assert self.frame is not None
+        grid = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+        local = low + grid * (high - low)
+        return local @ self.frame[:3, :3].T + self.frame[:3, 3]
+
+    def volume(self) -> np.ndarray:
+        """Min and max corners (in this frame) enclosing the content and every child."""
+        boxes = [] if self.box is None else [self.box]
+        assert self.frame is not None
+        for child in self.children:
+            inside = world_to_frame(self.frame, child.corners())
+            boxes.append(np.stack([inside.min(axis=0), inside.max(axis=0)]))
+        low = np.min([b[0] for b in boxes], axis=0)
+        high = np.max([b[1] for b in boxes], axis=0)
+        return np.stack([low - MARGIN, high + MARGIN])
+
+
+def _mesh_levels(chain: LodChain) -> list[tuple[int, Mesh]]:
+    """The chain's mesh levels (index, mesh), finest first."""
+    return [(i, lv.mesh) for i, lv in enumerate(chain.levels) if lv.mesh is not None]
+
+
+def _colors(mesh: Mesh) -> np.ndarray:
+    """(n, 4) sRGB bytes per vertex: vertex colours, else each part's material colour (a
+    texture's material colour stands in for it)."""
+    own = mesh.vertex_colors
+    if own is not None:
+        return own
+    return np.concatenate(
+        [np.repeat(p.material_color[None], len(p.vertices), axis=0) for p in mesh.parts]
+    )
+
+
+def _feature(chain: LodChain) -> Feature:
+    """An object's feature: its id, its ``type`` attribute and its other attributes."""
+    attributes = {k: v for k, v in chain.metadata.items() if k not in ("id", "type")}
+    kind = chain.metadata.get("type")
+    return chain.object_id, kind if isinstance(kind, str) else "", attributes
+
+
+class TilesetWriter:
+    """Writes the tiles of the items it is given into a :class:`~lodconvert.sinks.DirectorySink`
+    (each tile's GLB by ``executor``; in this process without one) and, at the end,
+    ``tileset.json``; ``progress`` hears how many tiles an interrupted run's folder gave."""
+
+    def __init__(
+        self,
+        sink: Any,
+        info: OutputInfo,
+        sse: float,
+        executor: Any = None,
+        progress: Callable[[str], None] | None = None,
+    ) -> None:
+        self.sink, self.info, self.sse = sink, info, sse
+        self.executor, self.progress = executor, progress
+        self.placement = Placement(info.georef, info.crs, info.source)
+        georef = info.georef
+        named = f"{self.placement.label}|{georef.frame}|{georef.crs.to_wkt()}"
+        self.where = Where(georef, info.crs, info.source, named)
+        self.folder = Path(sink.staged.temp) / TILES
+        self.point_scale: float | None = None
+        self._queued: list[tuple[Tile, TileTask]] = []
+
+    def error(self, distance: float) -> float:
+        """The geometric error of content that switches at ``distance``."""
+        return self.sse * distance / self.info.view.focal_px
+
+    def _write(self, name: str, data: bytes) -> str:
+        """Write the file ``name`` into the tiles folder; returns ``name``."""
+        with self.sink.file(f"{TILES}/{name}") as handle:
+            handle.write(data)
+        return name
+
+    def _frame_of(self, ecef: np.ndarray) -> np.ndarray:
+        """The ENU frame at the centre of ECEF points' bounding box."""
+        return self.placement.enu_frame((ecef.min(axis=0) + ecef.max(axis=0)) / 2.0)
+
+    def _tile(
+        self,
+        name: str,
+        error: float,
+        vertices: np.ndarray,
+        colors: np.ndarray,
+        faces: np.ndarray | None = None,
+        feature_ids: np.ndarray | None = None,
+        features: tuple[Feature, ...] = (),
+    ) -> Tile:
+        """A tile whose content ``name`` (``.glb``) is made by a task queued for the executor
+        (its frame and box are filled in from the task's result); see :class:`TileTask`."""
+        task = TileTask(
+            f"{name}.glb", str(self.folder), self.where, vertices, colors, faces, feature_ids,
+            features, self.info.generator,
+        )  # fmt: skip
+        tile = Tile(None, None, error, task.name)
+        self._queued.append((tile, task))
+        return tile
+
+    def mesh_tile(self, name: str, entries: list[tuple[LodChain, Mesh]], error: float) -> Tile:
+        """A tile of the meshes of ``entries`` (each a chain and one of its levels' meshes),
+        one feature per chain."""
+        placed = [chain.in_scene(mesh) for chain, mesh in entries]
+        starts = np.cumsum([0] + [mesh.vertex_count for mesh in placed])
+        return self._tile(
+            name,
+            error,
+            np.concatenate([mesh.vertices for mesh in placed]),
+            np.concatenate([_colors(mesh) for mesh in placed]),
+            np.concatenate(
+                [mesh.faces + start for mesh, start in zip(placed, starts[:-1], strict=True)]
+            ),
+            np.repeat(np.arange(len(placed)), np.diff(starts)),
+            tuple(_feature(chain) for chain, _ in entries),
+        )
+
+    def far_tile(self, cell: CellChain, children: list[Tile]) -> Tile:
+        """A cell's tile: its far level, switching to ``children`` at its first cutoff."""
+        far = cell.far
+        extras: dict[str, Any] = {"cell": cell.cell_id, "tier": cell.tier, "kind": far.kind}
+        error = self.error(cell.cutoffs[0])
+        if far.points is not None:
+            tile = self._tile(cell.cell_id, error, far.points.positions + cell.origin,
+                              far.points.colors)  # fmt: skip
+            if far.params is not None:
+                scale = far.params.point_size / self.sse
+                self.point_scale = max(self.point_scale or 0.0, scale)
+                extras.update(point_size_px=far.params.point_size, spacing=far.spacing)
+        else:
+            assert far.mesh is not None
+            tile = self._tile(
+                cell.cell_id, error, far.mesh.vertices + cell.origin, _colors(far.mesh),
+                far.mesh.faces,
+            )  # fmt: skip
+        tile.children, tile.extras = children, extras
+        return tile
+
+    def objects_tile(self, name: str, chains: list[LodChain]) -> Tile:
+        """The tile of objects drawn with their own levels: their coarsest mesh levels, refined
+        into a leaf of their finest (the leaf alone where none has two mesh levels)."""
+        leaf = self.mesh_tile(f"{name}_finest", [(c, _mesh_levels(c)[0][1]) for c in chains], 0.0)
+        switches = [
+            chain.cutoffs[levels[-1][0] - 1]
+            for chain in chains
+            if len(levels := _mesh_levels(chain)) > 1
+        ]
+        if not switches:
+            return leaf
+        coarsest = [(c, _mesh_levels(c)[-1][1]) for c in chains]
+        block = self.mesh_tile(f"{name}_coarsest", coarsest, self.error(max(switches)))
+        block.children = [leaf]
+        return block
+
+    def cell_tile(self, cell: CellChain) -> Tile:
+        """The tile of a LOD parent and everything under it."""
+        children = [self.cell_tile(m) for m in cell.members if isinstance(m, CellChain)]
+        objects = [m for m in cell.members if isinstance(m, LodChain)]
+        if objects:
+            children.append(self.objects_tile(cell.cell_id, objects))
+        return self.far_tile(cell, children)
+
+    def tops(self, items: Iterable[LodChain | CellChain]) -> Iterator[Tile]:
+        """The root's children: a tile per coarsest cell, and one per run of objects that
+        follow a cell (those its plan left out, of the same coarsest grid cell)."""
+        pending: list[LodChain] = []
+        last = "objects"
+        for item in items:
+            if isinstance(item, CellChain):
+                if pending:
+                    yield self.objects_tile(f"{last}_beside", pending)
+                    pending = []
+                last = item.cell_id
+                yield self.cell_tile(item)
+            else:
+                pending.append(item)
+        if pending:
+            yield self.objects_tile(f"{last}_beside", pending)
+
+    def _placed(self, items: Iterable[LodChain | CellChain]) -> list[Tile]:
+        """The root's children (:meth:`tops`), every tile's content made by its task."""
+        children: list[Tile] = []
+        waiting: deque[Tile] = deque()
+
+        def tasks() -> Iterator[TileTask]:
+            for top in self.tops(items):
+                children.append(top)
+                for tile, task in self._queued:
+                    waiting.append(tile)
+                    yield task
+                self._queued.clear()
+
+        results: Iterable[TileResult] = (
+            self.executor.results(tasks())
+            if self.executor is not None
+            else (task.run() for task in tasks())
+        )
+        made = reused = 0
+        for result in results:
+            if result.error is not None:
+                raise LodConvertError(result.error)
+            tile = waiting.popleft()
+            tile.frame, tile.box = result.frame, result.box
+            made, reused = made + 1, reused + result.reused
+        if self.sink.resumed and self.progress is not None:
+            self.progress(f"{reused} of {made} tiles kept from an interrupted run's folder")
+        return children
+
+    def write(self, items: Iterable[LodChain | CellChain], name: str) -> None:
+        """Every item's tiles, then the tileset JSON (``name``) and its external tilesets."""
+        children = self._placed(items)
+        if not children:  # nothing converted: the run fails and says why
+            return
+        ecef = np.stack([c.frame[:3, 3] for c in children])
+        root = Tile(self._frame_of(ecef), None, 0.0, children=children)
+        low, high = root.volume()
+        largest = max(child.error for child in children)
+        root.error = max(2.0 * largest, self.error(float(np.linalg.norm(high - low))))
+        text = _dumped(self._tileset(root, None, f"{TILES}/"))
+        if len(text) > EXTERNAL_BYTES:
+            text = _dumped(self._tileset(root, None, f"{TILES}/", external=True))
+        with self.sink.file(name) as handle:
+            handle.write(text)
+        if self.sink.resumed:
+            self._drop_stale(children)
+
+    def _drop_stale(self, children: list[Tile]) -> None:
+        """Remove the files of the tiles folder that an interrupted run wrote and this one
+        does not refer to."""
+        kept: set[str] = set()
+        stack = list(children)
+        while stack:
+            tile = stack.pop()
+            kept.update([tile.content] if tile.content else [])
+            kept.add(f"{(tile.content or 'tile').removesuffix('.glb')}.json")
+            stack.extend(tile.children)
+        for path in self.folder.iterdir():
+            if path.name not in kept:
+                path.unlink()
+
+    def _asset(self) -> dict[str, Any]:
+        """The tileset's ``asset``: version, generator, and in ``extras.lodconvert`` the
+        source, CRS, heights, --sse, reference view, options and point shading."""
+        view = self.info.view
+        extras: dict[str, Any] = {
+            "source": self.info.source,
+            "crs": self.placement.label,
+            "heights": self.placement.heights(),
+            "sse": self.sse,
+            "view": {"height_px": view.height_px, "fov_y_deg": view.fov_y_deg},
+            "geometric_error": "sse * switch distance / focal_px, focal_px = "
+            "height_px / (2 tan(fov_y / 2))",
+            "options": self.info.options,
+        }
+        if self.point_scale is not None:
+            extras["point_cloud_shading"] = {
+                "attenuation": True,
+                "geometricErrorScale": self.point_scale,
+            }
+        return {
+            "version": "1.1",
+            "generator": self.info.generator,
+            "extras": {"lodconvert": extras},
+        }
+
+    def _tileset(
+        self, root: Tile, parent: np.ndarray | None, folder: str, external: bool = False
+    ) -> dict[str, Any]:
+        """A tileset JSON of the tree under ``root`` (its transform relative to ``parent``),
+        written in a file from which the tiles folder is ``folder``."""
+        return {
+            "asset": self._asset(),
+            "geometricError": root.error,
+            "root": self._json(root, parent, folder, external),
+        }
+
+    def _json(
+        self, tile: Tile, parent: np.ndarray | None, folder: str, external: bool = False
+    ) -> dict[str, Any]:
+        """A tile's JSON; with ``external``, its children each an external tileset."""
+        low, high = tile.volume()
+        centre, half = (low + high) / 2.0, (high - low) / 2.0
+        relative = tile.frame if parent is None else np.linalg.solve(parent, tile.frame)
+        out: dict[str, Any] = {
+            "boundingVolume": {"box": [*centre, half[0], 0, 0, 0, half[1], 0, 0, 0, half[2]]},
+            "geometricError": tile.error,
+            "refine": "REPLACE",
+            "transform": [float(v) for v in relative.T.ravel()],
+        }
+        if tile.content is not None:
+            out["content"] = {"uri": folder + tile.content}
+        if tile.children:
+            out["children"] = [
+                self._reference(child, tile.frame)
+                if external
+                else self._json(child, tile.frame, folder)
+                for child in tile.children
+            ]
+        if tile.extras:
+            out["extras"] = tile.extras
+        return {k: _plain(v) for k, v in out.items()}
+
+    def _reference(self, tile: Tile, parent: np.ndarray) -> dict[str, Any]:
+        """A tile whose content is ``tile``'s subtree as an external tileset."""
+        name = f"{(tile.content or 'tile').removesuffix('.glb')}.json"
+        self._write(name, _dumped(self._tileset(tile, parent, "")))
+        inside = world_to_frame(parent, tile.corners())
+        low, high = inside.min(axis=0), inside.max(axis=0)
+        centre, half = (low + high) / 2.0, (high - low) / 2.0
+        box = [*centre, half[0], 0, 0, 0, half[1], 0, 0, 0, half[2]]
+        return _plain(
+            {
+                "boundingVolume": {"box": box},
+                "geometricError": tile.error,
+                "refine": "REPLACE",
+                "content": {"uri": f"{TILES}/{name}"},
+            }
+        )
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as JSON data: numpy scalars unpacked, no negative zero."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, float) and value == 0.0:
+        return 0.0  # no negative zero
+    return value
+
+
+def _dumped(tileset: dict[str, Any]) -> bytes:
+    """A tileset JSON's compact UTF-8 bytes."""
+    text = json.dumps(tileset, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
+    return text.encode("utf-8")
+
+
+def write_tileset(
+    chains: Iterable[LodChain | CellChain],
+    sink: Any,
+    info: OutputInfo,
+    sse: float = DEFAULT_SSE,
+    executor: Any = None,
+    progress: Callable[[str], None] | None = None,
+) -> None:
+    """The registry's ``write``: the tileset of ``chains`` (LOD parents and objects, as
+    :func:`~lodconvert.pipeline.iter_chains` yields them with cells) into ``sink``, each tile's
+    GLB made by ``executor`` (an :class:`~lodconvert.tasks.Executor`; ``None``: here)."""
+    if not (math.isfinite(sse) and sse > 0):
+        raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
+    TilesetWriter(sink, info, sse, executor, progress).write(chains, "tileset.json")

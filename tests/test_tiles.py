@@ -1,0 +1,524 @@
+"""3D Tiles 1.1 output: real sample cities pass the official validator with no error and no
+warning, tiles sit within 1 mm of pyproj's ECEF of the source, geometricError falls strictly
+from parent to child and follows --sse, features carry ids and typed attributes, bad outputs
+and cities without a CRS are refused in one line with nothing written, and output is
+byte-identical across runs and worker counts."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import os
+import shutil
+import subprocess
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyproj
+import pytest
+from scipy.spatial import cKDTree
+
+from lodconvert.io import read_scene
+from lodconvert.io.crs import pyproj_crs
+from lodconvert.io.tiles import writer as tiles_writer
+from lodconvert.io.tiles.check import accessor, frame_points, read_glb
+from lodconvert.ranges import REFERENCE_VIEW
+from lodconvert.validate import validate_file
+from tests.conftest import SHARED, require, shared_data
+from tests.test_cityjson import city
+from tests.test_cli import assert_one_line_error, run
+
+DATA = SHARED / "data"
+VALIDATOR = SHARED / "tools" / "3d-tiles-validator" / "validate.sh"
+SAMPLES = {
+    "multi_lod": ("cityjson/multi_lod_10bldg.city.json", "EPSG:7415"),  # declares none
+    "kit": ("citygml/kit_testcases_lod2_100bldg_v3.gml", None),
+    "plateau": ("citygml/plateau_53394517_bldg_lod012_v3.gml", None),
+    "sig3d": ("citygml/sig3d_house_lod0-4", None),
+    "potsdam": ("citygml/potsdam_lod1_v1.gml", None),
+    "tum": ("citygml/tum_munich_lod2_v2.zip", None),
+    "delft": ("cityjson/delft.city.json", None),
+}
+RD_NAP = ("--crs", "EPSG:7415")
+SLOW = ("potsdam", "tum", "delft")
+FAST = ("--levels", "2", "--workers", "1", "-q")
+
+
+def inputs(name: str) -> list[Path]:
+    """The input files of sample ``name`` (a folder: its files, one scene), or skip."""
+    path = shared_data(DATA / SAMPLES[name][0])
+    return sorted(path.glob("*.gml")) if path.is_dir() else [path]
+
+
+def convert(name: str, out: Path, *flags: str) -> Path:
+    """``out/tileset.json`` converted from sample ``name``; the run must succeed."""
+    tileset = out / "tileset.json"
+    crs = SAMPLES[name][1]
+    result = run(*inputs(name), "-o", tileset, *(("--crs", crs) if crs else ()), *FAST, *flags)
+    assert result.returncode == 0, result.stderr
+    return tileset
+
+
+@pytest.fixture(scope="module")
+def converted(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str], Path]:
+    """Each sample converted once for the module's tests."""
+    done: dict[str, Path] = {}
+
+    def get(name: str) -> Path:
+        if name not in done:
+            done[name] = convert(name, tmp_path_factory.mktemp(name))
+        return done[name]
+
+    return get
+
+
+def official(tileset: Path, report: Path) -> dict[str, Any]:
+    """The official validator's report of ``tileset``."""
+    require(VALIDATOR.exists(), f"{VALIDATOR} is absent (shared tools not checked out)")
+    require(shutil.which("node") is not None, "node is not on PATH (the 3D Tiles validator)")
+    subprocess.run(
+        [str(VALIDATOR), str(tileset), str(report)], capture_output=True, text=True, timeout=600
+    )
+    require(report.exists(), "the 3D Tiles validator could not run (npm install failed?)")
+    return json.loads(report.read_text())
+
+
+def tiles(tile: dict, frame: np.ndarray, base: Path) -> Iterator[tuple[dict, np.ndarray, Path]]:
+    """Every tile under ``tile`` with its frame (transforms multiplied down) and the tileset
+    file it is in, external tilesets followed."""
+    if tile.get("transform") is not None:
+        frame = frame @ np.asarray(tile["transform"], dtype=np.float64).reshape(4, 4).T
+    yield tile, frame, base
+    uri = tile.get("content", {}).get("uri", "")
+    if uri.endswith(".json"):
+        yield from tiles(json.loads((base.parent / uri).read_text())["root"], frame, base / uri)
+    for child in tile.get("children", []):
+        yield from tiles(child, frame, base)
+
+
+def features(document: dict, blob: bytes) -> list[dict[str, Any]]:
+    """The rows of a GLB's property table: each feature's id and its INT64, FLOAT64 and
+    STRING values (absent ones left out)."""
+    metadata = document["extensions"]["EXT_structural_metadata"]
+    table = metadata["propertyTables"][0]
+    definitions = metadata["schema"]["classes"][table["class"]]["properties"]
+    views = document["bufferViews"]
+
+    def view(index: int) -> bytes:
+        start = views[index].get("byteOffset", 0)
+        return blob[start : start + views[index]["byteLength"]]
+
+    rows: list[dict[str, Any]] = [{} for _ in range(table["count"])]
+    for name, column in table["properties"].items():
+        definition = definitions[name]
+        if definition["type"] == "STRING":
+            offsets = np.frombuffer(view(column["stringOffsets"]), dtype=np.uint32)
+            data = view(column["values"])
+            values: list[Any] = [data[a:b].decode() for a, b in itertools.pairwise(offsets)]
+        elif definition.get("componentType") in ("INT64", "FLOAT64"):
+            dtype = np.int64 if definition["componentType"] == "INT64" else np.float64
+            values = np.frombuffer(view(column["values"]), dtype=dtype).tolist()
+        else:
+            continue
+        for row, value in zip(rows, values, strict=True):
+            if value != definition.get("noData"):
+                row[definition["name"]] = value
+    return rows
+
+
+@pytest.mark.parametrize(
+    "name", [pytest.param(n, marks=[pytest.mark.slow] if n in SLOW else []) for n in SAMPLES]
+)
+def test_sample_cities_pass_the_official_validator_with_no_warning(
+    name: str, converted: Callable[[str], Path], tmp_path: Path
+) -> None:
+    tileset = converted(name)
+    report = official(tileset, tmp_path / "report.json")
+    problems = [i for i in report["issues"] if i["severity"] in ("ERROR", "WARNING")]
+    assert (report["numErrors"], report["numWarnings"]) == (0, 0), problems[:5]
+    assert validate_file(tileset) == []
+
+
+@pytest.mark.parametrize("name", ["multi_lod", "kit"])
+def test_content_lies_within_a_millimetre_of_pyprojs_ecef_of_the_source(
+    name: str, converted: Callable[[str], Path]
+) -> None:
+    """1,000 leaf vertices, through their tiles' transforms, against the ECEF pyproj makes of
+    the source's own vertices (RD New + NAP: grid convergence −0.8°, so projected offsets taken
+    for ENU metres would be metres off)."""
+    tileset = converted(name)
+    scene = read_scene(inputs(name)[0], crs=SAMPLES[name][1])
+    vertical = scene.attributes.get("vertical_crs")
+    source = pyproj_crs(scene.crs, vertical)
+    points = np.concatenate(
+        [
+            node.geometry.vertices + node.offset
+            for top in scene.nodes
+            for node in top.walk()
+            if node.geometry is not None
+        ]
+    )
+    to_ecef = pyproj.Transformer.from_crs(source, "EPSG:4978", always_xy=True)
+    expected = np.stack(to_ecef.transform(*points.T), axis=1)
+    placed = []
+    root = json.loads(tileset.read_text())["root"]
+    for tile, frame, _ in tiles(root, np.eye(4), tileset):
+        if tile.get("content", {}).get("uri", "").endswith("_finest.glb"):
+            document, blob = read_glb(tileset.parent / tile["content"]["uri"])
+            placed.append(frame_points(frame, _positions(document, blob)))
+    ours = np.concatenate(placed)
+    chosen = ours[np.random.default_rng(0).choice(len(ours), min(1000, len(ours)), False)]
+    distance, _ = cKDTree(expected).query(chosen)
+    assert len(chosen) >= min(1000, len(points) // 2)
+    assert distance.max() <= 1e-3, distance.max()
+
+
+def _positions(document: dict, blob: bytes) -> np.ndarray:
+    return np.concatenate(
+        [
+            accessor(document, blob, primitive["attributes"]["POSITION"])
+            for mesh in document["meshes"]
+            for primitive in mesh["primitives"]
+        ]
+    ).astype(np.float64)
+
+
+def test_geometric_error_falls_from_parent_to_child_and_follows_sse(
+    converted: Callable[[str], Path], tmp_path: Path
+) -> None:
+    tileset = converted("kit")
+    data = json.loads(tileset.read_text())
+    assert data["geometricError"] >= data["root"]["geometricError"] > 0
+    every = list(tiles(data["root"], np.eye(4), tileset))
+    for tile, _, _ in every:
+        assert tile["refine"] == "REPLACE"
+        for child in tile.get("children", []):
+            assert child["geometricError"] < tile["geometricError"]
+        if not tile.get("children"):
+            assert tile["geometricError"] == 0.0
+    # a cell's tile refines where the cell switches: GE = 16 · cutoff / focal_px
+    report = tmp_path / "report.json"
+    doubled = convert("kit", tmp_path / "sse32", "--sse", "32", "--report", str(report))
+    cells = {cell["id"]: cell for cell in json.loads(report.read_text())["hlod"]["cells"]}
+    found = 0
+    for tile, _, _ in tiles(json.loads(doubled.read_text())["root"], np.eye(4), doubled):
+        cell = cells.get(tile.get("extras", {}).get("cell"))
+        if cell is not None:
+            wanted = 32 * cell["cutoffs"][0] / REFERENCE_VIEW.focal_px
+            assert tile["geometricError"] == pytest.approx(wanted, rel=1e-12)
+            found += 1
+    assert found == len(cells) > 0
+
+
+def test_leaves_carry_each_buildings_id_and_typed_attributes(
+    converted: Callable[[str], Path],
+) -> None:
+    tileset = converted("multi_lod")
+    scene = read_scene(inputs("multi_lod")[0], crs="EPSG:7415")
+    source = {node.id: node.attributes for node in scene.nodes}
+    rows = []
+    for leaf in sorted((tileset.parent / "tiles").glob("*_finest.glb")):
+        document, blob = read_glb(leaf)
+        properties = document["extensions"]["EXT_structural_metadata"]["schema"]["classes"]
+        types = {p["name"]: p for p in properties["cityObject"]["properties"].values()}
+        assert types["oorspronkelijk_bouwjaar"]["componentType"] == "INT64"
+        assert types["h_maaiveld"]["componentType"] == "FLOAT64"
+        assert types["geconstateerd"]["type"] == "BOOLEAN"
+        rows.extend(features(document, blob))
+    assert sorted(row["id"] for row in rows) == sorted(source)
+    for row in rows:
+        attributes = source[row["id"]]
+        assert row["type"] == "Building"
+        assert row["oorspronkelijk_bouwjaar"] == attributes["oorspronkelijk_bouwjaar"]
+        assert row["h_maaiveld"] == attributes["h_maaiveld"]
+        assert row["dak_type"] == attributes["dak_type"]
+
+
+def test_a_large_tree_is_split_into_external_tilesets(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(tiles_writer, "EXTERNAL_BYTES", 1000)
+    tileset = convert("kit", tmp_path / "out", "--hlod", "50")
+    data = json.loads(tileset.read_text())
+    references = [c["content"]["uri"] for c in data["root"]["children"]]
+    assert references and all(uri.endswith(".json") for uri in references)
+    assert validate_file(tileset) == []
+    report = official(tileset, tmp_path / "report.json")
+    assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]
+
+
+@pytest.mark.parametrize(
+    "name, flags",
+    [("multi_lod", ()), pytest.param("kit", ("--hlod", "50"), marks=pytest.mark.slow)],
+)
+def test_output_is_byte_identical_across_runs_and_worker_counts(
+    tmp_path: Path, name: str, flags: tuple[str, ...]
+) -> None:
+    """The same files for any worker count, tiles made in worker processes included (KIT in
+    50 m cells: 8 tiles, some made while others are in flight)."""
+
+    def files(out: Path) -> dict[str, bytes]:
+        return {str(p.relative_to(out)): p.read_bytes() for p in sorted(out.rglob("*"))
+                if p.is_file()}  # fmt: skip
+
+    one = convert(name, tmp_path / "one", *flags).parent
+    again = convert(name, tmp_path / "again", *flags).parent
+    two = convert(name, tmp_path / "two", *flags, "--workers", "2").parent
+    assert files(one) == files(again) == files(two)
+    assert len(files(one)) > 2
+
+
+def test_a_previous_tileset_of_ours_is_replaced(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    convert("multi_lod", out, "--hlod", "50")
+    before = {p.name for p in (out / "tiles").iterdir()}
+    convert("multi_lod", out, "--hlod", "2000")
+    after = {p.name for p in (out / "tiles").iterdir()}
+    assert before != after
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def _unchanged(folder: Path) -> Callable[[], None]:
+    """A check that nothing under ``folder`` (or beside it) changed since now."""
+    before = sorted(str(p) for p in folder.parent.rglob("*"))
+
+    def check() -> None:
+        assert sorted(str(p) for p in folder.parent.rglob("*")) == before
+
+    return check
+
+
+def test_a_folder_that_is_not_ours_is_refused(tmp_path: Path) -> None:
+    out = tmp_path / "photos"
+    out.mkdir()
+    (out / "holiday.jpg").write_bytes(b"\xff\xd8")
+    unchanged = _unchanged(out)
+    result = run(*inputs("multi_lod"), "-o", out / "tileset.json", *RD_NAP, *FAST)
+    assert_one_line_error(result, 1, "photos", "holiday.jpg", "not a tileset lodconvert wrote")
+    unchanged()
+
+
+def test_a_folder_holding_the_input_is_refused(tmp_path: Path) -> None:
+    city = tmp_path / "city"
+    city.mkdir()
+    shutil.copy(inputs("multi_lod")[0], city / "district.city.json")
+    unchanged = _unchanged(city)
+    result = run(city / "district.city.json", "-o", city / "tileset.json", *RD_NAP, *FAST)
+    assert_one_line_error(result, 1, "district.city.json")
+    unchanged()
+
+
+def test_a_tileset_of_ours_holding_the_input_is_not_replaced(tmp_path: Path) -> None:
+    out = convert("multi_lod", tmp_path / "out").parent
+    moved = out / "tiles" / "district.city.json"
+    shutil.copy(inputs("multi_lod")[0], moved)
+    unchanged = _unchanged(out)
+    result = run(moved, "-o", out / "tileset.json", *RD_NAP, *FAST)
+    assert_one_line_error(result, 1, "district.city.json", "an input of this run")
+    unchanged()
+
+
+def test_a_city_of_one_building_is_one_cell_over_its_blocks_and_leaf(
+    converted: Callable[[str], Path],
+) -> None:
+    tileset = converted("plateau")  # one building, in geographic coordinates (JGD2011)
+    root = json.loads(tileset.read_text())["root"]
+    uris = [tile.get("content", {}).get("uri") for tile, _, _ in tiles(root, np.eye(4), tileset)]
+    assert uris[0] is None and uris[1].endswith(".glb") and uris[-1].endswith("_finest.glb")
+    document, blob = read_glb(tileset.parent / uris[-1])
+    assert len(features(document, blob)) == 1
+
+
+def test_an_unwritable_folder_is_refused(tmp_path: Path) -> None:
+    if os.geteuid() == 0:
+        pytest.skip("root writes into any folder")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        result = run(*inputs("multi_lod"), "-o", locked / "out" / "tileset.json", *RD_NAP)
+        assert_one_line_error(result, 1, "not writable")
+    finally:
+        locked.chmod(0o755)
+
+
+def test_other_json_names_are_a_usage_error(tmp_path: Path) -> None:
+    result = run(*inputs("multi_lod"), "-o", tmp_path / "city.json", *RD_NAP, *FAST)
+    assert_one_line_error(result, 2, "tileset.json")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_missing_input_is_one_line_with_nothing_written(tmp_path: Path) -> None:
+    result = run(tmp_path / "none.city.json", "-o", tmp_path / "out" / "tileset.json")
+    assert_one_line_error(result, 1, "none.city.json", "no such file")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_city_without_a_crs_is_refused_with_nothing_written(tmp_path: Path) -> None:
+    result = run(*inputs("multi_lod"), "-o", tmp_path / "out" / "tileset.json", *FAST)
+    assert result.returncode == 1
+    errors = [line for line in result.stderr.splitlines() if "error" in line]
+    assert len(errors) == 1 and "no CRS" in errors[0] and "multi_lod" in errors[0], errors
+    assert "Traceback" not in result.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_crs_that_cannot_be_placed_on_the_globe_is_refused(tmp_path: Path) -> None:
+    """A CRS of Mars has no way to the Earth's ECEF."""
+    result = run(
+        *inputs("multi_lod"), "-o", tmp_path / "out" / "tileset.json", "--crs", "IAU_2015:49910",
+        *FAST,
+    )  # fmt: skip
+    assert result.returncode == 1, result.stderr
+    errors = [line for line in result.stderr.splitlines() if "error" in line]
+    assert len(errors) == 1 and "cannot be placed on the globe" in errors[0], errors
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_tileset_folder_is_readable_by_others_as_a_web_server_needs(
+    converted: Callable[[str], Path],
+) -> None:
+    folder = converted("multi_lod").parent
+    assert folder.stat().st_mode & 0o777 == 0o755
+    assert (folder / "tiles").stat().st_mode & 0o005 == 0o005
+
+
+def test_the_current_folder_is_not_replaced(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    result = run(*inputs("multi_lod"), "-o", "tileset.json", *RD_NAP, *FAST)
+    assert_one_line_error(result, 2, "current folder", "tiles/tileset.json")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("output", "flags", "words"),
+    [
+        ("model.glb", ("--sse", "8"), ("--sse is for 3D Tiles",)),
+        ("out/tileset.json", ("--sse", "0"), ("positive",)),
+        ("out/tileset.json", ("--html",), ("--html", "not tilesets")),
+    ],
+)
+def test_tileset_options_are_checked_before_any_work(
+    tmp_path: Path, output: str, flags: tuple[str, ...], words: tuple[str, ...]
+) -> None:
+    result = run(*inputs("multi_lod"), "-o", tmp_path / output, *RD_NAP, *FAST, *flags)
+    assert_one_line_error(result, 2, *words)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("tamper", "code"),
+    [
+        ("child_error", "GEOMETRIC_ERROR"),
+        ("tileset_error", "GEOMETRIC_ERROR"),
+        ("shrunk_box", "VOLUME"),
+        ("missing_tile", "URI"),
+        ("not_json", "JSON"),
+    ],
+)
+def test_validate_finds_what_the_official_validator_does_not(
+    converted: Callable[[str], Path], tmp_path: Path, tamper: str, code: str
+) -> None:
+    out = tmp_path / "copy"
+    shutil.copytree(converted("kit").parent, out)
+    tileset = out / "tileset.json"
+    data = json.loads(tileset.read_text())
+    cell = data["root"]["children"][0]
+    if tamper == "child_error":
+        cell["children"][0]["geometricError"] = cell["geometricError"] * 2
+    elif tamper == "tileset_error":
+        data["geometricError"] = data["root"]["geometricError"] / 2
+    elif tamper == "shrunk_box":
+        cell["boundingVolume"]["box"][3:] = [0.5, 0, 0, 0, 0.5, 0, 0, 0, 0.5]
+    elif tamper == "missing_tile":
+        (out / cell["content"]["uri"]).unlink()
+    tileset.write_text("{" if tamper == "not_json" else json.dumps(data))
+    result = run("validate", tileset)
+    assert result.returncode == 1
+    assert f"error {code}" in result.stdout, result.stdout
+    assert "Traceback" not in result.stdout + result.stderr
+
+
+def test_point_far_levels_are_points_tiles_sized_for_cesium(tmp_path: Path) -> None:
+    tileset = convert("multi_lod", tmp_path / "out", "--hlod-kind", "points")
+    data = json.loads(tileset.read_text())
+    cell = data["root"]["children"][0]
+    document, _ = read_glb(tileset.parent / cell["content"]["uri"])
+    primitive = document["meshes"][0]["primitives"][0]
+    assert primitive["mode"] == 0 and set(primitive["attributes"]) == {"POSITION", "COLOR_0"}
+    shading = data["asset"]["extras"]["lodconvert"]["point_cloud_shading"]
+    assert shading["geometricErrorScale"] == cell["extras"]["point_size_px"] / 16
+    report = official(tileset, tmp_path / "report.json")
+    assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]
+
+
+def test_a_city_of_broken_buildings_only_writes_no_tileset(tmp_path: Path) -> None:
+    broken = {"type": "MultiSurface", "lod": "2", "boundaries": [[[0, 1, 2]]]}
+    document = city(
+        {"a": {"type": "Building", "geometry": [broken]}},
+        [[8500.0, 44600.0, 0.0], [8501.0, 44600.0, 0.0], [1e308, 44601.0, 0.0]],
+        transform={"scale": [10, 10, 10], "translate": [0, 0, 0]},  # 1e308 · 10: past float64
+        metadata={"referenceSystem": "https://www.opengis.net/def/crs/EPSG/0/7415"},
+    )
+    source = tmp_path / "broken.city.json"
+    source.write_text(json.dumps(document))
+    result = run(source, "-o", tmp_path / "out" / "tileset.json", *FAST)
+    assert_one_line_error(result, 1, "broken.city.json", "vertex 2")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.city.json"]
+
+
+def test_the_tileset_states_the_vertical_datum_of_several_inputs(
+    converted: Callable[[str], Path],
+) -> None:
+    """SIG3D's five files declare EPSG:25832 + EPSG:5783 (DHHN92): one scene keeps both."""
+    extras = json.loads(converted("sig3d").read_text())["asset"]["extras"]["lodconvert"]
+    assert extras["crs"] == "EPSG:25832 + EPSG:5783"
+    assert extras["heights"].startswith("DHHN92 height (EPSG:5783): taken as heights above")
+
+
+def test_a_district_over_two_utm_zones_is_placed_within_a_millimetre(tmp_path: Path) -> None:
+    """Buildings either side of 12° E, in files of UTM 32 and UTM 33 (EPSG:25832/25833): the
+    second file is reprojected into the first's zone, past its edge, and every vertex still
+    lies within 1 mm of pyproj's ECEF of its own file's coordinates."""
+    expected, paths = [], []
+    for zone, lon in (("25832", 11.9995), ("25833", 12.0005)):
+        to_utm = pyproj.Transformer.from_crs("EPSG:4326", f"EPSG:{zone}", always_xy=True)
+        x0, y0 = to_utm.transform(lon, 48.1)
+        vertices = []
+        objects = {}
+        for k in range(3):
+            x, y = round(x0) + 30 * k, round(y0)
+            base = len(vertices)
+            corners = [(x, y), (x + 10, y), (x + 10, y + 8), (x, y + 8)]
+            vertices += [[cx, cy, 520] for cx, cy in corners]
+            vertices += [[cx, cy, 532] for cx, cy in corners]
+            rings = [[[base + i for i in ring]] for ring in (
+                (0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)
+            )]  # fmt: skip
+            objects[f"b{zone}_{k}"] = {"type": "Building", "geometry": [
+                {"type": "Solid", "lod": "1", "boundaries": [rings]}
+            ]}  # fmt: skip
+        metadata = {"referenceSystem": f"https://www.opengis.net/def/crs/EPSG/0/{zone}"}
+        path = tmp_path / f"utm{zone}.city.json"
+        path.write_text(json.dumps(city(objects, vertices, metadata=metadata)))
+        paths.append(path)
+        to_ecef = pyproj.Transformer.from_crs(pyproj_crs(f"EPSG:{zone}", None), "EPSG:4978",
+                                              always_xy=True)  # fmt: skip
+        expected.append(np.stack(to_ecef.transform(*np.array(vertices, float).T), axis=1))
+    tileset = tmp_path / "out" / "tileset.json"
+    result = run(*paths, "-o", tileset, *FAST)
+    assert result.returncode == 0, result.stderr
+    placed, ids = [], []
+    for tile, frame, _ in tiles(json.loads(tileset.read_text())["root"], np.eye(4), tileset):
+        if tile.get("content", {}).get("uri", "").endswith("_finest.glb"):
+            document, blob = read_glb(tileset.parent / tile["content"]["uri"])
+            placed.append(frame_points(frame, _positions(document, blob)))
+            ids += [row["id"] for row in features(document, blob)]
+    assert sorted(ids) == [f"b{zone}_{k}" for zone in ("25832", "25833") for k in range(3)]
+    ours, wanted = np.concatenate(placed), np.concatenate(expected)
+    assert cKDTree(wanted).query(ours)[0].max() <= 1e-3
+    assert cKDTree(ours).query(wanted)[0].max() <= 1e-3
