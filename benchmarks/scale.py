@@ -1,59 +1,62 @@
-"""Conversion with worker processes: ``--workers 1`` against ``--workers 2`` and against a
-2-worker dask ``LocalCluster`` (``--scheduler``), end to end.
+"""Conversion with worker processes and on a dask cluster, end to end: ``--workers 1`` against
+``--workers N`` and against an N-worker dask ``LocalCluster`` (``--scheduler``).
 
-Converts TUM Munich (1×, unzipped) and a 10× district of shifted copies of it (made as
-``benchmarks/city.py`` makes them) into X3D and into glTF with the CLI, each run in a fresh
-child process (not pinned: the workers need the cores), the three set-ups interleaved (1, 2,
-cluster, 1, …) so that load on a shared machine falls on all alike. The cluster (two worker
-processes of one thread on 127.0.0.1) is started by the script once and serves every run, as a
-cluster would:
+Converts TUM Munich (1×, unzipped), districts of shifted copies of it (made as
+``benchmarks/city.py`` makes them) and a district of shifted copies of Delft's CityJSON into X3D
+and into glTF with the CLI, each run in a fresh child process (not pinned: the workers need the
+cores), the set-ups interleaved (1, 2, cluster, 1, …) so that load on a shared machine falls on
+all alike. The cluster (worker processes of one thread on 127.0.0.1) is started by the script
+once and serves every run, as a cluster would:
 
     python benchmarks/scale.py                    # writes results/scale.md
-    python benchmarks/scale.py --runs 3 --factors 1,10
+    python benchmarks/scale.py --runs 3 --factors 1,10,100 --delft 10
+    python benchmarks/scale.py --workers 1,2,4,8,16 --cluster 0 --out many_cores.md
 
 Per configuration, medians of ``--runs`` runs: wall seconds, CPU seconds of the whole process
 tree (the child's ``wait4`` rusage, which holds its workers': it waits for each; with the
 cluster, plus what its worker processes and this one, where its scheduler runs, spent
-meanwhile), buildings/s, the peak RSS of the largest single process (the cluster's workers:
-their peak so far), the speed-up over 1 worker (wall) and the cluster's wall time over the
-pool's. The outputs of each input and format are compared byte for byte (they must be the
-same).
+meanwhile), buildings/s, the peak RSS of the whole process tree (sampled every 50 ms; the
+cluster's workers: their peak so far, added), the speed-up over 1 worker (wall) and the
+cluster's wall time over the pool's of as many workers. The outputs of each input and format
+are compared byte for byte (they must be the same).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
 import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import psutil
-from city import TUM, Template, tum_document, write_district
-from distributed import Client, LocalCluster
+from city import DATA, TUM, Template, tum_document, write_district
 from objects import ROOT
 from tables import markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
+DELFT = DATA / "cityjson" / "delft.city.json"
 LODCONVERT = [sys.executable, "-m", "lodconvert"]
 FORMATS = ("x3d", "glb")
-SETUPS = ("1", "2", "cluster")
-"""``--workers 1``, ``--workers 2``, ``--scheduler`` of the 2-worker LocalCluster."""
+SAMPLE_SECONDS = 0.05
+"""How often the process tree's memory is sampled."""
 
 
 @dataclass
 class Run:
-    """One conversion: wall and CPU seconds, peak RSS (MiB), the output's bytes and the stage
-    timings of its report."""
+    """One conversion: wall and CPU seconds, peak RSS of the tree (MiB), the output's bytes and
+    the stage timings of its report."""
 
     wall: float
     cpu: float
@@ -62,17 +65,35 @@ class Run:
     timings: dict[str, float]
 
     @property
+    def reading(self) -> float:
+        """Seconds of the ``read`` and ``plan`` stages: the main process reading the city (or
+        taking what workers read) and parking it."""
+        return self.timings["read"] + self.timings["plan"]
+
+    @property
     def main_only(self) -> float:
         """Seconds of the stages only the main process works in (all but ``execute``)."""
         return sum(v for k, v in self.timings.items() if k != "execute")
 
 
-class Cluster:
-    """A 2-worker dask LocalCluster on 127.0.0.1 (worker processes of one thread each) and the
-    CPU seconds and peak memory of the processes it runs in."""
+@dataclass(frozen=True)
+class Input:
+    """A district to convert: its file, its name in the table and its buildings."""
 
-    def __init__(self, local: Any) -> None:
+    path: Path
+    name: str
+    buildings: int
+
+
+class Cluster:
+    """A dask LocalCluster on 127.0.0.1 (worker processes of one thread each) and the CPU
+    seconds and peak memory of the processes it runs in."""
+
+    def __init__(self, local: Any, workers: int) -> None:
+        from distributed import Client
+
         self.address = local.scheduler_address
+        self.size = workers
         with Client(local) as client:
             pids = client.run(os.getpid)
         self.workers = [psutil.Process(pid) for pid in pids.values()]
@@ -84,132 +105,266 @@ class Cluster:
         return own.ru_utime + own.ru_stime + sum(t.user + t.system for t in times)
 
     def peak_mib(self) -> float:
-        """The largest peak RSS (``VmHWM``) of its workers so far, in MiB."""
-        peaks = []
+        """The sum of its workers' peak RSS (``VmHWM``) so far, in MiB."""
+        total = 0.0
         for worker in self.workers:
             status = Path(f"/proc/{worker.pid}/status").read_text()
             line = next(line for line in status.splitlines() if line.startswith("VmHWM:"))
-            peaks.append(int(line.split()[1]) / 1024)
-        return max(peaks)
+            total += int(line.split()[1]) / 1024
+        return total
 
 
 @contextmanager
-def local_cluster() -> Iterator[Cluster]:
-    """A :class:`Cluster` for the length of the benchmark."""
+def local_cluster(workers: int) -> Iterator[Cluster | None]:
+    """A :class:`Cluster` of ``workers`` for the length of the benchmark (none for 0)."""
+    if workers == 0:
+        yield None
+        return
+    from distributed import LocalCluster
+
     sys.path.insert(0, str(ROOT))  # the workers (spawned) import this lodconvert
     with LocalCluster(
-        processes=True, n_workers=2, threads_per_worker=1, host="127.0.0.1",
+        processes=True, n_workers=workers, threads_per_worker=1, host="127.0.0.1",
         dashboard_address=":0",
     ) as local:  # fmt: skip
-        yield Cluster(local)
+        yield Cluster(local, workers)
 
 
-def convert_once(source: Path, output: Path, setup: str, cluster: Cluster) -> Run:
-    """Convert ``source`` into ``output`` in a child process, by ``setup`` (:data:`SETUPS`)."""
+def _tree_rss(root: psutil.Process) -> int:
+    """Bytes resident in ``root`` and its descendants now (0 for those already gone)."""
+    total = 0
+    try:
+        processes = [root, *root.children(recursive=True)]
+    except psutil.NoSuchProcess:
+        return 0
+    for process in processes:
+        with suppress(psutil.NoSuchProcess):
+            total += process.memory_info().rss
+    return total
+
+
+def convert_once(
+    source: Path, output: Path, setup: str, cluster: Cluster | None, root: Path = ROOT
+) -> Run:
+    """Convert ``source`` into ``output`` in a child process by the lodconvert of checkout
+    ``root``: with ``--workers setup``, or on ``cluster`` (``setup`` ``cluster``)."""
     output.unlink(missing_ok=True)
     report = output.with_suffix(".json")
-    where = ["--scheduler", cluster.address] if setup == "cluster" else ["--workers", setup]
+    if setup == "cluster":
+        assert cluster is not None
+        where = ["--scheduler", cluster.address]
+    else:
+        where = ["--workers", setup]
     command = [*LODCONVERT, str(source), "-o", str(output), "-qq", *where]
     command += ["--report", str(report)]
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    before = cluster.cpu() if setup == "cluster" else 0.0
+    env = {**os.environ, "PYTHONPATH": str(root)}
+    before = cluster.cpu() if cluster is not None and setup == "cluster" else 0.0
     started = time.perf_counter()
-    child = subprocess.Popen(command, env=env, cwd=ROOT)
+    child = subprocess.Popen(command, env=env, cwd=root)
+    peak = [0]
+    done = threading.Event()
+
+    def sample() -> None:
+        process = psutil.Process(child.pid)
+        while not done.wait(SAMPLE_SECONDS):
+            peak[0] = max(peak[0], _tree_rss(process))
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    sampler.start()
     _, status, usage = os.wait4(child.pid, 0)
     wall = time.perf_counter() - started
+    done.set()
+    sampler.join()
     if os.waitstatus_to_exitcode(status):
         raise SystemExit(f"{' '.join(command)} failed")
     cpu = usage.ru_utime + usage.ru_stime
-    peak = usage.ru_maxrss / 1024
-    if setup == "cluster":
+    peak_mib = max(peak[0], usage.ru_maxrss * 1024) / (1 << 20)
+    if cluster is not None and setup == "cluster":
         cpu += cluster.cpu() - before
-        peak = max(peak, cluster.peak_mib())
+        peak_mib += cluster.peak_mib()
     timings = json.loads(report.read_text())["timings"]
-    return Run(wall, cpu, peak, output.read_bytes(), timings)
+    return Run(wall, cpu, peak_mib, output.read_bytes(), timings)
+
+
+def write_delft_district(factor: int, path: Path) -> Input:
+    """``factor`` copies of Delft's CityJSON on a near-square grid as one CityJSON file: each
+    copy's objects renamed ``ID_k`` and its vertices shifted by whole extents."""
+    document = json.loads(DELFT.read_text(encoding="utf-8"))
+    vertices = document["vertices"]
+    scale = document["transform"]["scale"]
+    xs = [v[0] for v in vertices]
+    ys = [v[1] for v in vertices]
+    extent = (max(xs) - min(xs) + int(10 / scale[0]), max(ys) - min(ys) + int(10 / scale[1]))
+    columns = math.ceil(math.sqrt(factor))
+    objects: dict[str, Any] = {}
+    all_vertices: list[list[int]] = []
+    for k in range(factor):
+        row, column = divmod(k, columns)
+        dx, dy, base = column * extent[0], row * extent[1], len(all_vertices)
+        all_vertices += [[x + dx, y + dy, z] for x, y, z in vertices]
+        suffix = f"_{k}" if k else ""
+        for name, obj in document["CityObjects"].items():
+            copy = json.loads(json.dumps(obj))
+            for key in ("parents", "children"):
+                if key in copy:
+                    copy[key] = [ref + suffix for ref in copy[key]]
+            for geometry in copy.get("geometry", []):
+                geometry["boundaries"] = _shifted_indices(geometry["boundaries"], base)
+            objects[name + suffix] = copy
+    document["CityObjects"], document["vertices"] = objects, all_vertices
+    path.write_text(json.dumps(document), encoding="utf-8")
+    buildings = sum(o["type"] == "Building" for o in objects.values())
+    return Input(path, f"{factor}× Delft CityJSON", buildings)
+
+
+def _shifted_indices(boundaries: Any, base: int) -> Any:
+    """CityJSON ``boundaries`` with every vertex index moved by ``base``."""
+    if isinstance(boundaries, list):
+        return [_shifted_indices(part, base) for part in boundaries]
+    return boundaries + base
+
+
+def inputs(args: argparse.Namespace, folder: Path) -> Iterator[Input]:
+    """The districts to convert, each written when its turn comes (and removed after)."""
+    template = Template(tum_document())
+    for factor in args.factors:
+        sample = write_district(template, factor, folder / f"tum_{factor}x.gml")
+        yield Input(sample.path, f"{factor}× TUM", sample.buildings)
+        sample.path.unlink()
+    if args.delft and DELFT.is_file():
+        district = write_delft_district(args.delft, folder / f"delft_{args.delft}x.city.json")
+        yield district
+        district.path.unlink()
 
 
 def benchmark(args: argparse.Namespace) -> str:
     """Run every configuration, interleaved; the results file's text."""
     started = time.perf_counter()
     load = os.getloadavg()[0]
-    template = Template(tum_document())
     rows = []
+    setups = [str(w) for w in args.workers] + (["cluster"] if args.cluster else [])
+    codes = ["", "before"] if args.baseline is not None else [""]
+    configurations = [(s, c) for c in codes for s in setups if not (c and s == "cluster")]
+    pool_of_cluster = (str(args.cluster), "")
     with (
         tempfile.TemporaryDirectory(prefix="lodconvert-scale-") as tmp,
-        local_cluster() as cluster,
+        local_cluster(args.cluster) as cluster,
     ):
         folder = Path(tmp)
-        for factor in args.factors:
-            sample = write_district(template, factor, folder / f"tum_{factor}x.gml")
+        for sample in inputs(args, folder):
             for fmt in FORMATS:
-                runs: dict[str, list[Run]] = {setup: [] for setup in SETUPS}
+                runs: dict[tuple[str, str], list[Run]] = {c: [] for c in configurations}
                 for i in range(args.runs):
-                    for setup in SETUPS:
-                        print(f"{factor}× → {fmt}, {setup}, run {i + 1}", flush=True)
-                        out = folder / f"out_{setup}.{fmt}"
-                        runs[setup].append(convert_once(sample.path, out, setup, cluster))
-                same = len({run.output for s in SETUPS for run in runs[s]}) == 1
-                walls = {s: statistics.median(r.wall for r in runs[s]) for s in SETUPS}
-                for setup in SETUPS:
+                    for setup, code in configurations:
+                        print(f"{sample.name} → {fmt}, {setup} {code}, run {i + 1}", flush=True)
+                        out = folder / f"out_{setup}{code}.{fmt}"
+                        root = args.baseline if code else ROOT
+                        runs[setup, code].append(
+                            convert_once(sample.path, out, setup, cluster, root)
+                        )
+                same = len({run.output for each in runs.values() for run in each}) == 1
+                walls = {c: statistics.median(r.wall for r in runs[c]) for c in configurations}
+                for setup, code in configurations:
+                    each, wall = runs[setup, code], walls[setup, code]
+                    one = walls["1", code] if ("1", code) in walls else float("nan")
+                    versus = ""
+                    if setup == "cluster" and pool_of_cluster in walls:
+                        versus = f"{wall / walls[pool_of_cluster]:.2f}"
+                    label = f"{args.cluster} (LocalCluster)" if setup == "cluster" else setup
                     rows.append(
                         [
-                            f"{factor}× TUM ({sample.buildings:,} buildings)",
+                            f"{sample.name} ({sample.buildings:,} buildings)",
                             fmt,
-                            "2 (LocalCluster)" if setup == "cluster" else setup,
-                            f"{walls[setup]:.2f}",
-                            f"{statistics.median(r.cpu for r in runs[setup]):.2f}",
-                            f"{sample.buildings / walls[setup]:,.0f}",
-                            f"{max(r.peak_mib for r in runs[setup]):.0f}",
-                            f"{statistics.median(r.main_only for r in runs[setup]):.2f}",
-                            f"{statistics.median(r.timings['execute'] for r in runs[setup]):.2f}",
-                            f"{walls['1'] / walls[setup]:.2f}×",
-                            f"{walls['cluster'] / walls['2']:.2f}" if setup == "cluster" else "",
+                            label + (f" ({code})" if code else ""),
+                            f"{wall:.2f}",
+                            f"{statistics.median(r.cpu for r in each):.2f}",
+                            f"{sample.buildings / wall:,.0f}",
+                            f"{max(r.peak_mib for r in each):.0f}",
+                            f"{statistics.median(r.reading for r in each):.2f}",
+                            f"{statistics.median(r.main_only for r in each):.2f}",
+                            f"{statistics.median(r.timings['execute'] for r in each):.2f}",
+                            f"{one / wall:.2f}×",
+                            versus,
                             "yes" if same else "**NO**",
                         ]
                     )
-            sample.path.unlink()
     header = [
-        "input", "format", "workers", "wall s", "CPU s", "buildings/s", "peak RSS MiB",
-        "main-only s", "execute s", "speed-up", "cluster / pool", "same bytes",
+        "input", "format", "workers", "wall s", "CPU s", "buildings/s", "peak RSS MiB (tree)",
+        "read+plan s", "main-only s", "execute s", "speed-up", "cluster / pool", "same bytes",
     ]  # fmt: skip
+    return results_text(args, header, rows, load, time.perf_counter() - started)
+
+
+def results_text(
+    args: argparse.Namespace, header: list[str], rows: list[list[str]], load: float, took: float
+) -> str:
+    """The results file: machine, command, table and what the columns mean."""
     cores = len(os.sched_getaffinity(0))
+    command = " ".join(["python", "benchmarks/scale.py", *sys.argv[1:]])
     return "\n".join(
         [
-            "# Worker processes: --workers 1 vs 2 vs a 2-worker dask LocalCluster",
+            "# Worker processes and a dask cluster: --workers 1 vs N vs --scheduler",
             "",
-            f"Machine: {cores} cores usable ({os.uname().machine}, Python "
-            f"{sys.version.split()[0]}), shared; load average {load:.1f} at the start, "
-            f"{os.getloadavg()[0]:.1f} at the end; {time.perf_counter() - started:.0f} s in all.",
-            f"Command: `python benchmarks/scale.py --runs {args.runs} --factors "
-            f"{','.join(map(str, args.factors))}`; medians of {args.runs} interleaved runs each, "
-            "CPU s of the whole process tree, peak RSS of the largest process.",
+            f"Machine: {cores} cores usable ({os.uname().machine}, {psutil.cpu_count()} in all, "
+            f"Python {sys.version.split()[0]}); load average {load:.1f} at the start, "
+            f"{os.getloadavg()[0]:.1f} at the end; {took:.0f} s in all.",
+            f"Command: `{command}`; medians of {args.runs} interleaved runs each.",
             "",
             markdown_table(header, rows, 3),
             "",
-            "Main-only s: the report's stages that only the main process works in (reading and"
-            " parking the city: `read` + `plan`; `assemble`, `write`, `validate`); execute s: the"
-            " time it spent baking (1 worker) or waiting for the workers' results (2). Baking in"
-            " workers can shorten only `execute`: the main-only part bounds the speed-up."
-            " Cluster / pool: the LocalCluster's wall time over 2 worker processes' (its workers"
-            " are started once, before the first run; the pool's with each run).",
+            "CPU s: the whole process tree's (the cluster's: its workers' and scheduler's too);"
+            " peak RSS: the whole tree's, sampled every 50 ms (the cluster's workers' peaks"
+            " added). Read+plan s: the main process reading the city (with workers: cutting it"
+            " into runs of members and taking what the workers read) and parking it; main-only"
+            " s: that and the other stages only the main process works in (`assemble`, `write`,"
+            " `validate`); execute s: the time it spent baking (1 worker) or waiting for the"
+            " workers' results. Speed-up: wall of 1 worker over this row's, same code. Cluster /"
+            " pool: the LocalCluster's wall time over as many worker processes' (its workers are"
+            " started once, before the first run; the pool's with each run)."
+            + (
+                f" Rows marked (before): the checkout at `{args.baseline}`, run interleaved with"
+                " this one's."
+                if args.baseline is not None
+                else ""
+            ),
             "",
         ]
     )
+
+
+def _numbers(text: str) -> list[int]:
+    return [int(part) for part in text.split(",") if part]
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=2, help="runs per configuration (2)")
     parser.add_argument(
-        "--factors",
-        type=lambda text: [int(part) for part in text.split(",")],
-        default=[1, 10],
-        help="district sizes in copies of TUM Munich (default 1,10)",
+        "--factors", type=_numbers, default=[1, 10], help="TUM district sizes (default 1,10)"
+    )
+    parser.add_argument(
+        "--delft",
+        type=int,
+        default=10,
+        help="copies of Delft (10; 0: none)",
+    )
+    parser.add_argument(
+        "--workers", type=_numbers, default=[1, 2], help="worker counts to run (default 1,2)"
+    )
+    parser.add_argument(
+        "--cluster", type=int, default=2, help="LocalCluster workers (default 2; 0: none)"
     )
     parser.add_argument("--out", type=Path, default=HERE / "results" / "scale.md")
+    parser.add_argument(
+        "--baseline",
+        type=Path,
+        help="another checkout of lodconvert whose runs are interleaved with these (before)",
+    )
     args = parser.parse_args(argv)
     if not TUM.is_file():
         raise SystemExit(f"{TUM} is absent")
+    if 1 not in args.workers:
+        raise SystemExit("--workers must include 1 (the speed-up's reference)")
     write_results(args.out, benchmark(args))
     return 0
 

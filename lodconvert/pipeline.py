@@ -463,11 +463,17 @@ def convert(
             else outputs.file(output_path)
         )
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
+        spread = {"spread": run.workers > 1 and len(inputs) == 1 and _read_through(run)}
         with clock("read"):
-            scene, crs_record = read_inputs(inputs, run.read_options, run.limits, sources, run.warn)
+            scene, crs_record = read_inputs(
+                inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
+            )
         stack.enter_context(_input_kept_out_of_gc())
         baker = get_backend(run.backend)
         executor = stack.enter_context(_executor(run, baker, _object_count(scene)))
+        if scene.spread is not None:  # reading (its rest, or all of it) by the executor
+            with clock("read"):
+                scene.spread(executor.results, run.progress)
         writer = (  # a folder's files (tiles) are made by tasks too, in processes of their own
             stack.enter_context(_executor(run, get_backend("numpy"), _object_count(scene)))
             if folder is not None
@@ -573,6 +579,13 @@ def _executor(run: RunOptions, backend: Backend, objects: int | None) -> Executo
     if run.workers == 1 or objects == 1:
         return SerialExecutor(backend, run.progress)
     return PoolExecutor(run.workers, backend.name, run.progress)
+
+
+def _read_through(run: RunOptions) -> bool:
+    """Whether a city is read through before its first object is baked (its plot radii or
+    its LOD parents need every object): then the executor can read it first (with γ given,
+    objects are baked as they are read, so reading stays in the main process)."""
+    return run.chain.gamma is None or run.hlod is not None
 
 
 def _output_info(

@@ -9,6 +9,10 @@ of a process holding a GL context deadlocks; each worker makes its own backend),
 window of tasks in flight, so memory stays bounded and the output is the same as serial. A
 worker that dies mid-task is replaced and its task run once more; when it dies again, the task's
 objects are reported as failed and the run goes on.
+
+An executor only calls a task's ``run(backend, progress)`` and ``failed(reason)``, so readers
+ship tasks of their own on the same executors (:mod:`.io.spread`): the pool's workers stay up
+once every result of one stream of tasks is taken, for the next (reading, then baking).
 """
 
 from __future__ import annotations
@@ -253,8 +257,9 @@ class PoolExecutor(Executor):
                     return
                 self._dispatch(workers, waiting, submitted)
                 self._collect(workers, waiting, submitted, tries, done)
-        finally:
+        except BaseException:  # an error, or the results left unread: stop the workers
             self.close()
+            raise
 
     def _dispatch(
         self, workers: list[_Worker], waiting: deque[int], submitted: dict[int, BakeTask]

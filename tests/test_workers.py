@@ -22,8 +22,18 @@ from lodconvert.pipeline import iter_chains
 from lodconvert.tasks import PoolExecutor, SerialExecutor
 
 from .conftest import ROOT, SHARED, surface_of
+from .test_cityjson import _features
 
 TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
+CITIES = {
+    "kit": SHARED / "data" / "citygml" / "kit_testcases_lod2_100bldg_v3.gml",
+    "plateau": SHARED / "data" / "citygml" / "plateau_53394517_bldg_lod012_v3.gml",
+    "potsdam": SHARED / "data" / "citygml" / "potsdam_lod1_v1.gml",
+    "sig3d": SHARED / "data" / "citygml" / "sig3d_house_lod0-4" / "Building_LOD4-EPSG25832.gml",
+    "delft": SHARED / "data" / "cityjson" / "delft.city.json",
+    "multi_lod": SHARED / "data" / "cityjson" / "multi_lod_10bldg.city.json",
+}
+"""Real cities read in workers (CityGML) or in the main process (CityJSON) beside TUM."""
 
 
 def _lodconvert(*args: object) -> subprocess.CompletedProcess[str]:
@@ -73,6 +83,16 @@ CASES = [
     pytest.param("tum", ".x3d", ("--switching", "prism"), id="tum-prism"),
     pytest.param("mixed", ".x3d", (), id="mesh-x3d"),
     pytest.param("mixed", ".glb", (), id="mesh-glb"),
+    pytest.param("kit", ".x3d", (), id="kit-x3d"),
+    pytest.param("kit", ".glb", ("--plot-radius", "12"), id="kit-plot-radius"),
+    pytest.param("sequence", ".glb", ("--hlod", "250"), id="cityjsonseq-hlod-250"),
+    pytest.param("plateau", ".glb", (), id="plateau-glb", marks=pytest.mark.slow),
+    pytest.param(
+        "potsdam", ".x3d", ("--switching", "prism"), id="potsdam-prism", marks=pytest.mark.slow
+    ),
+    pytest.param("sig3d", ".glb", (), id="sig3d-glb", marks=pytest.mark.slow),
+    pytest.param("delft", ".x3d", (), id="delft-x3d", marks=pytest.mark.slow),
+    pytest.param("multi_lod", ".glb", (), id="multi-lod-glb", marks=pytest.mark.slow),
 ]
 
 
@@ -80,7 +100,8 @@ CASES = [
 def test_two_workers_write_the_bytes_of_one(
     source: str, suffix: str, options: tuple[str, ...], mixed: Path, tmp_path: Path
 ) -> None:
-    path = TUM if source == "tum" else mixed
+    paths = {"tum": TUM, "mixed": mixed, **CITIES}
+    path = _sequence(tmp_path) if source == "sequence" else paths[source]
     if not path.exists():
         pytest.skip(f"{path} is not here")
     runs = {}
@@ -94,6 +115,20 @@ def test_two_workers_write_the_bytes_of_one(
     assert _messages(runs[2][2]) == _messages(runs[1][2])
     timings = runs[2][1]["timings"]
     assert list(timings) == ["read", "plan", "execute", "assemble", "write", "validate"]
+
+
+def _sequence(tmp_path: Path) -> Path:
+    """Delft as a CityJSONSeq file: a header, then one feature a line."""
+    source = CITIES["delft"]
+    if not source.exists():
+        pytest.skip(f"{source} is not here")
+    document = json.loads(source.read_text())
+    header = {key: document[key] for key in ("type", "version", "transform", "metadata")}
+    lines = [json.dumps({**header, "CityObjects": {}, "vertices": []})]
+    lines += [json.dumps(feature) for feature in _features(document)]
+    path = tmp_path / "delft.city.jsonl"
+    path.write_text("\n".join(lines) + "\n")
+    return path
 
 
 class _KillsItsWorker:

@@ -10,7 +10,7 @@ parent's frame. Readers may yield nodes lazily; nothing here knows a file format
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -84,6 +84,11 @@ class Node:
         return replace(text, cut=self.cut + text.cut) if self.cut else text
 
 
+Spread = Callable[[Callable[[Iterable[Any]], Iterator[Any]], Callable[[str], None]], None]
+"""``spread(results, progress)``: a reader told to read the rest of its nodes as tasks by an
+executor's ``results``, telling ``progress`` what it reads itself instead."""
+
+
 @dataclass
 class Scene:
     """What a reader produced: its nodes (a list, or an iterator consumed once) and scene-wide
@@ -99,6 +104,8 @@ class Scene:
     city: bool = False
     """Whether a city model's reader made it: its objects are city objects, with their own
     LoDs and plots, in the CRS the file declares (or none)."""
+    spread: Spread | None = None
+    """How the reader can read the rest of its nodes in workers (None: it cannot)."""
 
     def __iter__(self) -> Iterator[Node]:
         return iter(self.nodes)

@@ -32,7 +32,8 @@ city object's nesting depth before it is walked, and what a ``.gz`` or ``.zip`` 
 Nothing is walked by recursion deeper than :data:`~.geometry.MAX_PART_DEPTH` parts. Only the
 root's children reach Python as the document streams; city objects are read
 :data:`~.document.BATCH` at a time and their elements freed once converted, so memory follows
-the batch, not the file.
+the batch, not the file. With workers, runs of members are read in worker processes, as one
+process reads them (:mod:`.parallel`).
 
 What a reader must check passes :mod:`..geometry_checks`: a polygon whose ring is degenerate
 (fewer than three distinct points, no area) is dropped and counted with the object's dropped
@@ -57,6 +58,7 @@ from ..crs import Crs, LocalFrame, crs_attributes
 from ..geometry_checks import InputTally, attach_tally
 from .document import Document
 from .names import CITYGML_NAMESPACE
+from .parallel import SpreadReading
 
 __all__ = ["CITYGML_NAMESPACE", "FORMAT", "LocalFrame", "read_citygml"]
 
@@ -67,6 +69,7 @@ def read_citygml(
     types: frozenset[str] | None = None,
     colors: Palette = DEFAULT_PALETTE,
     crs: str | None = None,
+    spread: bool = False,
 ) -> Scene:
     """Read a CityGML file (``.gml``/``.xml``, or a ``.gz``/``.zip`` of one) into a Scene whose
     nodes are streamed; raise :class:`InputError` with a one-line reason. ``crs`` (an EPSG
@@ -77,6 +80,8 @@ def read_citygml(
     before this returns (so that the scene's CRS is known); the rest as the nodes are taken.
     The scene's attributes hold the CityGML version, the vertical CRS, the local frame of a
     geographic CRS, and counts (links not resolved, degenerate polygons, features not read).
+    With ``spread``, the scene's :attr:`~.model.Scene.spread` lets an executor read the rest
+    of the document in workers (:mod:`.parallel`).
     """
     path = Path(path)
     source = str(path)
@@ -86,11 +91,16 @@ def read_citygml(
         raise InputError("is a directory, not a CityGML file", source)
     if path.stat().st_size == 0:
         raise InputError("is empty", source)
-    tally = InputTally(source, limits)
-    document = Document(path, limits, types, tally, colors)
-    if crs is not None:
-        document.crs = Crs.of(crs, source)
-    nodes = document.nodes()
+
+    def make() -> Document:
+        document = Document(path, limits, types, InputTally(source, limits), colors)
+        document.crs = Crs.of(crs, source) if crs is not None else None
+        return document
+
+    reading = SpreadReading(make) if spread else None
+    document = reading.document if reading is not None else make()
+    tally = document.tally
+    nodes = reading.nodes() if reading is not None else document.nodes()
     first = next(nodes, None)
     if first is None and tally.skipped_count == 1:
         raise InputError(tally.skipped[0]["reason"], source)
@@ -109,6 +119,7 @@ def read_citygml(
         crs=declared.scene_crs,
         attributes=attributes,
         city=True,
+        spread=reading.use if reading is not None else None,
     )
     return attach_tally(scene, tally)
 
@@ -117,5 +128,5 @@ FORMAT = Format(
     name="citygml",
     suffixes=(".gml", ".xml", ".zip"),
     read=read_citygml,
-    read_options=("limits", "types", "colors", "crs"),
+    read_options=("limits", "types", "colors", "crs", "spread"),
 )

@@ -41,7 +41,7 @@ from .names import (
     local,
     namespace,
 )
-from .source import first_look, open_document, parser_options
+from .source import Stream, first_look, open_document, parser_options
 
 BATCH = 64
 """City objects triangulated together (their coordinates are held until then)."""
@@ -84,8 +84,16 @@ class Document:
         """The document's city objects with geometry, one at a time, as it is parsed."""
         stream = open_document(self.path, self.limits)
         try:
+            yield from self.read(stream)
+        finally:
+            stream.close()
+
+    def read(self, stream: Stream) -> Iterator[Node]:
+        """The city objects with geometry of the document ``stream`` holds (the file's, or a
+        run of its members inside its root: :mod:`.parallel`), as it is parsed."""
+        try:
             replay, root = first_look(stream, self.limits, self.source)
-            self._check_root(root)
+            self.check_root(root)
             events = etree.iterparse(
                 replay, events=("end",), tag=_ROOT_CHILDREN, **parser_options(self.limits)
             )
@@ -107,10 +115,8 @@ class Document:
             raise InputError(f"is not well-formed XML ({reason})", self.source) from None
         except (OSError, EOFError, zlib.error, zipfile.BadZipFile) as exc:
             raise InputError(f"cannot be read ({exc})", self.source) from None
-        finally:
-            stream.close()
 
-    def _check_root(self, root: etree._Element) -> None:
+    def check_root(self, root: etree._Element) -> None:
         """Refuse a root that is not a CityGML ``CityModel``; note the version."""
         version = CITYGML_NAMESPACE.fullmatch(namespace(root))
         if version is None or local(root) != "CityModel":

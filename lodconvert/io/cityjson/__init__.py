@@ -90,12 +90,14 @@ def read_cityjson(
     types: Iterable[str] | None = None,
     colors: Palette = DEFAULT_PALETTE,
     crs: str | None = None,
+    spread: bool = False,
 ) -> Scene:
     """Read a CityJSON (``.json``) or CityJSONSeq (``.jsonl``) file, plain, ``.gz`` or in a
     ``.zip``, into a Scene (see the module docstring); :class:`InputError` with a one-line
     reason when it cannot be. ``types``: keep only CityObjects of these types (and their
     descendants); ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`);
-    ``crs`` replaces the CRS the file declares.
+    ``crs`` replaces the CRS the file declares; with ``spread``, the objects can be read by
+    workers (:attr:`~.model.Scene.spread`).
     The scene carries an :class:`~..geometry_checks.InputTally` of dropped faces and skipped
     objects."""
     path = Path(path)
@@ -105,13 +107,14 @@ def read_cityjson(
         raise InputError("is empty", str(path))
     name = (member_name(path) if path.name.lower().endswith(".zip") else path.name).lower()
     name = name.removesuffix(".gz")
-    read = read_sequence if name.endswith(".jsonl") else read_document
-    return read(path, limits, _types(types), colors, crs)
+    if name.endswith(".jsonl"):
+        return read_sequence(path, limits, _types(types), colors, crs, spread)
+    return read_document(path, limits, _types(types), colors, crs, spread)
 
 
 FORMAT = Format(
     name="cityjson",
     suffixes=(".json", ".jsonl", ".zip"),
     read=read_cityjson,
-    read_options=("limits", "types", "colors", "crs"),
+    read_options=("limits", "types", "colors", "crs", "spread"),
 )

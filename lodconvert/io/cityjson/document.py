@@ -4,7 +4,7 @@ in batches of :data:`BATCH` objects, their nodes yielded lazily."""
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import closing
 from dataclasses import dataclass
 from itertools import chain
@@ -17,7 +17,10 @@ from ...model import Node, Scene
 from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
+from ..spread import Results
+from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_node, checked_nodes
+from .parallel import ObjectsReading, SequenceReading
 from .sequence import sequence_lines
 from .source import (
     Context,
@@ -51,23 +54,66 @@ def _object_nodes(
 
 
 def read_document(
-    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
+    path: Path,
+    limits: Limits,
+    types: frozenset[str] | None,
+    palette: Palette,
+    crs: str | None,
+    spread: bool = False,
 ) -> Scene:
-    """A ``.json`` CityJSON file: every node built before the scene is returned."""
+    """A ``.json`` CityJSON file: every node built before the scene is returned (with
+    ``spread``, when the scene's :attr:`~.model.Scene.spread` is given an executor, or when
+    its nodes are first taken: :mod:`.parallel`)."""
     tally = InputTally(str(path), limits)
     data = load_document(path, limits, tally)
     ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs, str(path)), palette)
-    nodes = _object_nodes(data.get("CityObjects") or {}, ctx, types)
-    size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
-    if not size and not tally.skipped:
-        if tally.dropped_faces:
-            raise tally.nothing_left()
-        which = f"of type {', '.join(sorted(types))} " if types is not None else ""
-        raise InputError(f"has no CityObject {which}with surfaces", str(path))
-    scene = Scene(source=str(path), nodes=nodes, crs=ctx.crs, size=size, city=True)
+    objects = data.get("CityObjects") or {}
+
+    def checked(nodes: list[Node]) -> int:
+        """How many nodes with geometry ``nodes`` hold; :class:`InputError` for none."""
+        size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
+        if not size and not tally.skipped:
+            if tally.dropped_faces:
+                raise tally.nothing_left()
+            which = f"of type {', '.join(sorted(types))} " if types is not None else ""
+            raise InputError(f"has no CityObject {which}with surfaces", str(path))
+        return size
+
+    if spread and _any_surface(objects, types):
+        reading = ObjectsReading(
+            objects, ctx, types, lambda: _object_nodes(objects, ctx, types), checked,
+            lambda: read_document(path, limits, types, palette, crs),
+        )  # fmt: skip
+
+        def read_by(results: Results, progress: Callable[[str], None]) -> None:
+            reading.use(results, progress)
+            if reading.roots is not None:
+                scene.size = checked(reading.roots)
+
+        scene = Scene(source=str(path), nodes=reading.nodes(), crs=ctx.crs, city=True)
+        scene.spread = read_by
+    else:
+        nodes = _object_nodes(objects, ctx, types)
+        scene = Scene(str(path), nodes, crs=ctx.crs, size=checked(nodes), city=True)
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(data.get("version"))
     return attach_tally(scene, tally)
+
+
+def _any_surface(objects: dict[str, Any], types: frozenset[str] | None) -> bool:
+    """Whether any of ``objects`` (of ``types``, where given) holds a surface geometry with
+    boundaries: a file with none is read at once, so that its error comes as it is read."""
+    for obj in objects.values():
+        if not isinstance(obj, dict) or not isinstance(obj.get("geometry"), list):
+            continue
+        kind = obj.get("type")
+        if types is not None and not (isinstance(kind, str) and kind in types):
+            continue
+        for geometry in obj["geometry"]:
+            shape = geometry.get("type") if isinstance(geometry, dict) else None
+            if isinstance(shape, str) and shape in SURFACE_DEPTH and geometry.get("boundaries"):
+                return True
+    return False
 
 
 @dataclass
@@ -154,9 +200,16 @@ def _finished_features(waiting: list[_Feature], tally: InputTally) -> Iterator[N
 
 
 def read_sequence(
-    path: Path, limits: Limits, types: frozenset[str] | None, palette: Palette, crs: str | None
+    path: Path,
+    limits: Limits,
+    types: frozenset[str] | None,
+    palette: Palette,
+    crs: str | None,
+    spread: bool = False,
 ) -> Scene:
-    """A CityJSONSeq file: the header read now, the features' nodes yielded lazily."""
+    """A CityJSONSeq file: the header read now, the features' nodes yielded lazily (with
+    ``spread``, by workers once the scene's :attr:`~.model.Scene.spread` is given an
+    executor: :mod:`.parallel`)."""
     lines = sequence_lines(path, limits)
     try:
         _, first = next(lines, (1, b""))
@@ -172,13 +225,21 @@ def read_sequence(
     except InputError:
         lines.close()
         raise
-    nodes = _feature_nodes(lines, header, ctx, types)
+    reading = None
+    if spread:
+
+        def again() -> Iterator[Node]:
+            return iter(read_sequence(path, limits, types, palette, crs).nodes)
+
+        reading = SequenceReading(lines, header, ctx, types, _feature_nodes, again)
+    nodes = reading.nodes() if reading is not None else _feature_nodes(lines, header, ctx, types)
     first_node = next(nodes, None)  # its vertices centre a geographic CRS's local frame
     scene = Scene(
         source=str(path),
         nodes=chain(() if first_node is None else (first_node,), nodes),
         crs=ctx.crs,
         city=True,
+        spread=reading.use if reading is not None else None,
     )
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))

@@ -79,6 +79,19 @@ def read_object(key: str, obj: Any, ctx: Context) -> Read:
     return read
 
 
+def read_kept(key: str, obj: Any, ctx: Context, below: int | None = None) -> Read:
+    """Object ``key`` read (:func:`read_object`), or, when it is nested too deep, its problem
+    (``below``: how many objects are left out with it)."""
+    if below is not None:
+        problem = InputError(
+            f"is nested more than {MAX_DEPTH} levels deep in children/parents: left out "
+            f"with the {below:,} object(s) below it",
+            key,
+        )
+        return Read(key, ctx, problem=problem)
+    return read_object(key, obj, ctx)
+
+
 def _node(read: Read) -> tuple[Node, int]:
     """The node of a read and triangulated object with its LoDs and geometry instances, and
     how many of its faces were dropped. :class:`InputError` (naming the object) when it
@@ -187,15 +200,8 @@ class Objects:
         self.order = order
 
     def read(self, key: str, ctx: Context) -> Read:
-        """Object ``key`` read (:func:`read_object`), or its problem when it is too deep."""
-        if key in self.too_deep:
-            problem = InputError(
-                f"is nested more than {MAX_DEPTH} levels deep in children/parents: left out "
-                f"with the {self.too_deep[key]:,} object(s) below it",
-                key,
-            )
-            return Read(key, ctx, problem=problem)
-        return read_object(key, self.objects[key], ctx)
+        """Object ``key`` read (:func:`read_kept`)."""
+        return read_kept(key, self.objects[key], ctx, self.too_deep.get(key))
 
     def roots(self, node_of: Callable[[str], Node | None]) -> list[Node]:
         """The root nodes: each object of a kept type (all, when ``types`` is None, else those

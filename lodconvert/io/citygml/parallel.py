@@ -1,0 +1,255 @@
+"""A CityGML document read by worker processes: the main process cuts it into its root's
+children (:mod:`.members`, inflated and held to the text limit there), reads the first of them
+itself until the CRS is settled, then ships runs of members as bytes with the root's start tag
+(:class:`ReadTask`: no path, so that a worker needs no shared file system); each worker reads
+its run inside that root with the reader of one process (:class:`~.document.Document`) and
+gives back the nodes and what it counted, as data (:class:`ReadResult`). The main process takes
+the results in order and merges them into the document's state, so the nodes, ids, skips and
+counts are those of reading in one process.
+
+What depends on the members before a run is kept exact: ids made unique across the document
+are checked against those taken before, and a run whose ids would differ is read again in the
+main process (so is a run whose workers died); a run holding implicit geometry (whose templates
+later objects link to) is read in the main process; a run a worker cannot read is read by the
+one-process reader from the start of the document, so that the error is the one it gives.
+"""
+
+from __future__ import annotations
+
+import io
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lxml import etree
+
+from ...errors import InputError
+from ...limits import Limits
+from ...model import Node
+from ...semantics import Palette
+from ..crs import Crs
+from ..geometry_checks import InputTally
+from ..spread import Results, Sizer, add_tally, quiet
+from .document import Document
+from .members import Members, NotSplit
+from .names import MEMBERS
+from .source import Stream, first_look, open_document
+
+_READ = MEMBERS | {"boundedBy"}
+"""The root's children the reader reads (others are not shipped)."""
+_IMPLICIT = b"ImplicitGeometry"
+
+
+class _Taken(set[str]):
+    """A set of ids that notes whether a name asked for was taken already."""
+
+    collided = False
+
+    def __contains__(self, name: object) -> bool:
+        found = super().__contains__(name)
+        self.collided = self.collided or found
+        return found
+
+
+@dataclass(frozen=True)
+class ReadResult:
+    """What a worker read of a run of members: the nodes with geometry, the ids it took in
+    order (``collided``: one was asked for twice), what the tally counted, the document's
+    counts, and the reason it could not read the run (then nothing else)."""
+
+    nodes: tuple[Node, ...] = ()
+    ids: frozenset[str] = frozenset()
+    collided: bool = False
+    tally: InputTally | None = None
+    stats: dict[str, dict[str, int]] = field(default_factory=dict)
+    error: str | None = None
+    died: str | None = None
+    """Why no worker could read the run (they died): then this process reads it."""
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class ReadTask:
+    """A run of a document's members (bytes) to read inside its root (``prolog``: the
+    document up to the end of the root's start tag; ``root_end``: its end tag) with the
+    document's CRS; ``source`` names the file in messages."""
+
+    prolog: bytes
+    members: bytes
+    root_end: bytes
+    source: str
+    limits: Limits
+    types: frozenset[str] | None
+    palette: Palette
+    crs: Crs
+    in_main: bool = False
+    """Read by the main process (it holds implicit geometry): a worker returns nothing."""
+
+    def run(self, backend: Any = None, progress: Any = None) -> ReadResult:
+        """Read the run (``backend`` and ``progress`` are not used)."""
+        if self.in_main:
+            return ReadResult()
+        start = time.process_time()
+        tally = InputTally(self.source, self.limits)
+        document = Document(Path(self.source), self.limits, self.types, tally, self.palette)
+        document.crs, document.taken = self.crs, _Taken()
+        try:
+            nodes = tuple(document.read(io.BytesIO(self.prolog + self.members + self.root_end)))
+        except InputError as exc:
+            return ReadResult(error=str(exc))
+        taken = document.taken
+        assert isinstance(taken, _Taken)
+        return ReadResult(
+            nodes, frozenset(taken), taken.collided, tally, document.stats,
+            seconds=time.process_time() - start,
+        )  # fmt: skip
+
+    def failed(self, reason: str) -> ReadResult:
+        """The result of a run no worker could read, for ``reason``."""
+        return ReadResult(died=reason)
+
+
+class SpreadReading:
+    """The nodes of the document ``make`` gives read as :class:`ReadTask` on an executor once
+    one is given (:meth:`use`); until then, and without one, each run is read in this
+    process."""
+
+    def __init__(self, make: Callable[[], Document]) -> None:
+        self.make = make
+        self.document = make()
+        self.progress: Callable[[str], None] = quiet
+        self.results: Results | None = None
+        self.sizer = Sizer()
+        self.told = False
+
+    def use(self, results: Results, progress: Callable[[str], None]) -> None:
+        """Read the rest of the document by ``results`` (an executor's); ``progress`` hears
+        where runs are read in this process instead."""
+        self.results, self.progress = results, progress
+
+    def nodes(self) -> Iterator[Node]:
+        """The document's city objects with geometry, in document order."""
+        document = self.document
+        stream = open_document(document.path, document.limits)
+        try:
+            members = self._members(stream)
+            runs = self._runs(members)
+            for run in runs:
+                yield from self._read_here(members.prolog, b"".join(run), members.root_end)
+                if self._settled():
+                    break
+            if self.results is None:
+                for run in runs:
+                    yield from self._read_here(members.prolog, b"".join(run), members.root_end)
+                return
+            sent: deque[ReadTask] = deque()
+            for result in self.results(self._tasks(members, runs, sent)):
+                yield from self._taken(sent.popleft(), result)
+        except NotSplit:
+            raise self._one_process_error() from None
+        finally:
+            stream.close()
+
+    def _members(self, stream: Stream) -> Members:
+        """The document's members, its root checked first (as one process reads it)."""
+        try:
+            replay, root = first_look(stream, self.document.limits, self.document.source)
+        except etree.XMLSyntaxError:
+            raise self._one_process_error() from None
+        self.document.check_root(root)
+        return Members(replay)
+
+    def _settled(self) -> bool:
+        """Whether the CRS (a geographic one's frame too) is settled and reading timed."""
+        crs = self.document.crs
+        frame = crs is not None and (crs.geographic is None or crs.frame is not None)
+        return frame and self.sizer.timed
+
+    def _runs(self, members: Members) -> Iterator[list[bytes]]:
+        """Runs of the members read, each of about :data:`~..spread.TASK_SECONDS` of reading
+        as measured so far (of one member until then)."""
+        run: list[bytes] = []
+        size = 0
+        for name, member in members:
+            if name not in _READ:
+                continue
+            run.append(member)
+            size += len(member)
+            if size >= self.sizer.wanted():
+                yield run
+                run, size = [], 0
+        if run:
+            yield run
+
+    def _read_here(self, prolog: bytes, members: bytes, root_end: bytes) -> Iterator[Node]:
+        """The nodes of ``members``, read in this process into the document's state."""
+        start = time.process_time()
+        nodes = list(self.document.read(io.BytesIO(prolog + members + root_end)))
+        if nodes:
+            self.sizer.took(time.process_time() - start, len(members))
+        yield from nodes
+
+    def _tasks(
+        self, members: Members, runs: Iterator[list[bytes]], sent: deque[ReadTask]
+    ) -> Iterator[ReadTask]:
+        """A task of each run (noted in ``sent``)."""
+        document = self.document
+        assert document.crs is not None
+        for run in runs:
+            joined = b"".join(run)
+            task = ReadTask(
+                members.prolog, joined, members.root_end, document.source, document.limits,
+                document.types, document.palette, document.crs, in_main=_IMPLICIT in joined,
+            )  # fmt: skip
+            sent.append(task)
+            yield task
+
+    def _taken(self, task: ReadTask, result: ReadResult) -> Iterator[Node]:
+        """The nodes of ``task``: a worker's, merged into the document's state, where they
+        are what this process would read; else read here."""
+        document = self.document
+        if result.error is not None:
+            raise self._one_process_error(InputError(result.error))
+        if result.died is not None:
+            self.progress(f"{document.source}: {result.died}; its run is read in the main process")
+        if (
+            task.in_main
+            or result.died is not None
+            or result.collided
+            or not document.taken.isdisjoint(result.ids)
+        ):
+            if task.in_main and not self.told:
+                self.progress(f"{document.source}: implicit geometry is read in the main process")
+                self.told = True
+            yield from self._read_here(task.prolog, task.members, task.root_end)
+            return
+        if result.nodes:
+            self.sizer.took(result.seconds, len(task.members))
+        try:
+            _merge(document, result)
+        except InputError as exc:
+            raise self._one_process_error(exc) from None
+        yield from result.nodes
+
+    def _one_process_error(self, error: InputError | None = None) -> InputError:
+        """The error reading the document in one process gives (``error`` if none)."""
+        try:
+            for _ in self.make().nodes():
+                pass
+        except InputError as exc:
+            return exc
+        return error or InputError("cannot be cut into its objects", self.document.source)
+
+
+def _merge(document: Document, result: ReadResult) -> None:
+    """Add what a worker read and counted to ``document``'s state."""
+    assert result.tally is not None
+    add_tally(document.tally, result.tally)
+    document.taken.update(result.ids)
+    for key, counts in result.stats.items():
+        total = document.stats[key]
+        for name, count in counts.items():
+            total[name] = total.get(name, 0) + count

@@ -1,0 +1,340 @@
+"""CityJSON read by worker processes. A CityJSONSeq file: the main process reads the lines
+(inflated and held to the limits there) and the first feature itself (its vertices centre a
+geographic CRS's frame), then ships runs of lines as bytes with the header (:class:`LinesTask`).
+A ``.json`` file: after its one ``json.loads`` (and its vertices put in metres) in the main
+process, batches of CityObjects with the vertices (:class:`ObjectsTask`); the main process joins
+parts to their objects once all are read. Each worker reads as one process reads and gives back
+the nodes and what it counted; the main process takes the results in order, so nodes, skipped
+objects and counts are those of one process. A file with geometry templates is read in the main
+process (its instances share one mesh per template); a task whose workers died is read in the
+main process; one a worker cannot read has the file read by the one-process reader, so that
+the error is the one it gives."""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Iterator
+from contextlib import closing
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ...errors import InputError
+from ...limits import Limits
+from ...model import Node
+from ..crs import Crs
+from ..geometry_checks import InputTally
+from ..spread import Results, Sizer, add_tally, quiet
+from .objects import Objects, checked_nodes, read_kept
+from .source import Context, context_of
+
+Lines = list[tuple[int, bytes]]
+"""Lines of a file, each with its number."""
+ReadLines = Callable[[Iterator[tuple[int, bytes]], dict[str, Any], Context, Any], Iterator[Node]]
+"""How one process reads lines into nodes: ``read(lines, header, ctx, types)``."""
+
+
+@dataclass(frozen=True)
+class LinesResult:
+    """The nodes of a run of lines and what reading them counted, or why it could not."""
+
+    nodes: tuple[Node, ...] = ()
+    tally: InputTally | None = None
+    error: str | None = None
+    died: str | None = None
+    """Why no worker could read the task (they died): then this process reads it."""
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class LinesTask:
+    """A run of a CityJSONSeq file's lines to read against its ``header`` in ``declared``
+    (the main process's CRS, its frame settled), by ``read``."""
+
+    lines: Lines
+    header: dict[str, Any]
+    declared: Crs | None
+    source: str
+    limits: Limits
+    types: frozenset[str] | None
+    palette: Any
+    read: ReadLines
+
+    def run(self, backend: Any = None, progress: Any = None) -> LinesResult:
+        """Read the lines (``backend`` and ``progress`` are not used)."""
+        start = time.process_time()
+        tally = InputTally(self.source, self.limits)
+        try:
+            ctx = context_of(self.header, tally, self.declared, self.palette)
+            nodes = tuple(self.read(_each(self.lines), self.header, ctx, self.types))
+        except InputError as exc:
+            return LinesResult(error=str(exc))
+        return LinesResult(nodes, tally, seconds=time.process_time() - start)
+
+    def failed(self, reason: str) -> LinesResult:
+        """The result of a run no worker could read, for ``reason``."""
+        return LinesResult(died=reason)
+
+
+class SequenceReading:
+    """The nodes of a CityJSONSeq file's ``lines`` (after its header) read as
+    :class:`LinesTask` on an executor once one is given (:meth:`use`), until then and without
+    one in this process by ``read``; ``again`` reads the whole file in one process."""
+
+    def __init__(
+        self,
+        lines: Iterator[tuple[int, bytes]],
+        header: dict[str, Any],
+        ctx: Context,
+        types: frozenset[str] | None,
+        read: ReadLines,
+        again: Callable[[], Iterator[Node]],
+    ) -> None:
+        self.lines, self.header, self.ctx, self.types = lines, header, ctx, types
+        self.read, self.again = read, again
+        self.results: Results | None = None
+        self.progress: Callable[[str], None] = quiet
+        self.sizer = Sizer()
+
+    def use(self, results: Results, progress: Callable[[str], None]) -> None:
+        """Read the rest of the file by ``results`` (an executor's); a file with geometry
+        templates is read here (``progress`` hears so)."""
+        if self.ctx.templates:
+            progress(f"{self.ctx.tally.source}: geometry templates are read in the main process")
+            return
+        self.results, self.progress = results, progress
+
+    def nodes(self) -> Iterator[Node]:
+        """The file's nodes, in line order."""
+        with closing(self.lines):
+            runs = self._runs()
+            for run in runs:
+                yield from self._read_here(run)
+                declared = self.ctx.declared
+                settled = declared is None or declared.geographic is None or declared.frame
+                if settled and self.sizer.timed:
+                    break
+            if self.results is None:
+                for run in runs:
+                    yield from self._read_here(run)
+                return
+            sent: deque[LinesTask] = deque()
+            for result in self.results(self._tasks(runs, sent)):
+                task = sent.popleft()
+                if result.died is not None:
+                    self.progress(_died_here(self.ctx, result.died))
+                    yield from self._read_here(task.lines)
+                    continue
+                if result.error is not None:
+                    raise self._one_process_error(InputError(result.error))
+                if result.nodes:
+                    self.sizer.took(result.seconds, sum(len(line) for _, line in task.lines))
+                assert result.tally is not None
+                try:
+                    add_tally(self.ctx.tally, result.tally)
+                except InputError as exc:
+                    raise self._one_process_error(exc) from None
+                yield from result.nodes
+
+    def _runs(self) -> Iterator[Lines]:
+        """Runs of lines of about :data:`~..spread.TASK_SECONDS` of reading as measured so
+        far (of one line until then)."""
+        run: Lines = []
+        size = 0
+        for number, line in self.lines:
+            run.append((number, line))
+            size += len(line)
+            if size >= self.sizer.wanted():
+                yield run
+                run, size = [], 0
+        if run:
+            yield run
+
+    def _read_here(self, run: Lines) -> Iterator[Node]:
+        """The nodes of ``run``, read in this process."""
+        start = time.process_time()
+        nodes = list(self.read(_each(run), self.header, self.ctx, self.types))
+        if nodes:
+            self.sizer.took(time.process_time() - start, sum(len(line) for _, line in run))
+        yield from nodes
+
+    def _tasks(self, runs: Iterator[Lines], sent: deque[LinesTask]) -> Iterator[LinesTask]:
+        """A task of each run (noted in ``sent``)."""
+        tally = self.ctx.tally
+        for run in runs:
+            task = LinesTask(
+                run, self.header, self.ctx.declared, tally.source, tally.limits, self.types,
+                self.ctx.palette, self.read,
+            )  # fmt: skip
+            sent.append(task)
+            yield task
+
+    def _one_process_error(self, error: InputError) -> InputError:
+        """The error reading the file in one process gives (``error`` if none)."""
+        try:
+            for _ in self.again():
+                pass
+        except InputError as exc:
+            return exc
+        return error
+
+
+def _died_here(ctx: Context, died: str) -> str:
+    """What ``-v`` tells of a task read here because its workers died (``died``: how)."""
+    return f"{ctx.tally.source}: {died}; its objects are read in the main process"
+
+
+def _each(lines: Lines) -> Iterator[tuple[int, bytes]]:
+    """``lines`` as the generator the reader takes (and closes)."""
+    yield from lines
+
+
+@dataclass(frozen=True)
+class ObjectsResult:
+    """The node of each object of a task (None: left out), in order, and what reading them
+    counted, or why they could not be read."""
+
+    nodes: tuple[Node | None, ...] = ()
+    tally: InputTally | None = None
+    error: str | None = None
+    died: str | None = None
+    """Why no worker could read the task (they died): then this process reads it."""
+    seconds: float = 0.0
+
+
+@dataclass(frozen=True)
+class ObjectsTask:
+    """CityObjects of a ``.json`` file to read, each ``(key, object, below)`` (``below``: how
+    many objects are left out with one nested too deep, else None), against the file's
+    vertices (in metres: all of them, which costs less to send than finding the rows each
+    task uses)."""
+
+    objects: tuple[tuple[str, Any, int | None], ...]
+    vertices: np.ndarray
+    materials: list[Any]
+    declared: Crs | None
+    source: str
+    limits: Limits
+    palette: Any
+
+    def run(self, backend: Any = None, progress: Any = None) -> ObjectsResult:
+        """Read the objects (``backend`` and ``progress`` are not used)."""
+        start = time.process_time()
+        tally = InputTally(self.source, self.limits)
+        ctx = Context(tally, self.vertices, self.declared, self.materials, palette=self.palette)
+        try:
+            reads = [read_kept(key, obj, ctx, below) for key, obj, below in self.objects]
+            nodes = tuple(checked_nodes(reads))
+        except InputError as exc:
+            return ObjectsResult(error=str(exc))
+        return ObjectsResult(nodes, tally, seconds=time.process_time() - start)
+
+    def failed(self, reason: str) -> ObjectsResult:
+        """The result of objects no worker could read, for ``reason``."""
+        return ObjectsResult(died=reason)
+
+
+class ObjectsReading:
+    """The root nodes of a ``.json`` file's ``objects`` (after one ``json.loads``), read as
+    :class:`ObjectsTask` on an executor when one is given (:meth:`use`, which reads them
+    then), else by ``read_here`` in this process as they are first taken (:meth:`nodes`);
+    ``check`` judges the roots once all are read, ``again`` reads the whole file in one
+    process."""
+
+    def __init__(
+        self,
+        objects: dict[str, Any],
+        ctx: Context,
+        types: frozenset[str] | None,
+        read_here: Callable[[], list[Node]],
+        check: Callable[[list[Node]], object],
+        again: Callable[[], object],
+    ) -> None:
+        self.tree = Objects(objects, types)
+        self.ctx, self.read_here, self.check, self.again = ctx, read_here, check, again
+        self.roots: list[Node] | None = None
+        self.progress: Callable[[str], None] = quiet
+        self.sizer = Sizer(MIN_OBJECTS, MAX_OBJECTS)
+
+    def use(self, results: Results, progress: Callable[[str], None]) -> None:
+        """Read the objects now by ``results`` (an executor's); a file with geometry
+        templates is read here (``progress`` hears so)."""
+        if self.ctx.templates:
+            progress(f"{self.ctx.tally.source}: geometry templates are read in the main process")
+            return
+        self.progress = progress
+        self.roots = self._read(results)
+        self.check(self.roots)
+
+    def nodes(self) -> Iterator[Node]:
+        """The root nodes, read here if :meth:`use` did not read them."""
+        if self.roots is None:
+            self.roots = self.read_here()
+            self.check(self.roots)
+        yield from self.roots
+
+    def _read(self, results: Results) -> list[Node]:
+        """Every object read (the first here, to time it; the rest by ``results``, in
+        order); the roots."""
+        tree, ctx = self.tree, self.ctx
+        keys = iter(tree.order)
+        nodes: dict[str, Node | None] = {}
+        for key in keys:
+            start = time.process_time()
+            nodes[key] = next(checked_nodes([tree.read(key, ctx)]))
+            self.sizer.took(time.process_time() - start, 1)
+            break
+        sent: deque[list[str]] = deque()
+        for result in results(self._tasks(keys, sent)):
+            batch = sent.popleft()
+            if result.died is not None:
+                self.progress(_died_here(ctx, result.died))
+                reads = [tree.read(key, ctx) for key in batch]
+                nodes.update(zip(batch, checked_nodes(reads), strict=True))
+                continue
+            if result.error is not None:
+                raise self._one_process_error(InputError(result.error))
+            self.sizer.took(result.seconds, len(batch))
+            assert result.tally is not None
+            try:
+                add_tally(ctx.tally, result.tally)
+            except InputError as exc:
+                raise self._one_process_error(exc) from None
+            nodes.update(zip(batch, result.nodes, strict=True))
+        return tree.roots(nodes.__getitem__)
+
+    def _tasks(self, keys: Iterator[str], sent: deque[list[str]]) -> Iterator[ObjectsTask]:
+        """Tasks of the objects of ``keys`` (each task's keys noted in ``sent``)."""
+        batch: list[str] = []
+        for key in keys:
+            batch.append(key)
+            if len(batch) >= self.sizer.wanted():
+                sent.append(batch)
+                yield self._task(batch)
+                batch = []
+        if batch:
+            sent.append(batch)
+            yield self._task(batch)
+
+    def _task(self, keys: list[str]) -> ObjectsTask:
+        """The task of the objects ``keys``."""
+        tree, ctx, tally = self.tree, self.ctx, self.ctx.tally
+        objects = tuple((key, tree.objects[key], tree.too_deep.get(key)) for key in keys)
+        return ObjectsTask(
+            objects, ctx.vertices, ctx.materials, ctx.declared, tally.source, tally.limits,
+            ctx.palette,
+        )  # fmt: skip
+
+    def _one_process_error(self, error: InputError) -> InputError:
+        """The error reading the file in one process gives (``error`` if none)."""
+        try:
+            self.again()
+        except InputError as exc:
+            return exc
+        return error
+
+
+MIN_OBJECTS, MAX_OBJECTS = 32, 256
+"""Objects a task holds at least (but for the last) and at most."""

@@ -1,0 +1,317 @@
+"""Reading a city in worker processes: a CityGML document cut into its root's children by a
+byte scan and read a run of members per task gives the nodes, ids, skips, counts and errors of
+reading it in one process."""
+
+from __future__ import annotations
+
+import gzip
+import io
+import json
+import signal
+import time
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from lxml import etree
+
+from lodconvert.errors import InputError
+from lodconvert.io import read_scene, spread
+from lodconvert.io.citygml import members as members_module
+from lodconvert.io.citygml.members import Members
+from lodconvert.io.geometry_checks import tally_of
+from lodconvert.model import Mesh, Node, Scene
+from lodconvert.tasks import PoolExecutor
+
+from .test_citygml import HEAD, box, building, tree
+from .test_cityjson import _features, multi_lod
+
+ROOT = HEAD.replace(">", ' xmlns:veg="http://www.opengis.net/citygml/vegetation/2.0">', 1)
+ENVELOPE = (
+    '<gml:boundedBy><gml:Envelope srsName="urn:ogc:def:crs,crs:EPSG::25832,crs:EPSG::7837">'
+    "<gml:lowerCorner>0 0 0</gml:lowerCorner><gml:upperCorner>1 1 1</gml:upperCorner>"
+    "</gml:Envelope></gml:boundedBy>"
+)
+
+
+def _city(*members: str) -> str:
+    return f'<?xml version="1.0" encoding="UTF-8"?>\n{ROOT}{ENVELOPE}{"".join(members)}</CityModel>'
+
+
+def _anonymous(x: float) -> str:
+    """A building without a ``gml:id`` (its id is its type, numbered in document order)."""
+    return building("x", box(x)).replace(' gml:id="x"', "", 1)
+
+
+def _own_prefix(gml_id: str, x: float) -> str:
+    """A building whose member declares the building namespace under a prefix of its own."""
+    text = building(gml_id, box(x)).replace("bldg:", "b2:")
+    return text.replace(
+        "<cityObjectMember>",
+        '<cityObjectMember xmlns:b2="http://www.opengis.net/citygml/building/2.0">',
+        1,
+    )
+
+
+def _tricky() -> str:
+    """A member with an end tag of its own name in a comment, in CDATA and in an attribute
+    value, beside a processing instruction."""
+    text = building("tricky", box(300.0))
+    return text.replace(
+        "<bldg:lod2MultiSurface>",
+        "<!-- </cityObjectMember> --><?note </cityObjectMember>?>"
+        '<gen:stringAttribute xmlns:gen="http://www.opengis.net/citygml/generics/2.0" '
+        'name="a>b"><gen:value><![CDATA[</cityObjectMember>]]></gen:value>'
+        "</gen:stringAttribute><bldg:lod2MultiSurface>",
+        1,
+    )
+
+
+def _town() -> str:
+    """Buildings, trees linking a crown defined in an earlier member, ids taken twice, a
+    building whose coordinates cannot be read, one linking a polygon of another member (left
+    unresolved, as links resolve within an object), members of their own namespace prefixes."""
+    bad = building("bad", [*box(500.0), "0 0 0 10 0 0 10 ten 0 0 0 0"])
+    return _city(
+        *(building(f"b{i}", box(20.0 * i)) for i in range(6)),
+        tree(0, (700.0, 0.0, 0.0), crown=""),
+        building("dup", box(200.0)),
+        _anonymous(220.0),
+        tree(1, (710.0, 3.0, 1.0)),
+        bad,
+        building("linker", box(280.0), extra='<gml:surfaceMember xlink:href="#b0_0"/>'),
+        _tricky(),
+        building("dup", box(240.0)),
+        _anonymous(260.0),
+        *(_own_prefix(f"p{i}", 400.0 + 20.0 * i) for i in range(3)),
+        tree(2, (720.0, 6.0, 2.0)),
+    )
+
+
+def _mesh(mesh: Mesh | None) -> Any:
+    if mesh is None:
+        return None
+    return [
+        (part.vertices.tobytes(), part.faces.tobytes(), part.base_color.tobytes())
+        for part in mesh.parts
+    ]
+
+
+def _facts(node: Node) -> Any:
+    """What a node holds, comparable."""
+    return (
+        node.id,
+        node.type,
+        node.attributes,
+        node.crs,
+        _mesh(node.geometry),
+        {label: _mesh(mesh) for label, mesh in node.lods.items()},
+        [_facts(child) for child in node.children],
+    )
+
+
+class _Kills:
+    """A task whose unpickling kills the process doing it (a worker taking it), and that
+    fails as ``task`` fails."""
+
+    def __init__(self, task: Any) -> None:
+        self.task = task
+
+    def __reduce__(self) -> tuple[Any, tuple[int]]:
+        return signal.raise_signal, (signal.SIGKILL,)
+
+    def failed(self, reason: str) -> Any:
+        return self.task.failed(reason)
+
+
+def _read(
+    path: Path, spread: bool, killer: int | None = None
+) -> tuple[Scene, list[Any], list[Any], list[str]]:
+    """The scene of ``path`` read in one process or by two workers, each member a task
+    (``killer``: that task kills the workers that take it); the facts of its nodes, the
+    workers' results and what was told of reading in this process."""
+    scene = read_scene(path, spread=spread)
+    results: list[Any] = []
+    told: list[str] = []
+    if not spread:
+        return scene, [_facts(node) for node in scene.nodes], results, told
+    with PoolExecutor(2, "numpy") as executor:
+
+        def kept(tasks: Iterable[Any]) -> Iterator[Any]:
+            sent = (_Kills(task) if i == killer else task for i, task in enumerate(tasks))
+            for result in executor.results(sent):
+                results.append(result)
+                yield result
+
+        assert scene.spread is not None
+        scene.spread(kept, told.append)
+        facts = [_facts(node) for node in scene.nodes]
+    return scene, facts, results, told
+
+
+@pytest.fixture
+def one_member_a_task(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Tasks of one member, line or object each (so that a small file makes many)."""
+    monkeypatch.setattr(spread.Sizer, "wanted", lambda self: 1)
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+@pytest.mark.parametrize("suffix", [".gml", ".gml.gz"])
+def test_a_town_read_by_workers_is_the_town_read_in_one_process(
+    tmp_path: Path, suffix: str
+) -> None:
+    text = _town().encode()
+    path = tmp_path / f"town{suffix}"
+    path.write_bytes(gzip.compress(text) if suffix.endswith(".gz") else text)
+    one, one_facts, _, _ = _read(path, spread=False)
+    two, two_facts, results, told = _read(path, spread=True)
+    assert two_facts == one_facts
+    ids = [facts[0] for facts in one_facts]
+    assert ids[:6] == [f"b{i}" for i in range(6)]
+    named = ["dup", "Building", "tricky", "dup_2", "Building_2", "p0"]
+    assert [i for i in ids if i in named] == named
+    assert tally_of(two).skipped == tally_of(one).skipped
+    assert [entry["id"] for entry in tally_of(two).skipped] == ["bad"]
+    assert two.attributes["citygml"] == one.attributes["citygml"]
+    assert one.attributes["citygml"]["unresolved_links"] == {"linker": 1}  # across members
+    assert two.crs == one.crs == "EPSG:25832"
+    by_workers = sum(len(result.nodes) for result in results)
+    assert by_workers >= 10  # buildings b1… read by workers (b0 by this process, first)
+    assert told == [f"{path}: implicit geometry is read in the main process"]
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_document_broken_in_a_late_member_fails_as_in_one_process(tmp_path: Path) -> None:
+    text = _city(*(building(f"b{i}", box(20.0 * i)) for i in range(5)))
+    path = tmp_path / "broken.gml"
+    path.write_text(text.replace('<bldg:Building gml:id="b3">', '<bldg:Building gml:id="b3"<'))
+    errors = []
+    for workers in (False, True):
+        with pytest.raises(InputError) as caught:
+            _read(path, workers)
+        errors.append(str(caught.value))
+    assert errors[0] == errors[1]
+    assert "is not well-formed XML (attributes construct error, line 2, column" in errors[0]
+
+
+@pytest.mark.parametrize("chunk", [7, 1 << 20])
+def test_members_are_cut_past_comments_cdata_instructions_text_and_nesting(
+    monkeypatch: pytest.MonkeyPatch, chunk: int
+) -> None:
+    monkeypatch.setattr(members_module, "CHUNK", chunk)
+    nested = building("n", box(0.0)).replace(
+        "<bldg:Building", "<cityObjectMember/><bldg:Building", 1
+    )
+    text = _city(
+        "<!-- a comment between members -->",
+        _tricky(),
+        "\n<?pi?> stray text > ",
+        nested,
+        "<featureMember/>",
+    ).encode()
+    found = Members(io.BytesIO(text))
+    pieces = list(found)
+    assert [name for name, _ in pieces] == [
+        "boundedBy", "cityObjectMember", "cityObjectMember", "featureMember"
+    ]  # fmt: skip
+    assert found.prolog.endswith(ROOT.encode()) and found.root_end == b"</CityModel>"
+    for name, piece in pieces:
+        alone = etree.fromstring(found.prolog + piece + found.root_end)
+        assert len(alone) == 1 and etree.QName(alone[0]).localname == name
+    whole = etree.fromstring(text)
+    together = etree.fromstring(found.prolog + b"".join(p for _, p in pieces) + found.root_end)
+    assert [e.tag for e in together.iter(etree.Element)] == [
+        e.tag for e in whole.iter(etree.Element)
+    ]
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_sequence_read_by_workers_is_the_sequence_read_in_one_process(tmp_path: Path) -> None:
+    """A CityJSONSeq file of ten buildings, a line that is no feature among them: a line a
+    task, the same nodes, the same line reported."""
+    document = json.loads(multi_lod().read_text())
+    header = {key: document[key] for key in ("type", "version", "transform")}
+    lines = [json.dumps({**header, "CityObjects": {}, "vertices": []})]
+    lines += [json.dumps(feature) for feature in _features(document)]
+    lines.insert(5, '{"type": "CityJSONFeature", "CityObjects": 3}')
+    path = tmp_path / "ten.city.jsonl"
+    path.write_text("\n".join(lines) + "\n")
+    one, one_facts, _, _ = _read(path, spread=False)
+    two, two_facts, results, _ = _read(path, spread=True)
+    assert two_facts == one_facts and len(one_facts) == 10
+    assert sum(len(result.nodes) for result in results) >= 8
+    assert tally_of(two).skipped == tally_of(one).skipped
+    assert [entry["id"] for entry in tally_of(two).skipped] == ["line 6"]
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_cityjson_file_read_by_workers_is_the_file_read_in_one_process(tmp_path: Path) -> None:
+    """Ten buildings of a ``.json`` file, an object a task (parts joined to their building
+    in the main process), one building naming a vertex that is not there: the same nodes,
+    the same object reported, the scene's size known once read."""
+    document = json.loads(multi_lod().read_text())
+    broken = document["CityObjects"]["2128302"]["geometry"][0]
+    broken["boundaries"] = [[[[len(document["vertices"]) + 5, 0, 1]]]]
+    path = tmp_path / "ten.city.json"
+    path.write_text(json.dumps(document))
+    one, one_facts, _, _ = _read(path, spread=False)
+    two, two_facts, results, _ = _read(path, spread=True)
+    assert two_facts == one_facts and len(one_facts) == 9
+    assert sum(sum(n is not None for n in result.nodes) for result in results) >= 8
+    assert tally_of(two).skipped == tally_of(one).skipped
+    assert [entry["id"] for entry in tally_of(two).skipped] == ["2128302"]
+    assert two.size == one.size == 9
+
+
+def _degrees(ring: str) -> str:
+    """A ring of metres (x y z) as latitude, longitude and height near Tokyo."""
+    values = [float(v) for v in ring.split()]
+    points = zip(values[0::3], values[1::3], values[2::3], strict=True)
+    return " ".join(f"{35.68 + y * 1e-5!r} {139.76 + x * 1e-5!r} {z!r}" for x, y, z in points)
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_geographic_city_read_by_workers_is_projected_on_the_frame_of_one_process(
+    tmp_path: Path,
+) -> None:
+    """Buildings in EPSG:6697 (latitude, longitude): the frame is centred on the first, read
+    by this process, and the workers' buildings are projected onto it."""
+    envelope = ENVELOPE.replace("EPSG::25832,crs:EPSG::7837", "EPSG::6697")
+    towns = [building(f"g{i}", [_degrees(r) for r in box(30.0 * i)]) for i in range(5)]
+    path = tmp_path / "tokyo.gml"
+    path.write_text(_city(*towns).replace(ENVELOPE, envelope))
+    one, one_facts, _, _ = _read(path, spread=False)
+    two, two_facts, results, _ = _read(path, spread=True)
+    assert two_facts == one_facts and len(one_facts) == 5
+    assert sum(len(result.nodes) for result in results) == 4
+    assert two.crs == one.crs and "+proj=tmerc" in str(two.crs)
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+@pytest.mark.parametrize("name", ["town.gml", "ten.city.json"])
+def test_a_task_whose_workers_die_is_read_in_the_main_process(tmp_path: Path, name: str) -> None:
+    path = tmp_path / name
+    if name.endswith(".gml"):
+        path.write_text(_town())
+    else:
+        path.write_bytes(multi_lod().read_bytes())
+    _, one_facts, _, _ = _read(path, spread=False)
+    _, two_facts, _, told = _read(path, spread=True, killer=1)
+    assert two_facts == one_facts
+    assert any("died twice (signal SIGKILL)" in line and "main process" in line for line in told)
+
+
+@pytest.mark.parametrize("inside", ["{}", "<!--{}-->"], ids=["text", "comment"])
+def test_a_long_member_is_scanned_in_time_linear_in_its_bytes(
+    monkeypatch: pytest.MonkeyPatch, inside: str
+) -> None:
+    """A member of 16 MiB (of text, or a comment) read 4 KiB at a time is cut out in about
+    a second at most (copying the bytes held, or looking at the comment again, for each
+    chunk read took minutes)."""
+    monkeypatch.setattr(members_module, "CHUNK", 4096)
+    long = inside.format("x" * (16 << 20))
+    text = _city(f"<cityObjectMember><a>{long}</a></cityObjectMember>").encode()
+    start = time.perf_counter()
+    assert [len(member) for _, member in Members(io.BytesIO(text))][1] > 16 << 20
+    assert time.perf_counter() - start < 3.0
