@@ -157,7 +157,10 @@ def convert_once(
         where = ["--workers", setup]
     command = [*LODCONVERT, str(source), "-o", str(output), "-qq", *where]
     command += ["--report", str(report)]
-    env = {**os.environ, "PYTHONPATH": str(root)}
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
+    }
     before = cluster.cpu() if cluster is not None and setup == "cluster" else 0.0
     started = time.perf_counter()
     child = subprocess.Popen(command, env=env, cwd=root)
