@@ -84,7 +84,7 @@ class Measured:
         self.seconds = time.process_time() - start
 
     def _count(self, chain: LodChain) -> None:
-        from lodconvert.prisms import LOW_F, MORE_TRIANGLES
+        from lodconvert.city.prisms import LOW_F, MORE_TRIANGLES
 
         triangles = [lv.mesh.face_count if lv.mesh is not None else 0 for lv in chain.levels]
         self.buildings += 1
@@ -127,13 +127,13 @@ class Measured:
 def sweep(path: Path) -> list[list[str]]:
     """Rows of TUM Munich's prisms kept and triangles beyond Y(1.0) per :data:`SWEEP` pair."""
     import lodconvert.chain
-    import lodconvert.prisms
+    import lodconvert.city.prisms
 
-    defaults = lodconvert.prisms.ROOF_PERCENTILE, lodconvert.chain.FOOTPRINT_TOLERANCE_PX
+    defaults = lodconvert.city.prisms.ROOF_PERCENTILE, lodconvert.chain.FOOTPRINT_TOLERANCE_PX
     rows = []
     try:
         for percentile, tolerance in SWEEP:
-            lodconvert.prisms.ROOF_PERCENTILE = percentile
+            lodconvert.city.prisms.ROOF_PERCENTILE = percentile
             lodconvert.chain.FOOTPRINT_TOLERANCE_PX = tolerance
             got = Measured(path)
             chosen = " (default)" if (percentile, tolerance) == defaults else ""
@@ -147,7 +147,7 @@ def sweep(path: Path) -> list[list[str]]:
             )
             print(" | ".join(rows[-1]), flush=True)
     finally:
-        lodconvert.prisms.ROOF_PERCENTILE, lodconvert.chain.FOOTPRINT_TOLERANCE_PX = defaults
+        lodconvert.city.prisms.ROOF_PERCENTILE, lodconvert.chain.FOOTPRINT_TOLERANCE_PX = defaults
     return rows
 
 

@@ -26,6 +26,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .bake import Backend, Grid, bake_points
+from .city.lods import GROUND_COVERS, SLOTS, lod_name, source_levels, unused_levels
+from .city.prisms import FOOTPRINT_TOLERANCE_PX, LOW_F, MIN_PRISM_F, MORE_TRIANGLES, prism
 from .errors import InputError, UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
@@ -36,7 +38,6 @@ from .plan import (
     mesh_silhouette_estimate,
     silhouette_estimate,
 )
-from .prisms import FOOTPRINT_TOLERANCE_PX, LOW_F, MIN_PRISM_F, MORE_TRIANGLES, prism
 from .ranges import (
     DEFAULT_BETA,
     DEFAULT_GAMMA,
@@ -50,7 +51,6 @@ from .ranges import (
     diagonal,
     projected_px,
 )
-from .sourcelods import GROUND_COVERS, SLOTS, lod_name, source_levels, unused_levels
 
 LEVEL_NAMES = ("LOD4", "LOD3", "LOD2", "LOD1", "LOD0")
 MAX_LEVELS = len(LEVEL_NAMES)
@@ -78,7 +78,7 @@ class ChainOptions:
     filter: str = "median"
     beta: float = DEFAULT_BETA
     gamma: float | None = None
-    """γ; ``None``: 10 for a mesh's objects, each city object's plot radius (:mod:`.plots`)."""
+    """γ; ``None``: 10 for a mesh's objects, each city object's plot radius (:mod:`.city.plots`)."""
     xs: tuple[float, ...] | None = None
     cull: float | None = None
     spacing_px: float = DEFAULT_SPACING_PX
@@ -555,7 +555,7 @@ def _mesh_plan(obj: Node, opts: ChainOptions) -> ChainPlan:
 
 
 def _source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOptions) -> ChainPlan:
-    """The CityGML-style chain of a city object with its own LoDs (:mod:`.sourcelods`): its
+    """The CityGML-style chain of a city object with its own LoDs (:mod:`.city.lods`): its
     finest source LoD covers every slot up to its own; each coarser slot is the source's LoD
     there, else (LOD1) a prism from its footprint, else (LOD3, LOD2) baked points where they
     pay; a slot with none of these leaves the finer level on."""
@@ -605,10 +605,10 @@ def _prism_level(
     opts: ChainOptions,
 ) -> Level | str:
     """The LOD1 prism of ``obj`` (its footprint simplified within
-    :data:`~.prisms.FOOTPRINT_TOLERANCE_PX` pixels at ``distance``, where it switches in), or
+    :data:`~.city.prisms.FOOTPRINT_TOLERANCE_PX` pixels at ``distance``, where it switches in), or
     why it is left out: no footprint, no fewer triangles than ``previous`` (the source LoD
     planned before it), or a silhouette F against ``surface`` (the finest level) below
-    :data:`~.prisms.MIN_PRISM_F` at ``distance``."""
+    :data:`~.city.prisms.MIN_PRISM_F` at ``distance``."""
     pixel = distance / opts.view.focal_px
     shape = prism(obj.lods, finest, obj.attributes, FOOTPRINT_TOLERANCE_PX * pixel)
     if shape is None:

@@ -17,7 +17,6 @@ import hashlib
 import itertools
 import json
 import os
-import platform
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
@@ -29,20 +28,20 @@ import numpy as np
 from . import __version__
 from .bake import Backend, get_backend
 from .chain import ChainOptions, ChainPlan
+from .city.hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
+from .city.lods import GROUND_COVERS, source_levels
+from .city.plots import plot_radii
 from .clock import Clock
 from .errors import InputError, UsageError
-from .hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
 from .io import OutputInfo, input_format, output_format
 from .io.crs import checked_crs_option
 from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, Scene
-from .plots import plot_radii
-from .records import Records, report_text
+from .report import Records, cell_record, chain_record, options_record, report_text, run_report
 from .reproject import SOURCE_CRS_KEYS, Georef, in_one_crs
 from .sinks import DirectorySink, FileSink, Outputs
-from .sourcelods import GROUND_COVERS, source_levels
 from .spool import NodeSpool
 from .tasks import (
     Baked,
@@ -67,70 +66,9 @@ def _no_step(stage: str, done: int, total: int | None) -> None:
     """Discard a progress count."""
 
 
-def options_record(options: ChainOptions) -> dict[str, Any]:
-    """The chain options as JSON-able values (recorded in outputs and reports)."""
-    record = asdict(options)
-    record["view"] = {"height_px": options.view.height_px, "fov_y_deg": options.view.fov_y_deg}
-    record["xs"] = list(options.exponents)
-    return {k: list(v) if isinstance(v, tuple) else v for k, v in record.items()}
-
-
-def cell_record(cell: CellChain) -> dict[str, Any]:
-    """What the report says of one LOD parent."""
-    return {
-        "id": cell.cell_id,
-        "tier": cell.tier,
-        "size": cell.size,
-        "members": cell.member_ids(),
-        "cutoffs": list(cell.cutoffs),
-        "alpha": cell.alpha,
-        "gamma": cell.gamma,
-        "far": {"kind": cell.far.kind, "count": cell.far.count},
-        **{key: value for key, value in cell.facts.items() if key != "members"},
-    }
-
-
 def _add_counts(total: dict[str, int], more: dict[str, int]) -> None:
     for key, value in more.items():
         total[key] = total.get(key, 0) + value
-
-
-def chain_record(chain: LodChain) -> dict[str, Any]:
-    """What the report says of one baked object."""
-    levels = []
-    for level in chain.levels:
-        entry: dict[str, Any] = {"name": level.name, "kind": level.kind, "count": level.count}
-        if not level.is_points:
-            assert level.mesh is not None
-            entry["faces"] = len(level.mesh.faces)
-            if level.silhouette_f is not None:
-                entry["silhouette_f"] = round(level.silhouette_f, 4)
-        else:
-            assert level.params is not None
-            entry.update(
-                resolution=level.params.resolution,
-                slices=level.params.slices,
-                point_size_px=level.params.point_size,
-                filter=level.params.filter,
-                spacing=level.spacing,
-                design_distance=level.design_distance,
-                bake_seconds=round(level.bake_seconds, 4),
-            )
-        levels.append(entry)
-    return {
-        "id": chain.object_id,
-        "alpha": chain.alpha,
-        "beta": chain.beta,
-        "gamma": chain.gamma,
-        "xs": list(chain.xs),
-        "cutoffs": list(chain.cutoffs),
-        "culled": chain.culled,
-        "origin": [float(v) for v in chain.origin],
-        "levels": levels,
-        "dropped": dict(chain.dropped),
-        "unused": dict(chain.unused),
-        **({"cut": list(chain.cut)} if chain.cut else {}),
-    }
 
 
 def iter_chains(
@@ -150,7 +88,7 @@ def iter_chains(
     """Bake the scene's objects (by ``executor``: in this process by default); objects with bad
     geometry are reported through ``warn`` (unless ``strict``: the caller fails), recorded in
     ``skipped`` and left out. ``step`` hears how many are done, ``clock`` how long planning
-    and baking took. With ``hlod``, the objects come grouped in LOD parents (:mod:`.hlod`):
+    and baking took. With ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`):
     one :class:`CellChain` per cell of the coarsest tier, in grid order, each followed by the
     members it left out (objects or finer cells, drawn on their own)."""
     bakery = _Bakery(
@@ -348,7 +286,7 @@ def merged(scenes: Sequence[Scene]) -> Scene:
 def _with_plot_radii(scene: Scene, options: ChainOptions) -> Iterator[tuple[Node, float | None]]:
     """The scene's nodes with geometry, each with the plot radius to use as its γ: unless
     ``options`` set γ, a city object's (a node with its own LoDs) comes from its neighbours'
-    spacing (:mod:`.plots`), so a city is read through first, its nodes parked on disk
+    spacing (:mod:`.city.plots`), so a city is read through first, its nodes parked on disk
     (:class:`~.spool.NodeSpool`); a mesh file's nodes stay streamed (radius ``None``)."""
     nodes = scene.with_geometry()
     first = next(nodes, None) if options.gamma is None else None
@@ -660,7 +598,7 @@ class _Assembly:
         crs_record: dict[str, Any],
     ) -> dict[str, Any]:
         """The ``--report`` of the run."""
-        report = _report(
+        report = run_report(
             named, output_path, baker, run.chain, self.records, skipped, clock.timings, tally
         )
         report["crs"] = crs_record
@@ -747,42 +685,6 @@ def _input_kept_out_of_gc() -> Iterator[None]:
         yield
     finally:
         gc.unfreeze()
-
-
-def _report(
-    input_path: str | Path,
-    output_path: str | Path,
-    baker: Backend,
-    options: ChainOptions,
-    records: Records,
-    skipped: list[dict[str, str]],
-    timings: dict[str, float],
-    tally: InputTally | None = None,
-) -> dict[str, Any]:
-    """What ``--report`` records of a run; ``tally``: what the reader's checks dropped."""
-    reduced = points = 0
-    for record in records:
-        reduced += bool(record["dropped"])
-        points += sum(lv["count"] for lv in record["levels"] if lv["kind"] == "pcd")
-    return {
-        "lodconvert": __version__,
-        "input": str(input_path),
-        "output": str(output_path),
-        "backend": baker.name,
-        "renderer": baker.renderer,
-        "machine": {"python": platform.python_version(), "platform": platform.platform()},
-        "options": options_record(options),
-        "objects": records,
-        "skipped": skipped,
-        "totals": {
-            "objects": len(records),
-            "skipped": len(skipped) + (tally.unlisted if tally is not None else 0),
-            "fewer_levels": reduced,
-            "dropped_faces": tally.dropped_faces if tally is not None else 0,
-            "points": int(points),
-        },
-        "timings": {k: round(v, 4) for k, v in timings.items()},
-    }
 
 
 def object_ranges(

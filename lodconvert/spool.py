@@ -1,14 +1,14 @@
 """Nodes parked on disk while a city is read through once.
 
 A city object's switching distances depend on its neighbours (its plot radius,
-:mod:`.plots`), so every object must have been read before the first is baked. Holding them all
-would make memory grow with the city; a :class:`NodeSpool` instead writes each node (without its
+:mod:`.city.plots`), so every object must have been read before the first is baked. Holding them
+all would make memory grow with the city; a :class:`NodeSpool` instead writes each node (without its
 children, which are spooled in their own turn where they have geometry; its id and the
 attributes of it and its parts go with it as outputs keep them, :meth:`~.model.Node.written`,
 so no input nests them too deep to pickle) to an anonymous temporary file as it is read and
 keeps only its position there, then gives the nodes back in the same order (or any node by its
-index, for grouping them into cells: :mod:`.hlod`). Nodes placed by a transform stay in memory:
-they share their geometry with other nodes, which a file would not.
+index, for grouping them into cells: :mod:`.city.hlod`). Nodes placed by a transform stay in
+memory: they share their geometry with other nodes, which a file would not.
 """
 
 from __future__ import annotations

@@ -32,7 +32,7 @@ from lodconvert.analysis.city_render import (
 )
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
-from lodconvert.hlod import HlodOptions
+from lodconvert.city.hlod import HlodOptions
 from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene, Surface
 from lodconvert.pipeline import iter_chains
 

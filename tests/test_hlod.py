@@ -16,8 +16,7 @@ from lxml import etree
 from lodconvert.bake import get_backend
 from lodconvert.bake.qem import simplify_within
 from lodconvert.chain import ChainOptions
-from lodconvert.errors import UsageError
-from lodconvert.hlod import (
+from lodconvert.city.hlod import (
     AUTO_SIZES,
     CELL_EXPONENT,
     MIN_CELL_F,
@@ -32,6 +31,7 @@ from lodconvert.hlod import (
     parse_sizes,
     plan_cells,
 )
+from lodconvert.errors import UsageError
 from lodconvert.io import read_chains, read_scene
 from lodconvert.io.gltf.rules import COMPONENT_SIZES, WIDTHS
 from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene, Surface

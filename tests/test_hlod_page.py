@@ -16,8 +16,8 @@ from lxml import etree
 import lodconvert
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
+from lodconvert.city.hlod import HlodOptions
 from lodconvert.errors import InputError
-from lodconvert.hlod import HlodOptions
 from lodconvert.io import own_format
 from lodconvert.io.gltf import read_lod_gltf
 from lodconvert.io.gltf.reader import _load as load_gltf

@@ -9,8 +9,8 @@ import trimesh
 
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.city.prisms import LOW_F, MORE_TRIANGLES, prism
 from lodconvert.model import Mesh, Node, Surface
-from lodconvert.prisms import LOW_F, MORE_TRIANGLES, prism
 
 from .test_plan import gabled_house
 from .test_sourcelods import block
@@ -107,7 +107,7 @@ def test_a_prism_that_loses_the_tower_is_left_out() -> None:
 
 
 def test_a_kept_prism_reports_its_silhouette_f() -> None:
-    from lodconvert.pipeline import chain_record
+    from lodconvert.report import chain_record
 
     house = house_of(gabled_house(10, 8, 6, 7))
     chain = bake_chain(Node("h", house, "Building", lods={"lod2": house}), ChainOptions(),

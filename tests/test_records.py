@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from lodconvert.records import Records, report_text
+from lodconvert.report import Records, report_text
 
 
 def test_records_read_back_as_added_and_the_report_is_json_dumps_indented() -> None:

@@ -20,8 +20,8 @@ import lodconvert
 from lodconvert import convert
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
+from lodconvert.city.hlod import HlodOptions
 from lodconvert.errors import LodConvertError
-from lodconvert.hlod import HlodOptions
 from lodconvert.io import own_format, read_chains, read_scene
 from lodconvert.io.frame import ROTATION
 from lodconvert.io.x3d.viewpoint import PITCH_DEG

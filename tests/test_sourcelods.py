@@ -11,11 +11,11 @@ import trimesh
 
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.city.lods import lod_rank, source_levels
+from lodconvert.city.prisms import footprint, prism
 from lodconvert.model import Mesh, Node, Surface
 from lodconvert.polygons import triangulate
-from lodconvert.prisms import footprint, prism
 from lodconvert.ranges import cutoff
-from lodconvert.sourcelods import lod_rank, source_levels
 
 
 def block(width: float, depth: float, height: float, x: float = 0.0, y: float = 0.0) -> Mesh:
@@ -174,9 +174,9 @@ def test_a_footprint_with_a_courtyard_keeps_it() -> None:
 
 
 def test_plot_radii_come_from_the_neighbours_spacing() -> None:
+    from lodconvert.city.plots import MAX_RADIUS
     from lodconvert.model import Scene
     from lodconvert.pipeline import object_ranges
-    from lodconvert.plots import MAX_RADIUS
 
     houses = [block(8, 8, 6, x, 0.0) for x in (0.0, 20.0, 50.0)]
     far = block(8, 8, 6, 5000.0, 0.0)
@@ -219,9 +219,9 @@ def test_every_prism_of_a_real_district_pays_looks_alike_and_faces_outward() -> 
     draws at least 30 % fewer triangles than its LoD2; the prisms enclose their volume with
     outward faces, as the buildings do (viewers light and cull them by their winding)."""
     from lodconvert.bake import get_backend
+    from lodconvert.city.prisms import MIN_PRISM_F
     from lodconvert.io import read_scene
     from lodconvert.pipeline import iter_chains
-    from lodconvert.prisms import MIN_PRISM_F
 
     from .test_citygml import sample
 

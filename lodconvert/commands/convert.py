@@ -11,6 +11,8 @@ from collections.abc import Iterator
 from typing import Any
 
 from ..bake import BACKENDS
+from ..city.hlod import KINDS, HlodOptions, parse_sizes
+from ..city.lods import lod_name
 from ..cli.console import Console
 from ..cli.options import (
     EXIT_OK,
@@ -22,12 +24,10 @@ from ..cli.options import (
     read_options,
 )
 from ..errors import UsageError
-from ..hlod import KINDS, HlodOptions, parse_sizes
 from ..io import output_format
 from ..io.x3d import SWITCHING_MODES
 from ..limits import DEFAULT_LIMITS
 from ..sinks import FileSink, Outputs
-from ..sourcelods import lod_name
 from . import COMMANDS
 
 DESCRIPTION = (

@@ -26,7 +26,7 @@ class BakeParams:
 MESH_KINDS = ("mesh", "qem", "source", "prism", "merged")
 """Level kinds drawn as triangles: the source mesh, the source decimated by quadric edge
 collapse, a city object's own LoD geometry, the prism derived from its footprint, and a LOD
-parent's merge of its members' coarsest levels (:mod:`lodconvert.hlod`). ``pcd``
+parent's merge of its members' coarsest levels (:mod:`lodconvert.city.hlod`). ``pcd``
 levels are baked point clouds. Kinds are data: a level is drawn as triangles when ``mesh`` is
 set, whatever its kind."""
 
@@ -101,7 +101,7 @@ class LodChain:
     dropped: dict[str, str] = field(default_factory=dict)
     """Levels the planner left out (name → why): the finer level stays on in their place."""
     unused: dict[str, str] = field(default_factory=dict)
-    """Source LoDs that no level is made from (label → why; :mod:`~lodconvert.sourcelods`)."""
+    """Source LoDs that no level is made from (label → why; :mod:`~lodconvert.city.lods`)."""
     transform: np.ndarray | None = None
     """4×4 placement of the chain's frame (an instance of shared geometry): world =
     ``transform · (origin + local)``; ``None`` is the identity. Instances of one geometry share

@@ -19,7 +19,7 @@ import pytest
 
 from lodconvert import convert
 from lodconvert.chain import ChainOptions
-from lodconvert.hlod import HlodOptions
+from lodconvert.city.hlod import HlodOptions
 from lodconvert.io import read_chains
 from lodconvert.viewer import LIBRARIES, page_config, write_page
 

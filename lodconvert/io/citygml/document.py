@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
+from ...city.lods import finest
 from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh, Node, Surface
@@ -235,7 +236,7 @@ class Document:
             self.tally.dropped_faces += dropped
             self.tally.dropped_by_object[node.id] = dropped
         node.lods = {lod: Mesh(_joined(parts)) for lod, parts in merged.items()}
-        node.geometry = _finest(node.lods)
+        node.geometry = finest(node.lods)
         if node.geometry is None:
             if dropped:
                 self.tally.skip(node.id, dropped)
@@ -286,9 +287,3 @@ def _one_surface(group: list[Surface]) -> Surface:
     boxes = np.stack([s.bounds for s in group])
     joined.derived("bounds", lambda: np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)]))
     return joined
-
-
-def _finest(lods: dict[str, Mesh]) -> Mesh | None:
-    """The highest LoD above 0, else LoD 0, else None."""
-    above = [label for label in sorted(lods) if label != "lod0"]
-    return lods[above[-1]] if above else lods.get("lod0")

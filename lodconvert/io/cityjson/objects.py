@@ -9,6 +9,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
+from ...city.lods import finest
 from ...errors import InputError
 from ...model import Mesh, Node
 from ..geometry_checks import check_extent
@@ -108,7 +109,7 @@ def _node(read: Read) -> tuple[Node, int]:
     assert node is not None
     node.lods = {lod.label: lod.mesh for lod in read.lods if lod.mesh is not None}
     if node.lods:
-        node.geometry = node.lods[max(node.lods, key=lod_key)]
+        node.geometry = finest(node.lods)
     placed = []
     for geometry in read.instances:
         shared = template_mesh(geometry.get("template"), ctx, key, kind)
@@ -271,4 +272,4 @@ def _absorb_parts(node: Node) -> None:
             merged.setdefault(label, []).extend(mesh.parts)
         each.geometry = None
     node.lods = {label: Mesh(surfaces) for label, surfaces in merged.items()}
-    node.geometry = node.lods[max(node.lods, key=lod_key)]
+    node.geometry = finest(node.lods)

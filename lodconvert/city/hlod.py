@@ -52,14 +52,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .bake import Backend
-from .bake.qem import simplify_within
-from .chain import ChainOptions, point_level_at
-from .errors import UsageError
-from .limits import DEFAULT_LIMITS, Limits
-from .model import WHITE, CellChain, Level, LodChain, Mesh, Surface
-from .plan import level_bytes, level_cost, mesh_silhouette_estimate, silhouette_estimate
-from .ranges import cutoff, diagonal
+from ..bake import Backend
+from ..bake.qem import simplify_within
+from ..chain import ChainOptions, point_level_at
+from ..errors import UsageError
+from ..limits import DEFAULT_LIMITS, Limits
+from ..model import WHITE, CellChain, Level, LodChain, Mesh, Surface
+from ..plan import level_bytes, level_cost, mesh_silhouette_estimate, silhouette_estimate
+from ..ranges import cutoff, diagonal
 
 KINDS = ("auto", "points", "mesh")
 AUTO_OBJECTS = 64

@@ -4,7 +4,7 @@ The CityGML-style hierarchy has four levels, LOD4 (nearest, finest) to LOD1 (far
 coarsest), in the slots of the ProxyPrismLOD paper's ranges. A source LoD label names its slot
 by its integer part: CityGML ``lod2`` and CityJSON ``"2.2"`` both fill LOD2 (of several labels
 for one slot the highest wins: CityJSON ``"1.3"`` over ``"1.2"``). ``lod0`` (footprints, roof
-edges) fills no slot; it is the footprint of a derived prism (:mod:`.prisms`). Only objects
+edges) fills no slot; it is the footprint of a derived prism (:mod:`.city.prisms`). Only objects
 that stand on the ground get one: terrain and the surfaces that cover the ground
 (:data:`GROUND_COVERS`: land use, roads, squares, waterways) would become blocks from their
 lowest to their highest point.
@@ -15,7 +15,7 @@ from __future__ import annotations
 import functools
 import re
 
-from .model import Mesh
+from ..model import Mesh
 
 SLOTS = (4, 3, 2, 1)
 """Source LoD of each level, finest first (``LOD4`` … ``LOD1``)."""
@@ -28,6 +28,15 @@ def lod_rank(label: str) -> tuple[int, int] | None:
     (1, 3)); ``None`` for a label that names no LoD."""
     match = _LABEL.fullmatch(label.strip())
     return (int(match.group(1)), int(match.group(2) or 0)) if match else None
+
+
+def finest(lods: dict[str, Mesh]) -> Mesh | None:
+    """The geometry of the finest of ``lods`` (by :func:`lod_rank`: CityGML ``lod3`` over
+    ``lod2``, CityJSON ``"2.2"`` over ``"2"``; labels naming no LoD lowest), the one a city
+    object stands for where one geometry is wanted; ``None`` for none. Both readers use it."""
+    if not lods:
+        return None
+    return lods[max(lods, key=lambda label: (lod_rank(label) or (-1, -1), label))]
 
 
 def source_levels(lods: dict[str, Mesh]) -> dict[int, tuple[str, Mesh]]:
