@@ -390,33 +390,15 @@ def convert(
     inputs = [input_path] if isinstance(input_path, str | Path) else list(input_path)
     sources = [input_format(path) for path in inputs]
     named = " + ".join(str(path) for path in inputs)
-    clock = Clock(*STAGES)
     folder = target.output_folder(Path(output_path)) if target.output_folder else None
     if folder is not None and run.hlod is None:
         run = replace(run, hlod=HlodOptions())
+    clock = Clock(*STAGES)
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
-        sink = (
-            outputs.directory(folder, resume=_resume_key(inputs, run))
-            if folder is not None
-            else outputs.file(output_path)
-        )
+        sink = _sink(outputs, output_path, folder, inputs, run)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
-        spread = {"spread": run.workers > 1 and len(inputs) == 1 and _read_through(run)}
-        with clock("read"):
-            scene, crs_record = read_inputs(
-                inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
-            )
-        stack.enter_context(_input_kept_out_of_gc())
-        baker = get_backend(run.backend)
-        executor = stack.enter_context(_executor(run, baker, _object_count(scene)))
-        if scene.spread is not None:  # reading (its rest, or all of it) by the executor
-            with clock("read"):
-                scene.spread(executor.results, run.progress)
-        writer = (  # a folder's files (tiles) are made by tasks too, in processes of their own
-            stack.enter_context(_executor(run, get_backend("numpy"), _object_count(scene)))
-            if folder is not None
-            else None
-        )
+        scene, crs_record, baker, executor = _read_stage(inputs, sources, run, clock, stack)
+        writer = _file_executor(run, scene, stack) if folder is not None else None
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         skipped: list[dict[str, str]] = []
         items = iter_chains(
@@ -429,10 +411,7 @@ def convert(
                 chains, sink, assembly.info, executor=writer, progress=run.progress,
                 **run.write_options,
             )  # fmt: skip
-        tally = _reader_skipped(
-            scene, skipped, run.warn if assembly.records and not run.strict else _quiet
-        )
-        _check_converted(assembly.records, skipped, run.strict, named)
+        tally = _finished(scene, assembly.records, skipped, run, named)
         with clock("validate"):
             _checked(sink, output_path, run.step)
         report = assembly.report(named, output_path, baker, run, skipped, clock, tally, crs_record)
@@ -441,6 +420,60 @@ def convert(
         if report_sink is not None:
             _stage_report(report_sink, report)
     return report
+
+
+def _sink(
+    outputs: Outputs,
+    output_path: str | Path,
+    folder: Path | None,
+    inputs: Sequence[str | Path],
+    run: RunOptions,
+) -> FileSink | DirectorySink:
+    """Where the output is staged: ``folder`` (a folder output, under its resume key) or the
+    file ``output_path``."""
+    if folder is None:
+        return outputs.file(output_path)
+    return outputs.directory(folder, resume=_resume_key(inputs, run))
+
+
+def _read_stage(
+    inputs: Sequence[str | Path],
+    sources: Sequence[Any],
+    run: RunOptions,
+    clock: Clock,
+    stack: contextlib.ExitStack,
+) -> tuple[Scene, dict[str, Any], Backend, Executor]:
+    """The ``read`` stage: the scene of ``inputs`` and the report's ``crs``, the baker and the
+    executor, entered on ``stack`` (which reads too, where the reader spreads its work)."""
+    spread = {"spread": run.workers > 1 and len(inputs) == 1 and _read_through(run)}
+    with clock("read"):
+        scene, crs_record = read_inputs(
+            inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
+        )
+    stack.enter_context(_input_kept_out_of_gc())
+    baker = get_backend(run.backend)
+    executor = stack.enter_context(_executor(run, baker, _object_count(scene)))
+    if scene.spread is not None:  # reading (its rest, or all of it) by the executor
+        with clock("read"):
+            scene.spread(executor.results, run.progress)
+    return scene, crs_record, baker, executor
+
+
+def _file_executor(run: RunOptions, scene: Scene, stack: contextlib.ExitStack) -> Executor:
+    """The executor that makes a folder output's files (tiles) as tasks, in processes of their
+    own, entered on ``stack``."""
+    return stack.enter_context(_executor(run, get_backend("numpy"), _object_count(scene)))
+
+
+def _finished(
+    scene: Scene, records: Records, skipped: list[dict[str, str]], run: RunOptions, named: str
+) -> InputTally | None:
+    """The reader's skipped objects added to ``skipped`` (told to ``run.warn`` unless nothing
+    was converted or the run is strict), the run failed where nothing (strict: not
+    everything) was converted; the reader's tally."""
+    tally = _reader_skipped(scene, skipped, run.warn if records and not run.strict else _quiet)
+    _check_converted(records, skipped, run.strict, named)
+    return tally
 
 
 def _resume_key(inputs: Sequence[str | Path], run: RunOptions) -> str:
