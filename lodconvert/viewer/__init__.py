@@ -18,6 +18,10 @@ its levels, clicking empty space (or the attributes' close button) clears both;
 ``lodScale``), ``setDistance(d)``, ``setLodScale(s)`` and ``screenPoint([x, y, z])`` (where a
 world point shows on the page).
 
+A 3D Tiles tileset (``DIR/tileset.json``) gets a CesiumJS page inside its folder instead
+(:mod:`.tileset`, ``tiles.js``): the tiles selected, the tile under the pointer, click-to-inspect
+a building's feature.
+
 Browsers do not let a page opened from a file fetch its neighbours, so the page must be served:
 :func:`serve` (``lodconvert view OUT --serve``) serves a folder on 127.0.0.1. A local library
 folder must therefore lie inside the page's folder, or be served beside it under
