@@ -5,7 +5,7 @@
 // parents, blocks, leaves) and names the tile under the pointer; clicking a building shows its
 // id and attributes (its feature's properties) and tints it. window.lodconvertViewer holds the
 // state (`tiles`: the tiles selected, `failed`: tiles that failed to load, `selected`, `picked`,
-// `settled`) and setCamera / screenPoint. ?target=X,Y,Z (ECEF metres) &range= &heading=
+// `settled`: the view's tiles loaded and drawn) and setCamera / screenPoint. ?target=X,Y,Z (ECEF metres) &range= &heading=
 // &pitch= (degrees) in the URL set the first view, else it frames the whole tileset from the
 // south, 35° above the horizon.
 
@@ -68,6 +68,13 @@ function showReadout() {
   readout.textContent = lines.join("\n");
 }
 
+/** `value` as JSON can hold it: an INT64 property (a BigInt) as a number, or as text beyond
+ * 2^53. */
+function plain(value) {
+  if (typeof value !== "bigint") return value;
+  return Number.isSafeInteger(Number(value)) ? Number(value) : String(value);
+}
+
 /** The picked object at CSS pixel (x, y) of the view: a building's feature, a tile, or null. */
 function pickAt(x, y) {
   const rect = widget.canvas.getBoundingClientRect();
@@ -77,8 +84,18 @@ function pickAt(x, y) {
   const tile = content.tile ? describe(content.tile) : null;
   if (!(picked instanceof Cesium.Cesium3DTileFeature)) return tile;
   const properties = {};
-  for (const name of picked.getPropertyIds()) properties[name] = picked.getProperty(name);
+  for (const name of picked.getPropertyIds()) properties[name] = plain(picked.getProperty(name));
   return { ...tile, id: properties.id ?? null, properties, feature: picked };
+}
+
+/** A STRING property holding a nested value as JSON (the writer's way), as that value. */
+function nested(value) {
+  if (typeof value !== "string" || !/^[[{]/.test(value)) return value;
+  try {
+    return JSON.parse(value);
+  } catch {
+    return value;
+  }
 }
 
 const tileLine = (tile) => `${tile.uri} (${tile.kind}, geometricError ${tile.geometricError.toPrecision(4)})`;
@@ -98,7 +115,8 @@ function select(picked) {
   heading.textContent = state.selected;
   const table = document.createElement("table");
   const { id, ...others } = picked.properties;
-  addAttributes(table, { ...others, tile: tileLine(picked) });
+  const attributes = Object.fromEntries(Object.entries(others).map(([k, v]) => [k, nested(v)]));
+  addAttributes(table, { ...attributes, tile: tileLine(picked) });
   const close = document.createElement("button");
   Object.assign(close, { type: "button", className: "close", textContent: "×", title: "Deselect" });
   inspect.append(close, heading, table);
@@ -128,11 +146,12 @@ function watchPointer(view) {
   });
 }
 
-/** Track the tiles each frame selects; resolve `settle` promises once a frame shows every tile
- * its view needs, loaded (CesiumJS's tilesLoaded), and selects some (an early frame selects
- * none). */
+/** Track the tiles each frame selects; resolve `settle` promises once two frames in a row after
+ * the move have every tile their view needs loaded (CesiumJS's tilesLoaded): the first frame
+ * after a move only starts the requests of its view, and may select nothing yet. */
 let frame = new Set();
 let waiting = [];
+let loadedFrames = 0;
 function watchFrames() {
   const scene = widget.scene;
   scene.preUpdate.addEventListener(() => { frame = new Set(); });
@@ -144,7 +163,8 @@ function watchFrames() {
   scene.postRender.addEventListener(() => {
     state.tiles = [...frame].filter((tile) => tile.content?.url).map(describe);
     showReadout();
-    if (tileset.tilesLoaded && state.tiles.length > 0) {
+    loadedFrames = tileset.tilesLoaded ? loadedFrames + 1 : 0;
+    if (loadedFrames >= 2) {
       state.settled = true;
       waiting.forEach((done) => done());
       waiting = [];
@@ -155,6 +175,7 @@ function watchFrames() {
 /** Resolves once the view is settled after a change. */
 function settle() {
   state.settled = false;
+  loadedFrames = 0;
   const done = new Promise((resolve) => waiting.push(resolve));
   widget.scene.requestRender();
   return done;
