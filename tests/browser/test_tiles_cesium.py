@@ -4,8 +4,9 @@ DIR/tileset.json``), driven by tiles.mjs: TUM Munich in 250 m and 1 km cells loa
 tile failing; from near, clicking a known building picks its feature in a leaf tile, with the
 source's id and attributes, and the inspect panel shows them; from far, the cells show their
 far levels, not their buildings' tiles. A small city with point far levels loads and shows them
-from afar. Each camera's tiles selected and bytes requested are recorded (and printed in the
-viewer measurements). Every wait is on page state."""
+from afar. Without CesiumJS the page says where it failed to load it. Each camera's tiles
+selected and bytes requested are recorded (and printed in the viewer measurements). Every wait
+is on page state."""
 
 from __future__ import annotations
 
@@ -20,8 +21,9 @@ import pytest
 from lodconvert.io.tiles.check import accessor, frame_points, read_glb
 from lodconvert.viewer import write_page
 
+from ..conftest import ROOT, require
 from ..test_tiles import convert, features, tiles
-from .conftest import Drive, Driver, console_text
+from .conftest import REQUIRE, Drive, Driver, console_text
 from .test_inspect import EXPOSED, _source_attributes
 
 pytestmark = pytest.mark.browser
@@ -41,7 +43,9 @@ view; a tile of geometric error GE refines within GE·height/(sse·this) of the 
 
 @pytest.fixture(scope="module")
 def look(driver: Driver) -> Drive:
-    """Run tiles.mjs's scenario ``cameras``."""
+    """Run tiles.mjs's scenario ``cameras``, once the npm package cesium is known to be there."""
+    package = ROOT / "node_modules" / "cesium" / "package.json"
+    require(package.exists(), f"{package} is absent (scripts/test.sh installs it)", REQUIRE)
     return driver("tiles.mjs")
 
 
@@ -144,10 +148,16 @@ def test_cesium_picks_a_building_near_and_shows_far_levels_far(
     _record(measure, "TUM", [seen_near, seen_far])
 
 
+@pytest.fixture(scope="module")
+def small(site: Path) -> Path:
+    """The ten buildings of multi_lod with point far levels, in the test site."""
+    return _tileset(site, "multi_lod", "--hlod-kind", "points")
+
+
 def test_cesium_shows_point_far_levels_of_a_small_city(
-    look: Drive, site: Path, measure: Callable[[str, str], None]
+    small: Path, look: Drive, site: Path, measure: Callable[[str, str], None]
 ) -> None:
-    tileset = _tileset(site, "multi_lod", "--hlod-kind", "points")
+    tileset = small
     far = {"name": "far", "range": _far(tileset), "pitch": -35}
     out = look("cameras", page=_page(site, tileset), cameras=[{"name": "overview"}, far])
     message = f"{out['result']}\n{console_text(out)}"
@@ -160,3 +170,16 @@ def test_cesium_shows_point_far_levels_of_a_small_city(
         document, _ = read_glb(tileset.parent / uri)
         assert document["meshes"][0]["primitives"][0]["mode"] == 0, message  # POINTS
     _record(measure, "multi_lod", [overview, seen_far])
+
+
+def test_the_page_names_an_unreachable_cesium(small: Path, driver: Driver, site: Path) -> None:
+    """CesiumJS from a server that does not answer: the page's alert box names its URL and says
+    how to give the page a local copy."""
+    page = write_page(small, small.parent / "offline.html", library="http://127.0.0.1:9/cesium")
+    out = driver("page.mjs")("alert", page=str(page.relative_to(site)))
+    alert = out["result"]
+    message = f"{alert}\n{console_text(out)}"
+    assert alert["shown"] and not alert["ready"], message
+    assert "Could not load the viewer library" in alert["text"], message
+    assert "http://127.0.0.1:9/cesium/Build/Cesium/" in alert["text"], message
+    assert "--viewer-lib DIR" in alert["text"] and "cesium@1.145.0" in alert["text"], message
