@@ -4,7 +4,8 @@ external tilesets where one JSON would grow too large), written from LOD parents
 
 An output path named ``tileset.json`` selects the format; its folder is the output, staged and
 replaced as a whole. A folder that exists must be empty or hold a tileset lodconvert wrote (its
-``asset.generator``) and nothing else, so that a run never deletes files it did not write.
+``asset.generator``) and nothing else but its viewer page, so that a run never deletes files it
+did not write.
 """
 
 from __future__ import annotations
