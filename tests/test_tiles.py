@@ -399,7 +399,7 @@ def test_the_current_folder_is_not_replaced(
     [
         ("model.glb", ("--sse", "8"), ("--sse is for 3D Tiles",)),
         ("out/tileset.json", ("--sse", "0"), ("positive",)),
-        ("out/tileset.json", ("--html",), ("--html", "not tilesets")),
+        ("out/tileset.json", ("--html", "--viewer-lib", "nowhere"), ("nowhere", "not a folder")),
     ],
 )
 def test_tileset_options_are_checked_before_any_work(

@@ -378,3 +378,47 @@ def test_view_serve_serves_a_library_outside_the_page_folder(
         with urllib.request.urlopen(f"{base}/knot.glb") as response:  # the page's folder too
             assert response.read() == asset.read_bytes()
     assert sorted(p.name for p in asset.parent.iterdir()) == ["knot.glb", "knot.glb.html"]
+
+
+def test_html_option_writes_a_cesium_page_inside_a_tileset(tmp_path: Path) -> None:
+    """A tileset's page goes inside its folder (served with it), loads CesiumJS (the CDN by
+    default) and tells it the tileset's --sse and point shading; the folder still checks, and a
+    later run replaces it, page and all."""
+    from .test_tiles import FAST as TILES_FAST
+    from .test_tiles import RD_NAP, inputs
+
+    tileset = tmp_path / "tiles" / "tileset.json"
+    flags = (*RD_NAP, *TILES_FAST, "--hlod-kind", "points", "--sse", "12")
+    result = run(*inputs("multi_lod"), "-o", tileset, *flags, "--html")
+    assert result.returncode == 0, result.stderr
+    page = tileset.parent / "tileset.json.html"
+    text = page.read_text()
+    config = _embedded(text, "lodconvert-config")
+    extras = json.loads(tileset.read_text())["asset"]["extras"]["lodconvert"]
+    assert config["asset"] == "./tileset.json" and config["sse"] == 12.0
+    assert config["pointCloudShading"] == extras["point_cloud_shading"]
+    assert config["pointCloudShading"]["geometricErrorScale"] == pytest.approx(1.5 / 12)
+    assert _import_map(text) == {"cesium": f"{CDN}cesium@1.145.0/Build/Cesium/index.js"}
+    assert sorted(p.name for p in tileset.parent.iterdir()) == ["tiles", "tileset.json", page.name]
+    assert run("validate", tileset).returncode == 0
+    result = run(*inputs("multi_lod"), "-o", tileset, *RD_NAP, *TILES_FAST)
+    assert result.returncode == 0, result.stderr
+    assert sorted(p.name for p in tileset.parent.iterdir()) == ["tiles", "tileset.json"]
+
+
+def test_view_command_writes_a_tilesets_page_and_refuses_other_json(tmp_path: Path) -> None:
+    from .test_tiles import convert
+
+    tileset = convert("multi_lod", tmp_path / "tiles")
+    result = run("view", tileset, "--viewer-lib", "/node_modules/cesium")
+    assert result.returncode == 0, result.stderr
+    page = tileset.parent / "tileset.json.html"
+    assert _import_map(page.read_text()) == {"cesium": "/node_modules/cesium/Build/Cesium/index.js"}
+    config = _embedded(page.read_text(), "lodconvert-config")
+    assert config["library"]["base"] == "/node_modules/cesium/Build/Cesium/"
+    assert config["sse"] == 16.0
+    other = tmp_path / "other" / "tileset.json"
+    other.parent.mkdir()
+    other.write_text('{"asset": {"version": "1.1", "generator": "someone else"}, "root": {}}')
+    assert_one_line_error(run("view", other), 1, str(other), "not a tileset lodconvert wrote")
+    assert list(other.parent.iterdir()) == [other]

@@ -8,6 +8,7 @@ import logging
 import math
 from collections import Counter
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 from ..bake import BACKENDS
@@ -27,7 +28,7 @@ from ..errors import UsageError
 from ..io import output_format
 from ..io.x3d import SWITCHING_MODES
 from ..limits import DEFAULT_LIMITS
-from ..sinks import FileSink, Outputs
+from ..sinks import DirectorySink, FileSink, Outputs
 from . import COMMANDS
 
 DESCRIPTION = (
@@ -144,15 +145,13 @@ def _check_switching(args: argparse.Namespace) -> None:
 
 
 def _check_tiles(args: argparse.Namespace) -> None:
-    """:class:`UsageError` for ``--sse`` with an output other than a tileset, ``--html`` with
-    a tileset, or an ``--sse`` that is not a positive number, before any work."""
+    """:class:`UsageError` for ``--sse`` with an output other than a tileset, or an ``--sse``
+    that is not a positive number, before any work."""
     tiles = output_format(args.output).output_folder is not None
     if args.sse is not None and not tiles:
         raise UsageError(f"--sse is for 3D Tiles; write DIR/tileset.json, not {args.output}")
     if args.sse is not None and not (math.isfinite(args.sse) and args.sse > 0):
         raise UsageError(f"--sse must be a positive number of pixels, got {args.sse:g}")
-    if tiles and args.html:
-        raise UsageError("--html writes a page for .x3d, .glb and .gltf outputs, not tilesets")
 
 
 def _hlod_line(hlod: dict[str, Any]) -> str:
@@ -213,12 +212,20 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
         check_library(args.output, args.viewer_lib)  # before baking, not after
 
-    def stage_page(outputs: Outputs, sink: FileSink, report: dict[str, Any]) -> None:
+    def stage_page(
+        outputs: Outputs, sink: FileSink | DirectorySink, report: dict[str, Any]
+    ) -> None:
         from ..viewer import page_path, render_page
 
         page = page_path(args.output)
-        text = render_page(sink.path, page, args.viewer_lib, source=sink.staged.temp)
-        outputs.file(page).write_bytes(text.encode("utf-8"))
+        if isinstance(sink, DirectorySink):  # a tileset: the page goes inside its folder
+            source = sink.staged.temp / page.with_suffix("").name
+            text = render_page(Path(args.output), page, args.viewer_lib, source=source)
+            with sink.file(page.name) as handle:
+                handle.write(text.encode("utf-8"))
+        else:
+            text = render_page(sink.path, page, args.viewer_lib, source=sink.staged.temp)
+            outputs.file(page).write_bytes(text.encode("utf-8"))
         report["page"] = str(page)
 
     run = RunOptions(

@@ -13,7 +13,9 @@ from ..viewer import library_mounts, serve, write_page
 DESCRIPTION = (
     "Write a self-contained HTML page beside an .x3d, .glb or .gltf written by lodconvert that "
     "shows it switching levels at its cutoffs, with a readout of each object's level and "
-    "distance. The page loads its viewer library (X_ITE for X3D, three.js for glTF) from a CDN "
+    "distance; for a 3D Tiles DIR/tileset.json, a CesiumJS page inside DIR with the tiles "
+    "selected and the tile and building under the pointer. The page loads its viewer library "
+    "(X_ITE for X3D, three.js for glTF, CesiumJS for tilesets) from a CDN "
     "unless --viewer-lib names another URL or a local copy of the npm package: one inside the "
     "page's folder, or anywhere with --serve, which then serves it too."
 )
@@ -21,7 +23,9 @@ DESCRIPTION = (
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``lodconvert view``."""
-    parser.add_argument("asset", metavar="OUT", help="an .x3d, .glb or .gltf lodconvert wrote")
+    parser.add_argument(
+        "asset", metavar="OUT", help="an .x3d, .glb, .gltf or DIR/tileset.json lodconvert wrote"
+    )
     parser.add_argument(
         "-o", "--output", metavar="HTML", help="page to write (default: OUT.html, e.g. a.glb.html)"
     )

@@ -18,6 +18,10 @@ its levels, clicking empty space (or the attributes' close button) clears both;
 ``lodScale``), ``setDistance(d)``, ``setLodScale(s)`` and ``screenPoint([x, y, z])`` (where a
 world point shows on the page).
 
+A 3D Tiles tileset (``DIR/tileset.json``) gets a CesiumJS page inside its folder instead
+(:mod:`.tileset`, ``tiles.js``): the tiles selected, the tile under the pointer, click-to-inspect
+a building's feature.
+
 Browsers do not let a page opened from a file fetch its neighbours, so the page must be served:
 :func:`serve` (``lodconvert view OUT --serve``) serves a folder on 127.0.0.1. A local library
 folder must therefore lie inside the page's folder, or be served beside it under
@@ -45,6 +49,7 @@ from typing import Any, ClassVar
 from ..errors import UsageError
 from ..sinks import Outputs
 from .config import page_config
+from .tileset import tileset_config
 
 
 @dataclass(frozen=True)
@@ -69,10 +74,22 @@ LIBRARIES = {
         (("three", "build/three.module.js"), ("three/addons/", "examples/jsm/")),
     ),
     "x3d": Library("x_ite", "15.0.1", (("x_ite", "dist/x_ite.min.mjs"),)),
+    "tiles": Library("cesium", "1.145.0", (("cesium", "Build/Cesium/index.js"),)),
 }
-SCRIPTS = {"gltf": "gltf.js", "x3d": "x3d.js"}
-"""Format part of the page script, after the common ``viewer.js``."""
-FORMATS = {".glb": "gltf", ".gltf": "gltf", ".x3d": "x3d"}
+SCRIPTS = {
+    "gltf": ("panel.js", "viewer.js", "gltf.js"),
+    "x3d": ("panel.js", "viewer.js", "x3d.js"),
+    "tiles": ("panel.js", "tiles.js"),
+}
+"""The parts of each kind's page script, in order."""
+FORMATS = {".glb": "gltf", ".gltf": "gltf", ".x3d": "x3d", ".json": "tiles"}
+CONTROLS = """\
+  <label>distance <input id="distance" type="range" min="0" max="1000" step="1" value="0"></label>
+  <label title="A factor on every cutoff: the levels switch at this many times their distances">\
+LOD scale
+    <input id="lodscale" type="number" min="0" step="any" value="1"></label>
+"""
+"""The distance slider and LOD scale field of the pages of .x3d and glTF files."""
 
 MIME_TYPES = {
     ".mjs": "text/javascript",
@@ -175,18 +192,26 @@ def render_page(
     """The HTML of the page at ``page`` showing ``asset`` (``served``: see
     :func:`library_base`); the configuration is read from ``source`` (default ``asset``: a
     staged copy while the run has not committed it)."""
-    config = page_config(source or asset)
+    tiles = FORMATS.get(asset.suffix.lower()) == "tiles"
+    config = (tileset_config if tiles else page_config)(source or asset)
     config["asset"] = _url(asset, page.parent)
     kind = config["format"]
     base = library_base(kind, library, page.parent, served)
     imports = {name: f"{base}/{path}" for name, path in LIBRARIES[kind].imports}
     config["library"] = {"package": LIBRARIES[kind].package, "version": LIBRARIES[kind].version}
+    if tiles:
+        config["library"]["base"] = f"{base}/Build/Cesium/"  # CESIUM_BASE_URL
+    what = "tiles" if tiles else "levels"
     fields = {
         "title": html.escape(f"{asset.name} — lodconvert viewer"),
         "asset": html.escape(asset.name),
+        "shows": what,
+        "summary_title": f"Show or hide the {what}"
+        + ("" if tiles else ", the distance slider and the LOD scale"),
+        "controls": "" if tiles else CONTROLS,
         "importmap": _json_in_html({"imports": imports}),
         "config": _json_in_html(config),
-        "script": _template("viewer.js") + "\n" + _template(SCRIPTS[kind]),
+        "script": "\n".join(_template(name) for name in SCRIPTS[kind]),
     }
     return re.sub(r"\{\{(\w+)\}\}", lambda m: fields[m.group(1)], _template("page.html"))
 

@@ -4,7 +4,8 @@ external tilesets where one JSON would grow too large), written from LOD parents
 
 An output path named ``tileset.json`` selects the format; its folder is the output, staged and
 replaced as a whole. A folder that exists must be empty or hold a tileset lodconvert wrote (its
-``asset.generator``) and nothing else, so that a run never deletes files it did not write.
+``asset.generator``) and nothing else but its viewer page, so that a run never deletes files it
+did not write.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from .writer import DEFAULT_SSE, TILES, write_tileset
 NAME = "tileset.json"
 GENERATOR = "lodconvert"
 """What ``asset.generator`` of our tilesets starts with."""
+PAGE = f"{NAME}.html"
+"""The viewer page that ``--html`` and ``lodconvert view`` write inside the folder."""
 
 
 def output_folder(path: Path) -> Path:
@@ -38,7 +41,7 @@ def output_folder(path: Path) -> Path:
         )
     if folder.is_dir():
         entries = sorted(entry.name for entry in folder.iterdir())
-        if entries and (not _ours(folder / NAME) or set(entries) - {NAME, TILES}):
+        if entries and (not _ours(folder / NAME) or set(entries) - {NAME, TILES, PAGE}):
             shown = ", ".join(entries[:3]) + (", …" if len(entries) > 3 else "")
             raise InputError(
                 f"folder {str(folder)!r} holds files that are not a tileset lodconvert wrote "
