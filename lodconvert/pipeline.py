@@ -446,13 +446,15 @@ def _read_stage(
     """The ``read`` stage: the scene of ``inputs`` and the report's ``crs``, the baker and the
     executor, entered on ``stack`` (which reads too, where the reader spreads its work)."""
     spread = {"spread": run.workers > 1 and len(inputs) == 1 and _read_through(run)}
+    baker = get_backend(run.backend)
+    # a cluster is reached first: an unreachable scheduler fails the run before any reading
+    executor = stack.enter_context(_executor(run, baker, None)) if run.scheduler else None
     with clock("read"):
         scene, crs_record = read_inputs(
             inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
         )
     stack.enter_context(_input_kept_out_of_gc())
-    baker = get_backend(run.backend)
-    executor = stack.enter_context(_executor(run, baker, _object_count(scene)))
+    executor = executor or stack.enter_context(_executor(run, baker, _object_count(scene)))
     if scene.spread is not None:  # reading (its rest, or all of it) by the executor
         with clock("read"):
             scene.spread(executor.results, run.progress)

@@ -28,6 +28,7 @@ from lodconvert.pipeline import iter_chains
 from lodconvert.tasks import Executor, SerialExecutor
 
 from .conftest import ROOT, SHARED, shared_data
+from .fuzz import hostile_citygml
 from .test_workers import TUM, _KillsItsWorker, _lodconvert, _messages, _scene, _untimed
 
 distributed = pytest.importorskip("distributed")
@@ -106,6 +107,23 @@ def test_an_unreachable_scheduler_fails_in_seconds_naming_it(tmp_path: Path) -> 
     assert last.startswith(f"lodconvert: error: {address}: cannot reach the dask scheduler")
     assert "Traceback" not in run.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.slow
+def test_an_unreachable_scheduler_fails_before_the_input_is_read(tmp_path: Path) -> None:
+    """The scheduler is reached first: a building of 100,000 parts (a minute's reading) is
+    not read when its cluster cannot be reached."""
+    district = tmp_path / "parts.gml"
+    district.write_bytes(hostile_citygml.many_parts(100_000))
+    address = f"tcp://127.0.0.1:{_closed_port()}"
+    out = tmp_path / "out"
+    out.mkdir()
+    started = time.monotonic()
+    run = _lodconvert(district, "-o", out / "out.glb", "--scheduler", address)
+    assert time.monotonic() - started < 30
+    assert run.returncode == 1, run.stderr
+    assert "cannot reach the dask scheduler" in run.stderr.strip().splitlines()[-1]
+    assert list(out.iterdir()) == []
 
 
 def test_a_scheduler_file_gives_the_address(address: str, tmp_path: Path) -> None:
