@@ -17,6 +17,7 @@ pair of outputs is compared byte for byte (they must be the same).
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import os
 import statistics
@@ -39,13 +40,14 @@ WORKERS = (1, 2)
 
 @dataclass
 class Run:
-    """One conversion: wall and CPU seconds, peak RSS (MiB), the output's bytes and the stage
+    """One conversion: wall and CPU seconds, peak RSS (MiB), the digest of its output and the stage
     timings of its report."""
 
     wall: float
     cpu: float
     peak_mib: float
     output: bytes
+    """SHA-256 of the output (``output_digest``)."""
     timings: dict[str, float]
 
     @property
@@ -54,12 +56,30 @@ class Run:
         return sum(v for k, v in self.timings.items() if k != "execute")
 
 
-def convert_once(source: Path, output: Path, workers: int) -> Run:
-    """Convert ``source`` into ``output`` with ``--workers`` in a child process."""
+def output_digest(output: Path) -> bytes:
+    """SHA-256 of an output file; of a tileset (``DIR/tileset.json``), of every file of DIR,
+    each preceded by its path in DIR."""
+    digest = hashlib.sha256()
+    files = sorted(p for p in output.parent.rglob("*") if p.is_file())
+    for path in files if output.name == "tileset.json" else [output]:
+        digest.update(str(path.relative_to(output.parent)).encode())
+        digest.update(path.read_bytes())
+    return digest.digest()
+
+
+def convert_once(
+    source: Path,
+    output: Path,
+    workers: int,
+    options: tuple[str, ...] = (),
+    report: Path | None = None,
+) -> Run:
+    """Convert ``source`` into ``output`` with ``--workers`` and further CLI ``options`` in a
+    child process; its report is ``report`` (default: ``output`` with the suffix ``.json``)."""
     output.unlink(missing_ok=True)
-    report = output.with_suffix(".json")
+    report = report or output.with_suffix(".json")
     command = [*LODCONVERT, str(source), "-o", str(output), "-qq", "--workers", str(workers)]
-    command += ["--report", str(report)]
+    command += ["--report", str(report), *options]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     started = time.perf_counter()
     child = subprocess.Popen(command, env=env, cwd=ROOT)
@@ -69,7 +89,7 @@ def convert_once(source: Path, output: Path, workers: int) -> Run:
         raise SystemExit(f"{' '.join(command)} failed")
     cpu = usage.ru_utime + usage.ru_stime
     timings = json.loads(report.read_text())["timings"]
-    return Run(wall, cpu, usage.ru_maxrss / 1024, output.read_bytes(), timings)
+    return Run(wall, cpu, usage.ru_maxrss / 1024, output_digest(output), timings)
 
 
 def benchmark(args: argparse.Namespace) -> str:
