@@ -222,20 +222,19 @@ def tileset_positions(tileset_json: Path) -> np.ndarray:
 
 
 def source_vertices(path: Path, count: int = 1000) -> np.ndarray:
-    """``count`` vertices of a CityJSON file spread over its vertex list, in ECEF (float64):
-    RD New + NAP, the heights taken as ellipsoidal (as our tileset states)."""
+    """``count`` vertices of the finest LoD of a CityJSON file's city objects, spread over its
+    vertex list, in ECEF (float64): RD New + NAP, the heights taken as ellipsoidal (as our
+    tileset states)."""
     from pyproj import Transformer
 
     model = json.loads(path.read_bytes())
     scale, translate = (np.asarray(model["transform"][k]) for k in ("scale", "translate"))
-    used = sorted(
-        {
-            v
-            for o in model["CityObjects"].values()
-            for g in o.get("geometry", [])
-            for v in flatten(g["boundaries"])
-        }
-    )
+    finest = [
+        max(o["geometry"], key=lambda g: float(g["lod"]))
+        for o in model["CityObjects"].values()
+        if o.get("geometry")
+    ]
+    used = sorted({v for g in finest for v in flatten(g["boundaries"])})
     vertices = np.asarray(model["vertices"], float)[used] * scale + translate
     chosen = vertices[np.linspace(0, len(vertices) - 1, count).astype(int)]
     lon, lat = Transformer.from_crs("EPSG:28992", "EPSG:4326", always_xy=True).transform(
