@@ -20,6 +20,7 @@ import argparse
 import hashlib
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -74,8 +75,11 @@ def convert_once(
     options: tuple[str, ...] = (),
     report: Path | None = None,
 ) -> Run:
-    """Convert ``source`` into ``output`` with ``--workers`` and further CLI ``options`` in a
-    child process; its report is ``report`` (default: ``output`` with the suffix ``.json``)."""
+    """Convert ``source`` into ``output`` (a tileset: its folder removed first) with
+    ``--workers`` and further CLI ``options`` in a child process; its report is ``report``
+    (default: ``output`` with the suffix ``.json``)."""
+    if output.name == "tileset.json":
+        shutil.rmtree(output.parent, ignore_errors=True)
     output.unlink(missing_ok=True)
     report = report or output.with_suffix(".json")
     command = [*LODCONVERT, str(source), "-o", str(output), "-qq", "--workers", str(workers)]

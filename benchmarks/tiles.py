@@ -20,7 +20,9 @@ camera where ``cesium_metrics`` measures them.
 environment of its own (``--peers-venv``, default ``/tmp/lodconvert-peers``, never the
 project's): cjio's ``export b3dm`` and py3dtiles's ``export -d`` of a folder of WKB
 multipolygons (one per city object, its finest LoD, moved to the extent's centre and turned
-y-up as py3dtiles's PostGIS route does). For ours and each peer: CPU and wall seconds, what the
+y-up as py3dtiles's PostGIS route does), and again with each object's polygons split into
+pieces of at most 255 distinct vertices (py3dtiles indexes a geometry's vertices in uint8 and
+fails on more). For ours and each peer: CPU and wall seconds, what the
 output keeps (city object ids and attribute names found in its bytes; whether features link
 geometry to them), the official validator's errors, and positions: the distance from 1,000
 source vertices (RD New + NAP, heights taken as ellipsoidal, to ECEF with pyproj in float64) to
