@@ -503,7 +503,17 @@ def validator_counts(path: Path) -> str:
         subprocess.run([*command, "--reportFile", str(report)], capture_output=True)
     result = json.loads(report.read_text())
     report.unlink()
-    return f"{result['numErrors']} errors, {result['numWarnings']} warnings"
+    kinds: set[str] = set()
+
+    def collect(issues: list[dict]) -> None:
+        for issue in issues:
+            if issue["severity"] in ("ERROR", "WARNING"):
+                kinds.add(issue["type"])
+            collect(issue.get("causes", []))
+
+    collect(result["issues"])
+    found = f" ({', '.join(sorted(kinds))})" if kinds else ""
+    return f"{result['numErrors']} errors, {result['numWarnings']} warnings{found}"
 
 
 def content_files(output: Path) -> list[Path]:
@@ -598,7 +608,8 @@ def peers_section(delft: Input, args: argparse.Namespace, folder: Path) -> list[
         "viewer places it (tile transforms, RTC_CENTER, glTF node matrices, y-up to z-up); cjio "
         "writes one `.b3dm` and no tileset, so its content is placed as a tile with no transform "
         "would be. Validator: CesiumGS 3d-tiles-validator 0.6.1 on the tileset (cjio: on its "
-        "`.b3dm` alone, `--tileContentFile`).",
+        "`.b3dm` alone, `--tileContentFile`), its finding types (a content's own findings are "
+        "the causes of its CONTENT_VALIDATION_ERROR).",
         "",
     ]
 
