@@ -24,10 +24,12 @@ are compared byte for byte (they must be the same).
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import math
 import os
 import resource
+import shutil
 import statistics
 import subprocess
 import sys
@@ -55,8 +57,8 @@ SAMPLE_SECONDS = 0.05
 
 @dataclass
 class Run:
-    """One conversion: wall and CPU seconds, peak RSS of the tree (MiB), the output's bytes and
-    the stage timings of its report."""
+    """One conversion: wall and CPU seconds, peak RSS of the tree (MiB), the digest of its
+    output (:func:`output_digest`) and the stage timings of its report."""
 
     wall: float
     cpu: float
@@ -143,20 +145,41 @@ def _tree_rss(root: psutil.Process) -> int:
     return total
 
 
+def output_digest(output: Path) -> bytes:
+    """SHA-256 of an output file; of a tileset (``DIR/tileset.json``), of every file of DIR,
+    each preceded by its path in DIR."""
+    digest = hashlib.sha256()
+    files = sorted(p for p in output.parent.rglob("*") if p.is_file())
+    for path in files if output.name == "tileset.json" else [output]:
+        digest.update(str(path.relative_to(output.parent)).encode())
+        digest.update(path.read_bytes())
+    return digest.digest()
+
+
 def convert_once(
-    source: Path, output: Path, setup: str, cluster: Cluster | None, root: Path = ROOT
+    source: Path,
+    output: Path,
+    setup: str,
+    cluster: Cluster | None = None,
+    root: Path = ROOT,
+    options: tuple[str, ...] = (),
+    report: Path | None = None,
 ) -> Run:
-    """Convert ``source`` into ``output`` in a child process by the lodconvert of checkout
-    ``root``: with ``--workers setup``, or on ``cluster`` (``setup`` ``cluster``)."""
+    """Convert ``source`` into ``output`` (a tileset: its folder removed first) in a child
+    process by the lodconvert of checkout ``root``: with ``--workers setup``, or on ``cluster``
+    (``setup`` ``cluster``), and further CLI ``options``; its report is ``report`` (default:
+    ``output`` with the suffix ``.json``)."""
+    if output.name == "tileset.json":
+        shutil.rmtree(output.parent, ignore_errors=True)
     output.unlink(missing_ok=True)
-    report = output.with_suffix(".json")
+    report = report or output.with_suffix(".json")
     if setup == "cluster":
         assert cluster is not None
         where = ["--scheduler", cluster.address]
     else:
         where = ["--workers", setup]
     command = [*LODCONVERT, str(source), "-o", str(output), "-qq", *where]
-    command += ["--report", str(report)]
+    command += ["--report", str(report), *options]
     env = {
         **os.environ,
         "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
@@ -186,7 +209,7 @@ def convert_once(
         cpu += cluster.cpu() - before
         peak_mib += cluster.peak_mib()
     timings = json.loads(report.read_text())["timings"]
-    return Run(wall, cpu, peak_mib, output.read_bytes(), timings)
+    return Run(wall, cpu, peak_mib, output_digest(output), timings)
 
 
 def write_delft_district(factor: int, path: Path) -> Input:

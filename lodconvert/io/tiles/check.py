@@ -229,7 +229,11 @@ def _corners(frame: np.ndarray, box: list[float]) -> np.ndarray:
 
 def read_glb(path: Path) -> tuple[dict, bytes]:
     """A GLB's JSON document and binary chunk (``ValueError`` for a file that is not one)."""
-    data = path.read_bytes()
+    return glb_parts(path.read_bytes())
+
+
+def glb_parts(data: bytes) -> tuple[dict, bytes]:
+    """The JSON document and binary chunk of GLB ``data`` (``ValueError`` if it is not one)."""
     magic, _, total = struct.unpack_from("<4sII", data)
     if magic != b"glTF" or total != len(data):
         raise ValueError("not a GLB")
