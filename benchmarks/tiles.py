@@ -62,10 +62,37 @@ Y_UP_TO_Z_UP = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]
 """glTF's y-up to 3D Tiles' z-up, as every 3D Tiles viewer applies it to tile content."""
 
 
+CAMERAS = {"near": 300.0, "far": 4000.0}
+"""Metres from the tileset's centre of the cameras CesiumJS is measured from (35° down)."""
+TILES_DRIVER = ROOT / "tests" / "browser" / "tiles.mjs"
+
+
 def cesium_metrics(tileset_path: Path) -> dict | None:
-    """CesiumJS tiles selected and bytes requested from a near and a far camera:
-    ``{"near": {"tiles": N, "bytes": B}, "far": {...}}``, or None where not measured."""
-    return None
+    """CesiumJS tiles selected and bytes requested from a near and a far camera
+    (:data:`CAMERAS`): ``{"near": {"tiles": N, "bytes": B}, "far": {...}}``, measured by the
+    browser tests' ``tiles.mjs cameras`` scenario in headless Chromium on lodconvert's tileset
+    page, served from 127.0.0.1 with the npm package ``cesium``; None where node, Chromium or
+    the package is absent."""
+    from lodconvert.viewer import serve, write_page
+
+    node, cesium = shutil.which("node"), ROOT / "node_modules" / "cesium" / "package.json"
+    chromium = Path(os.environ.get("LODCONVERT_CHROMIUM", "/usr/bin/chromium"))
+    if node is None or not cesium.is_file() or not chromium.exists():
+        return None
+    write_page(tileset_path, library="/node_modules/cesium")
+    cameras = [{"name": name, "range": metres, "pitch": -35} for name, metres in CAMERAS.items()]
+    params = {"page": f"{tileset_path.parent.name}/tileset.json.html", "cameras": cameras}
+    mounts = {"/node_modules": ROOT / "node_modules"}
+    with serve(tileset_path.parent.parent, mounts=mounts) as base:
+        command = [node, str(TILES_DRIVER), "cameras", base, json.dumps(params)]
+        done = subprocess.run(command, capture_output=True, text=True, check=False)
+    out = json.loads(done.stdout.strip().splitlines()[-1]) if done.stdout.strip() else {}
+    if not out.get("ok"):
+        raise SystemExit(f"CesiumJS scenario failed: {out.get('error') or done.stderr[-2000:]}")
+    return {
+        seen["name"]: {"tiles": seen["tilesSelected"], "bytes": seen["bytes"]}
+        for seen in out["result"]["cameras"]
+    }
 
 
 # --- a tileset's content ----------------------------------------------------------------------
