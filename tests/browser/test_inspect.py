@@ -50,6 +50,18 @@ def district(site: Path) -> dict[str, Chain]:
     return {s: make_chain(site, SOURCE, f"inspect_tum.{s}") for s in ("x3d", "glb")}
 
 
+def roof_point(corners: np.ndarray) -> tuple[np.ndarray, float]:
+    """Of the upward-facing (z-up) triangles among ``corners`` ((n, 3, 3)), the centre of the
+    largest inscribed circle and its radius (0 where none faces up): a point safe to click."""
+    sides = np.linalg.norm(corners[:, [1, 2, 0]] - corners[:, [2, 0, 1]], axis=2)
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    twice_area = np.linalg.norm(normals, axis=1)
+    upward = normals[:, 2] > 0.5 * twice_area
+    radii = np.where(upward, twice_area / np.maximum(sides.sum(axis=1), 1e-12), 0.0)
+    k = int(np.argmax(radii))
+    return (sides[k] @ corners[k]) / sides[k].sum(), float(radii[k])
+
+
 def _roof(path: Path, object_id: str | None = None) -> tuple[str, list[float]]:
     """An object of ``path`` (``object_id`` where given) and a point on its roof, safe to
     click, in the file's scene coordinates (where the page draws): of all upward-facing
@@ -60,16 +72,9 @@ def _roof(path: Path, object_id: str | None = None) -> tuple[str, list[float]]:
     for chain in read_chains(path):
         if object_id is not None and chain.object_id != object_id:
             continue
-        corners = chain.levels[0].mesh.vertices[chain.levels[0].mesh.faces]
-        sides = np.linalg.norm(corners[:, [1, 2, 0]] - corners[:, [2, 0, 1]], axis=2)
-        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        twice_area = np.linalg.norm(normals, axis=1)
-        upward = normals[:, 2] > 0.5 * twice_area
-        radii = np.where(upward, twice_area / np.maximum(sides.sum(axis=1), 1e-12), 0.0)
-        k = int(np.argmax(radii))
-        if radii[k] > best[0]:
-            centre = (sides[k] @ corners[k]) / sides[k].sum()
-            best = (radii[k], chain.object_id, (chain.origin + centre).tolist())
+        centre, radius = roof_point(chain.levels[0].mesh.vertices[chain.levels[0].mesh.faces])
+        if radius > best[0]:
+            best = (radius, chain.object_id, (chain.origin + centre).tolist())
     frame = own_format(path).read_frame(path)
     point = best[2] if frame is None else (ROTATION @ (best[2] - frame.origin)).tolist()
     return best[1], point

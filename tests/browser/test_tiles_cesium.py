@@ -24,7 +24,7 @@ from lodconvert.viewer import write_page
 from ..conftest import ROOT, require
 from ..test_tiles import convert, features, tiles
 from .conftest import REQUIRE, Drive, Driver, console_text
-from .test_inspect import EXPOSED, _source_attributes
+from .test_inspect import EXPOSED, _source_attributes, roof_point
 
 pytestmark = pytest.mark.browser
 
@@ -86,14 +86,7 @@ def _roof(tileset: Path, gml_id: str) -> tuple[list[float], str]:
         faces = accessor(document, blob, primitive["indices"]).reshape(-1, 3)
         faces = faces[(feature[faces] == ids.index(gml_id)).all(axis=1)]
         local = (ecef - frame[:3, 3]) @ frame[:3, :3]  # east, north, up at the tile
-        corners = local[faces]
-        sides = np.linalg.norm(corners[:, [1, 2, 0]] - corners[:, [2, 0, 1]], axis=2)
-        normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-        twice_area = np.linalg.norm(normals, axis=1)
-        upward = normals[:, 2] > 0.5 * twice_area
-        radii = np.where(upward, twice_area / np.maximum(sides.sum(axis=1), 1e-12), 0.0)
-        k = int(np.argmax(radii))
-        centre = (sides[k] @ corners[k]) / sides[k].sum()
+        centre, _ = roof_point(local[faces])
         return (frame[:3, :3] @ centre + frame[:3, 3]).tolist(), uri
     raise AssertionError(f"no leaf tile of {tileset} holds {gml_id}")
 
