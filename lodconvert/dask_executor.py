@@ -90,6 +90,7 @@ class DaskExecutor(Executor):
         self.window = window
         self.address = scheduler
         self._client: Client | None = None
+        self._backend: Backend | None = None
 
     def __enter__(self) -> Self:
         """Connect to the scheduler and wait for a worker (:class:`LodConvertError` naming the
@@ -119,22 +120,36 @@ class DaskExecutor(Executor):
         assert client is not None and self.window is not None, "use DaskExecutor as a context"
         run = uuid.uuid4().hex
         pending = iter(tasks)
-        flight: deque[tuple[BakeTask, Future]] = deque()
+        flight: deque[tuple[BakeTask, Future | None]] = deque()
         number = 0
         try:
             while True:
                 while len(flight) < self.window and (task := next(pending, None)) is not None:
                     key = f"lodconvert-{type(task).__name__.lower()}-{run}-{number}"
-                    payload = pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL)
-                    flight.append((task, client.submit(_run, payload, self.backend_name, key=key)))
+                    flight.append((task, self._submitted(client, task, key)))
                     number += 1
                 if not flight:
                     return
                 task, future = flight.popleft()
-                yield self._result(task, future)
+                yield self._result(task, future) if future is not None else self._run_here(task)
         finally:
             if flight:
-                client.cancel([future for _, future in flight])
+                client.cancel([future for _, future in flight if future is not None])
+
+    def _submitted(self, client: Client, task: BakeTask, key: str) -> Future | None:
+        """``task`` pickled and submitted under ``key``; ``None`` for a task that cannot be
+        pickled (its data nested too deep), which is run here when its turn comes."""
+        try:
+            payload = pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL)
+        except (RecursionError, pickle.PicklingError):
+            return None
+        return client.submit(_run, payload, self.backend_name, key=key)
+
+    def _run_here(self, task: BakeTask) -> BakeResult:
+        """Run ``task`` in this process (with a backend of the cluster's kind, made once)."""
+        if self._backend is None:
+            self._backend = get_backend(self.backend_name)
+        return task.run(self._backend)
 
     def _result(self, task: BakeTask, future: Future) -> BakeResult:
         """The result of ``task`` from ``future``: waited for while the cluster has workers,

@@ -17,9 +17,9 @@ once every result of one stream of tasks is taken, for the next (reading, then b
 
 from __future__ import annotations
 
-import contextlib
 import multiprocessing
 import os
+import pickle
 import queue
 import signal
 import threading
@@ -173,14 +173,15 @@ def _receive(conn: Connection, inbox: queue.SimpleQueue[BakeTask | None]) -> Non
 
 def _send(conn: Connection, outbox: queue.SimpleQueue[tuple[str, Any] | None]) -> None:
     """Send what arrives in ``outbox`` through ``conn`` until ``None`` (or the main process is
-    gone); a result that cannot be pickled is sent as the error it raised."""
+    gone); a result that cannot be pickled (nested too deep, say) is sent as ``unsendable``:
+    the main process runs its task itself."""
     while (message := outbox.get()) is not None:
         try:
             conn.send(message)
         except OSError:
             return
         except Exception as exc:
-            conn.send(("error", RuntimeError(f"a worker's {message[0]} cannot be sent: {exc}")))
+            conn.send(("unsendable", f"{type(exc).__name__}: {exc}"))
 
 
 @dataclass
@@ -210,6 +211,7 @@ class PoolExecutor(Executor):
         self.window = window or (DEPTH + 1) * workers
         self._context = multiprocessing.get_context("spawn")
         self._workers: list[_Worker] = []
+        self._backend: Backend | None = None
 
     def __enter__(self) -> Self:
         """Start the workers now, so that they are ready (imports done, backends made) when the
@@ -255,26 +257,43 @@ class PoolExecutor(Executor):
                     continue
                 if exhausted and taken == next_number:
                     return
-                self._dispatch(workers, waiting, submitted)
+                self._dispatch(workers, waiting, submitted, done)
                 self._collect(workers, waiting, submitted, tries, done)
         except BaseException:  # an error, or the results left unread: stop the workers
             self.close()
             raise
 
     def _dispatch(
-        self, workers: list[_Worker], waiting: deque[int], submitted: dict[int, BakeTask]
+        self,
+        workers: list[_Worker],
+        waiting: deque[int],
+        submitted: dict[int, BakeTask],
+        done: dict[int, BakeResult],
     ) -> None:
         """Give waiting tasks to the workers holding fewest (up to :data:`DEPTH` each, so
-        that each has the next at hand), starting workers up to the pool's size."""
+        that each has the next at hand), starting workers up to the pool's size; a task that
+        cannot be pickled (its data nested too deep) is run here."""
         while waiting:
             if len(workers) < self.workers:
                 workers.append(self._start())
             worker = min(workers, key=lambda w: len(w.held))
             if len(worker.held) >= DEPTH:
                 return
-            worker.held.append(waiting.popleft())
-            with contextlib.suppress(BrokenPipeError, ConnectionResetError):  # it died: see
-                worker.conn.send(submitted[worker.held[-1]])  # _collect, which waits on it
+            number = waiting.popleft()
+            try:
+                worker.conn.send(submitted[number])
+            except (BrokenPipeError, ConnectionResetError):  # it died: see _collect, which
+                worker.held.append(number)  # waits on it
+            except (RecursionError, pickle.PicklingError):
+                done[number] = self._run_here(submitted[number])
+            else:
+                worker.held.append(number)
+
+    def _run_here(self, task: BakeTask) -> BakeResult:
+        """Run ``task`` in this process (with a backend of the pool's kind, made once)."""
+        if self._backend is None:
+            self._backend = get_backend(self.backend_name)
+        return task.run(self._backend, self.progress)
 
     def _collect(
         self,
@@ -288,6 +307,8 @@ class PoolExecutor(Executor):
         first task is charged a try (run again, or after two failed with each object), the
         others it held wait again."""
         busy = [w for w in workers if w.held]
+        if not busy:  # every task given out was run here
+            return
         ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy])
         for worker in busy:
             dead = worker.process.sentinel in ready
@@ -300,6 +321,9 @@ class PoolExecutor(Executor):
                     self.progress(value)
                 elif kind == "result":
                     done[worker.held.popleft()] = value
+                elif kind == "unsendable":  # its result cannot be pickled: run it here
+                    number = worker.held.popleft()
+                    done[number] = self._run_here(submitted[number])
                 elif kind == "error":
                     raise value
                 if kind != "died":
