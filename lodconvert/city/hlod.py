@@ -395,7 +395,7 @@ def _blocks_level(
             tried.append((mesh.vertex_count, px, band, mesh.translated(-origin)))
     if not tried:
         return None
-    best: tuple[float, Level, float, float | None] | None = None
+    best: tuple[float, Level, float, float] | None = None
     for _, px, band, mesh in sorted(tried, key=lambda t: t[:3]):
         level = Level(name="FAR", kind="merged", mesh=mesh)
         f = _silhouette_f(source, level, distance, options)
