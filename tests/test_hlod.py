@@ -320,7 +320,7 @@ def test_simplification_keeps_each_face_s_colour_without_bleeding() -> None:
     assert (corners[up & right, 0] == red).all() and (corners[~(up & right), 0] == white).all()
 
 
-@pytest.mark.parametrize("kind", ["points", "mesh"])
+@pytest.mark.parametrize("kind", ["points", "mesh", "blocks"])
 def test_a_district_of_one_building_is_a_cell_of_one(kind: str) -> None:
     house = block(10, 8, 6)
     scene = Scene("one", [Node("house", house, "Building", lods={"lod2": house})])
@@ -330,6 +330,19 @@ def test_a_district_of_one_building_is_a_cell_of_one(kind: str) -> None:
     assert_seamless(cell)
     if kind == "mesh":  # one draw call: the merge is a single part
         assert cell.far.mesh is not None and len(cell.far.mesh.parts) == 1
+
+
+def test_blocks_of_a_district_without_footprints_fall_back_to_a_mesh_and_say_so() -> None:
+    """Ground covers (their type as the readers give it) have no block proxy, so a forced
+    ``blocks`` cell keeps the merged mesh, and its report says why."""
+    square = block(40, 40, 0.2)
+    plaza = Node("plaza", square, "LandUse", {"type": "LandUse"}, lods={"lod1": square})
+    scene = Scene("plaza", [plaza])
+    (cell,) = iter_chains(
+        scene, ChainOptions(), get_backend("numpy"), hlod=HlodOptions(None, "blocks")
+    )
+    assert cell.facts["kind"] == "mesh" and cell.facts["why"] == "no blocks level could be made"
+    assert "blocks" not in cell.facts["counts"] and cell.far.count > 0
 
 
 def test_cell_sizes_plan_and_auto() -> None:
