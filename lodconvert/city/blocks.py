@@ -63,14 +63,15 @@ def object_footprint(chain: LodChain, finest: Mesh) -> Footprint | None:
     """The footprint of ``chain``'s object, whose finest level is ``finest`` in scene
     coordinates (kept with its finest level for the next call); ``None`` for a ground cover or
     an object with no footprint with area and height."""
-    level = next(lv.mesh for lv in chain.levels if lv.mesh is not None)
-    key = f"block-footprint-{np.asarray(chain.origin, dtype=np.float64).tobytes().hex()}"
     if chain.transform is not None:  # an instance: its own placement
         return _footprint(chain, finest)
+    level = next(lv.mesh for lv in chain.levels if lv.mesh is not None)
+    key = f"block-footprint-{np.asarray(chain.origin, dtype=np.float64).tobytes().hex()}"
     return level.derived(key, lambda: _footprint(chain, finest))
 
 
 def _footprint(chain: LodChain, finest: Mesh) -> Footprint | None:
+    """:func:`object_footprint`, found anew."""
     if chain.metadata.get("type") in GROUND_COVERS:
         return None
     base, top = standing_height(finest, chain.metadata, percentile=ROOF_PERCENTILE)
