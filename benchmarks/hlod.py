@@ -1,4 +1,5 @@
-"""LOD parents side by side: far levels of points against simplified merged meshes (and ``auto``).
+"""LOD parents side by side: far levels of points, simplified merged meshes and block proxies
+(and ``auto``).
 
 Bakes TUM Munich (and ``--factors`` larger districts of shifted copies, made as
 ``benchmarks/city.py`` makes them) with ``--hlod`` cells of each size set in ``--sizes``, once
@@ -38,7 +39,7 @@ from tables import markdown_table, one_core_facts, write_results  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results" / "hlod.md"
-KINDS = ("points", "mesh", "auto")
+KINDS = ("points", "mesh", "blocks", "auto")
 
 
 def tier_rows(sizes: str, kind: str, cells: list) -> list[list[str]]:
@@ -109,7 +110,7 @@ def measure(path: Path, sizes: str, kind: str) -> tuple[list[str], list[list[str
         cells += item.cells() if is_cell else []
     seconds = time.process_time() - start
     chosen = [cell.facts["silhouette_f"][cell.facts["kind"]] for cell in cells]
-    kinds = {k: sum(1 for cell in cells if cell.facts["kind"] == k) for k in ("points", "mesh")}
+    kinds = {k: sum(1 for cell in cells if cell.facts["kind"] == k) for k in KINDS[:-1]}
     row = [
         sizes,
         kind,
@@ -169,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
             )
     text = "\n".join(
         [
-            "# LOD parents: far levels of points against simplified merged meshes",
+            "# LOD parents: far levels of points, simplified merged meshes and block proxies",
             "",
             *one_core_facts(
                 f"python benchmarks/hlod.py {' '.join(argv or sys.argv[1:])}".rstrip(),
@@ -185,8 +186,10 @@ def main(argv: list[str] | None = None) -> int:
             "content: each member's coarsest (a finer cell's far level, a building's coarsest "
             "level: what a REPLACE parent is loaded instead of) and the buildings' finest levels. "
             "Merged vertices: the merged far meshes before simplification (to within 4, 2 or 1 "
-            "px at the switch distance, the coarsest that keeps F ≥ 0.95). Bytes: geometry as the "
-            "glTF writer lays it out (`lodconvert.plan.level_bytes`: float32 positions and "
+            "px at the switch distance, the coarsest that keeps F ≥ 0.95). Blocks: the members' "
+            "footprints unioned into blocks, extruded in height bands (the lightest of 4, 2 or 1 "
+            "px outlines and one band, 6, 3 or 1 m bands that keeps F ≥ 0.95). Bytes: geometry "
+            "as the glTF writer lays it out (`lodconvert.plan.level_bytes`: float32 positions and "
             "normals, none on merged far meshes; uint16 colours and indices). Numpy baker, no "
             "GPU; a 2-core shared AMD EPYC.",
             "",

@@ -5,6 +5,7 @@ call per cell instead of one per building."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import jsonschema
@@ -16,12 +17,14 @@ from lxml import etree
 from lodconvert.bake import get_backend
 from lodconvert.bake.qem import simplify_within
 from lodconvert.chain import ChainOptions
+from lodconvert.city.blocks import block_proxy, blocks_of, object_footprint
 from lodconvert.city.hlod import (
     AUTO_SIZES,
     CELL_EXPONENT,
     MIN_CELL_F,
     SIMPLIFY_PX,
     HlodOptions,
+    _blocks_level,
     _finest_mesh,
     _merged,
     _merged_level,
@@ -34,8 +37,9 @@ from lodconvert.city.hlod import (
 from lodconvert.errors import UsageError
 from lodconvert.io import read_chains, read_scene
 from lodconvert.io.gltf.rules import COMPONENT_SIZES, WIDTHS
-from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene, Surface
+from lodconvert.model import CellChain, Level, LodChain, Mesh, Node, Scene, Surface
 from lodconvert.pipeline import iter_chains
+from lodconvert.plan import POINT_COST, level_bytes, mesh_silhouette_estimate
 from lodconvert.ranges import cutoff
 from tests.conftest import ROOT
 from tests.test_citygml import sample
@@ -79,11 +83,20 @@ def _cells(items: list[Item]) -> list[CellChain]:
     return [cell for item in items if isinstance(item, CellChain) for cell in item.cells()]
 
 
+def _tum(kind: str) -> list[Item]:
+    scene = read_scene(sample(TUM))
+    hlod = HlodOptions((250.0, 1000.0), kind)
+    return list(iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod))
+
+
 @pytest.fixture(scope="module")
 def tum_items() -> list[Item]:
-    scene = read_scene(sample(TUM))
-    hlod = HlodOptions((250.0, 1000.0), "auto")
-    return list(iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod))
+    return _tum("auto")
+
+
+@pytest.fixture(scope="module")
+def tum_mesh_items() -> list[Item]:
+    return _tum("mesh")
 
 
 def test_every_building_comes_once_and_cells_nest(tum_items: list[Item]) -> None:
@@ -134,7 +147,10 @@ def test_auto_keeps_the_cheaper_faithful_far_level(tum_items: list[Item]) -> Non
         assert cell.far.kind == ("pcd" if chosen == "points" else "merged")
         faithful = [kind for kind, value in f.items() if value >= MIN_CELL_F]
         if faithful:
-            assert chosen in faithful
+            cost = {
+                k: n * (POINT_COST if k == "points" else 1) for k, n in cell.facts["counts"].items()
+            }
+            assert chosen in faithful and cost[chosen] == min(cost[k] for k in faithful)
         else:
             assert f[chosen] == max(f.values())
 
@@ -142,8 +158,6 @@ def test_auto_keeps_the_cheaper_faithful_far_level(tum_items: list[Item]) -> Non
 def test_a_merged_far_mesh_takes_finer_levels_until_it_is_faithful(tum_items: list[Item]) -> None:
     """Where the buildings' merged coarsest levels miss F 0.95 against them (slabs a tenth of
     their height here), the cell's far mesh merges their next finer levels, and reaches it."""
-    from lodconvert.model import Level
-
     for cell in _cells(tum_items):
         assert cell.facts["silhouette_f"]["mesh"] >= MIN_CELL_F
     chains = []
@@ -163,13 +177,13 @@ def _merged_vertices(cell: CellChain) -> int:
 
 
 def test_far_meshes_are_simplified_below_the_merge_and_stay_faithful(
-    tum_items: list[Item],
+    tum_mesh_items: list[Item],
 ) -> None:
     """TUM Munich's 250 m blocks: the far meshes keep under 60 % of the merged buildings'
     vertices (about a third of their finest levels') at silhouette F ≥ 0.95, each within a few
     pixels where it switches in."""
-    tier1 = [cell for cell in _cells(tum_items) if cell.tier == 1]
-    for cell in _cells(tum_items):
+    tier1 = [cell for cell in _cells(tum_mesh_items) if cell.tier == 1]
+    for cell in _cells(tum_mesh_items):
         simplified = cell.facts["simplified"]
         assert simplified["kept"] and cell.facts["kind"] == "mesh"
         assert cell.far.count == simplified["vertices_after"] < simplified["vertices_before"]
@@ -207,6 +221,76 @@ def test_a_simplified_far_mesh_is_the_same_every_time(tum_items: list[Item]) -> 
         assert getattr(first, name).tobytes() == getattr(again, name).tobytes(), name
 
 
+def _children(cell: CellChain) -> list[Level]:
+    """What a cell's far level is loaded instead of: each member's coarsest content."""
+    return [m.far if isinstance(m, CellChain) else m.levels[-1] for m in cell.members]
+
+
+def test_block_proxies_make_each_tier_a_third_of_what_it_replaces(tum_items: list[Item]) -> None:
+    """Parents that pay, on TUM Munich in 250 m and 1000 m cells: per tier, the far levels
+    ``auto`` keeps (block proxies where they are the lightest at F ≥ 0.95) hold at most a third
+    of the vertices and bytes of what they replace (measured: 0.30 and 0.29 of the vertices),
+    every cell at F ≥ 0.95; each block proxy kept is one coloured part under a third of its
+    members' vertices."""
+    cells = _cells(tum_items)
+    kept = [cell for cell in cells if cell.facts["kind"] == "blocks"]
+    assert len(kept) >= 4 and {cell.tier for cell in kept} == {1, 2}
+    for cell in kept:
+        assert cell.far.count <= sum(level.count for level in _children(cell)) / 3
+        assert cell.facts["silhouette_f"]["blocks"] >= MIN_CELL_F
+        (part,) = cell.far.mesh.parts
+        assert part.vertex_colors is not None and len(np.unique(part.vertex_colors, axis=0)) > 1
+    for tier in (1, 2):
+        found = [cell for cell in cells if cell.tier == tier]
+        children = [level for cell in found for level in _children(cell)]
+        assert sum(c.far.count for c in found) <= sum(lv.count for lv in children) / 3
+        assert sum(level_bytes(c.far) for c in found) <= sum(map(level_bytes, children)) / 3
+    assert min(cell.facts["silhouette_f"][cell.facts["kind"]] for cell in cells) >= MIN_CELL_F
+
+
+def _houses(tops: list[float], x: float = 0.0) -> list[LodChain]:
+    """A row of 10 m houses side by side from ``x``, of heights ``tops``."""
+    chains = []
+    for i, top in enumerate(tops):
+        house = block(10, 10, top, x + 10.0 * i)
+        chains.append(LodChain(f"h{x:g}_{i}", [Level("LOD2", "source", mesh=house)], [],
+                               np.zeros(3), np.zeros(3), 15.0, 3.0, 10.0, []))  # fmt: skip
+    return chains
+
+
+def test_a_tower_keeps_its_height_in_a_band_of_its_own_and_streets_part_blocks() -> None:
+    """Nine 10 m houses and a 40 m tower in a row, and two houses across a 20 m street: two
+    blocks. In one band per block the tower sinks to its block's height (the 90th percentile);
+    in 6 m bands it stands 40 m high out of its 10 m block, and the proxy looks more like
+    the houses."""
+    chains = _houses([10.0] * 4 + [40.0] + [10.0] * 5) + _houses([10.0, 10.0], 120.0)
+    prints = [object_footprint(chain, _finest_mesh(chain)) for chain in chains]
+    found = blocks_of(prints, 0.5)
+    assert sorted(len(members) for members in found.members) == [2, 10]
+    one, banded = (block_proxy(found, 0.5, band) for band in (math.inf, 6.0))
+    assert set(np.unique(one.vertices[:, 2])) == {0.0, 10.0}
+    assert set(np.unique(banded.vertices[:, 2])) == {0.0, 10.0, 40.0}
+    source = _merged([_finest_mesh(chain) for chain in chains])
+    f = [mesh_silhouette_estimate(source, mesh, 100.0).f for mesh in (one, banded)]
+    assert f[1] > 0.99 > f[0]
+    # blocks take fewer vertices than the houses' own boxes
+    assert banded.vertex_count < sum(chain.levels[0].count for chain in chains) / 2
+
+
+def test_block_proxies_are_the_same_every_time(tum_items: list[Item]) -> None:
+    cell = next(c for c in _cells(tum_items) if c.facts["kind"] == "blocks")
+    objects = cell.objects()
+    source = _merged([_finest_mesh(chain) for chain in objects]).translated(-cell.origin)
+    for _ in range(2):
+        level, f, facts = _blocks_level(
+            objects, cell.origin, source, cell.cutoffs[0], ChainOptions()
+        )
+        for name in ("vertices", "faces", "vertex_colors"):
+            made, kept = (getattr(lv.mesh.single, name) for lv in (level, cell.far))
+            assert made.tobytes() == kept.tobytes(), name
+        assert round(f, 4) == cell.facts["silhouette_f"]["blocks"] and facts == cell.facts["blocks"]
+
+
 def test_simplification_keeps_each_face_s_colour_without_bleeding() -> None:
     """Two finely tessellated boxes, one red-roofed, become two boxes of eight corners, each
     face in its source's colour: a red roof's corners are four vertices of their own, so that
@@ -236,7 +320,7 @@ def test_simplification_keeps_each_face_s_colour_without_bleeding() -> None:
     assert (corners[up & right, 0] == red).all() and (corners[~(up & right), 0] == white).all()
 
 
-@pytest.mark.parametrize("kind", ["points", "mesh"])
+@pytest.mark.parametrize("kind", ["points", "mesh", "blocks"])
 def test_a_district_of_one_building_is_a_cell_of_one(kind: str) -> None:
     house = block(10, 8, 6)
     scene = Scene("one", [Node("house", house, "Building", lods={"lod2": house})])
@@ -246,6 +330,19 @@ def test_a_district_of_one_building_is_a_cell_of_one(kind: str) -> None:
     assert_seamless(cell)
     if kind == "mesh":  # one draw call: the merge is a single part
         assert cell.far.mesh is not None and len(cell.far.mesh.parts) == 1
+
+
+def test_blocks_of_a_district_without_footprints_fall_back_to_a_mesh_and_say_so() -> None:
+    """Ground covers (their type as the readers give it) have no block proxy, so a forced
+    ``blocks`` cell keeps the merged mesh, and its report says why."""
+    square = block(40, 40, 0.2)
+    plaza = Node("plaza", square, "LandUse", {"type": "LandUse"}, lods={"lod1": square})
+    scene = Scene("plaza", [plaza])
+    (cell,) = iter_chains(
+        scene, ChainOptions(), get_backend("numpy"), hlod=HlodOptions(None, "blocks")
+    )
+    assert cell.facts["kind"] == "mesh" and cell.facts["why"] == "no blocks level could be made"
+    assert "blocks" not in cell.facts["counts"] and cell.far.count > 0
 
 
 def test_cell_sizes_plan_and_auto() -> None:

@@ -456,6 +456,34 @@ def test_point_far_levels_are_points_tiles_sized_for_cesium(tmp_path: Path) -> N
     assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]
 
 
+@pytest.mark.slow
+def test_block_far_levels_pass_the_official_validator_and_are_byte_identical(
+    tmp_path: Path,
+) -> None:
+    """TUM Munich with ``--hlod-kind blocks``: every cell's far tile is its block proxy (one
+    coloured triangle primitive, as light as the report says), the official validator finds
+    no error or warning and ours none, and a second run writes the same bytes."""
+    report_path = tmp_path / "report.json"
+    tileset = convert("tum", tmp_path / "one", "--hlod-kind", "blocks", "--report", report_path)
+    cells = {cell["id"]: cell for cell in json.loads(report_path.read_text())["hlod"]["cells"]}
+    assert {cell["kind"] for cell in cells.values()} == {"blocks"}
+    found = [t for t, _, _ in tiles(json.loads(tileset.read_text())["root"], np.eye(4), tileset)
+             if "cell" in t.get("extras", {})]  # fmt: skip
+    assert {t["extras"]["cell"] for t in found} == set(cells)
+    for tile in found:
+        document, _ = read_glb(tileset.parent / tile["content"]["uri"])
+        (primitive,) = document["meshes"][0]["primitives"]
+        assert primitive.get("mode", 4) == 4 and "COLOR_0" in primitive["attributes"]
+        positions = document["accessors"][primitive["attributes"]["POSITION"]]
+        assert positions["count"] == cells[tile["extras"]["cell"]]["counts"]["blocks"]
+    report = official(tileset, tmp_path / "validator.json")
+    assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]
+    assert validate_file(tileset) == []
+    again = convert("tum", tmp_path / "again", "--hlod-kind", "blocks")
+    for path in sorted(p for p in tileset.parent.rglob("*") if p.is_file()):
+        assert path.read_bytes() == (again.parent / path.relative_to(tileset.parent)).read_bytes()
+
+
 def test_a_city_of_broken_buildings_only_writes_no_tileset(tmp_path: Path) -> None:
     broken = {"type": "MultiSurface", "lod": "2", "boundaries": [[[0, 1, 2]]]}
     document = city(

@@ -37,10 +37,14 @@ collapse (:func:`~.bake.qem.simplify_within`) to within a tolerance of a few pix
 ``Y_cell`` in the reference view (:data:`SIMPLIFY_PX`; a pixel is ``Y_cell / focal_px``
 metres there): the coarsest whose F still reaches :data:`MIN_CELL_F` (or is no lower than the
 merge's), else the merge stays as it is.
-``auto`` bakes both and keeps the cheaper (points at :data:`~.plan.POINT_COST`; then the
-fewer bytes) of those whose silhouette F against the members' finest geometry at ``Y_cell``
-(:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when neither is, the one
-with the higher F.
+``blocks``: block proxies (:mod:`.blocks`), the objects' footprints unioned into blocks and
+extruded in height bands; of the outline tolerances of :data:`BLOCK_PX` pixels at ``Y_cell``
+and the band depths of :data:`BAND_M`, the proxy with the fewest vertices whose F reaches
+:data:`MIN_CELL_F`, else the most faithful.
+``auto`` makes all three and keeps the cheapest (points at :data:`~.plan.POINT_COST`; then
+the fewer bytes) of those whose silhouette F against the members' finest geometry at
+``Y_cell`` (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when none is,
+the one with the highest F.
 """
 
 from __future__ import annotations
@@ -60,8 +64,9 @@ from ..limits import DEFAULT_LIMITS, Limits
 from ..model import WHITE, CellChain, Level, LodChain, Mesh, Surface
 from ..plan import level_bytes, level_cost, mesh_silhouette_estimate, silhouette_estimate
 from ..ranges import cutoff, diagonal
+from .blocks import block_proxy, blocks_of, object_footprint
 
-KINDS = ("auto", "points", "mesh")
+KINDS = ("auto", "points", "mesh", "blocks")
 AUTO_OBJECTS = 64
 """Objects an ``auto`` cell holds on average."""
 AUTO_SIZES = (25.0, 50.0, 100.0, 250.0, 500.0, 1000.0, 2000.0, 5000.0)
@@ -80,6 +85,13 @@ DOWN = -0.99
 FLOOR_MARGIN = 0.01
 """Metres above an object's lowest point within which a face looking down is its floor on the
 ground, left out of far meshes."""
+BLOCK_PX = (4.0, 2.0, 1.0)
+"""Tolerances tried for block proxies' outlines, in pixels at the cell's switch distance."""
+BAND_M = (math.inf, 6.0, 3.0, 1.0)
+"""Height band depths tried for block proxies, metres (infinite: one band per block)."""
+BLOCK_CLOSING_PX = 1.0
+"""Gaps between footprints narrower than this many pixels at the switch distance are closed
+into one block."""
 SIMPLIFY_PX = (4.0, 2.0, 1.0)
 """Tolerances tried for a far mesh's simplification, coarsest first: pixels at the cell's
 switch distance in the reference view (one pixel at d is 2·d·tan(fov/2)/height_px metres:
@@ -213,6 +225,12 @@ def bake_cell(
         level = point_level_at(source, "FAR", switch, options, backend, plan.cell_id, warn, limits)
         if level is not None:
             candidates["points"] = (level, _silhouette_f(source, level, switch, options))
+    blocks = None
+    if kind in ("blocks", "auto"):
+        found = _blocks_level(objects, origin, source, switch, options)
+        if found is not None:
+            level, f, blocks = found
+            candidates["blocks"] = (level, f)
     finer, simplified = 0, None
     if kind in ("mesh", "auto") or not candidates:
         merged, f, finer = _merged_level(objects, origin, source, switch, options)
@@ -230,6 +248,7 @@ def bake_cell(
         "bytes": {name: level_bytes(level) for name, (level, _) in candidates.items()},
         "mesh_levels_finer": finer,
         **({"simplified": simplified} if simplified is not None else {}),
+        **({"blocks": blocks} if blocks is not None else {}),
         "members": len(members),
         "objects": len(objects),
         "seam": seam,
@@ -259,7 +278,7 @@ def _choice(candidates: dict[str, tuple[Level, float]], kind: str) -> tuple[str,
     """The far level kind to keep and why."""
     if kind != "auto" or len(candidates) == 1:
         name = kind if kind in candidates else next(iter(candidates))
-        return name, "asked" if name == kind else "no point level could be baked"
+        return name, "asked" if name == kind else f"no {kind} level could be made"
     faithful = [name for name, (_, f) in candidates.items() if f >= MIN_CELL_F]
     if faithful:
         name = min(
@@ -350,6 +369,50 @@ def _simplified(
         "kept": kept,
     }
     return (level, after, facts) if kept else (merged, f, facts)
+
+
+def _blocks_level(
+    objects: list[LodChain],
+    origin: np.ndarray,
+    source: Mesh,
+    distance: float,
+    options: ChainOptions,
+) -> tuple[Level, float, dict[str, float | int | None]] | None:
+    """The objects as block proxies (:mod:`.blocks`) seen from ``distance``: of every
+    tolerance of :data:`BLOCK_PX` and band depth of :data:`BAND_M`, the proxy with the fewest
+    vertices whose silhouette F against ``source`` (the objects' finest geometry about
+    ``origin``) reaches :data:`MIN_CELL_F` (tried fewest first), else the most faithful; its
+    level, F and facts. ``None`` when no object has a footprint."""
+    pixel = distance / options.view.focal_px
+    prints = [p for chain in objects if (p := object_footprint(chain, _finest_mesh(chain)))]
+    if not prints:
+        return None
+    found = blocks_of(prints, BLOCK_CLOSING_PX * pixel)
+    tried = []
+    for px, band in itertools.product(BLOCK_PX, BAND_M):
+        mesh = block_proxy(found, px * pixel, band)
+        if mesh is not None:
+            tried.append((mesh.vertex_count, px, band, mesh.translated(-origin)))
+    if not tried:
+        return None
+    best: tuple[float, Level, float, float] | None = None
+    for _, px, band, mesh in sorted(tried, key=lambda t: t[:3]):
+        level = Level(name="FAR", kind="merged", mesh=mesh)
+        f = _silhouette_f(source, level, distance, options)
+        if best is None or f > best[0]:
+            best = (f, level, px, band)
+        if f >= MIN_CELL_F:
+            break
+    assert best is not None
+    f, level, px, band = best
+    facts = {
+        "blocks": len(found.polygons),
+        "objects": len(prints),
+        "tolerance_px": px,
+        "band_m": band if math.isfinite(band) else None,
+        "tried": len(tried),
+    }
+    return level, f, facts
 
 
 def _floorless(mesh: Mesh) -> Mesh:

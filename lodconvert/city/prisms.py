@@ -162,13 +162,13 @@ def _traced(
 ) -> list[FootprintPart]:
     """The footprint of triangles ``corners`` (indices into ``points``) that :func:`_merged`
     traced into ``rings`` and ``polygon``; simplified as a union of triangles is
-    (:func:`_polygons`) where corners of its outline lie within :data:`SEAM_TOLERANCE` of a
+    (:func:`polygons`) where corners of its outline lie within :data:`SEAM_TOLERANCE` of a
     straight line."""
     import shapely
 
     simple = shapely.simplify(polygon, SEAM_TOLERANCE * extent)
     if shapely.get_num_coordinates(simple) < shapely.get_num_coordinates(polygon):
-        return _polygons(simple)
+        return polygons(simple)
     return [FootprintPart(points, corners, rings)]
 
 
@@ -220,10 +220,10 @@ def _outline(union: Any, extent: float) -> list[FootprintPart]:
     import shapely
 
     valid = union if union.is_valid else shapely.make_valid(union).buffer(0)
-    return _polygons(shapely.simplify(valid, SEAM_TOLERANCE * extent))
+    return polygons(shapely.simplify(valid, SEAM_TOLERANCE * extent))
 
 
-def _polygons(outline: Any) -> list[FootprintPart]:
+def polygons(outline: Any) -> list[FootprintPart]:
     """The polygons with area of shapely geometry ``outline``, ear-clipped into triangles."""
     import mapbox_earcut
     import shapely
@@ -291,12 +291,23 @@ def prism_height(
     percentile of the roof heights where the object has a solid LoD (1 or finer) with a roof;
     else the base plus ``measuredHeight`` when that is a plausible number (positive, at most
     twice the geometry's own height), else the highest point."""
+    return standing_height(finest, attributes, bool(source_levels(lods).keys() - {0}))
+
+
+def standing_height(
+    finest: Mesh,
+    attributes: dict[str, object],
+    solid: bool = True,
+    percentile: float = ROOF_PERCENTILE,
+) -> tuple[float, float]:
+    """Base and top height of a prism of ``finest`` as :func:`prism_height` finds them, the
+    roof's ``percentile`` taken only where ``finest`` is ``solid`` (LoD 1 or finer)."""
     low, high = float(finest.bounds[0, 2]), float(finest.bounds[1, 2])
-    if source_levels(lods).keys() - {0}:
+    if solid:
         roof = _roofs(finest)
         if roof.any():
             tri = finest.triangles[roof]
-            top = _percentile(tri[:, :, 2], np.abs(_doubled_areas(tri)), ROOF_PERCENTILE / 100)
+            top = _percentile(tri[:, :, 2], np.abs(_doubled_areas(tri)), percentile / 100)
             if top > low:
                 return low, top
     measured = attributes.get("measuredHeight")
@@ -379,20 +390,35 @@ def simplified(parts: list[FootprintPart], tolerance: float) -> list[FootprintPa
 
     if tolerance <= 0 or not parts:
         return parts
-    outline = shapely.MultiPolygon([shapely.Polygon(p.rings[0], p.rings[1:]) for p in parts])
-    simple = shapely.simplify(outline, tolerance, preserve_topology=True)
-    least = tolerance * tolerance
-    kept = [
-        shapely.Polygon(polygon.exterior, [h for h in polygon.interiors if _area(h) >= least])
-        for polygon in getattr(simple, "geoms", [simple])
-        if isinstance(polygon, shapely.Polygon) and polygon.area >= least
-    ]
+    outline = shapes(parts)
+    kept = simplified_polygons(outline, tolerance)
     if not kept:
         return parts
     result = shapely.MultiPolygon(kept)
     if shapely.get_num_coordinates(result) >= shapely.get_num_coordinates(outline):
         return parts
-    return _polygons(result)
+    return polygons(result)
+
+
+def shapes(parts: list[FootprintPart]) -> Any:
+    """Footprint ``parts`` as one shapely multipolygon."""
+    import shapely
+
+    return shapely.MultiPolygon([shapely.Polygon(p.rings[0], p.rings[1:]) for p in parts])
+
+
+def simplified_polygons(outline: Any, tolerance: float) -> list[Any]:
+    """The polygons of shapely geometry ``outline`` simplified within ``tolerance`` (topology
+    kept), without the polygons and holes smaller than a ``tolerance`` square."""
+    import shapely
+
+    simple = shapely.simplify(outline, tolerance, preserve_topology=True)
+    least = tolerance * tolerance
+    return [
+        shapely.Polygon(polygon.exterior, [h for h in polygon.interiors if _area(h) >= least])
+        for polygon in getattr(simple, "geoms", [simple])
+        if isinstance(polygon, shapely.Polygon) and polygon.area >= least
+    ]
 
 
 def _area(ring: Any) -> float:
@@ -400,7 +426,7 @@ def _area(ring: Any) -> float:
     return abs(_doubled_area(np.asarray(ring.coords)[:-1])) / 2
 
 
-def _extruded(part: FootprintPart, base: float, top: float) -> tuple[Surface, Surface]:
+def extruded(part: FootprintPart, base: float, top: float) -> tuple[Surface, Surface]:
     """``part`` extruded from ``base`` to ``top``: its top (facing up) and its walls (facing
     outward), no floor. Exterior rings run clockwise and holes counter-clockwise seen from
     above, so the solid lies to the right of every ring."""
@@ -432,10 +458,14 @@ def prism(
     parts = simplified(footprint(lods, finest), tolerance)
     if not parts:
         return None
-    extruded = [_extruded(part, base, top) for part in parts]
+    solids = [extruded(part, base, top) for part in parts]
     roof_color, wall_color = prism_colors(finest)
-    surfaces = [roof for roof, _ in extruded] + [walls for _, walls in extruded]
-    colors = [roof_color] * len(extruded) + [wall_color] * len(extruded)
+    surfaces = [roof for roof, _ in solids] + [walls for _, walls in solids]
+    return coloured(surfaces, [roof_color] * len(solids) + [wall_color] * len(solids))
+
+
+def coloured(surfaces: list[Surface], colors: list[np.ndarray]) -> Mesh:
+    """``surfaces`` as one part (one draw call), each in its colour (RGBA) per vertex."""
     offsets = np.cumsum([0] + [len(s.vertices) for s in surfaces[:-1]])
     return Mesh(
         [

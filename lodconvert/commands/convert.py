@@ -96,8 +96,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         choices=KINDS,
         default="auto",
         help="far level of a cell: points baked from all its objects, their coarsest levels "
-        "merged into one mesh, or auto: the cheaper of the two that keeps silhouette F ≥ 0.95 "
-        "(default)",
+        "merged into one mesh, their footprints as block prisms, or auto: the cheapest that "
+        "keeps silhouette F ≥ 0.95 (default)",
     )
     out = parser.add_argument_group("output and messages")
     out.add_argument(
