@@ -73,6 +73,7 @@ CASES = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("source", "suffix", "options"), CASES)
 def test_a_cluster_writes_the_bytes_of_one_worker(
     source: Path, suffix: str, options: tuple[str, ...], address: str, tmp_path: Path
@@ -228,6 +229,7 @@ def test_a_task_whose_worker_is_killed_runs_again_with_the_same_result(
     assert cluster[2] == []
 
 
+@pytest.mark.slow
 def test_a_task_whose_workers_are_killed_twice_is_reported_and_the_rest_convert(
     address: str,
 ) -> None:
@@ -302,6 +304,7 @@ def _dask_command(*args: object) -> Iterator[subprocess.Popen[bytes]]:
             process.kill()
 
 
+@pytest.mark.slow
 def test_a_scheduler_lost_mid_run_ends_it_with_one_line(tmp_path: Path) -> None:
     scheduler_file = tmp_path / "scheduler.json"
     with (

@@ -256,6 +256,7 @@ EDITS: list[tuple[str, Callable[[dict[str, Any]], None]]] = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(("what", "edit"), EDITS, ids=[e[0] for e in EDITS])
 def test_broken_large_file_findings_do_not_depend_on_how_it_is_read(
     city: Path,

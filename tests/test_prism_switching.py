@@ -166,6 +166,7 @@ def _routed(
     return targets
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("sample", ["city", "mesh", "instances"])
 def test_prism_output_is_valid_and_reads_back_as_lod_output(
     sample: str, request: pytest.FixtureRequest, schema: etree.XMLSchema

@@ -41,6 +41,7 @@ def inputs_of(name: str, folder: Path) -> list[Path]:
     return [shared_data(CITYGML / name if name.endswith(".zip") else CITYJSON / name)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "options"),
     [
@@ -74,6 +75,7 @@ def test_ranges_prints_the_cutoffs_convert_writes(
         assert (row["dropped"], row["unused"]) == (obj["dropped"], obj["unused"])
 
 
+@pytest.mark.slow
 def test_a_lod2_building_has_one_cutoff_and_a_lod0_prism_the_alpha_of_its_box(
     tmp_path: Path,
 ) -> None:

@@ -182,6 +182,7 @@ def test_report_and_viewer_page_know_the_frame(tum: dict[str, Path]) -> None:
             np.testing.assert_allclose(obj["center"], scene, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_identical_runs_write_identical_city_files(tum: dict[str, Path], tmp_path: Path) -> None:
     for suffix, path in tum.items():
         again = tmp_path / f"again{suffix}"
@@ -256,6 +257,7 @@ def test_an_object_beyond_100_km_of_the_scene_origin_is_an_error(tmp_path: Path)
     assert list(tmp_path.iterdir()) == []  # nothing left behind
 
 
+@pytest.mark.slow
 def test_lod_parents_far_levels_follow_the_frame(tmp_path: Path) -> None:
     """TUM Munich in 250 m cells: the far nodes are offsets from the scene origin too, and both
     formats read every cell's centre back at the same place in the source CRS."""

@@ -42,7 +42,7 @@ SAMPLES = {
     "delft": ("cityjson/delft.city.json", None),
 }
 RD_NAP = ("--crs", "EPSG:7415")
-SLOW = ("potsdam", "tum", "delft")
+SLOW = ("potsdam", "tum", "delft", "kit", "plateau", "sig3d")
 FAST = ("--levels", "2", "--workers", "1", "-q")
 
 

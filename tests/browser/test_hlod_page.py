@@ -28,7 +28,7 @@ from .conftest import Chain, Drive, Driver, console_text
 from .test_prism_switching import _box_level
 from .test_viewers import _errors
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 SOURCE = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
 LISTED = 8

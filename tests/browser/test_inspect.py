@@ -20,7 +20,7 @@ from ..conftest import SHARED
 from .conftest import Chain, Drive, Driver, console_text, make_chain
 from .test_viewers import _errors
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 SOURCE = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
 HOUSE = SHARED / "data" / "citygml" / "sig3d_house_lod0-4" / "Building_LOD4-EPSG25832.gml"

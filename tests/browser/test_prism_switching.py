@@ -22,7 +22,7 @@ from lodconvert.ranges import cutoffs
 
 from .conftest import Drive, Driver
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 BUILDING = (60.0, 10.0, 10.0)
 """A 60 m × 10 m × 10 m building, long along x."""

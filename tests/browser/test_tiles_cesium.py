@@ -26,7 +26,7 @@ from ..test_tiles import convert, features, tiles
 from .conftest import REQUIRE, Drive, Driver, console_text
 from .test_inspect import EXPOSED, _source_attributes, roof_point
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 VIEWPORT = (640, 480)
 """The drivers' view (harness.mjs), CSS pixels."""

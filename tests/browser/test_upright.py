@@ -23,7 +23,7 @@ from ..conftest import SHARED
 from .conftest import Drive, Driver, console_text
 from .test_viewers import _errors
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
 

@@ -27,7 +27,7 @@ from ..conftest import stanford
 from ..test_viewer import view_served
 from .conftest import Chain, Drive, Driver, console_text, make_chain
 
-pytestmark = pytest.mark.browser
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
 
 MIN_VISIBLE = 20
 """Pixels an object shows at least (the coarsest level is a few dozen pixels across)."""
