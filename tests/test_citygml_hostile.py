@@ -228,6 +228,7 @@ def test_inflation_stops_at_the_limit_with_work_to_match(tmp_path: Path) -> None
     assert seconds(8 << 20) < 8 * seconds(2 << 20)
 
 
+@pytest.mark.slow
 def test_empty_members_take_no_memory_per_member(tmp_path: Path) -> None:
     """Inflating 4× as many empty members (``<bldg:Building/>``, 320,000 against 80,000) up to
     the limit raises the peak by less than 16 MB (it was some 300 bytes a member: an id taken

@@ -31,6 +31,8 @@ from .conftest import ROOT, SHARED, shared_data
 from .fuzz import hostile_citygml
 from .test_workers import TUM, _KillsItsWorker, _lodconvert, _messages, _scene, _untimed
 
+pytestmark = pytest.mark.slow  # a LocalCluster per module, and connection timeouts
+
 distributed = pytest.importorskip("distributed")
 dask = pytest.importorskip("dask")
 
@@ -73,7 +75,6 @@ CASES = [
 ]
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(("source", "suffix", "options"), CASES)
 def test_a_cluster_writes_the_bytes_of_one_worker(
     source: Path, suffix: str, options: tuple[str, ...], address: str, tmp_path: Path
@@ -110,7 +111,6 @@ def test_an_unreachable_scheduler_fails_in_seconds_naming_it(tmp_path: Path) -> 
     assert list(tmp_path.iterdir()) == []
 
 
-@pytest.mark.slow
 def test_an_unreachable_scheduler_fails_before_the_input_is_read(tmp_path: Path) -> None:
     """The scheduler is reached first: a building of 100,000 parts (a minute's reading) is
     not read when its cluster cannot be reached."""
@@ -229,7 +229,6 @@ def test_a_task_whose_worker_is_killed_runs_again_with_the_same_result(
     assert cluster[2] == []
 
 
-@pytest.mark.slow
 def test_a_task_whose_workers_are_killed_twice_is_reported_and_the_rest_convert(
     address: str,
 ) -> None:
@@ -304,7 +303,6 @@ def _dask_command(*args: object) -> Iterator[subprocess.Popen[bytes]]:
             process.kill()
 
 
-@pytest.mark.slow
 def test_a_scheduler_lost_mid_run_ends_it_with_one_line(tmp_path: Path) -> None:
     scheduler_file = tmp_path / "scheduler.json"
     with (

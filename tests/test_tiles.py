@@ -236,6 +236,7 @@ def test_leaves_carry_each_buildings_id_and_typed_attributes(
         assert row["dak_type"] == attributes["dak_type"]
 
 
+@pytest.mark.slow
 def test_a_large_tree_is_split_into_external_tilesets(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -270,6 +271,7 @@ def test_output_is_byte_identical_across_runs_and_worker_counts(
     assert len(files(one)) > 2
 
 
+@pytest.mark.slow
 def test_a_previous_tileset_of_ours_is_replaced(tmp_path: Path) -> None:
     out = tmp_path / "out"
     convert("multi_lod", out, "--hlod", "50")

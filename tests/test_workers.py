@@ -78,14 +78,16 @@ def _messages(stderr: str) -> list[str]:
 
 CASES = [
     pytest.param("tum", ".x3d", (), id="tum-x3d", marks=pytest.mark.slow),
-    pytest.param("tum", ".glb", (), id="tum-glb"),
+    pytest.param("tum", ".glb", (), id="tum-glb", marks=pytest.mark.slow),
     pytest.param("tum", ".x3d", ("--hlod", "250"), id="tum-hlod-250", marks=pytest.mark.slow),
     pytest.param("tum", ".x3d", ("--switching", "prism"), id="tum-prism", marks=pytest.mark.slow),
     pytest.param("mixed", ".x3d", (), id="mesh-x3d"),
     pytest.param("mixed", ".glb", (), id="mesh-glb"),
     pytest.param("kit", ".x3d", (), id="kit-x3d", marks=pytest.mark.slow),
     pytest.param("kit", ".glb", ("--plot-radius", "12"), id="kit-plot-radius"),
-    pytest.param("sequence", ".glb", ("--hlod", "250"), id="cityjsonseq-hlod-250"),
+    pytest.param(
+        "sequence", ".glb", ("--hlod", "250"), id="cityjsonseq-hlod-250", marks=pytest.mark.slow
+    ),
     pytest.param("plateau", ".glb", (), id="plateau-glb", marks=pytest.mark.slow),
     pytest.param(
         "potsdam", ".x3d", ("--switching", "prism"), id="potsdam-prism", marks=pytest.mark.slow
