@@ -315,6 +315,7 @@ def gml_cube_surface() -> Surface:
     return Surface(corners, faces, base_color=np.array([200, 100, 50, 255], dtype=np.uint8))
 
 
+@pytest.mark.slow
 def test_peak_memory_per_part_is_bounded(tmp_path: Path) -> None:
     """Converting a building of 4,000 one-metre parts peaks less than 20 KB a part above one
     of 1,000 (some 14 KB here: the object's XML tree and its collection, then its coordinates

@@ -28,7 +28,15 @@ def assert_nothing_left(folder: Path, before: set[Path]) -> None:
     assert set(folder.iterdir()) == before
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+SLOW_CASES = ("members.gml.gz",)
+"""Cases of several seconds: the slow tier's."""
+
+
+@pytest.mark.parametrize(
+    "case",
+    [pytest.param(c, marks=pytest.mark.slow) if c.name in SLOW_CASES else c for c in CASES],
+    ids=[c.name for c in CASES],
+)
 def test_hostile_case(tmp_path: Path, case: Case) -> None:
     src = case.write(tmp_path)
     out = tmp_path / "out.x3d"
