@@ -33,7 +33,7 @@ from .city.lods import GROUND_COVERS, source_levels
 from .city.plots import plot_radii
 from .clock import Clock
 from .errors import InputError, UsageError
-from .io import OutputInfo, input_format, output_format
+from .io import Format, OutputInfo, Pieces, input_format, output_format
 from .io.crs import checked_crs_option
 from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
@@ -84,16 +84,19 @@ def iter_chains(
     hlod: HlodOptions | None = None,
     executor: Executor | None = None,
     clock: Clock | None = None,
+    pieces: Pieces | None = None,
 ) -> Iterator[LodChain | CellChain]:
     """Bake the scene's objects (by ``executor``: in this process by default); objects with bad
     geometry are reported through ``warn`` (unless ``strict``: the caller fails), recorded in
     ``skipped`` and left out. ``step`` hears how many are done, ``clock`` how long planning
-    and baking took. With ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`):
-    one :class:`CellChain` per cell of the coarsest tier, in grid order, each followed by the
+    and baking took; ``pieces`` keeps what its formatter made of each chain where it was baked.
+    With ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`): one
+    :class:`CellChain` per cell of the coarsest tier, in grid order, each followed by the
     members it left out (objects or finer cells, drawn on their own)."""
     bakery = _Bakery(
         scene.source, options, executor or SerialExecutor(backend, progress), backend, warn,
         skipped, limits, strict, step, _object_count(scene), clock=clock or Clock(),
+        pieces=pieces,
     )  # fmt: skip
     if hlod is not None:
         yield from _cell_chains(scene, options, hlod, bakery)
@@ -129,6 +132,7 @@ class _Bakery:
     total: int | None = None
     plan_only: bool = False
     clock: Clock = field(default_factory=lambda: Clock())
+    pieces: Pieces | None = None
     done: int = 0
 
     def chains(
@@ -150,7 +154,9 @@ class _Bakery:
                     seen.add(key)
                     yield node, self._options(radius)
 
-        tasks = self.clock.iterate("plan", batches(sent(), per_object, self.limits, self.plan_only))
+        formatter = self.pieces.formatter if self.pieces is not None else None
+        tasks = batches(sent(), per_object, self.limits, self.plan_only, formatter)
+        tasks = self.clock.iterate("plan", tasks)
         for result in self.clock.iterate("execute", self.executor.results(tasks)):
             per_object[0] = result.seconds / len(result.outcomes)
             for outcome in result.outcomes:
@@ -175,6 +181,8 @@ class _Bakery:
             if outcome.chain is None:
                 return self._skip(obj, outcome.reason or "could not be converted")
             chain = outcome.chain
+            if outcome.piece is not None and self.pieces is not None:
+                self.pieces.add(chain, outcome.piece)
             if obj.transform is not None:
                 shared.setdefault(id(obj.geometry), chain)
                 chain = replace(chain, transform=np.asarray(obj.transform, dtype=np.float64))
@@ -400,16 +408,17 @@ def convert(
         scene, crs_record, baker, executor = _read_stage(inputs, sources, run, clock, stack)
         writer = _file_executor(run, scene, stack) if folder is not None else None
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
+        pieces = _pieces(target, assembly.info, run, executor)
         skipped: list[dict[str, str]] = []
         items = iter_chains(
             scene, run.chain, baker, run.progress, run.warn, skipped, run.step, run.limits,
-            run.strict, run.hlod, executor, clock,
+            run.strict, run.hlod, executor, clock, pieces,
         )  # fmt: skip
         with clock("write"):
             chains = clock.iterate("assemble", assembly.recorded(items))
             target.write_chains(
                 chains, sink, assembly.info, executor=writer, progress=run.progress,
-                **run.write_options,
+                pieces=pieces, **run.write_options,
             )  # fmt: skip
         tally = _finished(scene, assembly.records, skipped, run, named)
         with clock("validate"):
@@ -459,6 +468,12 @@ def _read_stage(
         with clock("read"):
             scene.spread(executor.results, run.progress)
     return scene, crs_record, baker, executor
+
+
+def _pieces(target: Format, info: OutputInfo, run: RunOptions, executor: Executor) -> Pieces | None:
+    """Where the chains' pieces of the output (``target``'s formatter) are kept, made by the
+    workers that bake them; ``None`` where this process bakes (it formats as it writes)."""
+    return None if isinstance(executor, SerialExecutor) else target.pieces(info, run.write_options)
 
 
 def _file_executor(run: RunOptions, scene: Scene, stack: contextlib.ExitStack) -> Executor:

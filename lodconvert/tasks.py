@@ -25,7 +25,7 @@ import signal
 import threading
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any, Self
@@ -45,14 +45,21 @@ MAX_BATCH = 256
 """Objects a batch holds at most (memory in flight stays small)."""
 
 
+Formatter = Callable[[LodChain], Any]
+"""What an output format makes of a chain in the worker that baked it (its piece of the
+output; ``None``: nothing, the writer formats it), :mod:`.io`'s ``formatter``."""
+
+
 @dataclass(frozen=True)
 class BakeTask:
     """Objects to bake, each with the options to bake it with (γ already decided); with
-    ``plan_only``, plan each chain (:func:`~.chain.plan_chain`) and bake nothing."""
+    ``plan_only``, plan each chain (:func:`~.chain.plan_chain`) and bake nothing; with a
+    ``formatter``, each chain's piece of the output is made too."""
 
     items: tuple[tuple[Node, ChainOptions], ...]
     limits: Limits = DEFAULT_LIMITS
     plan_only: bool = False
+    formatter: Formatter | None = None
 
     def object_ids(self) -> list[str]:
         """The ids of the task's objects, in order."""
@@ -74,7 +81,8 @@ class BakeTask:
             except InputError as exc:
                 outcomes.append(Baked(None, str(exc), tuple(warnings)))
                 continue
-            outcomes.append(Baked(chain, None, tuple(warnings)))
+            piece = self.formatter(chain) if self.formatter and node.transform is None else None
+            outcomes.append(Baked(chain, None, tuple(warnings), piece))
         return BakeResult(tuple(outcomes), time.perf_counter() - start)
 
     def failed(self, reason: str) -> BakeResult:
@@ -91,6 +99,8 @@ class Baked:
     chain: LodChain | ChainPlan | None
     reason: str | None = None
     warnings: tuple[str, ...] = ()
+    piece: Any = None
+    """The chain's piece of the output (the task's ``formatter``'s), if made."""
 
 
 @dataclass(frozen=True)
@@ -372,6 +382,7 @@ def batches(
     per_object: list[float],
     limits: Limits,
     plan_only: bool = False,
+    formatter: Formatter | None = None,
 ) -> Iterator[BakeTask]:
     """``items`` as tasks of about :data:`TASK_SECONDS` of work each, judged by ``per_object``
     (a one-item list: seconds an object takes so far, updated by the caller; 0: not known yet,
@@ -381,7 +392,7 @@ def batches(
         batch.append(item)
         wanted = int(TASK_SECONDS / per_object[0]) if per_object[0] > 0 else 1
         if len(batch) >= max(1, min(MAX_BATCH, wanted)):
-            yield BakeTask(tuple(batch), limits, plan_only)
+            yield BakeTask(tuple(batch), limits, plan_only, formatter)
             batch = []
     if batch:
-        yield BakeTask(tuple(batch), limits, plan_only)
+        yield BakeTask(tuple(batch), limits, plan_only, formatter)

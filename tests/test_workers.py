@@ -5,6 +5,7 @@ stopping its workers and leaving nothing."""
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -117,6 +118,30 @@ def test_two_workers_write_the_bytes_of_one(
     assert _messages(runs[2][2]) == _messages(runs[1][2])
     timings = runs[2][1]["timings"]
     assert list(timings) == ["read", "plan", "execute", "assemble", "write", "validate"]
+
+
+@pytest.mark.parametrize("switching", ["lod", "prism"])
+def test_objects_whose_names_clash_get_the_names_of_one_worker(
+    tmp_path: Path, switching: str
+) -> None:
+    """Workers write each chain's X3D text with the names its id gives; where an object before
+    it took them, the main process names and writes that chain as with one worker."""
+    scene = trimesh.Scene()
+    for i, name in enumerate(["a b", "a_b", "a_b_2", "a_b_2_LOD4"]):
+        box = trimesh.creation.box(extents=(1, 1 + i, 2))
+        box.apply_translation([3.0 * i, 0, 0])
+        scene.add_geometry(box, node_name=name, geom_name=f"g{i}")
+    path = tmp_path / "clash.glb"
+    scene.export(path)
+    written = []
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}.x3d"
+        run = _lodconvert(path, "-o", out, "--workers", workers, "--switching", switching)
+        assert run.returncode == 0, run.stderr
+        written.append(out.read_bytes())
+    assert written[1] == written[0]
+    defs = re.findall(rb'<Transform DEF="([^"]+)"', written[1])
+    assert defs == [b"a_b", b"a_b_2", b"a_b_2_2", b"a_b_2_LOD4_2"]  # a level's name
 
 
 def _sequence(tmp_path: Path) -> Path:

@@ -23,7 +23,11 @@ whichever of these it offers —
 - ``output_folder(path) -> Path``: for a format written as a folder of files (3D Tiles), the
   folder that the output path names, checked to be one the run may replace; the writer's sink
   is then that folder (:class:`~lodconvert.sinks.DirectorySink`), and the run groups objects
-  into LOD parents (``--hlod auto`` unless given).
+  into LOD parents (``--hlod auto`` unless given);
+- ``formatter(info, **write options)``: for a format whose text of a chain needs nothing of
+  the rest of the document, a picklable callable that worker processes call on each chain they
+  bake (``formatter(chain)`` → that chain's piece of the output, or ``None``); ``write`` then
+  takes the pieces (``pieces``, a :class:`Pieces`) instead of formatting those chains itself.
 
 ``read_options`` and ``write_options`` name the keyword options the format takes; the others
 are not passed to it. No other module parses our files or looks at suffixes.
@@ -90,6 +94,7 @@ class Format:
     read_frame: Callable[..., Any] | None = None
     check: Callable[..., None] | None = None
     output_folder: Callable[[Path], Path] | None = None
+    formatter: Callable[..., Callable[[LodChain], Any]] | None = None
     read_options: tuple[str, ...] = ()
     write_options: tuple[str, ...] = ()
 
@@ -104,6 +109,35 @@ class Format:
         """``write`` with the options this format takes."""
         assert self.write is not None
         self.write(chains, sink, info, **_taken(options, self.write_options))
+
+    def pieces(self, info: OutputInfo, options: dict[str, Any]) -> Pieces | None:
+        """Where the pieces its ``formatter`` (with the write options this format takes) makes
+        are kept for ``write``; ``None`` for a format without one."""
+        if self.formatter is None:
+            return None
+        return Pieces(self.formatter(info, **_taken(options, self.write_options)))
+
+
+class Pieces:
+    """Chains' pieces of the output made by workers with ``formatter`` (a format's), each kept
+    with its chain until the writer takes it: a piece is only ever given for the very chain it
+    was made of."""
+
+    def __init__(self, formatter: Callable[[LodChain], Any] | None = None) -> None:
+        self.formatter = formatter
+        self._held: dict[int, tuple[LodChain, Any]] = {}
+
+    def add(self, chain: LodChain, piece: Any) -> None:
+        """Keep ``piece`` (made of ``chain``) until :meth:`take`."""
+        self._held[id(chain)] = (chain, piece)
+
+    def take(self, chain: LodChain) -> Any:
+        """The piece made of ``chain`` (forgotten here), or ``None``."""
+        held = self._held.get(id(chain))
+        if held is None or held[0] is not chain:
+            return None
+        del self._held[id(chain)]
+        return held[1]
 
 
 StreamWriter = Callable[..., None]

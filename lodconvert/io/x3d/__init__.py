@@ -16,6 +16,7 @@ from .reader import (
 from .writer import (
     METADATA_SET,
     SWITCHING_MODES,
+    chain_texts,
     point_properties,
     prism_boxes,
     vertex_colors,
@@ -30,7 +31,8 @@ FORMAT = Format(
     read_cells=read_cells,
     read_frame=read_frame,
     check=check_x3d,
-    write_options=("switching",),
+    formatter=chain_texts,
+    write_options=("switching", "pieces"),
 )
 
 __all__ = [

@@ -104,8 +104,8 @@ import itertools
 import json
 import math
 import re
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import astuple, dataclass, replace
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import astuple, dataclass, field, replace
 from typing import BinaryIO
 
 import numpy as np
@@ -114,7 +114,7 @@ from PIL import Image as PILImage
 from ...errors import UsageError
 from ...model import CellChain, Level, LodChain, Mesh, Surface
 from ...model.safe_text import NOT_XML_CHARS, xml_text
-from .. import OutputInfo
+from .. import OutputInfo, Pieces
 from ..frame import ROTATION, SceneFrame, scene_frame
 from ..numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
 from .viewpoint import NAVIGATION, SceneBox
@@ -253,6 +253,21 @@ class _Out:
         self.handle.write("".join(self.parts).encode("utf-8"))
         self.parts.clear()
 
+    def inserted(self, text: str) -> None:
+        """Add ``text`` made by :func:`_piece_text` as the children of the element open now."""
+        self.parts.append(text.replace("\n", self.indent))
+
+
+def _piece_text(write: Callable[[_Out], None]) -> str:
+    """The text ``write`` adds to a document as the children of an element at depth 0, each
+    line starting with its line break and its depth's indentation, to be moved to any depth by
+    :meth:`_Out.inserted` (no line break stands elsewhere: attribute values have theirs
+    escaped, and the fields written verbatim hold none)."""
+    out = _Out(io.BytesIO())
+    out.parts.clear()
+    write(out)
+    return "".join(out.parts)
+
 
 def _mfstring(values: Iterable[str]) -> str:
     """X3D MFString text: each value double-quoted, with ``\\`` and ``"`` escaped."""
@@ -354,29 +369,42 @@ def _hidden_name(base: str) -> str:
     return f"{base}_levels"
 
 
+def _ncname(object_id: str) -> str:
+    """``object_id`` made an XML NCName: the DEF base it gets when no other object has it."""
+    base = _NOT_NCNAME.sub("_", object_id) or "_"
+    return base if base[0].isalpha() or base[0] == "_" else "_" + base
+
+
+def _derived_names(
+    candidate: str, levels: list[Level], regions: int | None
+) -> tuple[list[str], list[str]]:
+    """The level DEFs of an object whose DEF base is ``candidate``, and every name that base
+    takes (itself, LOD, level Groups and their Appearances; with prism switching, the Switch
+    hiding the LOD and the nodes of ``regions`` regions)."""
+    level_defs = [f"{candidate}_{lv.name}" for lv in levels]
+    names = [
+        candidate,
+        f"{candidate}_LOD",
+        f"{candidate}_instance",
+        *level_defs,
+        *map(_appearance_name, level_defs),
+    ]
+    if regions is not None:
+        names.append(_hidden_name(candidate))
+        names += [name for region in _regions(candidate, regions) for name in astuple(region)]
+    return level_defs, names
+
+
 def _unique_names(
     object_id: str, used: set[str], levels: list[Level], regions: int | None = None
 ) -> tuple[str, list[str]]:
-    """A DEF base (an XML NCName) for ``object_id`` whose derived names (LOD, level Groups and
-    their Appearances; with prism switching, the Switch hiding the LOD and the nodes of
-    ``regions`` regions) are not yet in ``used``, and the level DEFs; all are added to
+    """A DEF base (an XML NCName) for ``object_id`` whose derived names
+    (:func:`_derived_names`) are not yet in ``used``, and the level DEFs; all are added to
     ``used``."""
-    base = _NOT_NCNAME.sub("_", object_id) or "_"
-    if not (base[0].isalpha() or base[0] == "_"):
-        base = "_" + base
+    base = _ncname(object_id)
     candidate, n = base, 1
     while True:
-        level_defs = [f"{candidate}_{lv.name}" for lv in levels]
-        names = [
-            candidate,
-            f"{candidate}_LOD",
-            f"{candidate}_instance",
-            *level_defs,
-            *map(_appearance_name, level_defs),
-        ]
-        if regions is not None:
-            names.append(_hidden_name(candidate))
-            names += [name for region in _regions(candidate, regions) for name in astuple(region)]
+        level_defs, names = _derived_names(candidate, levels, regions)
         if not used.intersection(names):
             used.update(names)
             return candidate, level_defs
@@ -671,45 +699,113 @@ class _Written:
     level_defs: list[str]
 
 
-def _write_chain(
-    out: _Out,
-    chain: LodChain,
-    used: set[str],
-    written: dict[int, _Written],
-    switching: str,
-    shift: np.ndarray,
-) -> None:
+@dataclass
+class _Document:
+    """What writing one document keeps from item to item: how levels switch, the scene origin
+    positions are less (zero without a frame), the chains' text made by workers, the DEFs used
+    so far and the levels shared by instances (by the id of their list)."""
+
+    switching: str
+    shift: np.ndarray
+    pieces: Pieces
+    used: set[str] = field(default_factory=set)
+    written: dict[int, _Written] = field(default_factory=dict)
+
+    def prism_regions(self, chain: LodChain) -> int | None:
+        """How many regions ``chain`` switches on (``None``: it switches by an ``LOD``)."""
+        return _prism_regions(chain, self.switching)
+
+
+def _prism_regions(chain: LodChain, switching: str) -> int | None:
+    return len(chain.cutoffs) if switching == "prism" else None
+
+
+@dataclass(frozen=True)
+class ChainText:
+    """A chain's text made by a worker (:class:`ChainTexts`): its DEF base, every name that
+    takes, and what its ``Transform`` holds (:func:`_piece_text`)."""
+
+    base: str
+    names: tuple[str, ...]
+    inner: str
+
+
+@dataclass(frozen=True)
+class ChainTexts:
+    """Makes the text of a chain that is not an instance of shared geometry, as the writer
+    would with ``switching`` when no object before it took its names (the writer checks that)."""
+
+    switching: str = "lod"
+
+    def __call__(self, chain: LodChain) -> ChainText | None:
+        if chain.transform is not None:
+            return None
+        _check_chain(chain)
+        regions = _prism_regions(chain, self.switching)
+        base = _ncname(chain.object_id)
+        level_defs, names = _derived_names(base, chain.levels, regions)
+        inner = _piece_text(lambda out: _write_contents(out, chain, base, level_defs, regions))
+        return ChainText(base, tuple(names), inner)
+
+
+def chain_texts(info: OutputInfo, switching: str = "lod") -> ChainTexts:
+    """The X3D format's ``formatter`` (:mod:`lodconvert.io`)."""
+    return ChainTexts(switching)
+
+
+def _write_chain(out: _Out, chain: LodChain, doc: _Document) -> None:
     """One chain: its ``Transform`` (inside one more for an instance of shared geometry) with
     the chain's metadata and its ``LOD`` — defined the first time its levels are written,
     ``USE`` d by later instances. With prism switching the LOD goes into a ``Switch`` that
     draws nothing, followed by the nodes that draw its levels (:func:`_write_prism`). Positions
-    are less ``shift`` (the scene origin, zero without a frame): an object's translation, or an
-    instance's placement (its chain keeps its origin, as its facts declare)."""
+    are less ``doc.shift``: an object's translation, or an instance's placement (its chain
+    keeps its origin, as its facts declare). A worker's text of the chain is used where its
+    names are free."""
+    piece: ChainText | None = doc.pieces.take(chain)
+    if piece is not None and doc.used.isdisjoint(piece.names):
+        doc.used.update(piece.names)
+        placed = {"DEF": piece.base, "translation": format_exact(chain.origin - doc.shift)}
+        with out.node("Transform", placed):
+            out.inserted(piece.inner)
+        return
     _check_chain(chain)
-    shared = written.get(id(chain.levels))
-    prism_regions = len(chain.cutoffs) if switching == "prism" else None
+    shared = doc.written.get(id(chain.levels))
+    prism_regions = doc.prism_regions(chain)
     levels = [] if shared else chain.levels
-    base, level_defs = _unique_names(chain.object_id, used, levels, prism_regions)
-    origin = chain.origin if chain.transform is not None else chain.origin - shift
+    base, level_defs = _unique_names(chain.object_id, doc.used, levels, prism_regions)
+    origin = chain.origin if chain.transform is not None else chain.origin - doc.shift
     transform = {"DEF": base, "translation": format_exact(origin)}
     with contextlib.ExitStack() as stack:
         if chain.transform is not None:
             placed = chain.transform.copy()
-            placed[:3, 3] -= shift
+            placed[:3, 3] -= doc.shift
             fields = {"DEF": f"{base}_instance", **instance_fields(placed)}
             stack.enter_context(out.node("Transform", fields))
         with out.node("Transform", transform):
-            # The chain's metadata goes on the Transform: X3DOM counts a MetadataSet inside
-            # LOD as its first level.
-            _metadata_set(out, _chain_metadata(chain))
-            if prism_regions is None:
-                _write_lod(out, chain, base, level_defs, shared, written)
-                return
-            hidden = {"DEF": _hidden_name(base), "whichChoice": "-1"}
-            with out.node("Switch", hidden):
-                _write_lod(out, chain, base, level_defs, shared, written)
-            defs = shared.level_defs if shared else level_defs
-            _write_prism(out, chain, _regions(base, prism_regions), defs)
+            _write_contents(out, chain, base, level_defs, prism_regions, shared, doc.written)
+
+
+def _write_contents(
+    out: _Out,
+    chain: LodChain,
+    base: str,
+    level_defs: list[str],
+    prism_regions: int | None,
+    shared: _Written | None = None,
+    written: dict[int, _Written] | None = None,
+) -> None:
+    """What a chain's ``Transform`` holds: the chain's metadata (on the Transform: X3DOM counts
+    a MetadataSet inside LOD as its first level), its ``LOD`` and, with prism switching, the
+    nodes that draw its levels."""
+    _metadata_set(out, _chain_metadata(chain))
+    if prism_regions is None:
+        _write_lod(out, chain, base, level_defs, shared, written)
+        return
+    hidden = {"DEF": _hidden_name(base), "whichChoice": "-1"}
+    with out.node("Switch", hidden):
+        _write_lod(out, chain, base, level_defs, shared, written)
+    defs = shared.level_defs if shared else level_defs
+    _write_prism(out, chain, _regions(base, prism_regions), defs)
 
 
 def _write_lod(
@@ -718,7 +814,7 @@ def _write_lod(
     base: str,
     level_defs: list[str],
     shared: _Written | None,
-    written: dict[int, _Written],
+    written: dict[int, _Written] | None,
 ) -> None:
     """The chain's ``LOD``: a ``USE`` of the ``shared`` one, or defined with its levels (and,
     for an instance, remembered in ``written``)."""
@@ -731,7 +827,7 @@ def _write_lod(
         "range": format_exact(chain.cutoffs),
         "forceTransitions": "true",
     }
-    if chain.transform is not None:
+    if chain.transform is not None and written is not None:
         written[id(chain.levels)] = _Written(chain.levels, lod["DEF"], level_defs)
     with out.node("LOD", lod):
         _write_levels(out, chain, level_defs)
@@ -796,19 +892,12 @@ def _routes(region: _Region) -> list[dict[str, str]]:
     return [dict(zip(keys, connection, strict=True)) for connection in connections]
 
 
-def _write_item(
-    out: _Out,
-    item: LodChain | CellChain,
-    used: set[str],
-    written: dict[int, _Written],
-    switching: str,
-    shift: np.ndarray,
-) -> None:
-    """An object's chain, or a LOD parent with everything in it, placed from ``shift``."""
+def _write_item(out: _Out, item: LodChain | CellChain, doc: _Document) -> None:
+    """An object's chain, or a LOD parent with everything in it."""
     if isinstance(item, CellChain):
-        _write_cell(out, item, used, written, switching, shift)
+        _write_cell(out, item, doc)
     else:
-        _write_chain(out, item, used, written, switching, shift)
+        _write_chain(out, item, doc)
 
 
 def _cell_metadata(cell: CellChain) -> list[Metadata]:
@@ -824,34 +913,27 @@ def _cell_metadata(cell: CellChain) -> list[Metadata]:
     ]
 
 
-def _write_cell(
-    out: _Out,
-    cell: CellChain,
-    used: set[str],
-    written: dict[int, _Written],
-    switching: str,
-    shift: np.ndarray,
-) -> None:
+def _write_cell(out: _Out, cell: CellChain, doc: _Document) -> None:
     """A LOD parent: a ``Group`` with the cell's metadata around an ``LOD`` (centred on the
     members' bounding box, in scene coordinates) whose near child holds the members as they
     are written alone and whose far child is the cell's one level, in a ``Transform`` to the
-    cell's origin (then an empty ``Group`` for a culled cell); positions less ``shift``."""
-    base, (far_def,) = _unique_names(cell.cell_id, used, [cell.far])
+    cell's origin (then an empty ``Group`` for a culled cell); positions less ``doc.shift``."""
+    base, (far_def,) = _unique_names(cell.cell_id, doc.used, [cell.far])
     near, far = f"{base}_near", f"{base}_far"
-    used.update((near, far))
+    doc.used.update((near, far))
     with out.node("Group", {"DEF": base}):
         _metadata_set(out, _cell_metadata(cell))
         lod = {
             "DEF": f"{base}_LOD",
-            "center": format_exact(cell.origin - shift + cell.center),
+            "center": format_exact(cell.origin - doc.shift + cell.center),
             "range": format_exact(cell.cutoffs),
             "forceTransitions": "true",
         }
         with out.node("LOD", lod):
             with out.node("Group", {"DEF": near}):
                 for member in cell.members:
-                    _write_item(out, member, used, written, switching, shift)
-            placed = format_exact(cell.origin - shift)
+                    _write_item(out, member, doc)
+            placed = format_exact(cell.origin - doc.shift)
             with out.node("Transform", {"DEF": far, "translation": placed}):
                 # the far level shows from the cell's first cutoff on, like a chain's second
                 _write_level(out, cell.far, far_def, cell.cutoffs, 1, cell.alpha)
@@ -883,11 +965,16 @@ def _write_levels(out: _Out, chain: LodChain, level_defs: list[str]) -> None:
 
 
 def write_x3d(
-    chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo, switching: str = "lod"
+    chains: Iterable[LodChain],
+    handle: BinaryIO,
+    info: OutputInfo,
+    switching: str = "lod",
+    pieces: Pieces | None = None,
 ) -> None:
     """Write ``chains`` as an X3D 4.0 XML document to the binary ``handle``, each object's
     levels switching as ``switching`` says (one of :data:`SWITCHING_MODES`; else
-    :class:`~lodconvert.errors.UsageError`).
+    :class:`~lodconvert.errors.UsageError`); a chain's text in ``pieces`` (made by a worker,
+    :class:`ChainTexts`) is written as it is.
 
     The document is streamed: each chain is written (and flushed) as the iterable yields it, so
     only one chain's text is held in memory. Same input, same bytes.
@@ -895,8 +982,6 @@ def write_x3d(
     if switching not in SWITCHING_MODES:
         modes = " or ".join(SWITCHING_MODES)
         raise UsageError(f"must be {modes}, not {switching!r}", field="switching")
-    used: set[str] = set()
-    written: dict[int, _Written] = {}  # instances: id of a shared levels list → its DEFs
     out = _Out(handle)
     root = {
         "xmlns:xsd": XSI,
@@ -912,14 +997,15 @@ def write_x3d(
             frame = scene_frame(info.framed, first) if first is not None else None
             box = SceneBox(frame)
             shift = frame.origin if frame is not None else np.zeros(3)
+            doc = _Document(switching, shift, pieces or Pieces())
             with contextlib.ExitStack() as framed:
                 if frame is not None:
-                    used.add(FRAME_DEF)
+                    doc.used.add(FRAME_DEF)
                     attrib = {"DEF": FRAME_DEF, "rotation": FRAME_ROTATION}
                     framed.enter_context(out.node("Transform", attrib))
                     _frame_metadata(out, frame)
                 for item in itertools.chain([first] if first is not None else [], items):
-                    _write_item(out, item, used, written, switching, shift)
+                    _write_item(out, item, doc)
                     box.add(item)
                     out.flush()
             view = box.viewpoint()
