@@ -13,6 +13,7 @@ from .writer import (
     GLB_MAGIC,
     MSFT_LOD,
     SRGB_TO_LINEAR,
+    buffers_formatter,
     linear_rgba,
     srgb_rgba,
     write_glb,
@@ -27,6 +28,8 @@ FORMAT = Format(
     read_cells=read_cells,
     read_frame=read_frame,
     check=check_gltf,
+    formatter=buffers_formatter,
+    write_options=("pieces",),
 )
 
 __all__ = [

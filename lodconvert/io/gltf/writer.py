@@ -35,7 +35,8 @@ import math
 import shutil
 import struct
 import tempfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from typing import IO, Any, BinaryIO
 
 import numpy as np
@@ -45,7 +46,7 @@ from ...errors import LodConvertError
 from ...model import CellChain, Level, LodChain, PointCloud, Surface
 from ...ranges import ReferenceView, screen_coverage
 from ...sinks import writing_temporary
-from .. import OutputInfo
+from .. import OutputInfo, Pieces
 from ..frame import ROTATION, SceneFrame, scene_frame
 
 MSFT_LOD = "MSFT_lod"
@@ -350,7 +351,10 @@ class _Array:
 
     def append(self, item: Any) -> int:
         """Write ``item`` as the next element; its index."""
-        text = self.layout.text(item, self.depth + 1)
+        return self.append_text(self.layout.text(item, self.depth + 1))
+
+    def append_text(self, text: str) -> int:
+        """Write the JSON text of an element laid out at the array's depth; its index."""
         self._pending.append(self._head + text if self.count else self._head[1:] + text)
         if len(self._pending) >= _PENDING:
             self._flush()
@@ -468,6 +472,123 @@ def _root_node(chain: LodChain, finest: int, frame: SceneFrame | None) -> dict[s
     )
 
 
+# --- buffers of a chain (made where it is baked) ------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _AccessorData:
+    """An accessor's bytes (little-endian), its buffer view's target and its other fields, with
+    their compact JSON text (what follows its ``bufferView`` number in a GLB)."""
+
+    data: bytes
+    target: int
+    fields: dict[str, Any]
+    compact_tail: str
+
+
+_VIEW_HEAD = '{"bufferView":'
+
+
+def _accessor_data(
+    array: np.ndarray, target: int = _ARRAY_BUFFER, normalized: bool = False, bounds: bool = False
+) -> _AccessorData:
+    """An accessor over ``array`` ((k,) scalars or (k, w) vectors, dtype of the buffer)."""
+    data = np.ascontiguousarray(array)
+    stored = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
+    fields = _object(
+        byteOffset=0,
+        componentType=_COMPONENTS[data.dtype],
+        normalized=True if normalized else None,
+        count=len(data),
+        type=_TYPES[1 if data.ndim == 1 else data.shape[1]],
+        max=[float(v) for v in data.max(axis=0)] if bounds else None,
+        min=[float(v) for v in data.min(axis=0)] if bounds else None,
+    )
+    compact = _COMPACT.text({"bufferView": 0, **fields}, 2)
+    return _AccessorData(stored.tobytes(), target, fields, compact[len(_VIEW_HEAD) + 1 :])
+
+
+def _colors(rgba: np.ndarray) -> _AccessorData:
+    """COLOR_0 accessor: VEC4 normalised unsigned shorts in linear space."""
+    return _accessor_data(_unit16(linear_rgba(rgba)), normalized=True)
+
+
+@dataclass(frozen=True)
+class _PrimitiveData:
+    """What a primitive's JSON needs of its geometry: its accessors' data in the order they
+    are added to the buffer (``POSITION``, ``NORMAL``, ``COLOR_0``, ``TEXCOORD_0``), its
+    texture (PNG bytes, added next) and indices (last); for a mesh, the linear base colour of
+    its material (``None``: a point level's shared unlit one) and the alpha mode."""
+
+    attributes: dict[str, _AccessorData]
+    mode: int
+    alpha_mode: str
+    base: list[float] | None = None
+    png: bytes | None = None
+    indices: _AccessorData | None = None
+
+
+def _mesh_data(surface: Surface, normals: bool = True) -> _PrimitiveData:
+    attributes = {"POSITION": _accessor_data(float32_positions(surface.vertices), bounds=True)}
+    if normals:
+        attributes["NORMAL"] = _accessor_data(vertex_normals(surface))
+    if surface.vertex_colors is not None:
+        attributes["COLOR_0"] = _colors(surface.vertex_colors)
+    textured = surface.texture is not None and surface.uv is not None
+    png = None
+    if textured:
+        # Surface.uv has its origin at the image's bottom-left, glTF at the top-left.
+        flipped = np.column_stack([surface.uv[:, 0], 1.0 - surface.uv[:, 1]])
+        attributes["TEXCOORD_0"] = _accessor_data(flipped.astype(np.float32))
+        png = _png(surface.texture)
+    index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
+    indices = _accessor_data(surface.faces.ravel().astype(index_type), _ELEMENT_ARRAY_BUFFER)
+    alpha_mode = _alpha_mode(
+        surface.material_color[3:],
+        None if surface.vertex_colors is None else surface.vertex_colors[:, 3],
+        surface.texture[..., 3] if textured else None,
+    )
+    base = [float(v) for v in linear_rgba(surface.material_color)]
+    return _PrimitiveData(attributes, _TRIANGLES, alpha_mode, base, png, indices)
+
+
+def _points_data(points: PointCloud) -> _PrimitiveData:
+    attributes = {
+        "POSITION": _accessor_data(float32_positions(points.positions), bounds=True),
+        "NORMAL": _accessor_data(unit_normals(points.normals)),
+        "COLOR_0": _colors(points.colors),
+    }
+    return _PrimitiveData(attributes, _POINTS, _alpha_mode(points.colors[:, 3]))
+
+
+def _level_data(level: Level) -> list[_PrimitiveData]:
+    """The primitives of one (non-empty) level. A LOD parent's merged far mesh has no normals:
+    its corners are welded (:func:`~lodconvert.bake.qem.simplify_within`), where normals per
+    vertex would round every building's edges, and glTF clients shade a primitive without
+    normals flat (three.js from screen-space derivatives, with no vertex split)."""
+    if level.mesh is None:
+        return [_points_data(level.points)]
+    flat = level.kind == "merged"
+    return [_mesh_data(part, not flat) for part in level.mesh.parts]
+
+
+ChainBuffers = tuple["list[_PrimitiveData] | None", ...]
+"""A chain's buffers made by a worker: each level's primitives (``None`` for an empty one)."""
+
+
+def chain_buffers(chain: LodChain) -> ChainBuffers | None:
+    """The glTF formats' chain formatter (:mod:`lodconvert.io`): the buffers of a chain that
+    is not an instance of shared geometry (whose levels are written once, by the first)."""
+    if chain.transform is not None:
+        return None
+    return tuple(_level_data(level) if level.count else None for level in chain.levels)
+
+
+def buffers_formatter(info: OutputInfo) -> Callable[[LodChain], ChainBuffers | None]:
+    """The glTF formats' ``formatter`` (:mod:`lodconvert.io`)."""
+    return chain_buffers
+
+
 # --- document assembly --------------------------------------------------------------------------
 
 
@@ -475,9 +596,10 @@ class _Document:
     """A glTF document being written: its JSON arrays and binary buffer go to temporary files
     as they are made, so memory holds the chain being added, not what was added before."""
 
-    def __init__(self, info: OutputInfo, layout: _Layout) -> None:
+    def __init__(self, info: OutputInfo, layout: _Layout, pieces: Pieces) -> None:
         self.reference_view = info.view
         self.info = info
+        self.pieces = pieces
         self.frame: SceneFrame | None = None  # set by the first item, for a framed scene
         self._layout = layout
         self._files = contextlib.ExitStack()
@@ -530,34 +652,15 @@ class _Document:
         view = _object(buffer=0, byteOffset=start, byteLength=len(data), target=target)
         return self.buffer_views.append(view)
 
-    def _accessor(
-        self,
-        array: np.ndarray,
-        target: int = _ARRAY_BUFFER,
-        normalized: bool = False,
-        bounds: bool = False,
-    ) -> int:
-        """An accessor over ``array`` ((k,) scalars or (k, w) vectors, dtype of the buffer)."""
-        data = np.ascontiguousarray(array)
-        stored = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
-        accessor = _object(
-            bufferView=self._buffer_view(memoryview(stored).cast("B"), target),
-            byteOffset=0,
-            componentType=_COMPONENTS[data.dtype],
-            normalized=True if normalized else None,
-            count=len(data),
-            type=_TYPES[1 if data.ndim == 1 else data.shape[1]],
-            max=[float(v) for v in data.max(axis=0)] if bounds else None,
-            min=[float(v) for v in data.min(axis=0)] if bounds else None,
-        )
-        return self.accessors.append(accessor)
+    def _accessor(self, accessor: _AccessorData) -> int:
+        """Add an accessor (and its buffer view); its index."""
+        view = self._buffer_view(accessor.data, accessor.target)
+        if self._layout is _COMPACT:
+            return self.accessors.append_text(_VIEW_HEAD + str(view) + accessor.compact_tail)
+        return self.accessors.append({"bufferView": view, **accessor.fields})
 
-    def _colors(self, rgba: np.ndarray) -> int:
-        """COLOR_0 accessor: VEC4 normalised unsigned shorts in linear space."""
-        return self._accessor(_unit16(linear_rgba(rgba)), normalized=True)
-
-    def _texture(self, rgba: np.ndarray) -> int:
-        image = {"mimeType": "image/png", "bufferView": self._buffer_view(_png(rgba))}
+    def _texture(self, png: bytes) -> int:
+        image = {"mimeType": "image/png", "bufferView": self._buffer_view(png)}
         sampler = {
             "magFilter": _LINEAR,
             "minFilter": _LINEAR_MIPMAP_LINEAR,
@@ -568,36 +671,26 @@ class _Document:
             {"sampler": self.samplers.append(sampler), "source": self.images.append(image)}
         )
 
-    def _mesh_primitive(self, surface: Surface, normals: bool = True) -> dict[str, Any]:
-        position = self._accessor(float32_positions(surface.vertices), bounds=True)
-        normal = self._accessor(vertex_normals(surface)) if normals else None
-        color = None
-        if surface.vertex_colors is not None:
-            color = self._colors(surface.vertex_colors)
-        textured = surface.texture is not None and surface.uv is not None
-        texcoord = texture = None
-        if textured:
-            # Surface.uv has its origin at the image's bottom-left, glTF at the top-left.
-            flipped = np.column_stack([surface.uv[:, 0], 1.0 - surface.uv[:, 1]])
-            texcoord = self._accessor(flipped.astype(np.float32))
-            texture = self._texture(surface.texture)
-        index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
-        indices = self._accessor(
-            surface.faces.ravel().astype(index_type), target=_ELEMENT_ARRAY_BUFFER
-        )
-        alpha_mode = _alpha_mode(
-            surface.material_color[3:],
-            None if surface.vertex_colors is None else surface.vertex_colors[:, 3],
-            surface.texture[..., 3] if textured else None,
-        )
-        base = [float(v) for v in linear_rgba(surface.material_color)]
-        attributes = _object(POSITION=position, NORMAL=normal, TEXCOORD_0=texcoord, COLOR_0=color)
-        return {
-            "attributes": attributes,
-            "indices": indices,
-            "mode": _TRIANGLES,
-            "material": self._mesh_material(base, alpha_mode, texture),
+    def _primitive(self, data: _PrimitiveData) -> dict[str, Any]:
+        """A primitive's JSON, its accessors (and texture) added."""
+        added = {name: self._accessor(accessor) for name, accessor in data.attributes.items()}
+        texture = self._texture(data.png) if data.png is not None else None
+        primitive: dict[str, Any] = {
+            "attributes": _object(
+                POSITION=added["POSITION"],
+                NORMAL=added.get("NORMAL"),
+                TEXCOORD_0=added.get("TEXCOORD_0"),
+                COLOR_0=added.get("COLOR_0"),
+            )
         }
+        if data.indices is not None:
+            primitive["indices"] = self._accessor(data.indices)
+        primitive["mode"] = data.mode
+        if data.base is None:
+            primitive["material"] = self._point_material(data.alpha_mode)
+        else:
+            primitive["material"] = self._mesh_material(data.base, data.alpha_mode, texture)
+        return primitive
 
     def _mesh_material(self, base: list[float], alpha_mode: str, texture: int | None) -> int:
         """The material of a mesh primitive: one for all primitives of the same colour and
@@ -620,34 +713,21 @@ class _Document:
             self._point_materials[alpha_mode] = self.materials.append(material)
         return self._point_materials[alpha_mode]
 
-    def _point_primitive(self, points: PointCloud) -> dict[str, Any]:
-        attributes = {
-            "POSITION": self._accessor(float32_positions(points.positions), bounds=True),
-            "NORMAL": self._accessor(unit_normals(points.normals)),
-            "COLOR_0": self._colors(points.colors),
-        }
-        return {
-            "attributes": attributes,
-            "mode": _POINTS,
-            "material": self._point_material(_alpha_mode(points.colors[:, 3])),
-        }
-
-    def _level_mesh(self, name: str, level: Level, shared: bool = False) -> int | None:
-        """The mesh of one level's geometry (``None`` when the level is empty). The levels of
-        instances of one geometry (``shared``) share their meshes. A LOD parent's merged far
-        mesh has no normals: its corners are welded
-        (:func:`~lodconvert.bake.qem.simplify_within`), where normals per vertex would round
-        every building's edges, and glTF clients shade a primitive without normals flat
-        (three.js from screen-space derivatives, with no vertex split)."""
+    def _level_mesh(
+        self,
+        name: str,
+        level: Level,
+        shared: bool = False,
+        made: list[_PrimitiveData] | None = None,
+    ) -> int | None:
+        """The mesh of one level's geometry (``None`` when the level is empty), of its
+        primitives as a worker ``made`` them or made here. The levels of instances of one
+        geometry (``shared``) share their meshes."""
         if not level.count:
             return None
         if id(level) in self._shared:
             return self._shared[id(level)][1]
-        if level.mesh is not None:
-            flat = level.kind == "merged"
-            primitives = [self._mesh_primitive(part, not flat) for part in level.mesh.parts]
-        else:
-            primitives = [self._point_primitive(level.points)]
+        primitives = [self._primitive(data) for data in made or _level_data(level)]
         mesh = self.meshes.append({"primitives": primitives, "name": name})
         if shared:  # kept alive with the level, so its id stays unique
             self._shared[id(level)] = (level, mesh)
@@ -700,13 +780,16 @@ class _Document:
         assert self.nodes.append(far) == at
 
     def _add_chain(self, chain: LodChain) -> None:
-        """Add a chain's root node, finest node (its child) and coarser nodes."""
+        """Add a chain's root node, finest node (its child) and coarser nodes (their buffers
+        as a worker made them, where one did)."""
         shared = chain.transform is not None
-        finest_mesh = self._level_mesh(_level_name(chain, chain.levels[0]), chain.levels[0], shared)
-        coarser = [
-            (level, switch_in, self._level_mesh(_level_name(chain, level), level, shared))
-            for level, switch_in in zip(chain.levels[1:], chain.cutoffs, strict=False)
+        made: ChainBuffers = self.pieces.take(chain) or (None,) * len(chain.levels)
+        meshes = [
+            self._level_mesh(_level_name(chain, level), level, shared, buffers)
+            for level, buffers in zip(chain.levels, made, strict=True)
         ]
+        finest_mesh = meshes[0]
+        coarser = list(zip(chain.levels[1:], chain.cutoffs, meshes[1:], strict=False))
         root = self.nodes.append(_root_node(chain, len(self.nodes) + 1, self.frame))
         ids = list(range(root + 2, root + 2 + len(coarser)))
         extras: dict[str, Any] = {}
@@ -778,9 +861,12 @@ def _level_node(
 
 
 @contextlib.contextmanager
-def _document(chains: Iterable[LodChain], info: OutputInfo, layout: _Layout) -> Iterator[_Document]:
-    """A document holding ``chains``; its temporary files are deleted when the block ends."""
-    doc = _Document(info, layout)
+def _document(
+    chains: Iterable[LodChain], info: OutputInfo, layout: _Layout, pieces: Pieces | None
+) -> Iterator[_Document]:
+    """A document holding ``chains`` (with the buffers workers made of them in ``pieces``); its
+    temporary files are deleted when the block ends."""
+    doc = _Document(info, layout, pieces or Pieces())
     try:
         with writing_temporary():
             for item in chains:
@@ -802,10 +888,14 @@ def _write_chunk(out: BinaryIO, kind: bytes, source: IO[bytes], length: int, fil
     out.write(fill * (_padded_length(length) - length))
 
 
-def write_glb(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) -> None:
-    """Write ``chains`` as binary glTF (one JSON chunk, one BIN chunk) to ``handle``."""
+def write_glb(
+    chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo, pieces: Pieces | None = None
+) -> None:
+    """Write ``chains`` as binary glTF (one JSON chunk, one BIN chunk) to ``handle``; the
+    buffers of a chain in ``pieces`` (made by a worker, :func:`chain_buffers`) are taken as
+    they are."""
     with (
-        _document(chains, info, _COMPACT) as doc,
+        _document(chains, info, _COMPACT, pieces) as doc,
         tempfile.SpooledTemporaryFile(_SPOOL_BYTES) as text,
     ):
         with writing_temporary():
@@ -819,8 +909,11 @@ def write_glb(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) ->
             _write_chunk(handle, *chunk)
 
 
-def write_gltf(chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo) -> None:
-    """Write ``chains`` as one self-contained glTF JSON file (buffer as a base64 data URI)."""
-    with _document(chains, info, _INDENTED) as doc:
+def write_gltf(
+    chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo, pieces: Pieces | None = None
+) -> None:
+    """Write ``chains`` as one self-contained glTF JSON file (buffer as a base64 data URI), as
+    :func:`write_glb` takes ``pieces``."""
+    with _document(chains, info, _INDENTED, pieces) as doc:
         _write_json(doc.json_value(data_uri=True), handle, _INDENTED)
     handle.write(b"\n")
