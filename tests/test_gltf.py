@@ -20,7 +20,7 @@ from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions, bake_chain
 from lodconvert.errors import InputError
 from lodconvert.io import OutputInfo, gltf, output_format, own_format
-from lodconvert.io.gltf import SRGB_TO_LINEAR, read_lod_gltf, write_glb, write_gltf
+from lodconvert.io.gltf import FORMAT, SRGB_TO_LINEAR, read_lod_gltf, write_glb, write_gltf
 from lodconvert.model import LodChain, Node, PointCloud, Surface
 from lodconvert.ranges import screen_coverage
 
@@ -386,6 +386,25 @@ def test_vertex_colours_survive(tmp_path, sphere_chain):
     for level in obj.levels[1:]:
         rgb = level.colors[:, :3].astype(int)
         assert np.ptp(rgb, axis=0).min() > 100  # coloured, not the default grey
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_buffers_made_where_a_chain_is_baked_write_the_same_bytes(
+    tmp_path, culled_chain, far_chain, suffix
+):
+    """Worker processes make each chain's buffers and accessor text (the format's formatter);
+    the document written from them is the one written from the chains alone: textures,
+    accessor bounds and both layouts included."""
+    chains = [culled_chain, far_chain]
+    pieces = FORMAT.pieces(INFO, {})
+    assert pieces is not None and pieces.formatter is not None
+    for chain in chains:
+        pieces.add(chain, pieces.formatter(chain))
+    made = tmp_path / f"made{suffix}"
+    with made.open("wb") as handle:
+        WRITE[suffix](iter(chains), handle, INFO, pieces=pieces)
+    assert made.read_bytes() == _write(tmp_path, chains, suffix).read_bytes()
+    assert pieces.take(culled_chain) is None  # each piece is written once
 
 
 def test_texture_is_embedded_with_flipped_v(tmp_path, culled_chain):
