@@ -2,11 +2,12 @@
 
 A city object's switching distances depend on its neighbours (its plot radius,
 :mod:`.city.plots`), so every object must have been read before the first is baked. Holding them
-all would make memory grow with the city; a :class:`NodeSpool` instead writes each node (without its
-children, which are spooled in their own turn where they have geometry; its id and the
+all would make memory grow with the city; a :class:`NodeSpool` instead keeps each node (without
+its children, which are spooled in their own turn where they have geometry; its id and the
 attributes of it and its parts go with it as outputs keep them, :meth:`~.model.Node.written`,
-so no input nests them too deep to pickle) to an anonymous temporary file as it is read and
-keeps only its position there, then gives the nodes back in the same order (or any node by its
+so no input nests them too deep to pickle) in memory while their geometry takes less than
+:data:`SPOOL_MEMORY`, and writes the rest to an anonymous temporary file as they are read,
+keeping only their position there; it gives the nodes back in the same order (or any node by its
 index, for grouping them into cells: :mod:`.city.hlod`). Nodes placed by a transform stay in
 memory: they share their geometry with other nodes, which a file would not.
 """
@@ -19,8 +20,15 @@ from collections.abc import Iterator
 from dataclasses import replace
 from typing import IO
 
+import numpy as np
+
 from .model import Node
 from .sinks import writing_temporary
+
+SPOOL_MEMORY = 64 << 20
+"""Bytes of geometry arrays a spool holds in memory before it parks nodes on disk: a district's
+nodes stay (pickling and unpickling them would cost the main process a third of what reading
+them took), a large city's beyond it go to disk."""
 
 
 class NodeSpool:
@@ -28,20 +36,26 @@ class NodeSpool:
     the file is gone when the spool is closed (or its ``with`` block left, or the process
     ends)."""
 
-    def __init__(self) -> None:
+    def __init__(self, memory: int = SPOOL_MEMORY) -> None:
         # the spool owns the file: closed by close() or leaving its ``with`` block
         self._file: IO[bytes] = tempfile.TemporaryFile(prefix="lodconvert-spool-")  # noqa: SIM115
         self._entries: list[Node | int] = []
+        self._room = memory
 
     def add(self, node: Node) -> None:
-        """Park ``node`` (kept in memory when it is placed by a transform); a full temporary
-        folder is one line naming it (:func:`~.sinks.writing`)."""
+        """Park ``node`` (kept in memory when it is placed by a transform, or while there is
+        room); a full temporary folder is one line naming it (:func:`~.sinks.writing`)."""
         if node.transform is not None:
             self._entries.append(node)
             return
-        self._entries.append(self._file.tell())
         text = node.written()
         parked = replace(node, id=text.id, children=[], attributes=text.attributes, cut=text.cut)
+        weight = _geometry_bytes(parked)
+        if weight <= self._room:
+            self._room -= weight
+            self._entries.append(parked)
+            return
+        self._entries.append(self._file.tell())
         with writing_temporary():
             pickle.dump(parked, self._file, protocol=pickle.HIGHEST_PROTOCOL)
 
@@ -71,3 +85,16 @@ class NodeSpool:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _geometry_bytes(node: Node) -> int:
+    """Bytes of the arrays of ``node``'s geometry and source LoDs (each array once)."""
+    arrays = {
+        id(value): value.nbytes
+        for mesh in (node.geometry, *node.lods.values())
+        if mesh is not None
+        for part in mesh.parts
+        for value in vars(part).values()
+        if isinstance(value, np.ndarray)
+    }
+    return sum(arrays.values())
