@@ -172,6 +172,18 @@ def test_a_merged_far_mesh_takes_finer_levels_until_it_is_faithful(tum_items: li
     assert level.count == sum(chain.levels[0].count for chain in chains)
 
 
+def test_a_coarser_tier_simplifies_what_it_replaces(tum_items: list[Item]) -> None:
+    """A 1000 m cell's far mesh is never heavier than what it replaces (its 250 m cells' far
+    levels and its other buildings' LOD1), at F ≥ 0.95: it is simplified from that where the
+    buildings' own levels, simplified again, keep more (measured: 2,127 against 3,221, where
+    the buildings' own gave 5,114)."""
+    tier2 = [c for c in _cells(tum_items) if c.tier == 2]
+    assert {cell.facts["merged_from"] for cell in tier2} == {"finer cells' far levels"}
+    for cell in tier2:
+        assert cell.facts["counts"]["mesh"] < sum(level.count for level in _children(cell))
+        assert cell.facts["silhouette_f"]["mesh"] >= MIN_CELL_F
+
+
 def _merged_vertices(cell: CellChain) -> int:
     return cell.facts["simplified"]["vertices_before"]
 
