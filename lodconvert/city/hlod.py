@@ -21,7 +21,10 @@ therefore **admits** only the members whose reach ``Y_m + |c_m - c|`` lies withi
 distance (a few lone or large buildings with wide plots would otherwise push a whole block's
 switch out by kilometres); the others stay beside it, drawn on their own (a coarser tier may
 admit them in turn). When it would admit none, it holds the one member that reaches its
-coarsest level first: a cell of one. With culling,
+coarsest level first: a cell of one. The members a coarsest cell leaves out, which no cell
+admits, are gathered into a cell of their own (``{cell_id}_beside``) that admits them all: it
+switches where the last of them reaches its coarsest level (the seam rule alone), so that they
+too have a far level. With culling,
 a cell disappears at the formula's distance for the cull exponent, and never before its far
 level has shown.
 
@@ -165,12 +168,14 @@ class CellPlan:
     key: tuple[int, int]
     objects: list[int]
     cells: list[CellPlan]
+    suffix: str = ""
+    """Added to the id (``_beside``: the members a coarsest cell left out, :func:`bake_cell`)."""
 
     @property
     def cell_id(self) -> str:
-        """``cell{tier}_{column}_{row}`` (negative numbers with ``m``)."""
+        """``cell{tier}_{column}_{row}`` (negative numbers with ``m``) and the suffix."""
         col, row = (str(k).replace("-", "m") for k in self.key)
-        return f"cell{self.tier}_{col}_{row}"
+        return f"cell{self.tier}_{col}_{row}{self.suffix}"
 
     def object_indices(self) -> list[int]:
         """The objects of this cell and its finer cells."""
@@ -211,15 +216,26 @@ def bake_cell(
     backend: Backend,
     warn: Warn | None = None,
     limits: Limits = DEFAULT_LIMITS,
+    beside: bool = False,
 ) -> tuple[CellChain | None, list[Member]]:
     """The LOD parent of ``plan`` over those of its baked ``members`` (object chains or finer
     cells) that it admits (see the module docstring), and the members left out of it, to be
-    drawn on their own; no cell when it admits none."""
+    drawn on their own; no cell when it admits none. With ``beside`` (a coarsest cell, whose
+    left-out members no cell would admit), those left out come back as one cell of their own,
+    ``{cell_id}_beside``, that admits all of them: its switch is the seam rule's alone."""
     gamma = max(plan.size / 2.0, 1.0 + 1e-6)
-    admitted = _admitted(members, options, gamma)
+    beside_cell = bool(plan.suffix)  # gathers what no cell admits: admits every member
+    admitted = list(members) if beside_cell else _admitted(members, options, gamma)
     if not admitted:
         return None, members
     members, left_out = admitted, [m for m in members if not any(m is a for a in admitted)]
+    drawn_beside: list[Member] = left_out
+    if beside and left_out:
+        gathered, _ = bake_cell(
+            replace(plan, suffix="_beside"), left_out, options, kind, backend, warn, limits
+        )
+        assert gathered is not None
+        drawn_beside = [gathered]
     objects = [c for m in members for c in (m.objects() if isinstance(m, CellChain) else [m])]
     finest = _merged([_finest_mesh(chain) for chain in objects])
     world = finest.bounds
@@ -255,6 +271,7 @@ def bake_cell(
         "bytes": {name: level_bytes(level) for name, (level, _) in candidates.items()},
         **mesh_facts,
         **({"blocks": blocks} if blocks is not None else {}),
+        **({"beside": True} if beside_cell else {}),
         "members": len(members),
         "objects": len(objects),
         "seam": seam,
@@ -277,7 +294,7 @@ def bake_cell(
         culled=options.cull is not None,
         facts=facts,
     )
-    return cell, left_out
+    return cell, drawn_beside
 
 
 def _choice(candidates: dict[str, tuple[Level, float]], kind: str) -> tuple[str, str]:
