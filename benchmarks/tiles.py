@@ -117,8 +117,8 @@ class Tileset:
 
     tiles: int = 0
     bytes: int = 0
-    far: dict[int, Content] = field(default_factory=dict)
-    children: dict[int, Content] = field(default_factory=dict)
+    far: dict[str, Content] = field(default_factory=dict)
+    children: dict[str, Content] = field(default_factory=dict)
 
 
 def glb_vertices(path: Path) -> int:
@@ -156,7 +156,8 @@ def survey(tileset_json: Path) -> Tileset:
     def walk(node: dict, base: Path) -> None:
         result.tiles += "content" in node and not node["content"]["uri"].endswith(".json")
         children = tiles_of(node, base)
-        tier = node.get("extras", {}).get("tier")
+        extras = node.get("extras", {})
+        tier = tier_name(extras["tier"], extras.get("beside", False)) if "tier" in extras else None
         if tier is not None:
             result.far.setdefault(tier, Content()).add(content(node, base))
             below = result.children.setdefault(tier, Content())
@@ -169,13 +170,19 @@ def survey(tileset_json: Path) -> Tileset:
     return result
 
 
-def silhouette_f(report: dict) -> dict[int, list[float]]:
+def tier_name(tier: int, beside: bool) -> str:
+    """A row's tier: its number, ``beside`` for the cells gathering what no cell admitted."""
+    return f"{tier} beside" if beside else str(tier)
+
+
+def silhouette_f(report: dict) -> dict[str, list[float]]:
     """Per tier, the silhouette F of each cell's kept far level (from the report)."""
-    per_tier: dict[int, list[float]] = {}
+    per_tier: dict[str, list[float]] = {}
     for cell in report.get("hlod", {}).get("cells", []):
         scores = cell.get("silhouette_f", {})
         if cell.get("kind") in scores:
-            per_tier.setdefault(cell["tier"], []).append(scores[cell["kind"]])
+            tier = tier_name(cell["tier"], cell.get("beside", False))
+            per_tier.setdefault(tier, []).append(scores[cell["kind"]])
     return per_tier
 
 
@@ -301,7 +308,7 @@ class Input:
     runs: dict[str, list[Run]]
     tileset: Tileset
     glb_bytes: int
-    f: dict[int, list[float]]
+    f: dict[str, list[float]]
     cesium: dict | None
 
 
@@ -386,7 +393,7 @@ def tier_rows(item: Input) -> list[list[str]]:
         rows.append(
             [
                 item.label,
-                str(tier),
+                tier,
                 str(len(scores)),
                 f"{far.vertices:,} / {below.vertices:,}",
                 f"{far.vertices / below.vertices:.2f}" if below.vertices else "–",
@@ -711,7 +718,8 @@ def benchmark(args: argparse.Namespace) -> str:
             "",
             markdown_table(tier_header, [r for item in items for r in tier_rows(item)], 2),
             "",
-            "Per tier of cells (1: 250 m, 2: 1000 m), the far tiles' content over that of the "
+            "Per tier of cells (1: 250 m, 2: 1000 m; `2 beside`: the cells gathering the "
+            "buildings no cell admitted), the far tiles' content over that of the "
             "tiles they refine into (their children: finer cells' far tiles and the cells' LOD1 "
             "block tiles); vertices + points from the GLBs' POSITION counts, bytes of the GLB "
             "files. F: silhouette F of each cell's kept far level (`hlod.cells` of the report).",

@@ -232,8 +232,9 @@ def _cell_chains(
         order = (i for plan in plans for i in plan.object_indices())
         found = bakery.chains((spool.get(i), radii[i]) for i in order)
 
-        def baked(plan: CellPlan) -> list[LodChain | CellChain]:
-            """The cell of ``plan`` (if it admits any member) and the members it left out."""
+        def baked(plan: CellPlan, top: bool = False) -> list[LodChain | CellChain]:
+            """The cell of ``plan`` (if it admits any member) and the members it left out (a
+            coarsest cell's gathered into a cell of their own)."""
             if plan.tier == 1:
                 members = [m for m in itertools.islice(found, len(plan.objects)) if m is not None]
             else:
@@ -241,12 +242,13 @@ def _cell_chains(
             if not members:
                 return []
             cell, left_out = bake_cell(
-                plan, members, options, hlod.kind, bakery.backend, bakery.warn, bakery.limits
-            )
+                plan, members, options, hlod.kind, bakery.backend, bakery.warn, bakery.limits,
+                beside=top,
+            )  # fmt: skip
             return ([cell] if cell is not None else []) + left_out
 
         for plan in plans:
-            yield from baked(plan)
+            yield from baked(plan, top=True)
 
 
 def merged(scenes: Sequence[Scene]) -> Scene:

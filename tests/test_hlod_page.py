@@ -144,12 +144,16 @@ def test_files_without_cells_have_none(tmp_path: Path) -> None:
 
 def test_page_config_nests_cells_and_places_objects(items: list, written: dict[str, Path]) -> None:
     """Each cell names the cell holding it (``parent``), each object the cell holding it
-    (``cell``): finer cells and objects in coarser cells, and the tower in none."""
+    (``cell``): finer cells and objects in coarser cells, and the tower, which no cell admits,
+    in the cell gathering what its 200 m cell left out."""
     cells = _cells(items)
     index = {cell.cell_id: i for i, cell in enumerate(cells)}
     holder = {_id(m): index[c.cell_id] for c in cells for m in c.members}
     direct = [m for c in cells if c.tier == 2 for m in c.members if isinstance(m, LodChain)]
-    assert "tower" not in holder and direct  # objects beside finer cells, and beside all cells
+    assert direct  # objects beside finer cells, in their coarser cell
+    assert cells[holder["tower"]].facts.get("beside") and cells[holder["tower"]].members == [
+        m for m in _objects(items) if m.object_id == "tower"
+    ]
     configs = {suffix: page_config(written[suffix]) for suffix in ("x3d", "glb")}
     for suffix, config in configs.items():
         assert [c["id"] for c in config["cells"]] == list(index), suffix

@@ -552,3 +552,54 @@ def test_a_district_over_two_utm_zones_is_placed_within_a_millimetre(tmp_path: P
     ours, wanted = np.concatenate(placed), np.concatenate(expected)
     assert cKDTree(wanted).query(ours)[0].max() <= 1e-3
     assert cKDTree(ours).query(wanted)[0].max() <= 1e-3
+
+
+def _drawn(path: Path) -> int:
+    """Vertices + points of a GLB (its primitives' POSITION counts)."""
+    document, blob = read_glb(path)
+    return len(_positions(document, blob))
+
+
+def test_far_tiers_are_a_third_of_their_children_and_buildings_beside_cells_have_one(
+    tmp_path: Path,
+) -> None:
+    """Parents that pay, on TUM Munich in 250 m and 1000 m cells: per tier, the far tiles hold
+    at most a third of the vertices and bytes of the tiles they refine into, every cell at
+    silhouette F ≥ 0.95; the buildings no cell admitted hang below a far tile of their own,
+    lighter than the LOD1 blocks it refines into; the official validator finds no error or
+    warning and ours none."""
+    report_path, tileset = tmp_path / "report.json", tmp_path / "tum" / "tileset.json"
+    flags = ("--hlod", "250,1000", "--workers", "1", "-q", "--report", report_path)
+    result = run(*inputs("tum"), "-o", tileset, *flags)  # all levels, as benchmarks/tiles.py
+    assert result.returncode == 0, result.stderr
+    cells = {cell["id"]: cell for cell in json.loads(report_path.read_text())["hlod"]["cells"]}
+    tiers: dict[str, list[int]] = {}
+    beside = []
+    for tile, _, _ in tiles(json.loads(tileset.read_text())["root"], np.eye(4), tileset):
+        if "cell" not in tile.get("extras", {}):
+            continue
+        cell = cells[tile["extras"]["cell"]]
+        assert cell["silhouette_f"][cell["kind"]] >= 0.95
+        far = tileset.parent / tile["content"]["uri"]
+        below = [tileset.parent / child["content"]["uri"] for child in tile["children"]]
+        counts = [_drawn(far), sum(map(_drawn, below)),
+                  far.stat().st_size, sum(p.stat().st_size for p in below)]  # fmt: skip
+        if tile["extras"].get("beside"):
+            beside.append((tile, cell))
+            assert counts[0] < counts[1] and counts[2] < counts[3]
+            continue
+        sums = tiers.setdefault(str(tile["extras"]["tier"]), [0, 0, 0, 0])
+        sums[:] = [a + b for a, b in zip(sums, counts, strict=True)]
+    assert set(tiers) == {"1", "2"}
+    for far_vertices, vertices, far_bytes, size in tiers.values():
+        assert far_vertices <= vertices / 3 and far_bytes <= size / 3
+    assert beside
+    for tile, cell in beside:
+        assert cell["id"].endswith("_beside") and cell["beside"] and cell["left_out"] == []
+        (blocks,) = tile["children"]  # the buildings' LOD1 blocks, then their finest
+        assert blocks["content"]["uri"].endswith(f"{cell['id']}_coarsest.glb")
+        assert 0 < blocks["geometricError"] < tile["geometricError"]
+        assert blocks["children"][0]["content"]["uri"].endswith(f"{cell['id']}_finest.glb")
+    report = official(tileset, tmp_path / "validator.json")
+    assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]
+    assert validate_file(tileset) == []

@@ -21,7 +21,10 @@ therefore **admits** only the members whose reach ``Y_m + |c_m - c|`` lies withi
 distance (a few lone or large buildings with wide plots would otherwise push a whole block's
 switch out by kilometres); the others stay beside it, drawn on their own (a coarser tier may
 admit them in turn). When it would admit none, it holds the one member that reaches its
-coarsest level first: a cell of one. With culling,
+coarsest level first: a cell of one. The members a coarsest cell leaves out, which no cell
+admits, are gathered into a cell of their own (``{cell_id}_beside``) that admits them all: it
+switches where the last of them reaches its coarsest level (the seam rule alone), so that they
+too have a far level. With culling,
 a cell disappears at the formula's distance for the cull exponent, and never before its far
 level has shown.
 
@@ -36,7 +39,11 @@ no viewpoint above it). The merge is then simplified by quadric edge
 collapse (:func:`~.bake.qem.simplify_within`) to within a tolerance of a few pixels at
 ``Y_cell`` in the reference view (:data:`SIMPLIFY_PX`; a pixel is ``Y_cell / focal_px``
 metres there): the coarsest whose F still reaches :data:`MIN_CELL_F` (or is no lower than the
-merge's), else the merge stays as it is.
+merge's), else the merge stays as it is. A cell of finer cells also merges what it replaces
+(their far meshes, already simplified for their nearer switches, and its other members'
+coarsest mesh levels) and simplifies that the same way, and keeps the lighter of the two that
+reaches :data:`MIN_CELL_F`: the objects' own levels keep every building's corners and open
+borders, so simplified again they left a coarser tier about as heavy as its children.
 ``blocks``: block proxies (:mod:`.blocks`), the objects' footprints unioned into blocks and
 extruded in height bands; of the outline tolerances of :data:`BLOCK_PX` pixels at ``Y_cell``
 and the band depths of :data:`BAND_M`, the proxy with the fewest vertices whose F reaches
@@ -53,6 +60,7 @@ import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -85,6 +93,9 @@ DOWN = -0.99
 FLOOR_MARGIN = 0.01
 """Metres above an object's lowest point within which a face looking down is its floor on the
 ground, left out of far meshes."""
+MERGED_FROM = ("finer cells' far levels", "objects' levels")
+"""What a merged far mesh is made of: what it replaces (a coarser tier's), or its objects'
+levels."""
 BLOCK_PX = (4.0, 2.0, 1.0)
 """Tolerances tried for block proxies' outlines, in pixels at the cell's switch distance."""
 BAND_M = (math.inf, 6.0, 3.0, 1.0)
@@ -92,11 +103,11 @@ BAND_M = (math.inf, 6.0, 3.0, 1.0)
 BLOCK_CLOSING_PX = 1.0
 """Gaps between footprints narrower than this many pixels at the switch distance are closed
 into one block."""
-SIMPLIFY_PX = (4.0, 2.0, 1.0)
+SIMPLIFY_PX = (8.0, 4.0, 2.0, 1.0)
 """Tolerances tried for a far mesh's simplification, coarsest first: pixels at the cell's
 switch distance in the reference view (one pixel at d is 2·d·tan(fov/2)/height_px metres:
-0.77 m at 1 km, 1080 px, 45°), all well within the 16 px screen-space error at which CesiumJS
-refines a tile by default."""
+0.77 m at 1 km, 1080 px, 45°), all within half the 16 px screen-space error at which CesiumJS
+refines a tile by default (a tile's geometric error is 16 px at its switch)."""
 
 Member = LodChain | CellChain
 Warn = Callable[[str], None]
@@ -157,12 +168,14 @@ class CellPlan:
     key: tuple[int, int]
     objects: list[int]
     cells: list[CellPlan]
+    suffix: str = ""
+    """Added to the id (``_beside``: the members a coarsest cell left out, :func:`bake_cell`)."""
 
     @property
     def cell_id(self) -> str:
-        """``cell{tier}_{column}_{row}`` (negative numbers with ``m``)."""
+        """``cell{tier}_{column}_{row}`` (negative numbers with ``m``) and the suffix."""
         col, row = (str(k).replace("-", "m") for k in self.key)
-        return f"cell{self.tier}_{col}_{row}"
+        return f"cell{self.tier}_{col}_{row}{self.suffix}"
 
     def object_indices(self) -> list[int]:
         """The objects of this cell and its finer cells."""
@@ -203,15 +216,26 @@ def bake_cell(
     backend: Backend,
     warn: Warn | None = None,
     limits: Limits = DEFAULT_LIMITS,
+    beside: bool = False,
 ) -> tuple[CellChain | None, list[Member]]:
     """The LOD parent of ``plan`` over those of its baked ``members`` (object chains or finer
     cells) that it admits (see the module docstring), and the members left out of it, to be
-    drawn on their own; no cell when it admits none."""
+    drawn on their own; no cell when it admits none. With ``beside`` (a coarsest cell, whose
+    left-out members no cell would admit), those left out come back as one cell of their own,
+    ``{cell_id}_beside``, that admits all of them: its switch is the seam rule's alone."""
     gamma = max(plan.size / 2.0, 1.0 + 1e-6)
-    admitted = _admitted(members, options, gamma)
+    beside_cell = bool(plan.suffix)  # gathers what no cell admits: admits every member
+    admitted = list(members) if beside_cell else _admitted(members, options, gamma)
     if not admitted:
         return None, members
     members, left_out = admitted, [m for m in members if not any(m is a for a in admitted)]
+    drawn_beside: list[Member] = left_out
+    if beside and left_out:
+        gathered, _ = bake_cell(
+            replace(plan, suffix="_beside"), left_out, options, kind, backend, warn, limits
+        )
+        assert gathered is not None
+        drawn_beside = [gathered]
     objects = [c for m in members for c in (m.objects() if isinstance(m, CellChain) else [m])]
     finest = _merged([_finest_mesh(chain) for chain in objects])
     world = finest.bounds
@@ -231,10 +255,9 @@ def bake_cell(
         if found is not None:
             level, f, blocks = found
             candidates["blocks"] = (level, f)
-    finer, simplified = 0, None
+    mesh_facts: dict[str, Any] = {"mesh_levels_finer": 0}
     if kind in ("mesh", "auto") or not candidates:
-        merged, f, finer = _merged_level(objects, origin, source, switch, options)
-        level, f, simplified = _simplified(merged, f, source, switch, options)
+        level, f, mesh_facts = _mesh_level(members, objects, origin, source, switch, options)
         candidates["mesh"] = (level, f)
     chosen, why = _choice(candidates, kind)
     cutoffs = [switch]
@@ -246,9 +269,9 @@ def bake_cell(
         "silhouette_f": {name: round(f, 4) for name, (_, f) in candidates.items()},
         "counts": {name: level.count for name, (level, _) in candidates.items()},
         "bytes": {name: level_bytes(level) for name, (level, _) in candidates.items()},
-        "mesh_levels_finer": finer,
-        **({"simplified": simplified} if simplified is not None else {}),
+        **mesh_facts,
         **({"blocks": blocks} if blocks is not None else {}),
+        **({"beside": True} if beside_cell else {}),
         "members": len(members),
         "objects": len(objects),
         "seam": seam,
@@ -271,7 +294,7 @@ def bake_cell(
         culled=options.cull is not None,
         facts=facts,
     )
-    return cell, left_out
+    return cell, drawn_beside
 
 
 def _choice(candidates: dict[str, tuple[Level, float]], kind: str) -> tuple[str, str]:
@@ -312,6 +335,40 @@ def _finest_mesh(chain: LodChain) -> Mesh:
     return _placed(chain, level.mesh)
 
 
+def _mesh_level(
+    members: list[Member],
+    objects: list[LodChain],
+    origin: np.ndarray,
+    source: Mesh,
+    distance: float,
+    options: ChainOptions,
+) -> tuple[Level, float, dict[str, Any]]:
+    """A cell's simplified merged far mesh (:func:`_simplified`), from what it replaces where
+    it has finer cells (:func:`_far_meshes` of every member merged, kept where its silhouette
+    F against ``source`` from ``distance`` reaches :data:`MIN_CELL_F`) and from its objects'
+    levels (:func:`_merged_level`): the one with fewer vertices of those whose F reaches it,
+    else the most faithful. Its level, F and facts (what it was merged from, the levels finer
+    than the objects' coarsest it took, the simplification)."""
+    merges = []
+    if any(isinstance(m, CellChain) and m.far.mesh is not None for m in members):
+        parts = [mesh for m in members for mesh in _far_meshes(m)]
+        level = Level(name="FAR", kind="merged", mesh=_one_part(_merged(parts).translated(-origin)))
+        f = _silhouette_f(source, level, distance, options)
+        if f >= MIN_CELL_F:
+            merges.append((MERGED_FROM[0], 0, level, f))
+    level, f, finer = _merged_level(objects, origin, source, distance, options)
+    merges.append((MERGED_FROM[1], finer, level, f))
+    made = []
+    for made_from, finer, merged, f in merges:
+        level, after, simplified = _simplified(merged, f, source, distance, options)
+        facts = {"merged_from": made_from, "mesh_levels_finer": finer, "simplified": simplified}
+        made.append((level, after, facts))
+    faithful = [m for m in made if m[1] >= MIN_CELL_F]
+    if faithful:
+        return min(faithful, key=lambda m: m[0].count)
+    return max(made, key=lambda m: m[1])
+
+
 def _merged_level(
     objects: list[LodChain],
     origin: np.ndarray,
@@ -340,6 +397,17 @@ def _merged_level(
         if f >= MIN_CELL_F:
             break
     return level, f, finer
+
+
+def _far_meshes(member: Member) -> list[Mesh]:
+    """A member's far content in scene coordinates: a finer cell's far mesh (its objects'
+    coarsest mesh levels where it is points), an object's coarsest mesh level, without
+    floors."""
+    if isinstance(member, CellChain) and member.far.mesh is not None:
+        return [member.far.mesh.translated(member.origin)]
+    chains = member.objects() if isinstance(member, CellChain) else [member]
+    coarsest = (next(lv.mesh for lv in reversed(c.levels) if lv.mesh is not None) for c in chains)
+    return [_floorless(_placed(c, mesh)) for c, mesh in zip(chains, coarsest, strict=True)]
 
 
 def _simplified(

@@ -97,7 +97,7 @@ def _far(tileset: Path) -> float:
     distances in the test's view, from the nearest side of the root's box (CesiumJS measures
     to a tile's volume)."""
     root = json.loads(tileset.read_text())["root"]
-    cells = [c for c in root["children"] if "_beside_" not in c["content"]["uri"]]
+    cells = [c for c in root["children"] if "_beside" not in c["content"]["uri"]]
     mean = math.sqrt(root["geometricError"] * max(c["geometricError"] for c in cells))
     half_axes = np.asarray(root["boundingVolume"]["box"][3:]).reshape(3, 3)
     return mean * VIEWPORT[1] / (16 * SSE_DENOMINATOR) + float(
@@ -157,7 +157,7 @@ def test_cesium_shows_point_far_levels_of_a_small_city(
     overview, seen_far = out["result"]["cameras"]
     assert overview["failed"] == [] and seen_far["failed"] == [], message
     assert overview["tilesSelected"] > 0 and seen_far["tilesSelected"] > 0, message
-    cells = [t for t in seen_far["tiles"] if "_beside_" not in t["uri"]]
+    cells = [t for t in seen_far["tiles"] if "_beside" not in t["uri"]]
     assert cells and {t["kind"] for t in cells} == {"far level"}, message
     for uri in {t["uri"] for t in cells}:
         document, _ = read_glb(tileset.parent / uri)

@@ -5,10 +5,12 @@ with ``--workers``); results come back in order, so the tree is the same for any
 In a staging folder an interrupted run of the same inputs and options left, each tile whose
 file is whole and of the same key is kept (:mod:`.task`).
 
-Tree: the root (no content) holds one tile per coarsest cell and, beside them, the objects no
-cell admitted. A cell's tile shows its far level; its children are its finer cells' tiles and,
-for the objects among its members, one tile of their coarsest mesh levels whose child, a leaf,
-holds their finest. Refinement is ``REPLACE`` everywhere.
+Tree: the root (no content) holds one tile per coarsest cell and, beside each, the tile of the
+cell gathering the objects it left out, which no cell admitted (:func:`~.city.hlod.bake_cell`;
+objects given without a cell get tiles of their own there). A cell's tile shows its far level;
+its children are its finer cells' tiles and, for the objects among its members, one tile of
+their coarsest mesh levels whose child, a leaf, holds their finest. Refinement is ``REPLACE``
+everywhere.
 
 geometricError: a tile whose content switches to its children at distance d has
 GE = sse·d / focal_px (focal_px = h / (2·tan(fov/2)) of the reference view), so that CesiumJS,
@@ -178,6 +180,8 @@ class TilesetWriter:
         """A cell's tile: its far level, switching to ``children`` at its first cutoff."""
         far = cell.far
         extras: dict[str, Any] = {"cell": cell.cell_id, "tier": cell.tier, "kind": far.kind}
+        if cell.facts.get("beside"):
+            extras["beside"] = True
         error = self.error(cell.cutoffs[0])
         if far.points is not None:
             tile = self._tile(cell.cell_id, error, far.points.positions + cell.origin,
