@@ -548,7 +548,7 @@ def _executor(run: RunOptions, backend: Backend, objects: int | None) -> Executo
     if run.scheduler is not None:
         from .dask_executor import DaskExecutor
 
-        return DaskExecutor(run.scheduler, backend.name)
+        return DaskExecutor(run.scheduler, backend.name, run.progress)
     if run.workers == 1 or objects == 1:
         return SerialExecutor(backend, run.progress)
     return PoolExecutor(run.workers, backend.name, run.progress)

@@ -1,7 +1,8 @@
 """Baking on a dask.distributed cluster (``--scheduler ADDRESS``): the bytes of one worker on a
-2-worker ``LocalCluster``, broken objects reported the same, a killed worker's task run again
-and then reported, an unreachable scheduler or a bad scheduler file failing at once, an
-interrupted run cancelling its tasks and leaving nothing."""
+2-worker ``LocalCluster``, the workers' progress told as with one worker, broken objects
+reported the same, a task over dask's 10 MB sent without its warning, a killed worker's task
+run again and then reported, an unreachable scheduler or a bad scheduler file failing at once,
+an interrupted run cancelling its tasks and leaving nothing."""
 
 from __future__ import annotations
 
@@ -90,6 +91,26 @@ def test_a_cluster_writes_the_bytes_of_one_worker(
     assert cluster[0] == one[0]
     assert _untimed(cluster[1]) == _untimed(one[1])
     assert _messages(cluster[2]) == _messages(one[2])
+
+
+def _baking_lines(stderr: str) -> list[str]:
+    """What ``-v`` told of each level baked (without the time it was told at)."""
+    return [line.split(maxsplit=1)[1] for line in stderr.splitlines() if ": baking " in line]
+
+
+def test_the_workers_progress_is_told_as_with_one_worker(address: str, tmp_path: Path) -> None:
+    """``-v`` tells each level of points the cluster's workers bake, in the order of one
+    worker."""
+    source = tmp_path / "sphere.ply"
+    trimesh.creation.icosphere(subdivisions=3).export(source)
+    told = {}
+    for where in (("--workers", "1"), ("--scheduler", address)):
+        out = tmp_path / f"{where[0][2:]}.x3d"
+        run = _lodconvert(source, source, "-o", out, "-v", *where)
+        assert run.returncode == 0, run.stderr
+        told[where[0]] = _baking_lines(run.stderr)
+    assert told["--scheduler"] == told["--workers"]
+    assert told["--workers"] == [f"sphere: baking LOD{i}" for i in (3, 2, 1)] * 2
 
 
 def _closed_port() -> int:
@@ -195,6 +216,18 @@ def test_a_broken_object_in_a_batch_is_reported_as_with_one_worker(address: str)
         == one[2]
         == [{"id": "obj5", "reason": "obj5: has NaN or infinite vertex coordinates"}]
     )
+
+
+def test_a_task_over_ten_megabytes_is_sent_without_a_warning(
+    address: str, recwarn: pytest.WarningsRecorder
+) -> None:
+    """A task holding more than dask's 10 MB for a graph (a long run of members, a large
+    CityJSON file's vertices) is sent once, as it is: dask's advice is not printed."""
+    scene = _scene()
+    scene.nodes[2].attributes["notes"] = "x" * (11 << 20)
+    chains, _, skipped = _baked(scene, DaskExecutor(address, "numpy"))
+    assert len(chains) == 8 and skipped == []
+    assert [str(w.message) for w in recwarn if "large graph" in str(w.message)] == []
 
 
 def _kill_first_taker(marker: str) -> None:
