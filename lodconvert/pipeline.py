@@ -445,7 +445,8 @@ def _read_stage(
 ) -> tuple[Scene, dict[str, Any], Backend, Executor]:
     """The ``read`` stage: the scene of ``inputs`` and the report's ``crs``, the baker and the
     executor, entered on ``stack`` (which reads too, where the reader spreads its work)."""
-    spread = {"spread": run.workers > 1 and len(inputs) == 1 and _read_through(run)}
+    others = run.workers > 1 or run.scheduler is not None  # processes other than this one
+    spread = {"spread": others and len(inputs) == 1 and _read_through(run)}
     baker = get_backend(run.backend)
     # a cluster is reached first: an unreachable scheduler fails the run before any reading
     executor = stack.enter_context(_executor(run, baker, None)) if run.scheduler else None
@@ -527,10 +528,11 @@ def _stage_report(sink: FileSink, report: dict[str, Any]) -> None:
 
 def _check_scheduler(scheduler: str, workers: int) -> None:
     """:class:`UsageError` unless dask.distributed is installed, ``scheduler`` is an address or
-    a scheduler file, and ``workers`` is 1 (the cluster's workers bake)."""
+    a scheduler file, and ``workers`` is 1 (the cluster's workers read and bake)."""
     if workers != 1:
         raise UsageError(
-            "is for this machine's processes; with a dask scheduler, its workers bake", "workers"
+            "is for this machine's processes; with a dask scheduler, its workers read and bake",
+            "workers",
         )
     try:
         from .dask_executor import scheduler_address
