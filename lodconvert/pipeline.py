@@ -150,7 +150,8 @@ class _Bakery:
                     seen.add(key)
                     yield node, self._options(radius)
 
-        tasks = self.clock.iterate("plan", batches(sent(), per_object, self.limits, self.plan_only))
+        made = batches(sent(), per_object, self.limits, self.plan_only, self.executor.task_seconds)
+        tasks = self.clock.iterate("plan", made)
         for result in self.clock.iterate("execute", self.executor.results(tasks)):
             per_object[0] = result.seconds / len(result.outcomes)
             for outcome in result.outcomes:

@@ -26,9 +26,10 @@ from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
 from lodconvert.errors import LodConvertError
 from lodconvert.io.geometry_checks import tally_of
+from lodconvert.limits import DEFAULT_LIMITS
 from lodconvert.model import Scene
 from lodconvert.pipeline import iter_chains
-from lodconvert.tasks import Executor, SerialExecutor
+from lodconvert.tasks import Executor, PoolExecutor, SerialExecutor, batches
 
 from .conftest import ROOT, SHARED, shared_data
 from .fuzz import hostile_citygml
@@ -276,6 +277,16 @@ def test_a_broken_object_in_a_batch_is_reported_as_with_one_worker(address: str)
         == one[2]
         == [{"id": "obj5", "reason": "obj5: has NaN or infinite vertex coordinates"}]
     )
+
+
+def test_a_cluster_is_sent_batches_of_three_times_the_work_of_a_pools() -> None:
+    """A dask task costs milliseconds of CPU (a process pool's a tenth of one), so the
+    cluster's batches hold 0.3 s of work, not 0.1 s: a third as many tasks."""
+    items = [(node, ChainOptions()) for node in _scene().nodes] * 8
+    per_object = [1 / 64]  # seconds an object took so far
+    for executor, sizes in ((DaskExecutor, [19, 19, 19, 7]), (PoolExecutor, [6] * 10 + [4])):
+        made = batches(items, per_object, DEFAULT_LIMITS, seconds=executor.task_seconds)
+        assert [len(task.items) for task in made] == sizes
 
 
 def test_a_task_over_ten_megabytes_is_sent_without_a_warning(
