@@ -148,11 +148,12 @@ def _tree_rss(root: psutil.Process) -> int:
 
 
 def output_digest(output: Path) -> bytes:
-    """SHA-256 of an output file; of a tileset (``DIR/tileset.json``), of every file of DIR,
-    each preceded by its path in DIR."""
+    """SHA-256 of an output file (not of its name, which differs between set-ups); of a
+    tileset (``DIR/tileset.json``), of every file of DIR, each preceded by its path in DIR."""
+    if output.name != "tileset.json":
+        return hashlib.sha256(output.read_bytes()).digest()
     digest = hashlib.sha256()
-    files = sorted(p for p in output.parent.rglob("*") if p.is_file())
-    for path in files if output.name == "tileset.json" else [output]:
+    for path in sorted(p for p in output.parent.rglob("*") if p.is_file()):
         digest.update(str(path.relative_to(output.parent)).encode())
         digest.update(path.read_bytes())
     return digest.digest()

@@ -2,12 +2,14 @@
 submits each task to the scheduler, with a bounded window of tasks in flight, and gives the
 results back in submission order, as :class:`~.tasks.PoolExecutor` does.
 
-A task travels as data (a batch's nodes and options, pickled here: the scheduler passes the
-bytes on without reading them), so workers on other machines need no shared file system. Each
-worker thread makes its backend once, at its first task (a GL context only inside the worker).
-The scheduler re-runs a task whose worker died (dask's ``distributed.scheduler.allowed-failures``
-times); once it gives up, the task's objects are reported as failed and the run goes on.
-Progress messages of the workers are not forwarded.
+A task travels as data (a batch's nodes and options, or a run of a city's members as bytes,
+pickled here: the scheduler passes the bytes on without reading them), so workers on other
+machines need no shared file system. Each worker thread makes its backend once, at its first
+task (a GL context only inside the worker). The scheduler re-runs a task whose worker died
+(dask's ``distributed.scheduler.allowed-failures`` times); once it gives up, the task fails as
+the task says (a batch's objects reported, a run of members read in the main process) and the
+run goes on. What a task tells of its progress comes back with its result, and is told here
+when that result is taken: no message of its own crosses the cluster.
 
 Needs the ``dask`` extra (``pip install 'lodconvert[dask]'``); :mod:`.tasks` does not.
 """
@@ -19,6 +21,7 @@ import pickle
 import threading
 import time
 import uuid
+import warnings
 from collections import deque
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -27,6 +30,7 @@ from typing import Self
 from distributed import Client, Future, KilledWorker
 
 from .bake import Backend, get_backend
+from .chain import Progress
 from .errors import LodConvertError, UsageError
 from .tasks import DEPTH, BakeResult, BakeTask, Executor
 
@@ -36,6 +40,9 @@ WORKERS_SECONDS = 20.0
 """How long the run waits for a first worker, and for one to come back once all are gone."""
 POLL_SECONDS = 2.0
 """How often a wait for a result looks whether the cluster still has workers."""
+TASK_SECONDS = 0.3
+"""Work a batch of objects is sized for: a task costs the scheduler, the worker and this
+process about 6 ms of CPU in all (2 workers on 2 busy cores), so 2 % of its work."""
 
 _local = threading.local()
 
@@ -72,21 +79,33 @@ def _backend(name: str) -> Backend:
     return made[name]
 
 
-def _run(payload: bytes, backend_name: str) -> BakeResult:
-    """Run the pickled task ``payload`` on a worker, with the worker thread's backend."""
+def _run(payload: bytes, backend_name: str) -> tuple[BakeResult, tuple[str, ...]]:
+    """Run the pickled task ``payload`` on a worker, with the worker thread's backend; its
+    result and what it told of its progress, in order."""
     task: BakeTask = pickle.loads(payload)
-    return task.run(_backend(backend_name))
+    heard: list[str] = []
+    return task.run(_backend(backend_name), heard.append), tuple(heard)
 
 
 class DaskExecutor(Executor):
     """Tasks run by the workers of the dask scheduler at ``scheduler`` (an address or a
-    scheduler file), each baking with its own backend of ``backend_name``; at most ``window``
-    tasks (default: :data:`~.tasks.DEPTH` + 1 per worker thread) are in flight or waiting to be
+    scheduler file), each baking with its own backend of ``backend_name``; ``progress`` hears
+    what each task told of its progress when its result is taken; at most ``window`` tasks
+    (default: :data:`~.tasks.DEPTH` + 1 per worker thread) are in flight or waiting to be
     consumed."""
 
-    def __init__(self, scheduler: str, backend_name: str, window: int | None = None) -> None:
+    task_seconds = TASK_SECONDS
+
+    def __init__(
+        self,
+        scheduler: str,
+        backend_name: str,
+        progress: Progress | None = None,
+        window: int | None = None,
+    ) -> None:
         self.scheduler = scheduler
         self.backend_name = backend_name
+        self.progress = progress
         self.window = window
         self.address = scheduler
         self._client: Client | None = None
@@ -138,27 +157,31 @@ class DaskExecutor(Executor):
 
     def _submitted(self, client: Client, task: BakeTask, key: str) -> Future | None:
         """``task`` pickled and submitted under ``key``; ``None`` for a task that cannot be
-        pickled (its data nested too deep), which is run here when its turn comes."""
+        pickled (its data nested too deep), which is run here when its turn comes. A task's
+        data is sent once, in its task, so dask's advice against large graphs (over 10 MB: a
+        run of members, a CityJSON file's vertices) is not given."""
         try:
             payload = pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL)
         except (RecursionError, pickle.PicklingError):
             return None
-        return client.submit(_run, payload, self.backend_name, key=key)
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "Sending large graph", UserWarning)
+            return client.submit(_run, payload, self.backend_name, key=key)
 
     def _run_here(self, task: BakeTask) -> BakeResult:
         """Run ``task`` in this process (with a backend of the cluster's kind, made once)."""
         if self._backend is None:
             self._backend = get_backend(self.backend_name)
-        return task.run(self._backend)
+        return task.run(self._backend, self.progress)
 
     def _result(self, task: BakeTask, future: Future) -> BakeResult:
         """The result of ``task`` from ``future``: waited for while the cluster has workers,
         the task's objects failed when its workers died, an error when the scheduler is lost or
-        left without workers."""
+        left without workers; what the task told of its progress is told to ``progress``."""
         since = None
         while True:
             try:
-                return future.result(timeout=POLL_SECONDS)
+                result, heard = future.result(timeout=POLL_SECONDS)
             except KilledWorker as exc:
                 tries = exc.allowed_failures + 1
                 return task.failed(f"the dask workers converting it died ({tries} tries)")
@@ -166,10 +189,15 @@ class DaskExecutor(Executor):
                 if future.done():
                     raise
                 since = self._still_staffed(since)
+                continue
             except Exception:
                 if future.cancelled():  # by the client, when the scheduler is gone
                     raise LodConvertError("lost the dask scheduler", self.address) from None
                 raise
+            if self.progress is not None:
+                for text in heard:
+                    self.progress(text)
+            return result
 
     def _still_staffed(self, since: float | None) -> float | None:
         """``None`` when the cluster has workers; else since when it has none (``since``, or

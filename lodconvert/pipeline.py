@@ -155,8 +155,10 @@ class _Bakery:
                     yield node, self._options(radius)
 
         formatter = self.pieces.formatter if self.pieces is not None else None
-        tasks = batches(sent(), per_object, self.limits, self.plan_only, formatter)
-        tasks = self.clock.iterate("plan", tasks)
+        made = batches(
+            sent(), per_object, self.limits, self.plan_only, formatter, self.executor.task_seconds
+        )
+        tasks = self.clock.iterate("plan", made)
         for result in self.clock.iterate("execute", self.executor.results(tasks)):
             per_object[0] = result.seconds / len(result.outcomes)
             for outcome in result.outcomes:
@@ -456,7 +458,8 @@ def _read_stage(
 ) -> tuple[Scene, dict[str, Any], Backend, Executor]:
     """The ``read`` stage: the scene of ``inputs`` and the report's ``crs``, the baker and the
     executor, entered on ``stack`` (which reads too, where the reader spreads its work)."""
-    spread = {"spread": run.workers > 1 and len(inputs) == 1 and _read_through(run)}
+    others = run.workers > 1 or run.scheduler is not None  # processes other than this one
+    spread = {"spread": others and len(inputs) == 1 and _read_through(run)}
     baker = get_backend(run.backend)
     # a cluster is reached first: an unreachable scheduler fails the run before any reading
     executor = stack.enter_context(_executor(run, baker, None)) if run.scheduler else None
@@ -544,10 +547,11 @@ def _stage_report(sink: FileSink, report: dict[str, Any]) -> None:
 
 def _check_scheduler(scheduler: str, workers: int) -> None:
     """:class:`UsageError` unless dask.distributed is installed, ``scheduler`` is an address or
-    a scheduler file, and ``workers`` is 1 (the cluster's workers bake)."""
+    a scheduler file, and ``workers`` is 1 (the cluster's workers read and bake)."""
     if workers != 1:
         raise UsageError(
-            "is for this machine's processes; with a dask scheduler, its workers bake", "workers"
+            "is for this machine's processes; with a dask scheduler, its workers read and bake",
+            "workers",
         )
     try:
         from .dask_executor import scheduler_address
@@ -565,7 +569,7 @@ def _executor(run: RunOptions, backend: Backend, objects: int | None) -> Executo
     if run.scheduler is not None:
         from .dask_executor import DaskExecutor
 
-        return DaskExecutor(run.scheduler, backend.name)
+        return DaskExecutor(run.scheduler, backend.name, run.progress)
     if run.workers == 1 or objects == 1:
         return SerialExecutor(backend, run.progress)
     return PoolExecutor(run.workers, backend.name, run.progress)

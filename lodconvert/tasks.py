@@ -115,6 +115,9 @@ class Executor:
     """Runs tasks; their results come back in submission order. Use as a context manager:
     leaving it stops whatever it started."""
 
+    task_seconds = TASK_SECONDS
+    """Work a batch of objects is sized for, so that what running a task costs stays small."""
+
     def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
         """The result of each of ``tasks``, in order (tasks are taken as they are needed)."""
         raise NotImplementedError
@@ -383,14 +386,15 @@ def batches(
     limits: Limits,
     plan_only: bool = False,
     formatter: Formatter | None = None,
+    seconds: float = TASK_SECONDS,
 ) -> Iterator[BakeTask]:
-    """``items`` as tasks of about :data:`TASK_SECONDS` of work each, judged by ``per_object``
-    (a one-item list: seconds an object takes so far, updated by the caller; 0: not known yet,
-    a task of one object)."""  # fmt: skip
+    """``items`` as tasks of about ``seconds`` of work each, judged by ``per_object`` (a
+    one-item list: seconds an object takes so far, updated by the caller; 0: not known yet, a
+    task of one object)."""  # fmt: skip
     batch: list[tuple[Node, ChainOptions]] = []
     for item in items:
         batch.append(item)
-        wanted = int(TASK_SECONDS / per_object[0]) if per_object[0] > 0 else 1
+        wanted = int(seconds / per_object[0]) if per_object[0] > 0 else 1
         if len(batch) >= max(1, min(MAX_BATCH, wanted)):
             yield BakeTask(tuple(batch), limits, plan_only, formatter)
             batch = []

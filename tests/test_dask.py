@@ -1,7 +1,9 @@
-"""Baking on a dask.distributed cluster (``--scheduler ADDRESS``): the bytes of one worker on a
-2-worker ``LocalCluster``, broken objects reported the same, a killed worker's task run again
-and then reported, an unreachable scheduler or a bad scheduler file failing at once, an
-interrupted run cancelling its tasks and leaving nothing."""
+"""Reading and baking on a dask.distributed cluster (``--scheduler ADDRESS``): the bytes of one
+worker on a 2-worker ``LocalCluster``, a city read by its workers as in one process, the
+workers' progress told as with one worker, broken objects reported the same, a task over
+dask's 10 MB sent without its warning, a killed worker's task run again and then reported, an
+unreachable scheduler or a bad scheduler file failing at once, an interrupted run cancelling
+its tasks and leaving nothing."""
 
 from __future__ import annotations
 
@@ -13,7 +15,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -23,12 +25,21 @@ import trimesh
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
 from lodconvert.errors import LodConvertError
+from lodconvert.io.geometry_checks import tally_of
+from lodconvert.limits import DEFAULT_LIMITS
 from lodconvert.model import Scene
 from lodconvert.pipeline import iter_chains
-from lodconvert.tasks import Executor, SerialExecutor
+from lodconvert.tasks import Executor, PoolExecutor, SerialExecutor, batches
 
 from .conftest import ROOT, SHARED, shared_data
 from .fuzz import hostile_citygml
+from .test_parallel_reading import (
+    _read,
+    _town,
+    one_member_a_task,  # noqa: F401  (a fixture)
+    ten_lines,
+    ten_objects,
+)
 from .test_workers import TUM, _KillsItsWorker, _lodconvert, _messages, _scene, _untimed
 
 pytestmark = pytest.mark.slow  # a LocalCluster per module, and connection timeouts
@@ -69,27 +80,98 @@ def address(cluster: Any) -> str:
 
 
 CASES = [
-    pytest.param(CITYJSON, ".x3d", (), id="cityjson-x3d"),
-    pytest.param(TUM, ".glb", (), id="tum-glb"),
-    pytest.param(TUM, ".x3d", ("--hlod", "250", "--switching", "prism"), id="tum-hlod-prism"),
+    pytest.param(CITYJSON, ".x3d", (), "objectstask", id="cityjson-x3d"),
+    pytest.param(TUM, ".glb", (), "readtask", id="tum-glb"),
+    pytest.param(
+        TUM, ".x3d", ("--hlod", "250", "--switching", "prism"), "readtask", id="tum-hlod-prism"
+    ),
 ]
 
 
-@pytest.mark.parametrize(("source", "suffix", "options"), CASES)
+@pytest.mark.parametrize(("source", "suffix", "options", "reads"), CASES)
 def test_a_cluster_writes_the_bytes_of_one_worker(
-    source: Path, suffix: str, options: tuple[str, ...], address: str, tmp_path: Path
+    source: Path, suffix: str, options: tuple[str, ...], reads: str, address: str, tmp_path: Path
 ) -> None:
+    """The city is read on the cluster too (tasks of ``reads``), with the same outcome."""
     shared_data(source)
     runs = {}
-    for where in (("--workers", "1"), ("--scheduler", address)):
-        out, report = tmp_path / f"{where[0][2:]}{suffix}", tmp_path / f"{where[0][2:]}.json"
-        run = _lodconvert(source, "-o", out, "--report", report, *where, *options)
-        assert run.returncode == 0, run.stderr
-        runs[where[0]] = (out.read_bytes(), json.loads(report.read_text()), run.stderr)
+    with distributed.Client(address, set_as_default=False) as client:
+        client.get_task_stream()  # the scheduler records the tasks run from now on
+        started = time.time()
+        for where in (("--workers", "1"), ("--scheduler", address)):
+            out, report = tmp_path / f"{where[0][2:]}{suffix}", tmp_path / f"{where[0][2:]}.json"
+            run = _lodconvert(source, "-o", out, "--report", report, *where, *options)
+            assert run.returncode == 0, run.stderr
+            runs[where[0]] = (out.read_bytes(), json.loads(report.read_text()), run.stderr)
+        ran = {t["key"].split("-")[1] for t in client.get_task_stream(start=started)}
     one, cluster = runs["--workers"], runs["--scheduler"]
     assert cluster[0] == one[0]
     assert _untimed(cluster[1]) == _untimed(one[1])
     assert _messages(cluster[2]) == _messages(one[2])
+    assert ran == {reads, "baketask"}  # the kinds of task in their keys
+
+
+def _baking_lines(stderr: str) -> list[str]:
+    """What ``-v`` told of each level baked (without the time it was told at)."""
+    return [line.split(maxsplit=1)[1] for line in stderr.splitlines() if ": baking " in line]
+
+
+def test_the_workers_progress_is_told_as_with_one_worker(address: str, tmp_path: Path) -> None:
+    """``-v`` tells each level of points the cluster's workers bake, in the order of one
+    worker."""
+    source = tmp_path / "sphere.ply"
+    trimesh.creation.icosphere(subdivisions=3).export(source)
+    told = {}
+    for where in (("--workers", "1"), ("--scheduler", address)):
+        out = tmp_path / f"{where[0][2:]}.x3d"
+        run = _lodconvert(source, source, "-o", out, "-v", *where)
+        assert run.returncode == 0, run.stderr
+        told[where[0]] = _baking_lines(run.stderr)
+    assert told["--scheduler"] == told["--workers"]
+    assert told["--workers"] == [f"sphere: baking LOD{i}" for i in (3, 2, 1)] * 2
+
+
+def _write_town(folder: Path) -> Path:
+    """The town of :mod:`.test_parallel_reading` as a file in ``folder``."""
+    path = folder / "town.gml"
+    path.write_text(_town())
+    return path
+
+
+CITIES = {"town.gml": _write_town, "ten.city.jsonl": ten_lines, "ten.city.json": ten_objects}
+
+
+def _cluster(address: str) -> Callable[[], Executor]:
+    return lambda: DaskExecutor(address, "numpy")
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+@pytest.mark.parametrize("name", list(CITIES))
+def test_a_city_read_by_the_cluster_is_the_city_read_in_one_process(
+    name: str, address: str, tmp_path: Path
+) -> None:
+    """CityGML members, CityJSONSeq lines, CityJSON objects, each a task: the same nodes, ids
+    and skipped objects; the town's implicit geometry is read in the main process."""
+    path = CITIES[name](tmp_path)
+    one, one_facts, _, _ = _read(path, spread=False)
+    two, two_facts, results, told = _read(path, spread=True, workers=_cluster(address))
+    assert two_facts == one_facts
+    assert tally_of(two).skipped == tally_of(one).skipped != []
+    assert sum(sum(node is not None for node in result.nodes) for result in results) >= 8
+    implicit = [f"{path}: implicit geometry is read in the main process"]
+    assert told == (implicit if name.endswith(".gml") else [])
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_run_of_members_whose_workers_die_is_read_in_the_main_process(
+    address: str, tmp_path: Path
+) -> None:
+    path = _write_town(tmp_path)
+    _, one_facts, _, _ = _read(path, spread=False)
+    _, two_facts, _, told = _read(path, spread=True, killer=1, workers=_cluster(address))
+    assert two_facts == one_facts
+    died = f"{path}: the dask workers converting it died (2 tries); its run is read in the main"
+    assert any(line.startswith(died) for line in told)
 
 
 def _closed_port() -> int:
@@ -195,6 +277,28 @@ def test_a_broken_object_in_a_batch_is_reported_as_with_one_worker(address: str)
         == one[2]
         == [{"id": "obj5", "reason": "obj5: has NaN or infinite vertex coordinates"}]
     )
+
+
+def test_a_cluster_is_sent_batches_of_three_times_the_work_of_a_pools() -> None:
+    """A dask task costs milliseconds of CPU (a process pool's a tenth of one), so the
+    cluster's batches hold 0.3 s of work, not 0.1 s: a third as many tasks."""
+    items = [(node, ChainOptions()) for node in _scene().nodes] * 8
+    per_object = [1 / 64]  # seconds an object took so far
+    for executor, sizes in ((DaskExecutor, [19, 19, 19, 7]), (PoolExecutor, [6] * 10 + [4])):
+        made = batches(items, per_object, DEFAULT_LIMITS, seconds=executor.task_seconds)
+        assert [len(task.items) for task in made] == sizes
+
+
+def test_a_task_over_ten_megabytes_is_sent_without_a_warning(
+    address: str, recwarn: pytest.WarningsRecorder
+) -> None:
+    """A task holding more than dask's 10 MB for a graph (a long run of members, a large
+    CityJSON file's vertices) is sent once, as it is: dask's advice is not printed."""
+    scene = _scene()
+    scene.nodes[2].attributes["notes"] = "x" * (11 << 20)
+    chains, _, skipped = _baked(scene, DaskExecutor(address, "numpy"))
+    assert len(chains) == 8 and skipped == []
+    assert [str(w.message) for w in recwarn if "large graph" in str(w.message)] == []
 
 
 def _kill_first_taker(marker: str) -> None:

@@ -9,7 +9,7 @@ import io
 import json
 import signal
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +22,7 @@ from lodconvert.io.citygml import members as members_module
 from lodconvert.io.citygml.members import Members
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.model import Mesh, Node, Scene
-from lodconvert.tasks import PoolExecutor
+from lodconvert.tasks import Executor, PoolExecutor
 
 from .test_citygml import HEAD, box, building, tree
 from .test_cityjson import _features, multi_lod
@@ -125,18 +125,25 @@ class _Kills:
         return self.task.failed(reason)
 
 
+def _two_workers() -> Executor:
+    return PoolExecutor(2, "numpy")
+
+
 def _read(
-    path: Path, spread: bool, killer: int | None = None
+    path: Path,
+    spread: bool,
+    killer: int | None = None,
+    workers: Callable[[], Executor] = _two_workers,
 ) -> tuple[Scene, list[Any], list[Any], list[str]]:
-    """The scene of ``path`` read in one process or by two workers, each member a task
-    (``killer``: that task kills the workers that take it); the facts of its nodes, the
-    workers' results and what was told of reading in this process."""
+    """The scene of ``path`` read in one process or by ``workers`` (default: two worker
+    processes), each member a task (``killer``: that task kills the workers that take it); the
+    facts of its nodes, the workers' results and what was told of reading in this process."""
     scene = read_scene(path, spread=spread)
     results: list[Any] = []
     told: list[str] = []
     if not spread:
         return scene, [_facts(node) for node in scene.nodes], results, told
-    with PoolExecutor(2, "numpy") as executor:
+    with workers() as executor:
 
         def kept(tasks: Iterable[Any]) -> Iterator[Any]:
             sent = (_Kills(task) if i == killer else task for i, task in enumerate(tasks))
@@ -226,17 +233,35 @@ def test_members_are_cut_past_comments_cdata_instructions_text_and_nesting(
     ]
 
 
-@pytest.mark.usefixtures("one_member_a_task")
-def test_a_sequence_read_by_workers_is_the_sequence_read_in_one_process(tmp_path: Path) -> None:
-    """A CityJSONSeq file of ten buildings, a line that is no feature among them: a line a
-    task, the same nodes, the same line reported."""
+def ten_lines(folder: Path) -> Path:
+    """A CityJSONSeq file in ``folder``: ten buildings and, as its line 6, a line that is no
+    feature."""
     document = json.loads(multi_lod().read_text())
     header = {key: document[key] for key in ("type", "version", "transform")}
     lines = [json.dumps({**header, "CityObjects": {}, "vertices": []})]
     lines += [json.dumps(feature) for feature in _features(document)]
     lines.insert(5, '{"type": "CityJSONFeature", "CityObjects": 3}')
-    path = tmp_path / "ten.city.jsonl"
+    path = folder / "ten.city.jsonl"
     path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def ten_objects(folder: Path) -> Path:
+    """A CityJSON file in ``folder``: ten buildings, one of them (2128302) naming a vertex
+    that is not there."""
+    document = json.loads(multi_lod().read_text())
+    broken = document["CityObjects"]["2128302"]["geometry"][0]
+    broken["boundaries"] = [[[[len(document["vertices"]) + 5, 0, 1]]]]
+    path = folder / "ten.city.json"
+    path.write_text(json.dumps(document))
+    return path
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_sequence_read_by_workers_is_the_sequence_read_in_one_process(tmp_path: Path) -> None:
+    """A CityJSONSeq file of ten buildings, a line that is no feature among them: a line a
+    task, the same nodes, the same line reported."""
+    path = ten_lines(tmp_path)
     one, one_facts, _, _ = _read(path, spread=False)
     two, two_facts, results, _ = _read(path, spread=True)
     assert two_facts == one_facts and len(one_facts) == 10
@@ -250,11 +275,7 @@ def test_a_cityjson_file_read_by_workers_is_the_file_read_in_one_process(tmp_pat
     """Ten buildings of a ``.json`` file, an object a task (parts joined to their building
     in the main process), one building naming a vertex that is not there: the same nodes,
     the same object reported, the scene's size known once read."""
-    document = json.loads(multi_lod().read_text())
-    broken = document["CityObjects"]["2128302"]["geometry"][0]
-    broken["boundaries"] = [[[[len(document["vertices"]) + 5, 0, 1]]]]
-    path = tmp_path / "ten.city.json"
-    path.write_text(json.dumps(document))
+    path = ten_objects(tmp_path)
     one, one_facts, _, _ = _read(path, spread=False)
     two, two_facts, results, _ = _read(path, spread=True)
     assert two_facts == one_facts and len(one_facts) == 9
