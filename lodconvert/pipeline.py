@@ -398,7 +398,6 @@ def convert(
         sink = _sink(outputs, output_path, folder, inputs, run)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
         scene, crs_record, baker, executor = _read_stage(inputs, sources, run, clock, stack)
-        writer = _file_executor(run, scene, stack) if folder is not None else None
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         skipped: list[dict[str, str]] = []
         items = iter_chains(
@@ -408,7 +407,7 @@ def convert(
         with clock("write"):
             chains = clock.iterate("assemble", assembly.recorded(items))
             target.write_chains(
-                chains, sink, assembly.info, executor=writer, progress=run.progress,
+                chains, sink, assembly.info, executor=executor, progress=run.progress,
                 **run.write_options,
             )  # fmt: skip
         tally = _finished(scene, assembly.records, skipped, run, named)
@@ -459,12 +458,6 @@ def _read_stage(
         with clock("read"):
             scene.spread(executor.results, run.progress)
     return scene, crs_record, baker, executor
-
-
-def _file_executor(run: RunOptions, scene: Scene, stack: contextlib.ExitStack) -> Executor:
-    """The executor that makes a folder output's files (tiles) as tasks, in processes of their
-    own, entered on ``stack``."""
-    return stack.enter_context(_executor(run, get_backend("numpy"), _object_count(scene)))
 
 
 def _finished(
