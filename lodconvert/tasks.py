@@ -31,6 +31,7 @@ from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
+from multiprocessing.reduction import ForkingPickler
 from typing import Any, Self
 
 from .bake import Backend, get_backend
@@ -190,11 +191,36 @@ def _send(conn: Connection, outbox: queue.SimpleQueue[tuple[str, Any] | None]) -
 @dataclass
 class _Worker:
     """One worker process, its end of the pipe and the tasks sent to it (their numbers, in
-    the order it runs them: the first is the one it works on)."""
+    the order it runs them: the first is the one it works on). What is sent to it goes
+    through ``outbox`` to a thread that writes it into the pipe, so the main process never
+    waits for a busy worker to take a task in."""
 
     process: Any
     conn: Connection
     held: deque[int] = field(default_factory=deque)
+    outbox: queue.SimpleQueue[bytes | None] = field(default_factory=queue.SimpleQueue)
+
+    def __post_init__(self) -> None:
+        threading.Thread(target=_write, args=(self.conn, self.outbox), daemon=True).start()
+
+    def send(self, message: Any) -> None:
+        """Send ``message`` (pickled here: :class:`RecursionError` or
+        :class:`pickle.PicklingError` for one that cannot be) after what was sent before."""
+        self.outbox.put(bytes(ForkingPickler.dumps(message)))
+
+    def stop_sending(self) -> None:
+        """End the thread that writes into the pipe, once it has written what it holds."""
+        self.outbox.put(None)
+
+
+def _write(conn: Connection, outbox: queue.SimpleQueue[bytes | None]) -> None:
+    """Write what arrives in ``outbox`` into ``conn`` until ``None`` (or the worker is gone:
+    the main process learns of that from the worker's sentinel)."""
+    while (data := outbox.get()) is not None:
+        try:
+            conn.send_bytes(data)
+        except OSError:
+            return
 
 
 class PoolExecutor(Executor):
@@ -293,12 +319,10 @@ class PoolExecutor(Executor):
             if task is None:
                 continue
             try:
-                worker.conn.send(task)
-            except (BrokenPipeError, ConnectionResetError):  # it died: see _collect, which
-                worker.held.append(number)  # waits on it
+                worker.send(task)
             except (RecursionError, pickle.PicklingError):
                 self._done[number] = self._run_here(task)
-            else:
+            else:  # if it died, _collect learns so from its sentinel
                 worker.held.append(number)
 
     def _run_here(self, task: BakeTask) -> BakeResult:
@@ -356,12 +380,10 @@ class PoolExecutor(Executor):
         workers, self._workers[:] = list(self._workers), []
         for worker in workers:
             if not worker.held:
-                try:
-                    worker.conn.send(None)
-                except OSError:
-                    worker.process.terminate()
+                worker.send(None)
             else:
                 worker.process.terminate()
+            worker.stop_sending()
         for worker in workers:
             worker.process.join()
             worker.conn.close()
