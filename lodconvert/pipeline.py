@@ -410,7 +410,6 @@ def convert(
         sink = _sink(outputs, output_path, folder, inputs, run)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
         scene, crs_record, baker, executor = _read_stage(inputs, sources, run, clock, stack)
-        writer = _file_executor(run, scene, stack) if folder is not None else None
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         pieces = _pieces(target, assembly.info, run, executor)
         skipped: list[dict[str, str]] = []
@@ -421,7 +420,7 @@ def convert(
         with clock("write"):
             chains = clock.iterate("assemble", assembly.recorded(items))
             target.write_chains(
-                chains, sink, assembly.info, executor=writer, progress=run.progress,
+                chains, sink, assembly.info, executor=executor, progress=run.progress,
                 pieces=pieces, **run.write_options,
             )  # fmt: skip
         tally = _finished(scene, assembly.records, skipped, run, named)
@@ -479,12 +478,6 @@ def _pieces(target: Format, info: OutputInfo, run: RunOptions, executor: Executo
     """Where the chains' pieces of the output (``target``'s formatter) are kept, made by the
     workers that bake them; ``None`` where this process bakes (it formats as it writes)."""
     return None if isinstance(executor, SerialExecutor) else target.pieces(info, run.write_options)
-
-
-def _file_executor(run: RunOptions, scene: Scene, stack: contextlib.ExitStack) -> Executor:
-    """The executor that makes a folder output's files (tiles) as tasks, in processes of their
-    own, entered on ``stack``."""
-    return stack.enter_context(_executor(run, get_backend("numpy"), _object_count(scene)))
 
 
 def _finished(

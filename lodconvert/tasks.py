@@ -11,12 +11,15 @@ worker that dies mid-task is replaced and its task run once more; when it dies a
 objects are reported as failed and the run goes on.
 
 An executor only calls a task's ``run(backend, progress)`` and ``failed(reason)``, so readers
-ship tasks of their own on the same executors (:mod:`.io.spread`): the pool's workers stay up
-once every result of one stream of tasks is taken, for the next (reading, then baking).
+and writers ship tasks of their own on the same executors (:mod:`.io.spread`, the tileset's
+tiles): the pool's workers stay up once every result of one stream of tasks is taken, for the
+next (reading, then baking), and serve streams that run at once (tiles made from the results of
+baking while baking goes on).
 """
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 import pickle
@@ -28,6 +31,7 @@ from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
+from multiprocessing.reduction import ForkingPickler
 from typing import Any, Self
 
 from .bake import Backend, get_backend
@@ -200,11 +204,36 @@ def _send(conn: Connection, outbox: queue.SimpleQueue[tuple[str, Any] | None]) -
 @dataclass
 class _Worker:
     """One worker process, its end of the pipe and the tasks sent to it (their numbers, in
-    the order it runs them: the first is the one it works on)."""
+    the order it runs them: the first is the one it works on). What is sent to it goes
+    through ``outbox`` to a thread that writes it into the pipe, so the main process never
+    waits for a busy worker to take a task in."""
 
     process: Any
     conn: Connection
     held: deque[int] = field(default_factory=deque)
+    outbox: queue.SimpleQueue[bytes | None] = field(default_factory=queue.SimpleQueue)
+
+    def __post_init__(self) -> None:
+        threading.Thread(target=_write, args=(self.conn, self.outbox), daemon=True).start()
+
+    def send(self, message: Any) -> None:
+        """Send ``message`` (pickled here: :class:`RecursionError` or
+        :class:`pickle.PicklingError` for one that cannot be) after what was sent before."""
+        self.outbox.put(bytes(ForkingPickler.dumps(message)))
+
+    def stop_sending(self) -> None:
+        """End the thread that writes into the pipe, once it has written what it holds."""
+        self.outbox.put(None)
+
+
+def _write(conn: Connection, outbox: queue.SimpleQueue[bytes | None]) -> None:
+    """Write what arrives in ``outbox`` into ``conn`` until ``None`` (or the worker is gone:
+    the main process learns of that from the worker's sentinel)."""
+    while (data := outbox.get()) is not None:
+        try:
+            conn.send_bytes(data)
+        except OSError:
+            return
 
 
 class PoolExecutor(Executor):
@@ -225,6 +254,11 @@ class PoolExecutor(Executor):
         self._context = multiprocessing.get_context("spawn")
         self._workers: list[_Worker] = []
         self._backend: Backend | None = None
+        self._numbers = itertools.count()
+        self._tasks: dict[int, BakeTask] = {}  # by number, until its result is taken
+        self._waiting: deque[int] = deque()  # tasks not sent to a worker yet
+        self._tries: dict[int, int] = {}
+        self._done: dict[int, BakeResult] = {}  # results not taken yet
 
     def __enter__(self) -> Self:
         """Start the workers now, so that they are ready (imports done, backends made) when the
@@ -244,48 +278,49 @@ class PoolExecutor(Executor):
 
     def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
         """The result of each of ``tasks``, in order; a task whose worker died twice gives a
-        result with each of its objects failed."""
+        result with each of its objects failed. Streams may run at once (a stream's tasks
+        drawn from another's results): their tasks share the workers, each task numbered
+        across streams, and each stream takes its own results in its own order."""
         pending = iter(tasks)
-        submitted: dict[int, BakeTask] = {}
-        waiting: deque[int] = deque()  # tasks not sent to a worker yet, by number
-        tries: dict[int, int] = {}
-        done: dict[int, BakeResult] = {}
-        workers = self._workers
-        taken = next_number = 0
+        order: deque[int] = deque()  # this stream's tasks whose results are not taken yet
         exhausted = False
         try:
             while True:
-                while not exhausted and next_number - taken < self.window:
+                while not exhausted and len(order) < self.window:
                     task = next(pending, None)
                     if task is None:
                         exhausted = True
                         break
-                    submitted[next_number] = task
-                    waiting.append(next_number)
-                    next_number += 1
-                if taken in done:
-                    submitted.pop(taken)
-                    yield done.pop(taken)
-                    taken += 1
+                    number = next(self._numbers)
+                    self._tasks[number] = task
+                    self._waiting.append(number)
+                    order.append(number)
+                if order and order[0] in self._done:
+                    number = order.popleft()
+                    del self._tasks[number]
+                    self._tries.pop(number, None)
+                    yield self._done.pop(number)
                     continue
-                if exhausted and taken == next_number:
+                if exhausted and not order:
                     return
-                self._dispatch(workers, waiting, submitted, done)
-                self._collect(workers, waiting, submitted, tries, done)
-        except BaseException:  # an error, or the results left unread: stop the workers
+                self._dispatch()
+                self._collect()
+        except GeneratorExit:  # the results left unread: the other streams go on
+            for number in order:
+                self._tasks.pop(number, None)
+                self._tries.pop(number, None)
+                self._done.pop(number, None)
+            raise
+        except BaseException:  # an error: stop the workers
             self.close()
             raise
 
-    def _dispatch(
-        self,
-        workers: list[_Worker],
-        waiting: deque[int],
-        submitted: dict[int, BakeTask],
-        done: dict[int, BakeResult],
-    ) -> None:
+    def _dispatch(self) -> None:
         """Give waiting tasks to the workers holding fewest (up to :data:`DEPTH` each, so
         that each has the next at hand), starting workers up to the pool's size; a task that
-        cannot be pickled (its data nested too deep) is run here."""
+        cannot be pickled (its data nested too deep) is run here; one whose stream was left
+        is dropped."""
+        workers, waiting = self._workers, self._waiting
         while waiting:
             if len(workers) < self.workers:
                 workers.append(self._start())
@@ -293,13 +328,14 @@ class PoolExecutor(Executor):
             if len(worker.held) >= DEPTH:
                 return
             number = waiting.popleft()
+            task = self._tasks.get(number)
+            if task is None:
+                continue
             try:
-                worker.conn.send(submitted[number])
-            except (BrokenPipeError, ConnectionResetError):  # it died: see _collect, which
-                worker.held.append(number)  # waits on it
+                worker.send(task)
             except (RecursionError, pickle.PicklingError):
-                done[number] = self._run_here(submitted[number])
-            else:
+                self._done[number] = self._run_here(task)
+            else:  # if it died, _collect learns so from its sentinel
                 worker.held.append(number)
 
     def _run_here(self, task: BakeTask) -> BakeResult:
@@ -308,18 +344,11 @@ class PoolExecutor(Executor):
             self._backend = get_backend(self.backend_name)
         return task.run(self._backend, self.progress)
 
-    def _collect(
-        self,
-        workers: list[_Worker],
-        waiting: deque[int],
-        submitted: dict[int, BakeTask],
-        tries: dict[int, int],
-        done: dict[int, BakeResult],
-    ) -> None:
+    def _collect(self) -> None:
         """Wait until a busy worker sends something or dies, and take it in: a dead worker's
         first task is charged a try (run again, or after two failed with each object), the
-        others it held wait again."""
-        busy = [w for w in workers if w.held]
+        others it held wait again. The result of a task whose stream was left is dropped."""
+        busy = [w for w in self._workers if w.held]
         if not busy:  # every task given out was run here
             return
         ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy])
@@ -333,10 +362,11 @@ class PoolExecutor(Executor):
                 if kind == "progress" and self.progress is not None:
                     self.progress(value)
                 elif kind == "result":
-                    done[worker.held.popleft()] = value
+                    self._keep(worker.held.popleft(), value)
                 elif kind == "unsendable":  # its result cannot be pickled: run it here
                     number = worker.held.popleft()
-                    done[number] = self._run_here(submitted[number])
+                    if number in self._tasks:
+                        self._keep(number, self._run_here(self._tasks[number]))
                 elif kind == "error":
                     raise value
                 if kind != "died":
@@ -344,26 +374,29 @@ class PoolExecutor(Executor):
             if not dead:
                 continue
             worker.process.join()
-            workers.remove(worker)
+            self._workers.remove(worker)
             first = worker.held.popleft()
-            waiting.extendleft(reversed(worker.held))
-            tries[first] = tries.get(first, 0) + 1
-            if tries[first] < 2:
-                waiting.appendleft(first)
-            else:
-                done[first] = submitted[first].failed(_death(worker.process.exitcode))
+            self._waiting.extendleft(reversed(worker.held))
+            self._tries[first] = self._tries.get(first, 0) + 1
+            if self._tries[first] < 2:
+                self._waiting.appendleft(first)
+            elif first in self._tasks:
+                self._keep(first, self._tasks[first].failed(_death(worker.process.exitcode)))
+
+    def _keep(self, number: int, result: BakeResult) -> None:
+        """Keep ``result`` of task ``number`` for its stream, unless that stream was left."""
+        if number in self._tasks:
+            self._done[number] = result
 
     def close(self) -> None:
         """End every worker: idle ones are told to, busy ones terminated; all are waited for."""
         workers, self._workers[:] = list(self._workers), []
         for worker in workers:
             if not worker.held:
-                try:
-                    worker.conn.send(None)
-                except OSError:
-                    worker.process.terminate()
+                worker.send(None)
             else:
                 worker.process.terminate()
+            worker.stop_sending()
         for worker in workers:
             worker.process.join()
             worker.conn.close()

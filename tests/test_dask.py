@@ -174,6 +174,21 @@ def test_a_run_of_members_whose_workers_die_is_read_in_the_main_process(
     assert any(line.startswith(died) for line in told)
 
 
+def test_a_cluster_writes_the_tileset_of_one_worker(address: str, tmp_path: Path) -> None:
+    """Tiles are tasks on the cluster that bakes: the same files as made in one process."""
+    shared_data(CITYJSON)
+    files = []
+    for where in (("--workers", "1"), ("--scheduler", address)):
+        out = tmp_path / where[0][2:] / "tileset.json"
+        options = ("--crs", "EPSG:7415", "--hlod", "20", "--levels", "2", *where)
+        run = _lodconvert(CITYJSON, "-o", out, *options)
+        assert run.returncode == 0, run.stderr
+        paths = sorted(p for p in out.parent.rglob("*") if p.is_file())
+        files.append({str(p.relative_to(out.parent)): p.read_bytes() for p in paths})
+    assert files[0] == files[1]
+    assert sum(name.endswith(".glb") for name in files[0]) > 2
+
+
 def _closed_port() -> int:
     """A port on 127.0.0.1 that nothing listens on."""
     with socket.socket() as probe:

@@ -6,11 +6,13 @@ byte-identical across runs and worker counts."""
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
 import shutil
 import subprocess
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -29,6 +31,7 @@ from lodconvert.validate import validate_file
 from tests.conftest import SHARED, require, shared_data
 from tests.test_cityjson import city
 from tests.test_cli import assert_one_line_error, run
+from tests.test_workers import _workers_of
 
 DATA = SHARED / "data"
 VALIDATOR = SHARED / "tools" / "3d-tiles-validator" / "validate.sh"
@@ -269,6 +272,29 @@ def test_output_is_byte_identical_across_runs_and_worker_counts(
     two = convert(name, tmp_path / "two", *flags, "--workers", "2").parent
     assert files(one) == files(again) == files(two)
     assert len(files(one)) > 2
+
+
+def test_a_two_worker_run_makes_its_tiles_in_its_two_workers(tmp_path: Path) -> None:
+    """Tiles are made by the worker processes that bake, while they bake: a ``--workers 2``
+    tileset run never has more than two of them alive."""
+    alive: list[int] = []
+    stop = threading.Event()
+
+    def watch() -> None:
+        while not stop.is_set():
+            with contextlib.suppress(OSError):  # a process ended while it was looked at
+                alive.append(len(_workers_of(os.getpid())))
+            stop.wait(0.01)
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    try:
+        tileset = convert("multi_lod", tmp_path, "--hlod", "20", "--workers", "2")
+    finally:
+        stop.set()
+        watcher.join()
+    assert len(list((tileset.parent / "tiles").glob("*.glb"))) > 2
+    assert max(alive) == 2
 
 
 @pytest.mark.slow
