@@ -629,3 +629,31 @@ def test_far_tiers_are_a_third_of_their_children_and_buildings_beside_cells_have
     report = official(tileset, tmp_path / "validator.json")
     assert (report["numErrors"], report["numWarnings"]) == (0, 0), report["issues"][:5]
     assert validate_file(tileset) == []
+
+
+def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_process(
+    tmp_path: Path,
+) -> None:
+    """A tile task touches no file (a dask worker on another machine has no staged folder):
+    it gives back the GLB, which the main process writes with its record, kept when resumed."""
+    import pyproj
+
+    from lodconvert.io.tiles.task import TileTask, Where
+    from lodconvert.reproject import Georef
+
+    georef = Georef("EPSG:25832", pyproj.CRS("EPSG:25832"))
+    where = Where(georef, "EPSG:25832", "test", "EPSG:25832")
+    folder = tmp_path / "staged" / "tiles"
+    corners = np.array(
+        [[690000.0, 5335000.0, 520.0], [690010, 5335000, 520], [690000, 5335010, 530]]
+    )
+    task = TileTask(
+        "t.glb", str(folder), where, corners, np.full((3, 4), 200, np.uint8), None, None, (), "test"
+    )
+    result = task.run()
+    assert result.error is None and result.data is not None and result.data[:4] == b"glTF"
+    assert not (tmp_path / "staged").exists()
+    written = task.written(result)
+    assert (folder / "t.glb").read_bytes() == result.data and written.data is None
+    kept = task.kept()
+    assert kept is not None and kept.reused and np.array_equal(kept.box, result.box)

@@ -1,20 +1,21 @@
 """One tile's content as a picklable task, run by any executor (:mod:`lodconvert.tasks`): its
-vertices (scene coordinates) placed in ECEF and in the tile's ENU frame, encoded as a GLB and
-written into the staged tileset folder; the result is the tile's frame and content box.
+vertices (scene coordinates) placed in ECEF and in the tile's ENU frame and encoded as a GLB;
+the result is the GLB, the tile's frame and content box, which the main process writes into
+the staged tileset folder (:meth:`TileTask.written`), so that a worker needs no access to it.
 
 Resuming: a task is keyed by a hash of everything that makes its file (:meth:`TileTask.key`:
-the placement, the geometry, colours and features, the generator). Beside the file it records
-the key, the file's SHA-256, frame and box (``.resume/tiles/NAME.json`` in the staged folder);
-a task that finds its record of the same key, and the file there with the recorded hash,
-returns the record instead of doing the work again. A file a killed run left half-written has
-no record yet, or another hash, and is written again.
+the placement, the geometry, colours and features, the generator). Beside the file the main
+process records the key, the file's SHA-256, frame and box (``.resume/tiles/NAME.json`` in the
+staged folder); a resumed run whose task finds its record of the same key, and the file there
+with the recorded hash, takes the record instead of running the task (:meth:`TileTask.kept`). A
+file a killed run left half-written has no record yet, or another hash, and is made again.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -57,13 +58,16 @@ def placement(where: Where) -> Placement:
 
 @dataclass(frozen=True)
 class TileResult:
-    """A tile's ENU frame (4×4, ECEF) and content box (min and max corners in it), whether its
-    file was kept from an interrupted run, or why it could not be made (``error``)."""
+    """A tile's ENU frame (4×4, ECEF) and content box (min and max corners in it), its GLB
+    and key (until written), whether its file was kept from an interrupted run, or why it could
+    not be made (``error``)."""
 
     frame: np.ndarray | None
     box: np.ndarray | None
     reused: bool = False
     error: str | None = None
+    data: bytes | None = None
+    key: str | None = None
 
 
 @dataclass(frozen=True)
@@ -96,28 +100,39 @@ class TileTask:
         return digest.hexdigest()
 
     def run(self, backend: Any = None, progress: Any = None) -> TileResult:
-        """Write the tile (or keep the one an interrupted run wrote); a scene that cannot be
-        placed, or a failed write, is the result's ``error``."""
-        key = self.key()
-        path = Path(self.folder) / self.name
-        record = Path(self.folder).parent / RECORDS / f"{self.name}.json"
-        kept = _kept(path, record, key)
-        if kept is not None:
-            return kept
+        """Make the tile's GLB, frame and box; a scene that cannot be placed is the result's
+        ``error``."""
         try:
             place = placement(self.where)
             ecef = place.ecef(self.vertices)
             frame = place.enu_frame((ecef.min(axis=0) + ecef.max(axis=0)) / 2.0)
             local = world_to_frame(frame, ecef)
             data = self._glb(local @ ENU_TO_GLTF.T)
-            with writing(path):
-                path.parent.mkdir(parents=True, exist_ok=True)
-                path.write_bytes(data)
-                box = np.stack([local.min(axis=0), local.max(axis=0)])
-                _record(record, key, hashlib.sha256(data).hexdigest(), frame, box)
         except LodConvertError as exc:
             return self.failed(str(exc))
-        return TileResult(frame, box)
+        box = np.stack([local.min(axis=0), local.max(axis=0)])
+        return TileResult(frame, box, data=data, key=self.key())
+
+    def _paths(self) -> tuple[Path, Path]:
+        """The tile's file in the staged folder and its record."""
+        folder = Path(self.folder)
+        return folder / self.name, folder.parent / RECORDS / f"{self.name}.json"
+
+    def kept(self) -> TileResult | None:
+        """What an interrupted run recorded of this tile, where its file is whole and was made
+        of the same (its key); ``None`` otherwise."""
+        return _kept(*self._paths(), self.key())
+
+    def written(self, result: TileResult) -> TileResult:
+        """Write the file and record of ``result`` (this task's) into the staged folder; a
+        failed write is one line naming the file (:func:`~lodconvert.sinks.writing`)."""
+        assert result.data is not None and result.key is not None
+        path, record = self._paths()
+        with writing(path):
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(result.data)
+            _record(record, result.key, hashlib.sha256(result.data).hexdigest(), *_placed(result))
+        return replace(result, data=None, key=None)
 
     def _glb(self, gltf: np.ndarray) -> bytes:
         """The GLB of the tile's content at glTF coordinates ``gltf``."""
@@ -130,6 +145,11 @@ class TileTask:
     def failed(self, reason: str) -> TileResult:
         """The result of this task when it could not run, for ``reason``."""
         return TileResult(None, None, error=reason)
+
+
+def _placed(result: TileResult) -> tuple[np.ndarray, np.ndarray]:
+    assert result.frame is not None and result.box is not None
+    return result.frame, result.box
 
 
 def _record(path: Path, key: str, sha256: str, frame: np.ndarray, box: np.ndarray) -> None:

@@ -20,6 +20,7 @@ refining where GE·focal/distance exceeds its maximumScreenSpaceError (= sse), r
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from collections import deque
@@ -242,16 +243,19 @@ class TilesetWriter:
             yield self.objects_tile(f"{last}_beside", pending)
 
     def _placed(self, items: Iterable[LodChain | CellChain]) -> list[Tile]:
-        """The root's children (:meth:`tops`), every tile's content made by its task."""
+        """The root's children (:meth:`tops`), every tile's content made by its task (or, in a
+        resumed run, kept where an interrupted run made it of the same) and written here."""
         children: list[Tile] = []
-        waiting: deque[Tile] = deque()
+        waiting: deque[tuple[Tile, TileTask, TileResult | None]] = deque()
 
         def tasks() -> Iterator[TileTask]:
             for top in self.tops(items):
                 children.append(top)
                 for tile, task in self._queued:
-                    waiting.append(tile)
-                    yield task
+                    kept = task.kept() if self.sink.resumed else None
+                    waiting.append((tile, task, kept))
+                    if kept is None:
+                        yield task
                 self._queued.clear()
 
         results: Iterable[TileResult] = (
@@ -260,12 +264,16 @@ class TilesetWriter:
             else (task.run() for task in tasks())
         )
         made = reused = 0
-        for result in results:
-            if result.error is not None:
-                raise LodConvertError(result.error)
-            tile = waiting.popleft()
-            tile.frame, tile.box = result.frame, result.box
-            made, reused = made + 1, reused + result.reused
+        for result in itertools.chain(results, [None]):  # None: the kept tiles after the last
+            while waiting and (result is not None or waiting[0][2] is not None):
+                tile, task, kept = waiting.popleft()
+                if kept is None:
+                    assert result is not None
+                    if result.error is not None:
+                        raise LodConvertError(result.error)
+                    kept, result = task.written(result), None
+                tile.frame, tile.box = kept.frame, kept.box
+                made, reused = made + 1, reused + kept.reused
         if self.sink.resumed and self.progress is not None:
             self.progress(f"{reused} of {made} tiles kept from an interrupted run's folder")
         return children
