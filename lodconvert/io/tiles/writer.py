@@ -1,8 +1,9 @@
 """The tileset writer: LOD parents and objects (:func:`~lodconvert.pipeline.iter_chains` with
 cells) → a tile tree, one GLB per tile (:mod:`.content`), placed in ECEF (:mod:`.placement`).
 Each tile's GLB is a :class:`~.task.TileTask` run by the run's executor, the one that bakes (in
-its worker processes with ``--workers``, while they bake the next cells); results come back in
-order, so the tree is the same for any worker count.
+its worker processes with ``--workers``, while they bake the next cells); results (each tile's
+GLB, frame and box) come back in order and are written here, so the tree is the same for any
+worker count and no worker needs the staging folder.
 In a staging folder an interrupted run of the same inputs and options left, each tile whose
 file is whole and of the same key is kept (:mod:`.task`).
 
