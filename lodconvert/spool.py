@@ -36,11 +36,12 @@ class NodeSpool:
     the file is gone when the spool is closed (or its ``with`` block left, or the process
     ends)."""
 
-    def __init__(self, memory: int = SPOOL_MEMORY) -> None:
+    def __init__(self, memory: int | None = None) -> None:
         # the spool owns the file: closed by close() or leaving its ``with`` block
         self._file: IO[bytes] = tempfile.TemporaryFile(prefix="lodconvert-spool-")  # noqa: SIM115
         self._entries: list[Node | int] = []
-        self._room = memory
+        self._room = SPOOL_MEMORY if memory is None else memory
+        """Bytes of geometry it may still hold in memory (default :data:`SPOOL_MEMORY`)."""
 
     def add(self, node: Node) -> None:
         """Park ``node`` (kept in memory when it is placed by a transform, or while there is
