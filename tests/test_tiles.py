@@ -274,6 +274,7 @@ def test_output_is_byte_identical_across_runs_and_worker_counts(
     assert len(files(one)) > 2
 
 
+@pytest.mark.slow
 def test_a_two_worker_run_makes_its_tiles_in_its_two_workers(tmp_path: Path) -> None:
     """Tiles are made by the worker processes that bake, while they bake: a ``--workers 2``
     tileset run never has more than two of them alive."""
@@ -586,6 +587,7 @@ def _drawn(path: Path) -> int:
     return len(_positions(document, blob))
 
 
+@pytest.mark.slow
 def test_far_tiers_are_a_third_of_their_children_and_buildings_beside_cells_have_one(
     tmp_path: Path,
 ) -> None:
