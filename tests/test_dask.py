@@ -1,9 +1,9 @@
 """Reading and baking on a dask.distributed cluster (``--scheduler ADDRESS``): the bytes of one
 worker on a 2-worker ``LocalCluster``, a city read by its workers as in one process, the
-workers' progress told as with one worker, broken objects reported the same, a task over
-dask's 10 MB sent without its warning, a killed worker's task run again and then reported, an
-unreachable scheduler or a bad scheduler file failing at once, an interrupted run cancelling
-its tasks and leaving nothing."""
+workers' progress told as with one worker, broken objects reported the same, a task over dask's
+10 MB sent without its warning, a killed worker's task run again and then reported, a result
+that comes as its wait times out taken, an unreachable scheduler or a bad scheduler file
+failing at once, an interrupted run cancelling its tasks and leaving nothing."""
 
 from __future__ import annotations
 
@@ -457,3 +457,28 @@ def test_a_scheduler_without_workers_fails_naming_it(monkeypatch: pytest.MonkeyP
     assert str(failed.value) == (
         f"{empty.scheduler_address}: the dask scheduler has no worker (none joined in 0.5 s)"
     )
+
+
+class _DoneAsTheWaitTimesOut:
+    """A future whose first wait times out just as it finishes (a loaded machine)."""
+
+    status = "finished"
+
+    def __init__(self, result: Any) -> None:
+        self._result = result
+        self._waits = 0
+
+    def result(self, timeout: float | None = None) -> Any:
+        self._waits += 1
+        if self._waits == 1:
+            raise TimeoutError(f"timed out after {timeout} s.")
+        return self._result
+
+    def done(self) -> bool:
+        return True
+
+
+def test_a_task_that_finishes_as_its_wait_times_out_gives_its_result() -> None:
+    executor = DaskExecutor("tcp://127.0.0.1:1", "numpy")
+    result = object()
+    assert executor._result(None, _DoneAsTheWaitTimesOut((result, []))) is result  # type: ignore[arg-type]
