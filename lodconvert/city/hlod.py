@@ -47,7 +47,13 @@ borders, so simplified again they left a coarser tier about as heavy as its chil
 ``blocks``: block proxies (:mod:`.blocks`), the objects' footprints unioned into blocks and
 extruded in height bands; of the outline tolerances of :data:`BLOCK_PX` pixels at ``Y_cell``
 and the band depths of :data:`BAND_M`, the proxy with the fewest vertices whose F reaches
-:data:`MIN_CELL_F`, else the most faithful.
+:data:`MIN_CELL_F`, else the most faithful. A cell of finer cells also makes block proxies of
+each member's objects apart (:func:`_member_blocks_level`: smaller blocks, whose one band's
+height stays true where the whole cell's would not), each member's outlines as coarse as keeps
+F at :data:`MIN_CELL_F`, roofs and walls sharing their corners (a vertex per corner, not per
+colour: seen that far, a wall is a few pixels high), and keeps the lighter faithful one: its
+children are block proxies and simplified meshes already, which a tier up cannot simplify much
+further (their floors' rings stay in place).
 ``auto`` makes all three and keeps the cheapest (points at :data:`~.plan.POINT_COST`; then
 the fewer bytes) of those whose silhouette F against the members' finest geometry at
 ``Y_cell`` (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when none is,
