@@ -518,14 +518,18 @@ def _member_blocks_level(
             blocks, objects = blocks + len(found.polygons), objects + len(prints)
             coarser = [block_proxy(found, px * pixel, math.inf) for px in ladder]
             proxies.append([shared_corners(m) if m is not None else None for m in coarser])
-    if not proxies:
+    if all(row[0] is None for row in proxies):
         return None
 
-    def made(steps: list[int]) -> tuple[Level, float]:
+    def made(steps: list[int]) -> tuple[Level | None, float]:
+        """The proxies at ``steps`` as one level (none where nothing with area is left) and
+        its F."""
         meshes = [row[step] for row, step in zip(proxies, steps, strict=True)]
+        if all(m is None for m in meshes):
+            return None, 0.0
         mesh = _merged([m for m in meshes if m is not None]).translated(-origin)
         level = Level(name="FAR", kind="merged", mesh=_one_part(mesh))
-        return level, _silhouette_f(source, level, distance, options) if level.count else 0.0
+        return level, _silhouette_f(source, level, distance, options)
 
     steps = [0] * len(proxies)
     level, f = made(steps)
@@ -545,6 +549,7 @@ def _member_blocks_level(
                 high = middle - 1
         steps = _raised(steps, order[:low], step)
         level, f = made(steps)
+    assert level is not None  # the finest has area; a coarser one only where F is kept
     facts = {
         "blocks": blocks,
         "objects": objects,
