@@ -248,6 +248,8 @@ class Template:
             self.parts += [match["open"], Coordinates(xy, rest)]
         self.parts.append(body[at:])
         self.extent = (math.ceil(max(xs) - min(xs)), math.ceil(max(ys) - min(ys)))
+        self.low = (min(xs), min(ys))
+        """The least x and y of the original's coordinates."""
 
     def copy(self, k: int, dx: int, dy: int) -> Iterator[str]:
         """The text of copy ``k`` shifted by (dx, dy) metres, ids suffixed ``_k`` (k ≥ 1)."""

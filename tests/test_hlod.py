@@ -17,7 +17,7 @@ from lxml import etree
 from lodconvert.bake import get_backend
 from lodconvert.bake.qem import simplify_within
 from lodconvert.chain import ChainOptions
-from lodconvert.city.blocks import block_proxy, blocks_of, object_footprint
+from lodconvert.city.blocks import block_proxy, blocks_of, object_footprint, shared_corners
 from lodconvert.city.hlod import (
     AUTO_SIZES,
     CELL_EXPONENT,
@@ -309,6 +309,32 @@ def test_a_tower_keeps_its_height_in_a_band_of_its_own_and_streets_part_blocks()
     assert f[1] > 0.99 > f[0]
     # blocks take fewer vertices than the houses' own boxes
     assert banded.vertex_count < sum(chain.levels[0].count for chain in chains) / 2
+
+
+def test_shared_corners_give_a_block_a_vertex_per_corner_in_its_roof_colour() -> None:
+    """A coarser tier's block proxies: a box house's 8 corners are 8 vertices (not 12, a roof
+    corner once per colour), the top ones in the roof's colour, the bottom ones in the wall's;
+    the shape stays as it was."""
+    red, white = (np.array(c, dtype=np.uint8) for c in ([200, 30, 30, 255], [230, 225, 210, 255]))
+    box = block(10, 8, 6)
+    (part,) = box.parts
+    roof = part.face_normals(np.arange(len(part.faces)))[:, 2] > 0.5
+    pieces = [
+        Surface(part.vertices, part.faces[faces], base_color=color)
+        for faces, color in ((roof, red), (~roof, white))
+    ]
+    chain = LodChain("house", [Level("LOD2", "source", mesh=Mesh(pieces))], [], np.zeros(3),
+                     np.zeros(3), 15.0, 3.0, 10.0, [])  # fmt: skip
+    found = blocks_of([object_footprint(chain, _finest_mesh(chain))], 0.5)
+    proxy = block_proxy(found, 0.5, math.inf)
+    shared = shared_corners(proxy)
+    assert proxy.vertex_count == 12 and shared.vertex_count == 8
+    (corners,) = shared.parts
+    top = corners.vertices[:, 2] > 3.0
+    assert (corners.vertex_colors[top] == red).all()
+    assert (corners.vertex_colors[~top] == white).all()
+    assert np.array_equal(np.sort(shared.triangles.reshape(-1, 3), axis=0),
+                          np.sort(proxy.triangles.reshape(-1, 3), axis=0))  # fmt: skip
 
 
 def test_block_proxies_are_the_same_every_time(tum_items: list[Item]) -> None:

@@ -47,7 +47,13 @@ borders, so simplified again they left a coarser tier about as heavy as its chil
 ``blocks``: block proxies (:mod:`.blocks`), the objects' footprints unioned into blocks and
 extruded in height bands; of the outline tolerances of :data:`BLOCK_PX` pixels at ``Y_cell``
 and the band depths of :data:`BAND_M`, the proxy with the fewest vertices whose F reaches
-:data:`MIN_CELL_F`, else the most faithful.
+:data:`MIN_CELL_F`, else the most faithful. A cell of finer cells also makes block proxies of
+each member's objects apart (:func:`_member_blocks_level`: smaller blocks, whose one band's
+height stays true where the whole cell's would not), each member's outlines as coarse as keeps
+F at :data:`MIN_CELL_F`, roofs and walls sharing their corners (a vertex per corner, not per
+colour: seen that far, a wall is a few pixels high), and keeps the lighter faithful one: its
+children are block proxies and simplified meshes already, which a tier up cannot simplify much
+further (their floors' rings stay in place).
 ``auto`` makes all three and keeps the cheapest (points at :data:`~.plan.POINT_COST`; then
 the fewer bytes) of those whose silhouette F against the members' finest geometry at
 ``Y_cell`` (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when none is,
@@ -72,7 +78,7 @@ from ..limits import DEFAULT_LIMITS, Limits
 from ..model import WHITE, CellChain, Level, LodChain, Mesh, Surface
 from ..plan import level_bytes, level_cost, mesh_silhouette_estimate, silhouette_estimate
 from ..ranges import cutoff, diagonal
-from .blocks import block_proxy, blocks_of, object_footprint
+from .blocks import block_proxy, blocks_of, object_footprint, shared_corners
 
 KINDS = ("auto", "points", "mesh", "blocks")
 AUTO_OBJECTS = 64
@@ -111,6 +117,8 @@ refines a tile by default (a tile's geometric error is 16 px at its switch)."""
 
 Member = LodChain | CellChain
 Warn = Callable[[str], None]
+Made = tuple[Level, float, dict[str, Any]]
+"""A far level, its silhouette F and its facts."""
 
 
 @dataclass(frozen=True)
@@ -252,6 +260,8 @@ def bake_cell(
     blocks = None
     if kind in ("blocks", "auto"):
         found = _blocks_level(objects, origin, source, switch, options)
+        if any(isinstance(m, CellChain) for m in members):
+            found = _lighter(found, _member_blocks_level(members, origin, source, switch, options))
         if found is not None:
             level, f, blocks = found
             candidates["blocks"] = (level, f)
@@ -481,6 +491,99 @@ def _blocks_level(
         "tried": len(tried),
     }
     return level, f, facts
+
+
+def _member_blocks_level(
+    members: list[Member],
+    origin: np.ndarray,
+    source: Mesh,
+    distance: float,
+    options: ChainOptions,
+) -> tuple[Level, float, dict[str, Any]] | None:
+    """A cell of finer cells as block proxies of each member's objects apart, one band per
+    block, seen from ``distance``: every member's outlines at the finest of :data:`BLOCK_PX`
+    first, then, coarser tolerance by coarser tolerance, as many of them made coarser (those
+    that save the most vertices first) as keep the silhouette F against ``source`` at
+    :data:`MIN_CELL_F`. Roofs and walls share their corners (:func:`~.blocks.shared_corners`).
+    Its level, F and facts; ``None`` when no object has a footprint."""
+    pixel = distance / options.view.focal_px
+    ladder = sorted(BLOCK_PX)
+    proxies = []
+    blocks = objects = 0
+    for member in members:
+        chains = member.objects() if isinstance(member, CellChain) else [member]
+        prints = [p for c in chains if (p := object_footprint(c, _finest_mesh(c)))]
+        if prints:
+            found = blocks_of(prints, BLOCK_CLOSING_PX * pixel)
+            blocks, objects = blocks + len(found.polygons), objects + len(prints)
+            coarser = [block_proxy(found, px * pixel, math.inf) for px in ladder]
+            proxies.append([shared_corners(m) if m is not None else None for m in coarser])
+    if all(row[0] is None for row in proxies):
+        return None
+
+    def made(steps: list[int]) -> tuple[Level | None, float]:
+        """The proxies at ``steps`` as one level (none where nothing with area is left) and
+        its F."""
+        meshes = [row[step] for row, step in zip(proxies, steps, strict=True)]
+        if all(m is None for m in meshes):
+            return None, 0.0
+        mesh = _merged([m for m in meshes if m is not None]).translated(-origin)
+        level = Level(name="FAR", kind="merged", mesh=_one_part(mesh))
+        return level, _silhouette_f(source, level, distance, options)
+
+    steps = [0] * len(proxies)
+    level, f = made(steps)
+    for step in range(1, len(ladder)):
+        if f < MIN_CELL_F:
+            break
+        saving = [_count(row[step - 1]) - _count(row[step]) for row in proxies]
+        order = sorted(
+            (i for i, s in enumerate(steps) if s == step - 1), key=lambda i: (-saving[i], i)
+        )
+        low, high = 0, len(order)  # the most of ``order`` made coarser that keep F
+        while low < high:
+            middle = (low + high + 1) // 2
+            if made(_raised(steps, order[:middle], step))[1] >= MIN_CELL_F:
+                low = middle
+            else:
+                high = middle - 1
+        steps = _raised(steps, order[:low], step)
+        level, f = made(steps)
+    assert level is not None  # the finest has area; a coarser one only where F is kept
+    facts = {
+        "blocks": blocks,
+        "objects": objects,
+        "tolerance_px": ladder[max(steps)],
+        "band_m": None,
+        "tried": len(ladder) * len(proxies),
+        "per_member": {f"{px:g}": steps.count(i) for i, px in enumerate(ladder)},
+        "shared_corners": True,
+    }
+    return level, f, facts
+
+
+def _raised(steps: list[int], which: list[int], step: int) -> list[int]:
+    """``steps`` with those at the indices ``which`` set to ``step``."""
+    raised = list(steps)
+    for i in which:
+        raised[i] = step
+    return raised
+
+
+def _count(mesh: Mesh | None) -> int:
+    return mesh.vertex_count if mesh is not None else 0
+
+
+def _lighter(one: Made | None, other: Made | None) -> Made | None:
+    """Of two levels (with their F and facts), the one with fewer vertices of those whose F
+    reaches :data:`MIN_CELL_F`, else the more faithful."""
+    found = [m for m in (one, other) if m is not None]
+    if not found:
+        return None
+    faithful = [m for m in found if m[1] >= MIN_CELL_F]
+    if faithful:
+        return min(faithful, key=lambda m: m[0].count)
+    return max(found, key=lambda m: m[1])
 
 
 def _floorless(mesh: Mesh) -> Mesh:
