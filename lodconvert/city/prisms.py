@@ -270,18 +270,33 @@ def _union(polygons: np.ndarray) -> Any:
     disjoint: shapely's union of many thousands of them took seconds); else the union of all
     at once."""
     import shapely
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
 
     pairs = shapely.STRtree(polygons).query(polygons)  # bounding boxes that meet
-    graph = coo_matrix((np.ones(pairs.shape[1]), pairs), shape=(len(polygons),) * 2)
-    count, labels = connected_components(graph, directed=False)
+    labels = _components(pairs, len(polygons))
+    count = int(labels.max()) + 1
     if count == 1:
         return shapely.union_all(polygons)
     order = np.argsort(labels, kind="stable")
     groups = np.split(polygons[order], np.cumsum(np.bincount(labels))[:-1])
     parts = shapely.get_parts([shapely.union_all(group) for group in groups])
     return shapely.multipolygons(parts[shapely.get_type_id(parts) == _POLYGON])
+
+
+def _components(pairs: np.ndarray, n: int) -> np.ndarray:
+    """The connected components of the graph of ``n`` nodes and edges ``pairs`` ((2, k)): each
+    node's component, numbered in the order of their first nodes. Each node takes the least
+    node number among its neighbours' and its own until none changes (then a component's is
+    its first node's), following each node's number to that node's on the way."""
+    first = np.arange(n)
+    while True:
+        before = first
+        least = np.minimum(first[pairs[0]], first[pairs[1]])
+        first = first.copy()
+        np.minimum.at(first, pairs[0], least)
+        np.minimum.at(first, pairs[1], least)
+        first = first[first]
+        if np.array_equal(first, before):
+            return np.unique(first, return_inverse=True)[1]
 
 
 def prism_height(
