@@ -85,8 +85,7 @@ def test_every_module_imports_alone_in_a_fresh_interpreter() -> None:
 
 def test_a_city_converts_without_loading_scipy(tmp_path) -> None:
     """Converting a city model of buildings (plot radii, prisms from footprints that need a
-    union) loads no scipy module, which takes half a second or more to import in every
-    process."""
+    union) loads no scipy module, which is slow to import in every process."""
     from .conftest import SHARED, shared_data
 
     source = shared_data(SHARED / "data" / "citygml" / "kit_testcases_lod2_100bldg_v3.gml")

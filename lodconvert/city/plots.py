@@ -29,8 +29,8 @@ def plot_radii(centres: np.ndarray) -> np.ndarray:
 def nearest_distances(centres: np.ndarray) -> np.ndarray:
     """Each of ``centres``' ((n, 2), n ≥ 2) distance to the nearest other one, as
     ``sqrt(dx² + dy²)`` (0 where another lies at the same place). Shapely's tree finds the
-    nearest (it skips those equal to a point, which lie at 0), so that no scipy module (half a
-    second to import) is needed."""
+    nearest (it skips those equal to a point, which lie at 0), so that no scipy module (slow
+    to import, in every process) is needed."""
     import shapely
 
     points = shapely.points(centres)
