@@ -21,12 +21,13 @@ to the next cutoff (or to the cull distance).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from .bake.grid import Grid
-from .bake.numpy import coverage
+from .bake.numpy import silhouettes
 from .model import Level, Mesh, PointCloud
 from .ranges import REFERENCE_VIEW, ReferenceView
 
@@ -108,14 +109,13 @@ class SilhouetteEstimate:
 
 
 def _source_masks(
-    mesh: Mesh, pixel: float, bounds: np.ndarray | None = None
-) -> tuple[Grid, list[np.ndarray]]:
-    """The source's silhouettes along x, y and z on a grid of pitch ``pixel`` over ``bounds``
-    (the mesh's own by default)."""
-    bounds = mesh.bounds if bounds is None else bounds
+    meshes: Sequence[Mesh], pixel: float, bounds: np.ndarray
+) -> tuple[Grid, list[list[np.ndarray]]]:
+    """The silhouettes along x, y and z of each of ``meshes`` on one grid of pitch ``pixel``
+    over ``bounds``."""
     resolution = max(1, math.ceil(float(np.ptp(bounds, axis=0).max()) / pixel - 1e-9))
     grid = Grid.for_bounds(bounds, resolution, 1)
-    return grid, [coverage(mesh, grid, axis) for axis in range(3)]
+    return grid, silhouettes(meshes, grid)
 
 
 def _splat(centres: np.ndarray, size: float, shape: tuple[int, int], pad: int) -> np.ndarray:
@@ -147,7 +147,7 @@ def silhouette_estimate(
     """Silhouette precision and recall of ``cloud`` (points ``point_px`` wide) against ``mesh``
     seen from ``distance`` in ``view``, both in the same frame; the worst over the axis views."""
     pixel = distance / view.focal_px
-    grid, masks = _source_masks(mesh, pixel)
+    grid, (masks,) = _source_masks([mesh], pixel, mesh.bounds)
     pad = math.ceil(max(point_px, 1.0))
     if not any(mask.any() for mask in masks):  # thinner than a pixel: nothing to look like
         return SilhouetteEstimate(precision=0.0, recall=0.0)
@@ -176,8 +176,7 @@ def mesh_silhouette_estimate(
     pixel = distance / view.focal_px
     both = np.stack([mesh.bounds, other.bounds])
     bounds = np.stack([both[:, 0].min(axis=0), both[:, 1].max(axis=0)])
-    _, source = _source_masks(mesh, pixel, bounds)
-    _, drawn = _source_masks(other, pixel, bounds)
+    _, (source, drawn) = _source_masks([mesh, other], pixel, bounds)
     precision = recall = 1.0
     for want, got in zip(source, drawn, strict=True):
         if not want.any() and not got.any():

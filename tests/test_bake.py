@@ -170,7 +170,7 @@ def test_coverage_is_the_silhouette_the_axis_rays_hit(resolution: int) -> None:
     the pixels where the axis rasteriser finds a hit, from either side: on the torus knot,
     curved and self-occluding."""
     from lodconvert.bake.grid import Grid
-    from lodconvert.bake.numpy import coverage
+    from lodconvert.bake.numpy import silhouettes
     from lodconvert.io import read_scene
 
     from .conftest import SAMPLE
@@ -179,10 +179,33 @@ def test_coverage_is_the_silhouette_the_axis_rays_hit(resolution: int) -> None:
     mesh = node.geometry
     grid = Grid.for_bounds(mesh.bounds, resolution, 1)
     hits = list(NumpyBackend().rasterize(mesh, grid))
+    (masks,) = silhouettes([mesh], grid)
     for axis in range(3):
         expected = np.zeros(grid.image_shape(axis), dtype=bool)
         for h in hits:
             if h.axis == axis:
                 expected[h.iv, h.iu] = True
         assert expected.any()
-        assert np.array_equal(coverage(mesh, grid, axis), expected)
+        assert np.array_equal(masks[axis], expected)
+
+
+def test_silhouettes_of_several_surfaces_are_each_ones_own() -> None:
+    """Surfaces rasterised together on one grid get the silhouettes each gets alone: the torus
+    knot and a copy of it shifted by a third of its extent, clipped at the grid's edge."""
+    from lodconvert.bake.grid import Grid
+    from lodconvert.bake.numpy import silhouettes
+    from lodconvert.io import read_scene
+
+    from .conftest import SAMPLE
+
+    (node,) = read_scene(SAMPLE).nodes
+    mesh = node.geometry
+    shifted = mesh.translated(np.ptp(mesh.bounds, axis=0) / 3)
+    grid = Grid.for_bounds(mesh.bounds, 40, 1)
+    together = silhouettes([mesh, shifted], grid)
+    alone = [silhouettes([mesh], grid)[0], silhouettes([shifted], grid)[0]]
+    for masks, own in zip(together, alone, strict=True):
+        for axis in range(3):
+            assert masks[axis].shape == grid.image_shape(axis)
+            assert np.array_equal(masks[axis], own[axis])
+    assert not np.array_equal(together[0][0], together[1][0])

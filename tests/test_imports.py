@@ -81,3 +81,24 @@ def test_every_module_imports_alone_in_a_fresh_interpreter() -> None:
     )
     assert run.returncode == 0, run.stderr
     assert run.stdout.strip() == ""
+
+
+def test_a_city_converts_without_loading_scipy(tmp_path) -> None:
+    """Converting a city model of buildings (plot radii, prisms from footprints that need a
+    union) loads no scipy module, which is slow to import in every process."""
+    from .conftest import SHARED, shared_data
+
+    source = shared_data(SHARED / "data" / "citygml" / "kit_testcases_lod2_100bldg_v3.gml")
+    code = (
+        "import sys\nfrom lodconvert.cli import main\n"
+        f"status = main([{str(source)!r}, '-o', {str(tmp_path / 'kit.x3d')!r}, '--workers', '1'])\n"
+        "assert status == 0, status\n"
+        "print(sorted(n for n in sys.modules if n.split('.')[0] == 'scipy'))\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    run = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().splitlines()[-1] == "[]"
+    assert (tmp_path / "kit.x3d").stat().st_size > 0

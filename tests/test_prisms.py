@@ -115,3 +115,22 @@ def test_a_kept_prism_reports_its_silhouette_f() -> None:
     (prism_level,) = [lv for lv in chain_record(chain)["levels"] if lv["kind"] == "prism"]
     assert 0.95 <= prism_level["silhouette_f"] <= 1.0
     assert prism_level["faces"] == 10  # top 2, walls 8: no floor
+
+
+def test_footprint_groups_are_the_connected_components_scipy_finds() -> None:
+    """The groups of a footprint's triangles whose boxes meet (unioned group by group) are
+    numbered as scipy's ``connected_components`` numbers them, on graphs with self-loops as
+    shapely's tree gives them: isolated nodes, chains, stars and cycles."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from lodconvert.city.prisms import _components
+
+    rng = np.random.default_rng(7)
+    for _ in range(300):
+        n = int(rng.integers(1, 40))
+        edges = rng.integers(0, n, (2, int(rng.integers(0, 2 * n))))
+        pairs = np.concatenate([edges, np.stack([np.arange(n)] * 2)], axis=1)
+        graph = coo_matrix((np.ones(pairs.shape[1]), pairs), shape=(n, n))
+        _, expected = connected_components(graph, directed=False)
+        assert _components(pairs, n).tolist() == expected.tolist()

@@ -189,6 +189,23 @@ def test_plot_radii_come_from_the_neighbours_spacing() -> None:
     assert mesh[0]["gamma"] == 10.0  # objects of a mesh file keep the default
 
 
+def test_nearest_distances_are_those_a_kd_tree_gives() -> None:
+    """Each centre's distance to its nearest neighbour, bit for bit as scipy's ``cKDTree``
+    gives it (so plot radii, and the cutoffs written, stay as they were): georeferenced
+    coordinates, ties, and centres that coincide (0)."""
+    from scipy.spatial import cKDTree
+
+    from lodconvert.city.plots import nearest_distances
+
+    rng = np.random.default_rng(3)
+    for n in (2, 3, 50, 2000):
+        spread = rng.random((n, 2)) * 900 + [691_000.0, 5_336_000.0]
+        grid = np.round(rng.random((n, 2)) * 20, 1)  # many ties and coinciding centres
+        for centres in (spread, grid, np.array([[1.0, 2.0]] * n)):
+            expected = cKDTree(centres).query(centres, k=2)[0][:, 1]
+            assert np.array_equal(nearest_distances(centres), expected)
+
+
 def test_inputs_merge_the_lods_of_one_city_object() -> None:
     from lodconvert.model import Scene
     from lodconvert.pipeline import merged

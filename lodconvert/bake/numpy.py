@@ -15,7 +15,7 @@ found so far, so that overlapping faces cost time, not memory.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -27,6 +27,10 @@ CANDIDATE_BYTES = 160
 """Working memory per candidate (face, pixel) pair tested at once."""
 MIN_CHUNK = 1 << 16
 EPS = 1e-9
+PLANE_U, PLANE_V = np.array([1, 2, 0]), np.array([2, 0, 1])
+"""The image plane's (u, v) axes seen along x, y and z (:meth:`Grid.plane_axes`)."""
+NEXT = PLANE_U
+"""The corner after each of a triangle's three."""
 
 
 class NumpyBackend:
@@ -99,15 +103,17 @@ def _not_edge_on(area: np.ndarray, surface: Mesh) -> np.ndarray:
     return np.abs(area) > 1e-15 * extent * extent
 
 
-def _projection(surface: Mesh, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The corners of ``surface``'s faces not seen edge-on along ``axis``, projected: u and v
-    ((m, 3) each) relative to ``centre``, the bounding box's centre (returned third)."""
-    u, v = Grid.plane_axes(axis)
+def _projections(surface: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The corners of ``surface``'s faces not seen edge-on along x, then along y, then along
+    z, projected: u and v ((3, m) each: corner, face) relative to ``centre``, the bounding
+    box's centre (returned last), and the axis each face is seen along (m,)."""
     centre = surface.bounds.mean(axis=0)
-    tri = surface.triangles
-    pu, pv = tri[:, :, u] - centre[u], tri[:, :, v] - centre[v]
-    seen = _not_edge_on(_projected_area(pu, pv), surface)
-    return pu[seen], pv[seen], centre
+    tri = surface.triangles - centre
+    side, other = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    area = side[:, PLANE_U] * other[:, PLANE_V] - side[:, PLANE_V] * other[:, PLANE_U]
+    axis, face = np.nonzero(_not_edge_on(area, surface).T)
+    corners = tri.transpose(1, 2, 0)  # corner, coordinate, face
+    return corners[:, PLANE_U[axis], face], corners[:, PLANE_V[axis], face], axis, centre
 
 
 def _pixel_range(lo: np.ndarray, hi: np.ndarray, origin: float, pitch: float, n: int):
@@ -222,41 +228,57 @@ def _chunks(count: np.ndarray, chunk: int) -> Iterator[slice]:
         start = stop
 
 
-def coverage(
-    surface: Mesh, grid: Grid, axis: int, memory_bytes: int = DEFAULT_LIMITS.memory_bytes
-) -> np.ndarray:
-    """The silhouette of ``surface`` along ``axis``: the pixels of ``grid``'s image ((rows,
-    cols) bool) whose rays :func:`rasterize_axis` finds a hit on, without depths. Each face
-    covers, in each pixel row its projection crosses, the span of pixel centres between its
-    edges there (edges inclusive, faces seen edge-on left out); a quarter of ``memory_bytes``
-    worth of spans at a time."""
-    pu, pv, centre = surface.derived(f"numpy-projection-{axis}", lambda: _projection(surface, axis))
-    u, v = grid.plane_axes(axis)
-    rows_n, cols_n = grid.image_shape(axis)
-    origin_u, origin_v = grid.lo[u] - centre[u], grid.lo[v] - centre[v]
-    iv0, nv = _pixel_range(pv.min(axis=1), pv.max(axis=1), origin_v, grid.pitch, rows_n)
+def silhouettes(
+    surfaces: Sequence[Mesh], grid: Grid, memory_bytes: int = DEFAULT_LIMITS.memory_bytes
+) -> list[list[np.ndarray]]:
+    """The silhouettes of each of ``surfaces`` along x, y and z: the pixels of ``grid``'s
+    images ((rows, cols) bool) whose rays :func:`rasterize_axis` finds a hit on, without depths.
+    Each face covers, in each pixel row its projection crosses, the span of pixel centres
+    between its edges there (edges inclusive, faces seen edge-on left out). All images are
+    filled at once, a quarter of ``memory_bytes`` worth of spans at a time."""
+    projected = [s.derived("numpy-projections", lambda s=s: _projections(s)) for s in surfaces]
+    pu = np.concatenate([p[0] for p in projected], axis=1)
+    pv = np.concatenate([p[1] for p in projected], axis=1)
+    view = np.concatenate([3 * i + p[2] for i, p in enumerate(projected)])  # surface, axis
+    shape = np.array([grid.image_shape(axis) for axis in range(3)] * len(surfaces)).reshape(-1, 2)
+    width = shape[:, 1] + 1  # a column more, where spans that reach the last one end
+    start = np.cumsum(shape[:, 0] * width) - shape[:, 0] * width
+    origin = np.concatenate(
+        [
+            np.stack([grid.lo[PLANE_U] - centre[PLANE_U], grid.lo[PLANE_V] - centre[PLANE_V]], 1)
+            for *_, centre in projected
+        ]
+    ).reshape(-1, 2)
+    origin_u, origin_v = origin[view, 0], origin[view, 1]
+    iv0, nv = _pixel_range(pv.min(axis=0), pv.max(axis=0), origin_v, grid.pitch, shape[view, 0])
     live = np.flatnonzero(nv)
     count = nv[live]
     chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
-    edges = np.zeros(rows_n * (cols_n + 1), dtype=np.int64)
+    edges = np.zeros(int((shape[:, 0] * width).sum()), dtype=np.int64)
     for part in _chunks(count, chunk):
         c = count[part]
         faces = np.repeat(live[part], c)
         iv = iv0[faces] + np.arange(len(faces)) - np.repeat(np.cumsum(c) - c, c)
-        y = origin_v + (iv + 0.5) * grid.pitch
-        low, high = np.full(len(faces), np.inf), np.full(len(faces), -np.inf)
-        for k in range(3):
-            ay, by = pv[faces, k], pv[faces, (k + 1) % 3]
-            ax, bx = pu[faces, k], pu[faces, (k + 1) % 3]
-            crosses = (np.minimum(ay, by) <= y) & (y <= np.maximum(ay, by))
-            rise = np.where(ay != by, by - ay, 1.0)
-            x = ax + np.clip((y - ay) / rise, 0.0, 1.0) * (bx - ax)
-            low = np.where(crosses, np.minimum(low, x), low)
-            high = np.where(crosses, np.maximum(high, x), high)
+        y = origin_v[faces] + (iv + 0.5) * grid.pitch
+        ay, ax = np.take(pv, faces, axis=1), np.take(pu, faces, axis=1)
+        by, bx = ay[NEXT], ax[NEXT]  # edge k of a face runs from its corner k to the next
+        crosses = (np.minimum(ay, by) <= y) & (y <= np.maximum(ay, by))
+        rise = np.where(ay != by, by - ay, 1.0)
+        x = ax + np.clip((y - ay) / rise, 0.0, 1.0) * (bx - ax)
+        low = np.where(crosses, x, np.inf).min(axis=0)
+        high = np.where(crosses, x, -np.inf).max(axis=0)
         found = low <= high
-        first, n = _pixel_range(low[found], high[found], origin_u, grid.pitch, cols_n)
+        faces, iv = faces[found], iv[found]
+        cols = width[view[faces]]
+        first, n = _pixel_range(low[found], high[found], origin_u[faces], grid.pitch, cols - 1)
         spans = n > 0
-        row = iv[found][spans] * (cols_n + 1)
-        edges += np.bincount(row + first[spans], minlength=len(edges))
-        edges -= np.bincount(row + first[spans] + n[spans], minlength=len(edges))
-    return edges.reshape(rows_n, cols_n + 1).cumsum(axis=1)[:, :cols_n] > 0
+        at = (start[view[faces]] + iv * cols + first)[spans]
+        np.add.at(edges, at, 1)
+        np.subtract.at(edges, at + n[spans], 1)
+    # Every span ends in its own row, so each row sums to nothing: one running sum fills all.
+    filled = edges.cumsum() > 0
+    images = [
+        filled[s : s + rows * w].reshape(rows, w)[:, : w - 1]
+        for s, (rows, _), w in zip(start.tolist(), shape.tolist(), width.tolist(), strict=True)
+    ]
+    return [images[i : i + 3] for i in range(0, len(images), 3)]

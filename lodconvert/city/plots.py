@@ -23,7 +23,22 @@ def plot_radii(centres: np.ndarray) -> np.ndarray:
     centres = np.asarray(centres, dtype=np.float64).reshape(-1, 2)
     if len(centres) < 2:
         return np.full(len(centres), LONE_RADIUS)
-    from scipy.spatial import cKDTree
+    return np.clip(nearest_distances(centres) / 2.0, MIN_RADIUS, MAX_RADIUS)
 
-    distance, _ = cKDTree(centres).query(centres, k=2)
-    return np.clip(distance[:, 1] / 2.0, MIN_RADIUS, MAX_RADIUS)
+
+def nearest_distances(centres: np.ndarray) -> np.ndarray:
+    """Each of ``centres``' ((n, 2), n ≥ 2) distance to the nearest other one, as
+    ``sqrt(dx² + dy²)`` (0 where another lies at the same place). Shapely's tree finds the
+    nearest (it skips those equal to a point, which lie at 0), so that no scipy module (slow
+    to import, in every process) is needed."""
+    import shapely
+
+    points = shapely.points(centres)
+    (i, j), _ = shapely.STRtree(points).query_nearest(
+        points, exclusive=True, all_matches=True, return_distance=True
+    )
+    nearest = np.full(len(centres), np.inf)
+    np.minimum.at(nearest, i, np.sqrt(((centres[i] - centres[j]) ** 2).sum(axis=1)))
+    _, where, count = np.unique(centres, axis=0, return_inverse=True, return_counts=True)
+    nearest[count[where.ravel()] > 1] = 0.0
+    return nearest

@@ -270,18 +270,33 @@ def _union(polygons: np.ndarray) -> Any:
     disjoint: shapely's union of many thousands of them took seconds); else the union of all
     at once."""
     import shapely
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
 
     pairs = shapely.STRtree(polygons).query(polygons)  # bounding boxes that meet
-    graph = coo_matrix((np.ones(pairs.shape[1]), pairs), shape=(len(polygons),) * 2)
-    count, labels = connected_components(graph, directed=False)
+    labels = _components(pairs, len(polygons))
+    count = int(labels.max()) + 1
     if count == 1:
         return shapely.union_all(polygons)
     order = np.argsort(labels, kind="stable")
     groups = np.split(polygons[order], np.cumsum(np.bincount(labels))[:-1])
     parts = shapely.get_parts([shapely.union_all(group) for group in groups])
     return shapely.multipolygons(parts[shapely.get_type_id(parts) == _POLYGON])
+
+
+def _components(pairs: np.ndarray, n: int) -> np.ndarray:
+    """The connected components of the graph of ``n`` nodes and edges ``pairs`` ((2, k)): each
+    node's component, numbered in the order of their first nodes. Each node takes the least
+    node number among its neighbours' and its own until none changes (then a component's is
+    its first node's), following each node's number to that node's on the way."""
+    first = np.arange(n)
+    while True:
+        before = first
+        least = np.minimum(first[pairs[0]], first[pairs[1]])
+        first = first.copy()
+        np.minimum.at(first, pairs[0], least)
+        np.minimum.at(first, pairs[1], least)
+        first = first[first]
+        if np.array_equal(first, before):
+            return np.unique(first, return_inverse=True)[1]
 
 
 def prism_height(
@@ -344,24 +359,30 @@ def _walls(mesh: Mesh) -> np.ndarray:
     return np.abs(normals[:, 2]) < STEEP * np.linalg.norm(normals, axis=1)
 
 
+_PROBES = np.arange(1.0, 65.0)
+"""The steps to the heights :func:`_percentile` probes between the ends of its bracket."""
+
+
 def _percentile(heights: np.ndarray, weights: np.ndarray, share: float) -> float:
     """The height below which ``share`` of the area of triangles with corner ``heights``
     ((m, 3)) and areas ``weights`` lies, heights varying linearly across each triangle: the
     bracket around it narrowed by 64 probes at a time, to 65⁻⁴ of the heights' range."""
-    z = np.sort(heights, axis=1)
-    a, b, c = z[:, 0], z[:, 1], z[:, 2]
+    low, high = np.minimum(heights[:, 0], heights[:, 1]), np.maximum(heights[:, 0], heights[:, 1])
+    a, c = np.minimum(low, heights[:, 2]), np.maximum(high, heights[:, 2])
+    b = np.maximum(low, np.minimum(high, heights[:, 2]))  # each triangle's heights in order
     lo, hi = float(a.min()), float(c.max())
     total = float(weights.sum())
     if total <= 0 or hi <= lo:
         return hi
-    for _ in range(4):
-        t = np.linspace(lo, hi, 66)[1:-1, None]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rising = (t - a) ** 2 / ((b - a) * (c - a))
-            falling = 1 - (c - t) ** 2 / ((c - a) * (c - b))
-        part = np.where(t >= c, 1.0, np.where(t <= a, 0.0, np.where(t <= b, rising, falling)))
-        i = int(np.searchsorted(part @ weights / total, share))
-        lo, hi = (float(t[i - 1, 0]) if i else lo), (float(t[i, 0]) if i < len(t) else hi)
+    below, above = (b - a) * (c - a), (c - a) * (c - b)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for _ in range(4):
+            t = (_PROBES * ((hi - lo) / 65) + lo)[:, None]  # 64 between lo and hi, 65 steps
+            rising = (t - a) ** 2 / below
+            falling = 1 - (c - t) ** 2 / above
+            part = np.where(t >= c, 1.0, np.where(t <= a, 0.0, np.where(t <= b, rising, falling)))
+            i = int(np.searchsorted(part @ weights / total, share))
+            lo, hi = (float(t[i - 1, 0]) if i else lo), (float(t[i, 0]) if i < len(t) else hi)
     return hi
 
 
