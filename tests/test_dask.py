@@ -108,7 +108,8 @@ def test_a_cluster_writes_the_bytes_of_one_worker(
     assert cluster[0] == one[0]
     assert _untimed(cluster[1]) == _untimed(one[1])
     assert _messages(cluster[2]) == _messages(one[2])
-    assert ran == {reads, "baketask"}  # the kinds of task in their keys
+    cells = {"celltask"} if "--hlod" in options else set()
+    assert ran == {reads, "baketask", *cells}  # the kinds of task in their keys
 
 
 def _baking_lines(stderr: str) -> list[str]:
@@ -174,13 +175,17 @@ def test_a_run_of_members_whose_workers_die_is_read_in_the_main_process(
     assert any(line.startswith(died) for line in told)
 
 
-def test_a_cluster_writes_the_tileset_of_one_worker(address: str, tmp_path: Path) -> None:
-    """Tiles are tasks on the cluster that bakes: the same files as made in one process."""
+@pytest.mark.parametrize("sizes", ["20", "20,80"])
+def test_a_cluster_writes_the_tileset_of_one_worker(
+    address: str, tmp_path: Path, sizes: str
+) -> None:
+    """Tiles and cells (of one tier or two) are tasks on the cluster that bakes: the same
+    files as made in one process."""
     shared_data(CITYJSON)
     files = []
     for where in (("--workers", "1"), ("--scheduler", address)):
         out = tmp_path / where[0][2:] / "tileset.json"
-        options = ("--crs", "EPSG:7415", "--hlod", "20", "--levels", "2", *where)
+        options = ("--crs", "EPSG:7415", "--hlod", sizes, "--levels", "2", *where)
         run = _lodconvert(CITYJSON, "-o", out, *options)
         assert run.returncode == 0, run.stderr
         paths = sorted(p for p in out.parent.rglob("*") if p.is_file())
