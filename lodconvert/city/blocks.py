@@ -20,7 +20,7 @@ height have no block. Coordinates are z-up.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -92,6 +92,18 @@ class Blocks:
     polygons: list[Any]
     members: list[np.ndarray]
     closing: float
+    _unions: dict[tuple[int, ...], Any] = field(default_factory=dict, repr=False, compare=False)
+
+    def union(self, indices: list[int]) -> Any:
+        """The outlines of the footprints ``indices`` unioned, gaps narrower than ``closing``
+        closed (found once: every outline tolerance tries the same bands)."""
+        import shapely
+
+        key = tuple(indices)
+        if key not in self._unions:
+            outlines = [self.prints[i].outline for i in indices]
+            self._unions[key] = _closed(shapely.union_all(outlines), self.closing)
+        return self._unions[key]
 
 
 def blocks_of(prints: list[Footprint], closing: float) -> Blocks:
@@ -133,11 +145,7 @@ def block_proxy(blocks: Blocks, tolerance: float, band: float) -> Mesh | None:
         bands = _bands(members[np.argsort(-tops[members], kind="stable")], tops, band)
         for last, group in ((g == len(bands) - 1, group) for g, group in enumerate(bands)):
             taller += group
-            outline = (
-                polygon
-                if last
-                else _closed(shapely.union_all([prints[i].outline for i in taller]), blocks.closing)
-            )
+            outline = polygon if last else blocks.union(taller)
             kept = simplified_polygons(outline, tolerance)
             if not kept:
                 continue
