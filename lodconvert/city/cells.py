@@ -19,13 +19,19 @@ import itertools
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
+from typing import Any, TypeVar
 
 from ..bake import Backend
 from ..chain import ChainOptions
 from ..limits import Limits
-from ..model import CellChain, LodChain
+from ..model import CellChain, Level, LodChain, Mesh, Surface
 from .hlod import CellPlan, Member, bake_cell
 
+SHIPPED = ("bounds", "block-footprint-")
+"""What a member's meshes derived that travels with a task (a few numbers each; a footprint
+takes a while to find)."""
+
+T = TypeVar("T", Mesh, Surface)
 Warn = Callable[[str], None]
 Results = Callable[[Iterable["CellTask"]], Iterator["CellResult"]]
 """An executor's ``results``: each task's result, in order."""
@@ -43,11 +49,17 @@ class CellResult:
     beside: CellChain | None = None
     warnings: tuple[str, ...] = ()
     error: str | None = None
+    derived: tuple[dict[str, Any], ...] = ()
+    """What the members' objects' finest levels derived that :data:`SHIPPED` names, each
+    object's in order (for a coarser tier's task; none for a coarsest cell)."""
 
     def items(self, members: list[Member]) -> list[Member]:
         """The cell of ``members`` (the task's, as the main process holds them) and the members
         it leaves out (gathered into the ``beside`` cell where there is one), as
-        :func:`~.hlod.bake_cell` gives them; ``members`` themselves without a cell."""
+        :func:`~.hlod.bake_cell` gives them; ``members`` themselves without a cell. The
+        objects' finest levels keep what was derived from them there."""
+        for chain, found in zip(_objects(members), self.derived, strict=False):
+            _finest(chain)._derived.update(found)
         if self.cell is None:
             return list(members)
         chosen = set(self.admitted)
@@ -77,8 +89,9 @@ class CellTask:
             self.plan, members, self.options, self.kind, backend, warnings.append, self.limits,
             beside=self.top,
         )  # fmt: skip
+        found = () if self.top else tuple(_kept(_finest(c)) for c in _objects(members))
         if cell is None:
-            return CellResult(None, warnings=tuple(warnings))
+            return CellResult(None, warnings=tuple(warnings), derived=found)
         chosen = {id(m) for m in cell.members}
         admitted = tuple(i for i, m in enumerate(members) if id(m) in chosen)
         gathered = None
@@ -86,7 +99,16 @@ class CellTask:
             gathered = beside[0]
             assert isinstance(gathered, CellChain) and len(beside) == 1
             gathered = replace(gathered, members=[])
-        return CellResult(replace(cell, members=[]), admitted, gathered, tuple(warnings))
+        return CellResult(
+            replace(cell, members=[]), admitted, gathered, tuple(warnings), derived=found
+        )
+
+    def __reduce__(self) -> tuple[type[CellTask], tuple[Any, ...]]:
+        """Pickled with its members' meshes without the tables derived from them (per face
+        and vertex, several times the geometry's bytes), which are found again where the task
+        runs: only their bounds and block footprints travel along (:data:`SHIPPED`)."""
+        members = tuple(_shipped(m) for m in self.members)
+        return CellTask, (self.plan, members, self.options, self.kind, self.limits, self.top)
 
     def failed(self, reason: str) -> CellResult:
         """The result of this task when it could not run, for ``reason``: no cell."""
@@ -144,6 +166,44 @@ class CellBaker:
             yield plan, result.items(members)
         while order:
             yield order.popleft()[0], []
+
+
+def _shipped(member: Member) -> Member:
+    """``member`` with meshes sharing its arrays but keeping only what :data:`SHIPPED` names
+    of what was derived from them."""
+    if isinstance(member, CellChain):
+        members = [_shipped(m) for m in member.members]
+        return replace(member, members=members, far=_shipped_level(member.far))
+    return replace(member, levels=[_shipped_level(level) for level in member.levels])
+
+
+def _shipped_level(level: Level) -> Level:
+    """``level`` with its mesh (if any) as :func:`_shipped` ships it."""
+    if level.mesh is None:
+        return level
+    parts = [_kept_derived(part, replace(part)) for part in level.mesh.parts]
+    return replace(level, mesh=_kept_derived(level.mesh, Mesh(parts)))
+
+
+def _kept_derived(source: T, copy: T) -> T:
+    """``copy`` given what :data:`SHIPPED` names of what ``source`` derived."""
+    copy._derived.update(_kept(source))
+    return copy
+
+
+def _kept(mesh: Mesh | Surface) -> dict[str, Any]:
+    """What :data:`SHIPPED` names of what ``mesh`` derived."""
+    return {key: value for key, value in mesh._derived.items() if key.startswith(SHIPPED)}
+
+
+def _objects(members: list[Member]) -> list[LodChain]:
+    """The object chains of ``members``, in order."""
+    return [c for m in members for c in (m.objects() if isinstance(m, CellChain) else [m])]
+
+
+def _finest(chain: LodChain) -> Mesh:
+    """The finest mesh level of ``chain`` (where its block footprint is kept)."""
+    return next(level.mesh for level in chain.levels if level.mesh is not None)
 
 
 def _at_tier(plans: list[CellPlan], tier: int) -> list[CellPlan]:
