@@ -186,9 +186,10 @@ class DaskExecutor(Executor):
                 tries = exc.allowed_failures + 1
                 return task.failed(f"the dask workers converting it died ({tries} tries)")
             except TimeoutError:
-                if future.done():
+                if future.done() and future.status != "finished":  # the task's own error
                     raise
-                since = self._still_staffed(since)
+                if not future.done():  # else it finished just after the wait: take it
+                    since = self._still_staffed(since)
                 continue
             except Exception:
                 if future.cancelled():  # by the client, when the scheduler is gone

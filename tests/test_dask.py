@@ -462,3 +462,25 @@ def test_a_scheduler_without_workers_fails_naming_it(monkeypatch: pytest.MonkeyP
     assert str(failed.value) == (
         f"{empty.scheduler_address}: the dask scheduler has no worker (none joined in 0.5 s)"
     )
+
+
+class _LateFuture:
+    """A future whose task finishes just after its first wait timed out."""
+
+    status = "pending"
+
+    def done(self) -> bool:
+        return self.status == "finished"
+
+    def result(self, timeout: float) -> tuple[str, tuple[str, ...]]:
+        if self.status == "pending":
+            self.status = "finished"
+            raise TimeoutError(f"timed out after {timeout} s.")
+        return "its result", ()
+
+
+def test_a_result_that_comes_just_after_a_wait_timed_out_is_taken() -> None:
+    """A task that finishes between a wait's timeout and the look at its state is taken, not
+    an error (it failed runs of a loaded machine with ``TimeoutError: timed out after 2 s.``)."""
+    executor = DaskExecutor("tcp://127.0.0.1:1", "numpy")
+    assert executor._result(None, _LateFuture()) == "its result"  # type: ignore[arg-type]
