@@ -8,7 +8,8 @@ from the results of the tier below, one coarsest cell's finer cells at a time, w
 finer tiers' next cells are already being baked. A task carries its plan and its members; its
 result is the cell without them (which members it admits, by index, and the cell gathering
 those a coarsest cell left out), so the main process puts the cell together of the very
-member chains it holds: members are shipped to a worker once per tier, never back. Results are
+member chains it holds: members are shipped to a worker once per tier, never back (only the
+block footprints found for their objects come back, for the coarser tier). Results are
 taken in submission order, so cells are the same for any executor. A task whose workers died
 gives no cell: its members are drawn on their own, and a warning says so.
 """
