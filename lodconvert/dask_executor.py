@@ -186,9 +186,9 @@ class DaskExecutor(Executor):
                 tries = exc.allowed_failures + 1
                 return task.failed(f"the dask workers converting it died ({tries} tries)")
             except TimeoutError:
-                if future.status == "error":  # the task's own TimeoutError
+                if future.done() and future.status != "finished":  # the task's own error
                     raise
-                if not future.done():  # else it finished as the wait timed out: take it
+                if not future.done():  # else it finished just after the wait: take it
                     since = self._still_staffed(since)
                 continue
             except Exception:

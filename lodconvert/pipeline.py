@@ -28,7 +28,8 @@ import numpy as np
 from . import __version__
 from .bake import Backend, get_backend
 from .chain import ChainOptions, ChainPlan
-from .city.hlod import CellPlan, HlodOptions, auto_size, bake_cell, draw_counts, plan_cells
+from .city.cells import CellBaker
+from .city.hlod import HlodOptions, auto_size, draw_counts, plan_cells
 from .city.lods import GROUND_COVERS, source_levels
 from .city.plots import plot_radii
 from .clock import Clock
@@ -226,31 +227,18 @@ def _cell_chains(
 ) -> Iterator[LodChain | CellChain]:
     """The scene's objects baked and grouped into LOD parents, one coarsest cell at a time
     (the objects wait on disk meanwhile, and go to be baked in the cells' order, so memory is
-    bounded by the cells in flight), each followed by the members it left out."""
+    bounded by the cells in flight), each followed by the members it left out; the cells are
+    baked by the bakery's executor (:mod:`.city.cells`)."""
     hlod.check()
     with NodeSpool() as spool:
         centres, radii = _spooled(scene.with_geometry(), options, spool)
         plans = plan_cells(centres, hlod.sizes or (auto_size(centres),))
         order = (i for plan in plans for i in plan.object_indices())
         found = bakery.chains((spool.get(i), radii[i]) for i in order)
-
-        def baked(plan: CellPlan, top: bool = False) -> list[LodChain | CellChain]:
-            """The cell of ``plan`` (if it admits any member) and the members it left out (a
-            coarsest cell's gathered into a cell of their own)."""
-            if plan.tier == 1:
-                members = [m for m in itertools.islice(found, len(plan.objects)) if m is not None]
-            else:
-                members = [item for cell in plan.cells for item in baked(cell)]
-            if not members:
-                return []
-            cell, left_out = bake_cell(
-                plan, members, options, hlod.kind, bakery.backend, bakery.warn, bakery.limits,
-                beside=top,
-            )  # fmt: skip
-            return ([cell] if cell is not None else []) + left_out
-
-        for plan in plans:
-            yield from baked(plan, top=True)
+        baker = CellBaker(
+            bakery.executor.results, options, hlod.kind, bakery.limits, bakery.warn, bakery.source
+        )
+        yield from baker.cells(plans, found)
 
 
 def merged(scenes: Sequence[Scene]) -> Scene:

@@ -21,7 +21,6 @@ to the next cutoff (or to the cull distance).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -109,13 +108,26 @@ class SilhouetteEstimate:
 
 
 def _source_masks(
-    meshes: Sequence[Mesh], pixel: float, bounds: np.ndarray
-) -> tuple[Grid, list[list[np.ndarray]]]:
-    """The silhouettes along x, y and z of each of ``meshes`` on one grid of pitch ``pixel``
-    over ``bounds``."""
+    mesh: Mesh, pixel: float, bounds: np.ndarray | None = None, keep: bool = False
+) -> tuple[Grid, list[np.ndarray]]:
+    """The source's silhouettes along x, y and z on a grid of pitch ``pixel`` over ``bounds``
+    (the mesh's own by default); with ``keep``, kept with ``mesh`` for the next call with the
+    same pixel and bounds."""
+    bounds = mesh.bounds if bounds is None else bounds
+
+    def compute() -> tuple[Grid, list[np.ndarray]]:
+        grid = _grid(pixel, bounds)
+        return grid, silhouettes([mesh], grid)[0]
+
+    if not keep:
+        return compute()
+    return mesh.derived(f"silhouette-masks-{pixel!r}-{bounds.tobytes().hex()}", compute)
+
+
+def _grid(pixel: float, bounds: np.ndarray) -> Grid:
+    """A grid of pitch ``pixel`` over ``bounds``."""
     resolution = max(1, math.ceil(float(np.ptp(bounds, axis=0).max()) / pixel - 1e-9))
-    grid = Grid.for_bounds(bounds, resolution, 1)
-    return grid, silhouettes(meshes, grid)
+    return Grid.for_bounds(bounds, resolution, 1)
 
 
 def _splat(centres: np.ndarray, size: float, shape: tuple[int, int], pad: int) -> np.ndarray:
@@ -143,11 +155,14 @@ def silhouette_estimate(
     point_px: float,
     distance: float,
     view: ReferenceView = REFERENCE_VIEW,
+    keep: bool = False,
 ) -> SilhouetteEstimate:
     """Silhouette precision and recall of ``cloud`` (points ``point_px`` wide) against ``mesh``
-    seen from ``distance`` in ``view``, both in the same frame; the worst over the axis views."""
+    seen from ``distance`` in ``view``, both in the same frame; the worst over the axis views.
+    With ``keep``, ``mesh``'s silhouettes are kept with it for the next estimate (a source
+    compared with several candidates)."""
     pixel = distance / view.focal_px
-    grid, (masks,) = _source_masks([mesh], pixel, mesh.bounds)
+    grid, masks = _source_masks(mesh, pixel, keep=keep)
     pad = math.ceil(max(point_px, 1.0))
     if not any(mask.any() for mask in masks):  # thinner than a pixel: nothing to look like
         return SilhouetteEstimate(precision=0.0, recall=0.0)
@@ -168,15 +183,24 @@ def silhouette_estimate(
 
 
 def mesh_silhouette_estimate(
-    mesh: Mesh, other: Mesh, distance: float, view: ReferenceView = REFERENCE_VIEW
+    mesh: Mesh,
+    other: Mesh,
+    distance: float,
+    view: ReferenceView = REFERENCE_VIEW,
+    keep: bool = False,
 ) -> SilhouetteEstimate:
     """Silhouette precision and recall of mesh ``other`` against ``mesh`` seen from
     ``distance`` in ``view`` (both in the same frame): the worst over the axis views, both
-    rasterised on one grid as :func:`silhouette_estimate` rasterises the source."""
+    rasterised on one grid as :func:`silhouette_estimate` rasterises the source (with
+    ``keep``, ``mesh``'s kept with it for the next estimate over the same grid)."""
     pixel = distance / view.focal_px
     both = np.stack([mesh.bounds, other.bounds])
     bounds = np.stack([both[:, 0].min(axis=0), both[:, 1].max(axis=0)])
-    _, (source, drawn) = _source_masks([mesh, other], pixel, bounds)
+    if keep:
+        grid, source = _source_masks(mesh, pixel, bounds, keep)
+        (drawn,) = silhouettes([other], grid)
+    else:  # both in one pass
+        (source, drawn) = silhouettes([mesh, other], _grid(pixel, bounds))
     precision = recall = 1.0
     for want, got in zip(source, drawn, strict=True):
         if not want.any() and not got.any():

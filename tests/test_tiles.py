@@ -255,7 +255,11 @@ def test_a_large_tree_is_split_into_external_tilesets(
 
 @pytest.mark.parametrize(
     "name, flags",
-    [("multi_lod", ()), pytest.param("kit", ("--hlod", "50"), marks=pytest.mark.slow)],
+    [
+        ("multi_lod", ()),
+        pytest.param("kit", ("--hlod", "50"), marks=pytest.mark.slow),
+        pytest.param("kit", ("--hlod", "50,200"), marks=pytest.mark.slow),
+    ],
 )
 def test_output_is_byte_identical_across_runs_and_worker_counts(
     tmp_path: Path, name: str, flags: tuple[str, ...]

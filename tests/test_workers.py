@@ -81,6 +81,9 @@ CASES = [
     pytest.param("tum", ".x3d", (), id="tum-x3d", marks=pytest.mark.slow),
     pytest.param("tum", ".glb", (), id="tum-glb", marks=pytest.mark.slow),
     pytest.param("tum", ".x3d", ("--hlod", "250"), id="tum-hlod-250", marks=pytest.mark.slow),
+    pytest.param(
+        "kit", ".glb", ("--hlod", "50,200"), id="kit-hlod-two-tiers", marks=pytest.mark.slow
+    ),
     pytest.param("tum", ".x3d", ("--switching", "prism"), id="tum-prism", marks=pytest.mark.slow),
     pytest.param("mixed", ".x3d", (), id="mesh-x3d"),
     pytest.param("mixed", ".glb", (), id="mesh-glb"),

@@ -20,7 +20,7 @@ height have no block. Coordinates are z-up.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -28,6 +28,7 @@ import numpy as np
 from ..model import LodChain, Mesh, Surface
 from .lods import GROUND_COVERS
 from .prisms import (
+    FootprintPart,
     coloured,
     extruded,
     footprint,
@@ -92,6 +93,35 @@ class Blocks:
     polygons: list[Any]
     members: list[np.ndarray]
     closing: float
+    _unions: dict[tuple[int, ...], Any] = field(default_factory=dict, repr=False, compare=False)
+    _parts: dict[tuple[Any, ...], Any] = field(default_factory=dict, repr=False, compare=False)
+    """Band outlines and their polygons, found once: every outline tolerance and band depth
+    tries the same bands."""
+
+    def parts(
+        self, block: int, taller: tuple[int, ...] | None, tolerance: float
+    ) -> list[FootprintPart]:
+        """The polygons to extrude of block ``block`` (``taller``: of the union of those
+        footprints instead, gaps narrower than ``closing`` closed), simplified within
+        ``tolerance``."""
+        import shapely
+
+        key = (block, taller, tolerance)
+        if key not in self._parts:
+            outline = self.polygons[block] if taller is None else self._union(taller)
+            kept = simplified_polygons(outline, tolerance)
+            self._parts[key] = polygons(shapely.MultiPolygon(kept)) if kept else []
+        return self._parts[key]
+
+    def _union(self, indices: tuple[int, ...]) -> Any:
+        """The outlines of the footprints ``indices`` unioned, gaps narrower than ``closing``
+        closed."""
+        import shapely
+
+        if indices not in self._unions:
+            outlines = [self.prints[i].outline for i in indices]
+            self._unions[indices] = _closed(shapely.union_all(outlines), self.closing)
+        return self._unions[indices]
 
 
 def blocks_of(prints: list[Footprint], closing: float) -> Blocks:
@@ -120,31 +150,24 @@ def block_proxy(blocks: Blocks, tolerance: float, band: float) -> Mesh | None:
     """The blocks as prisms in height bands ``band`` metres deep, outlines simplified within
     ``tolerance``: one part with vertex colours, in scene coordinates (``None`` when nothing
     with area is left)."""
-    import shapely
-
     prints = blocks.prints
     tops = np.array([p.top for p in prints])
     areas = np.array([p.area for p in prints])
     surfaces: list[Surface] = []
     colors: list[np.ndarray] = []
-    for polygon, members in zip(blocks.polygons, blocks.members, strict=True):
+    for b, members in enumerate(blocks.members):
         base = min(prints[i].base for i in members)
         taller: list[int] = []
         bands = _bands(members[np.argsort(-tops[members], kind="stable")], tops, band)
         for last, group in ((g == len(bands) - 1, group) for g, group in enumerate(bands)):
             taller += group
-            outline = (
-                polygon
-                if last
-                else _closed(shapely.union_all([prints[i].outline for i in taller]), blocks.closing)
-            )
-            kept = simplified_polygons(outline, tolerance)
-            if not kept:
+            parts = blocks.parts(b, None if last else tuple(taller), tolerance)
+            if not parts:
                 continue
             top = _weighted_percentile(tops[group], areas[group], BAND_PERCENTILE / 100)
             roof, wall = (_mean_color([getattr(prints[i], k) for i in taller], areas[taller])
                           for k in ("roof", "wall"))  # fmt: skip
-            for part in polygons(shapely.MultiPolygon(kept)):
+            for part in parts:
                 surfaces += extruded(part, base, top)
                 colors += [roof, wall]
     return coloured(surfaces, colors) if surfaces else None

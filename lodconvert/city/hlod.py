@@ -323,13 +323,14 @@ def _choice(candidates: dict[str, tuple[Level, float]], kind: str) -> tuple[str,
 
 
 def _silhouette_f(source: Mesh, level: Level, distance: float, options: ChainOptions) -> float:
-    """Silhouette F of ``level`` against ``source`` seen from ``distance``."""
+    """Silhouette F of ``level`` against ``source`` seen from ``distance`` (``source``'s
+    silhouettes kept with it: a cell compares every candidate with the same)."""
     if level.points is not None:
         size = level.params.point_size if level.params is not None else 1.0
-        estimate = silhouette_estimate(source, level.points, size, distance, options.view)
+        estimate = silhouette_estimate(source, level.points, size, distance, options.view, True)
     else:
         assert level.mesh is not None
-        estimate = mesh_silhouette_estimate(source, level.mesh, distance, options.view)
+        estimate = mesh_silhouette_estimate(source, level.mesh, distance, options.view, True)
     return estimate.f
 
 

@@ -1,0 +1,239 @@
+"""LOD parents baked as tasks on the run's executor (:mod:`lodconvert.tasks`), so that with
+``--workers`` or a dask cluster the workers bake cells while the main process goes on feeding
+them objects.
+
+Each tier is a stream of :class:`CellTask` s, one per cell with members, in the cells' order:
+tier 1 takes its members from the objects' chains as they come back baked, each coarser tier
+from the results of the tier below, one coarsest cell's finer cells at a time, while the
+finer tiers' next cells are already being baked. A task carries its plan and its members; its
+result is the cell without them (which members it admits, by index, and the cell gathering
+those a coarsest cell left out), so the main process puts the cell together of the very
+member chains it holds: members are shipped to a worker once per tier, never back (only the
+block footprints found for their objects come back, for the coarser tier). Results are
+taken in submission order, so cells are the same for any executor. A task whose workers died
+gives no cell: its members are drawn on their own, and a warning says so.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, replace
+from typing import Any, TypeVar
+
+from ..bake import Backend
+from ..chain import ChainOptions
+from ..limits import Limits
+from ..model import CellChain, Level, LodChain, Mesh, Surface
+from .hlod import CellPlan, Member, bake_cell
+
+SHIPPED = ("bounds", "block-footprint-")
+"""What a member's meshes derived that travels with a task (a few numbers each; a footprint
+takes a while to find)."""
+
+T = TypeVar("T", Mesh, Surface)
+Warn = Callable[[str], None]
+Results = Callable[[Iterable["CellTask"]], Iterator["CellResult"]]
+"""An executor's ``results``: each task's result, in order."""
+
+
+@dataclass(frozen=True)
+class CellResult:
+    """A baked cell without its members (``None``: it admits none) and the indices of the
+    members it admits; the cell gathering the others (``beside``, without its members, where
+    a coarsest cell left some out); the warnings its baking gave; ``error``: why it could not
+    be baked."""
+
+    cell: CellChain | None
+    admitted: tuple[int, ...] = ()
+    beside: CellChain | None = None
+    warnings: tuple[str, ...] = ()
+    error: str | None = None
+    derived: tuple[dict[str, Any], ...] = ()
+    """What the members' objects' finest levels derived that :data:`SHIPPED` names, each
+    object's in order (for a coarser tier's task; none for a coarsest cell)."""
+
+    def items(self, members: list[Member]) -> list[Member]:
+        """The cell of ``members`` (the task's, as the main process holds them) and the members
+        it leaves out (gathered into the ``beside`` cell where there is one), as
+        :func:`~.hlod.bake_cell` gives them; ``members`` themselves without a cell. The
+        objects' finest levels keep what was derived from them there."""
+        for chain, found in zip(_objects(members), self.derived, strict=False):
+            _finest(chain)._derived.update(found)
+        if self.cell is None:
+            return list(members)
+        chosen = set(self.admitted)
+        rest = [m for i, m in enumerate(members) if i not in chosen]
+        if self.beside is not None:
+            rest = [replace(self.beside, members=rest)]
+        return [replace(self.cell, members=[members[i] for i in self.admitted]), *rest]
+
+
+@dataclass(frozen=True)
+class CellTask:
+    """The LOD parent of ``plan`` over its baked ``members`` (:func:`~.hlod.bake_cell`;
+    ``top``: a coarsest cell, which gathers what it leaves out into a cell of its own)."""
+
+    plan: CellPlan
+    members: tuple[Member, ...]
+    options: ChainOptions
+    kind: str
+    limits: Limits
+    top: bool
+
+    def run(self, backend: Backend, progress: object = None) -> CellResult:
+        """Bake the cell with ``backend``; its warnings are data."""
+        warnings: list[str] = []
+        members = list(self.members)
+        cell, beside = bake_cell(
+            self.plan, members, self.options, self.kind, backend, warnings.append, self.limits,
+            beside=self.top,
+        )  # fmt: skip
+        found = () if self.top else tuple(_kept(_finest(c)) for c in _objects(members))
+        if cell is None:
+            return CellResult(None, warnings=tuple(warnings), derived=found)
+        chosen = {id(m) for m in cell.members}
+        admitted = tuple(i for i, m in enumerate(members) if id(m) in chosen)
+        gathered = None
+        if self.top and len(admitted) < len(members):
+            gathered = beside[0]
+            assert isinstance(gathered, CellChain) and len(beside) == 1
+            gathered = replace(gathered, members=[])
+        return CellResult(
+            replace(cell, members=[]), admitted, gathered, tuple(warnings), derived=found
+        )
+
+    def __reduce__(self) -> tuple[type[CellTask], tuple[Any, ...]]:
+        """Pickled with its members' meshes without the tables derived from them (per face
+        and vertex, several times the geometry's bytes), which are found again where the task
+        runs: only their bounds and block footprints travel along (:data:`SHIPPED`)."""
+        members = tuple(_shipped(m) for m in self.members)
+        return CellTask, (self.plan, members, self.options, self.kind, self.limits, self.top)
+
+    def failed(self, reason: str) -> CellResult:
+        """The result of this task when it could not run, for ``reason``: no cell."""
+        return CellResult(None, error=f"LOD parent {self.plan.cell_id}: {reason}")
+
+
+@dataclass(frozen=True)
+class CellBaker:
+    """How a run bakes its cells: by ``results`` (its executor's), with the run's options,
+    far level kind and limits; ``warn`` hears the cells' warnings (``source`` names the
+    input)."""
+
+    results: Results
+    options: ChainOptions
+    kind: str
+    limits: Limits
+    warn: Warn
+    source: str
+
+    def cells(self, plans: list[CellPlan], chains: Iterator[LodChain | None]) -> Iterator[Member]:
+        """The coarsest cells of ``plans`` (in order) over the objects' ``chains`` (in the
+        plans' object order, ``None`` for one skipped), each followed by the members it left
+        out: what :func:`~.hlod.bake_cell` gives for each coarsest cell, its finer cells baked
+        first."""
+        if not plans:
+            return
+        top = plans[0].tier
+        stream = self._baked(_first_tier(_at_tier(plans, 1), chains), top == 1)
+        for tier in range(2, top + 1):
+            stream = self._baked(_gathered(_at_tier(plans, tier), stream), tier == top)
+        for _, items in stream:
+            yield from items
+
+    def _baked(
+        self, planned: Iterator[tuple[CellPlan, list[Member]]], top: bool
+    ) -> Iterator[tuple[CellPlan, list[Member]]]:
+        """Each of ``planned`` (a cell's plan and members) with what its baking gives, in
+        order; a cell without members gives nothing."""
+        order: deque[tuple[CellPlan, list[Member]]] = deque()
+
+        def tasks() -> Iterator[CellTask]:
+            for plan, members in planned:
+                order.append((plan, members))
+                if members:
+                    yield CellTask(plan, tuple(members), self.options, self.kind, self.limits, top)
+
+        for result in self.results(tasks()):
+            while not order[0][1]:
+                yield order.popleft()[0], []
+            plan, members = order.popleft()
+            for text in result.warnings:
+                self.warn(text)
+            if result.error is not None:
+                self.warn(f"{self.source}: {result.error} — its members are drawn on their own")
+            yield plan, result.items(members)
+        while order:
+            yield order.popleft()[0], []
+
+
+def _shipped(member: Member) -> Member:
+    """``member`` with meshes sharing its arrays but keeping only what :data:`SHIPPED` names
+    of what was derived from them."""
+    if isinstance(member, CellChain):
+        members = [_shipped(m) for m in member.members]
+        return replace(member, members=members, far=_shipped_level(member.far))
+    return replace(member, levels=[_shipped_level(level) for level in member.levels])
+
+
+def _shipped_level(level: Level) -> Level:
+    """``level`` with its mesh (if any) as :func:`_shipped` ships it."""
+    if level.mesh is None:
+        return level
+    parts = [_kept_derived(part, replace(part)) for part in level.mesh.parts]
+    return replace(level, mesh=_kept_derived(level.mesh, Mesh(parts)))
+
+
+def _kept_derived(source: T, copy: T) -> T:
+    """``copy`` given what :data:`SHIPPED` names of what ``source`` derived."""
+    copy._derived.update(_kept(source))
+    return copy
+
+
+def _kept(mesh: Mesh | Surface) -> dict[str, Any]:
+    """What :data:`SHIPPED` names of what ``mesh`` derived."""
+    return {key: value for key, value in mesh._derived.items() if key.startswith(SHIPPED)}
+
+
+def _objects(members: list[Member]) -> list[LodChain]:
+    """The object chains of ``members``, in order."""
+    return [c for m in members for c in (m.objects() if isinstance(m, CellChain) else [m])]
+
+
+def _finest(chain: LodChain) -> Mesh:
+    """The finest mesh level of ``chain`` (where its block footprint is kept)."""
+    return next(level.mesh for level in chain.levels if level.mesh is not None)
+
+
+def _at_tier(plans: list[CellPlan], tier: int) -> list[CellPlan]:
+    """The cells of ``tier`` under ``plans``, in order."""
+    found: list[CellPlan] = []
+    for plan in plans:
+        found += [plan] if plan.tier == tier else _at_tier(plan.cells, tier)
+    return found
+
+
+def _first_tier(
+    plans: list[CellPlan], chains: Iterator[LodChain | None]
+) -> Iterator[tuple[CellPlan, list[Member]]]:
+    """Each tier-1 cell of ``plans`` with its objects' chains taken from ``chains`` (those
+    skipped left out)."""
+    for plan in plans:
+        found = itertools.islice(chains, len(plan.objects))
+        yield plan, [chain for chain in found if chain is not None]
+
+
+def _gathered(
+    plans: list[CellPlan], finer: Iterator[tuple[CellPlan, list[Member]]]
+) -> Iterator[tuple[CellPlan, list[Member]]]:
+    """Each of ``plans`` with its members: what baking each of its finer cells gave
+    (``finer``, in order)."""
+    for plan in plans:
+        members: list[Member] = []
+        for cell in plan.cells:
+            baked, items = next(finer)
+            assert baked is cell
+            members += items
+        yield plan, members
