@@ -7,6 +7,7 @@ from __future__ import annotations
 import gzip
 import io
 import json
+import pickle
 import signal
 import time
 from collections.abc import Callable, Iterable, Iterator
@@ -20,12 +21,13 @@ from lodconvert.errors import InputError
 from lodconvert.io import read_scene, spread
 from lodconvert.io.citygml import members as members_module
 from lodconvert.io.citygml.members import Members
+from lodconvert.io.cityjson.parallel import ObjectsTask
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.model import Mesh, Node, Scene
 from lodconvert.tasks import Executor, PoolExecutor
 
 from .test_citygml import HEAD, box, building, tree
-from .test_cityjson import _features, multi_lod
+from .test_cityjson import _features, delft, multi_lod
 
 ROOT = HEAD.replace(">", ' xmlns:veg="http://www.opengis.net/citygml/vegetation/2.0">', 1)
 ENVELOPE = (
@@ -283,6 +285,60 @@ def test_a_cityjson_file_read_by_workers_is_the_file_read_in_one_process(tmp_pat
     assert tally_of(two).skipped == tally_of(one).skipped
     assert [entry["id"] for entry in tally_of(two).skipped] == ["2128302"]
     assert two.size == one.size == 9
+
+
+class _Shipped(Executor):
+    """Each task and its result pickled and unpickled, as to and from a worker, in this
+    process; the tasks kept, each with its bytes."""
+
+    def __init__(self) -> None:
+        self.sent: list[tuple[Any, int]] = []
+
+    def results(self, tasks: Iterable[Any]) -> Iterator[Any]:
+        for task in tasks:
+            data = pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL)
+            self.sent.append((task, len(data)))
+            yield pickle.loads(pickle.dumps(pickle.loads(data).run()))
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_cityjson_task_carries_only_the_vertices_its_objects_use() -> None:
+    """Delft read by workers, an object a task: the nodes of one process, and each task ships
+    the rows of the vertex list its object uses, not the whole list (which made every task as
+    large as the file's vertices)."""
+    _, one_facts, _, _ = _read(delft(), spread=False)
+    shipped = _Shipped()
+    _, two_facts, _, _ = _read(delft(), spread=True, workers=lambda: shipped)
+    assert two_facts == one_facts
+    tasks = [(task, size) for task, size in shipped.sent if isinstance(task, ObjectsTask)]
+    assert len(tasks) > 1
+    whole = tasks[0][0].vertices.count
+    rows = [len(task.vertices.rows) for task, _ in tasks]
+    assert all(task.vertices.used is not None for task, _ in tasks)
+    assert len(tasks) > 500 and max(rows) < whole / 20 and sum(rows) < 2 * whole
+    assert sum(size for _, size in tasks) < 10 * 24 * whole  # the list once a task: 569×
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+@pytest.mark.parametrize(
+    "boundaries",
+    [[[[[10**6, 0, 1]]]], [[[["0", 1, 2]]]], [[[None]]], [[[[0.5, 1, 2]]]], "nested"],
+    ids=["missing-vertex", "text-index", "null-ring", "fractional-index", "text"],
+)
+def test_an_object_with_bad_boundaries_read_by_workers_is_skipped_as_in_one_process(
+    tmp_path: Path, boundaries: Any
+) -> None:
+    """An object whose boundaries are not nested lists of vertex indices is skipped for the
+    same reason as in one process (its task ships every row then), the others read alike."""
+    document = json.loads(multi_lod().read_text())
+    document["CityObjects"]["2128302"]["geometry"][0]["boundaries"] = boundaries
+    path = tmp_path / "broken.city.json"
+    path.write_text(json.dumps(document))
+    one, one_facts, _, _ = _read(path, spread=False)
+    two, two_facts, _, _ = _read(path, spread=True, workers=_Shipped)
+    assert two_facts == one_facts and len(one_facts) == 9
+    assert tally_of(two).skipped == tally_of(one).skipped
+    assert [entry["id"] for entry in tally_of(two).skipped] == ["2128302"]
 
 
 def _degrees(ring: str) -> str:

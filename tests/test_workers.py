@@ -16,14 +16,16 @@ import numpy as np
 import pytest
 import trimesh
 
+from lodconvert import pipeline
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
 from lodconvert.model import Node, Scene
-from lodconvert.pipeline import iter_chains
+from lodconvert.pipeline import RunOptions, convert, iter_chains
 from lodconvert.tasks import PoolExecutor, SerialExecutor
 
-from .conftest import ROOT, SHARED, surface_of
+from .conftest import ROOT, SHARED, shared_data, surface_of
 from .test_cityjson import _features
+from .worker_probe import Imported
 
 TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
 CITIES = {
@@ -267,3 +269,23 @@ def test_workers_below_one_is_a_usage_error(mixed: Path, tmp_path: Path) -> None
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1].endswith("--workers must be at least 1, got 0")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_workers_that_read_and_bake_a_city_never_import_scipy(
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    """A worker process starts by importing what it needs; scipy took the most of that (0.25 s
+    of CPU per worker and run, for the connected parts of a footprint), so a worker that read,
+    baked and formatted TUM's buildings must not have imported it."""
+    imported: list[str] = []
+
+    class Probed(PoolExecutor):
+        def close(self) -> None:
+            if self._workers:
+                imported.extend(next(self.results([Imported()])))
+            super().close()
+
+    monkeypatch.setattr(pipeline, "PoolExecutor", Probed)
+    convert(shared_data(TUM), tmp_path / "tum.x3d", RunOptions(workers=2))
+    assert {"lodconvert.io.citygml.parallel", "lodconvert.city.prisms"} <= set(imported)
+    assert [name for name in imported if name.split(".")[0] == "scipy"] == []

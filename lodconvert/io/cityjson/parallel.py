@@ -2,21 +2,22 @@
 (inflated and held to the limits there) and the first feature itself (its vertices centre a
 geographic CRS's frame), then ships runs of lines as bytes with the header (:class:`LinesTask`).
 A ``.json`` file: after its one ``json.loads`` (and its vertices put in metres) in the main
-process, batches of CityObjects with the vertices (:class:`ObjectsTask`); the main process joins
-parts to their objects once all are read. Each worker reads as one process reads and gives back
-the nodes and what it counted; the main process takes the results in order, so nodes, skipped
-objects and counts are those of one process. A file with geometry templates is read in the main
-process (its instances share one mesh per template); a task whose workers died is read in the
-main process; one a worker cannot read has the file read by the one-process reader, so that
-the error is the one it gives."""
+process, batches of CityObjects with the rows of the vertices they use (:class:`ObjectsTask`,
+:class:`UsedRows`); the main process joins parts to their objects once all are read. Each
+worker reads as one process reads and gives back the nodes and what it counted; the main
+process takes the results in order, so nodes, skipped objects and counts are those of one
+process. A file with geometry templates is read in the main process (its instances share one
+mesh per template); a task whose workers died is read in the main process; one a worker cannot
+read has the file read by the one-process reader, so that the error is the one it gives."""
 
 from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import closing
 from dataclasses import dataclass
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -27,6 +28,7 @@ from ...model import Node
 from ..crs import Crs
 from ..geometry_checks import InputTally
 from ..spread import Results, Sizer, add_tally, quiet
+from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_nodes, read_kept
 from .source import Context, context_of
 
@@ -208,11 +210,10 @@ class ObjectsResult:
 class ObjectsTask:
     """CityObjects of a ``.json`` file to read, each ``(key, object, below)`` (``below``: how
     many objects are left out with one nested too deep, else None), against the file's
-    vertices (in metres: all of them, which costs less to send than finding the rows each
-    task uses)."""
+    vertices (in metres): only the rows the objects use (:class:`UsedRows`)."""
 
     objects: tuple[tuple[str, Any, int | None], ...]
-    vertices: np.ndarray
+    vertices: UsedRows
     materials: list[Any]
     declared: Crs | None
     source: str
@@ -223,7 +224,8 @@ class ObjectsTask:
         """Read the objects (``backend`` and ``progress`` are not used)."""
         start = time.process_time()
         tally = InputTally(self.source, self.limits)
-        ctx = Context(tally, self.vertices, self.declared, self.materials, palette=self.palette)
+        vertices = self.vertices.array()
+        ctx = Context(tally, vertices, self.declared, self.materials, palette=self.palette)
         try:
             reads = [read_kept(key, obj, ctx, below) for key, obj, below in self.objects]
             nodes = tuple(checked_nodes(reads))
@@ -323,8 +325,8 @@ class ObjectsReading:
         tree, ctx, tally = self.tree, self.ctx, self.ctx.tally
         objects = tuple((key, tree.objects[key], tree.too_deep.get(key)) for key in keys)
         return ObjectsTask(
-            objects, ctx.vertices, ctx.materials, ctx.declared, tally.source, tally.limits,
-            ctx.palette,
+            objects, UsedRows.of(ctx.vertices, objects), ctx.materials, ctx.declared,
+            tally.source, tally.limits, ctx.palette,
         )  # fmt: skip
 
     def _one_process_error(self, error: InputError) -> InputError:
@@ -338,3 +340,58 @@ class ObjectsReading:
 
 MIN_OBJECTS, MAX_OBJECTS = 32, 256
 """Objects a task holds at least (but for the last) and at most."""
+
+_FLATTEN = {**{kind: depth + 1 for kind, depth in SURFACE_DEPTH.items()}, "GeometryInstance": 0}
+"""How many levels of lists lie above the vertex indices of each geometry type the reader
+reads (a surface's rings, their indices; an instance's one reference point)."""
+
+
+@dataclass(frozen=True)
+class UsedRows:
+    """The rows of a file's vertex list that some objects use (``rows``, in the order of the
+    sorted indices ``used``; ``None``: every row, as ``rows``) and how many it has: what a task
+    ships instead of the whole list (10× Delft's 23 tasks: 16 MB in all, not 110 MB). The
+    worker puts them back in place, so its objects index them as the file does."""
+
+    rows: np.ndarray
+    used: np.ndarray | None
+    count: int
+
+    @classmethod
+    def of(cls, vertices: np.ndarray, objects: Iterable[tuple[str, Any, Any]]) -> UsedRows:
+        """The rows of ``vertices`` that the geometry of ``objects`` (``(key, object, _)``)
+        names; every row where a boundary is not nested lists of numbers (the reader says
+        what is wrong)."""
+        try:
+            index = np.array(_indices(objects), dtype=np.int64)
+        except (TypeError, ValueError, OverflowError):
+            return cls(vertices, None, len(vertices))
+        index = np.sort(index[(index >= 0) & (index < len(vertices))])
+        used = index[np.diff(index, prepend=-1) != 0]
+        return cls(vertices[used], used, len(vertices))
+
+    def array(self) -> np.ndarray:
+        """The vertex list, of all its rows, those not used zero (where no row is written, no
+        memory is taken: the array is mapped as it is written)."""
+        if self.used is None:
+            return self.rows
+        vertices = np.zeros((self.count, *self.rows.shape[1:]), self.rows.dtype)
+        vertices[self.used] = self.rows
+        return vertices
+
+
+def _indices(objects: Iterable[tuple[str, Any, Any]]) -> list[Any]:
+    """The vertex indices of the geometry of ``objects`` that the reader reads, end to end
+    (``TypeError`` where a boundary is not nested lists)."""
+    found: list[Any] = []
+    for _, obj, _ in objects:
+        geometries = obj.get("geometry") if isinstance(obj, dict) else None
+        for geometry in geometries or ():
+            depth = _FLATTEN.get(geometry.get("type")) if isinstance(geometry, dict) else None
+            if depth is None:
+                continue
+            values = geometry.get("boundaries")
+            for _ in range(depth):
+                values = chain.from_iterable(values)
+            found.extend(values)
+    return found
