@@ -611,7 +611,7 @@ class _Assembly:
         for item in items:
             if not self.started:
                 self.frame, self.started = scene_frame(self.info.framed, item), True
-            objects = item.objects() if isinstance(item, CellChain) else [item]
+            objects = item.objects()
             for chain in objects:
                 self.records.append(
                     {**chain_record(chain), "dropped_faces": dropped.get(chain.object_id, 0)}

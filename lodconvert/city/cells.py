@@ -199,7 +199,7 @@ def _kept(mesh: Mesh | Surface) -> dict[str, Any]:
 
 def _objects(members: list[Member]) -> list[LodChain]:
     """The object chains of ``members``, in order."""
-    return [c for m in members for c in (m.objects() if isinstance(m, CellChain) else [m])]
+    return [c for m in members for c in m.objects()]
 
 
 def _finest(chain: LodChain) -> Mesh:

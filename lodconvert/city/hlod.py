@@ -244,7 +244,7 @@ def bake_cell(
         )
         assert gathered is not None
         drawn_beside = [gathered]
-    objects = [c for m in members for c in (m.objects() if isinstance(m, CellChain) else [m])]
+    objects = [c for m in members for c in m.objects()]
     finest = _merged([_finest_mesh(chain) for chain in objects])
     world = finest.bounds
     origin = (world[0] + world[1]) / 2.0
@@ -416,7 +416,7 @@ def _far_meshes(member: Member) -> list[Mesh]:
     floors."""
     if isinstance(member, CellChain) and member.far.mesh is not None:
         return [member.far.mesh.translated(member.origin)]
-    chains = member.objects() if isinstance(member, CellChain) else [member]
+    chains = member.objects()
     coarsest = (next(lv.mesh for lv in reversed(c.levels) if lv.mesh is not None) for c in chains)
     return [_floorless(_placed(c, mesh)) for c, mesh in zip(chains, coarsest, strict=True)]
 
@@ -512,7 +512,7 @@ def _member_blocks_level(
     proxies = []
     blocks = objects = 0
     for member in members:
-        chains = member.objects() if isinstance(member, CellChain) else [member]
+        chains = member.objects()
         prints = [p for c in chains if (p := object_footprint(c, _finest_mesh(c)))]
         if prints:
             found = blocks_of(prints, BLOCK_CLOSING_PX * pixel)
@@ -665,7 +665,7 @@ def _admitted(members: list[Member], options: ChainOptions, gamma: float) -> lis
 
 def _world_bounds(member: Member) -> np.ndarray:
     """(2, 3) bounding box of a member's objects' finest geometry in scene coordinates."""
-    chains = member.objects() if isinstance(member, CellChain) else [member]
+    chains = member.objects()
     boxes = np.stack([_finest_mesh(chain).bounds for chain in chains])
     return np.stack([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
 
@@ -691,7 +691,7 @@ def draw_counts(items: Sequence[Member]) -> dict[str, int]:
     nodes = shapes = calls = drawn = 0
     for item in items:
         cells = item.cells() if isinstance(item, CellChain) else []
-        chains = item.objects() if isinstance(item, CellChain) else [item]
+        chains = item.objects()
         nodes += 3 * len(cells) + sum(1 + len(chain.levels) for chain in chains)
         shapes += sum(_parts(cell.far) for cell in cells)
         shapes += sum(_parts(level) for chain in chains for level in chain.levels)

@@ -123,6 +123,10 @@ class LodChain:
             ]
         )
 
+    def objects(self) -> list[LodChain]:
+        """The object chains it holds: itself (as :meth:`CellChain.objects` gives a cell's)."""
+        return [self]
+
 
 @dataclass
 class CellChain:
@@ -159,10 +163,7 @@ class CellChain:
 
     def objects(self) -> list[LodChain]:
         """The object chains of this cell and of its finer cells, in order."""
-        found: list[LodChain] = []
-        for member in self.members:
-            found.extend(member.objects() if isinstance(member, CellChain) else [member])
-        return found
+        return [chain for member in self.members for chain in member.objects()]
 
     def cells(self) -> list[CellChain]:
         """This cell and its finer cells, coarsest first."""

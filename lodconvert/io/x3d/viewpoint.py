@@ -34,7 +34,7 @@ class SceneBox:
 
     def add(self, item: LodChain | CellChain) -> None:
         """Grow the box by a chain's sphere, or by those of a LOD parent's objects."""
-        for chain in item.objects() if isinstance(item, CellChain) else [item]:
+        for chain in item.objects():
             centre = np.asarray(chain.origin, dtype=np.float64) + chain.center
             if chain.transform is not None:
                 centre = chain.transform[:3, :3] @ centre + chain.transform[:3, 3]
