@@ -267,6 +267,8 @@ class Mesh:
         if not len(face_ids):
             return out
         part_of = self.face_part[face_ids]
+        if all(p.vertex_colors is None and p.texture is None for p in self.parts):
+            return np.stack([p.material_color for p in self.parts])[part_of]  # plain colours
         first_face = np.cumsum([0] + [len(p.faces) for p in self.parts[:-1]])
         order = np.argsort(part_of, kind="stable")  # each part's faces together: one pass
         indices, starts = np.unique(part_of[order], return_index=True)
