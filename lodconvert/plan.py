@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .bake.grid import Grid
-from .bake.numpy import silhouettes
+from .bake.numpy import overlap_counts, silhouette_counts, silhouettes
 from .model import Level, Mesh, PointCloud
 from .ranges import REFERENCE_VIEW, ReferenceView
 
@@ -199,14 +199,14 @@ def mesh_silhouette_estimate(
     if keep:
         grid, source = _source_masks(mesh, pixel, bounds, keep)
         (drawn,) = silhouettes([other], grid)
+        counts = [overlap_counts(want, got) for want, got in zip(source, drawn, strict=True)]
     else:  # both in one pass
-        (source, drawn) = silhouettes([mesh, other], _grid(pixel, bounds))
+        counts = silhouette_counts(mesh, other, _grid(pixel, bounds))
     precision = recall = 1.0
-    for want, got in zip(source, drawn, strict=True):
-        if not want.any() and not got.any():
+    for wanted, drawn_count, tp in counts:
+        if not wanted and not drawn_count:
             continue
-        tp = int(np.count_nonzero(want & got))
-        fp, fn = int(np.count_nonzero(got & ~want)), int(np.count_nonzero(want & ~got))
+        fp, fn = drawn_count - tp, wanted - tp
         precision = min(precision, tp / (tp + fp) if tp + fp else 0.0)
         recall = min(recall, tp / (tp + fn) if tp + fn else 1.0)
     return SilhouetteEstimate(precision=precision, recall=recall)

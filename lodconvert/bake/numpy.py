@@ -236,35 +236,75 @@ def silhouettes(
     Each face covers, in each pixel row its projection crosses, the span of pixel centres
     between its edges there (edges inclusive, faces seen edge-on left out). All images are
     filled at once, a quarter of ``memory_bytes`` worth of spans at a time."""
+    filled, layout = _filled(surfaces, grid, memory_bytes)
+    images = [filled[s : s + rows * w].reshape(rows, w)[:, : w - 1] for s, rows, w in layout]
+    return [images[i : i + 3] for i in range(0, len(images), 3)]
+
+
+def silhouette_counts(
+    first: Mesh, second: Mesh, grid: Grid, memory_bytes: int = DEFAULT_LIMITS.memory_bytes
+) -> list[tuple[int, int, int]]:
+    """Along x, y and z: the pixels of ``first``'s silhouette, of ``second``'s and of both
+    (:func:`silhouettes`), counted without laying out the images."""
+    filled, layout = _filled([first, second], grid, memory_bytes)
+    return [
+        overlap_counts(filled[s : s + rows * w], filled[t : t + rows * w])
+        for (s, rows, w), (t, _, _) in zip(layout[:3], layout[3:], strict=True)
+    ]
+
+
+def overlap_counts(one: np.ndarray, other: np.ndarray) -> tuple[int, int, int]:
+    """The pixels of silhouette ``one``, of ``other`` (of the same shape) and of both."""
+    both = int(np.count_nonzero(one & other))
+    return int(np.count_nonzero(one)), int(np.count_nonzero(other)), both
+
+
+def _filled(
+    surfaces: Sequence[Mesh], grid: Grid, memory_bytes: int
+) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+    """The silhouettes of :func:`silhouettes` laid out one after another in one flat array,
+    each image's rows a column wider (that column never filled), and where each image starts
+    in it with its rows and width, per surface along x, y and z."""
     projected = [s.derived("numpy-projections", lambda s=s: _projections(s)) for s in surfaces]
     pu = np.concatenate([p[0] for p in projected], axis=1)
     pv = np.concatenate([p[1] for p in projected], axis=1)
     view = np.concatenate([3 * i + p[2] for i, p in enumerate(projected)])  # surface, axis
-    shape = np.array([grid.image_shape(axis) for axis in range(3)] * len(surfaces)).reshape(-1, 2)
-    width = shape[:, 1] + 1  # a column more, where spans that reach the last one end
-    start = np.cumsum(shape[:, 0] * width) - shape[:, 0] * width
-    origin = np.concatenate(
-        [
-            np.stack([grid.lo[PLANE_U] - centre[PLANE_U], grid.lo[PLANE_V] - centre[PLANE_V]], 1)
-            for *_, centre in projected
-        ]
-    ).reshape(-1, 2)
-    origin_u, origin_v = origin[view, 0], origin[view, 1]
-    iv0, nv = _pixel_range(pv.min(axis=0), pv.max(axis=0), origin_v, grid.pitch, shape[view, 0])
+    shapes = [grid.image_shape(axis) for axis in range(3)]
+    layout, at = [], 0
+    for _ in surfaces:
+        for rows, cols in shapes:
+            layout.append((at, rows, cols + 1))  # a column more, where spans that reach the
+            at += rows * (cols + 1)  # last one end
+    start, rows_of, width = np.array(layout, dtype=np.int64).T
+    lo_u, lo_v = grid.lo[PLANE_U], grid.lo[PLANE_V]
+    origin = np.array([[lo_u - p[3][PLANE_U], lo_v - p[3][PLANE_V]] for p in projected])
+    origin_u, origin_v = origin[view // 3, 0, view % 3], origin[view // 3, 1, view % 3]
+    iv0, nv = _pixel_range(pv.min(axis=0), pv.max(axis=0), origin_v, grid.pitch, rows_of[view])
     live = np.flatnonzero(nv)
     count = nv[live]
+    # Per face and edge (edge k runs from corner k to the next): its lowest and highest v, its
+    # start, its rise in v (1 where it has none) and its run in u.
+    after_v, after_u = pv[NEXT], pu[NEXT]
+    edges_of = np.stack(
+        [
+            np.minimum(pv, after_v),
+            np.maximum(pv, after_v),
+            pv,
+            np.where(pv != after_v, after_v - pv, 1.0),
+            pu,
+            after_u - pu,
+        ]
+    )
     chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
-    edges = np.zeros(int((shape[:, 0] * width).sum()), dtype=np.int64)
+    edges = np.zeros(at, dtype=np.int64)
     for part in _chunks(count, chunk):
         c = count[part]
         faces = np.repeat(live[part], c)
         iv = iv0[faces] + np.arange(len(faces)) - np.repeat(np.cumsum(c) - c, c)
         y = origin_v[faces] + (iv + 0.5) * grid.pitch
-        ay, ax = np.take(pv, faces, axis=1), np.take(pu, faces, axis=1)
-        by, bx = ay[NEXT], ax[NEXT]  # edge k of a face runs from its corner k to the next
-        crosses = (np.minimum(ay, by) <= y) & (y <= np.maximum(ay, by))
-        rise = np.where(ay != by, by - ay, 1.0)
-        x = ax + np.clip((y - ay) / rise, 0.0, 1.0) * (bx - ax)
+        low_v, high_v, ay, rise, ax, run = np.take(edges_of, faces, axis=2)
+        crosses = (low_v <= y) & (y <= high_v)
+        x = ax + (y - ay) / rise * run  # (y - ay) / rise lies in [0, 1] where the edge crosses
         low = np.where(crosses, x, np.inf).min(axis=0)
         high = np.where(crosses, x, -np.inf).max(axis=0)
         found = low <= high
@@ -272,13 +312,8 @@ def silhouettes(
         cols = width[view[faces]]
         first, n = _pixel_range(low[found], high[found], origin_u[faces], grid.pitch, cols - 1)
         spans = n > 0
-        at = (start[view[faces]] + iv * cols + first)[spans]
-        np.add.at(edges, at, 1)
-        np.subtract.at(edges, at + n[spans], 1)
+        begins = (start[view[faces]] + iv * cols + first)[spans]
+        edges += np.bincount(begins, minlength=at)
+        edges -= np.bincount(begins + n[spans], minlength=at)
     # Every span ends in its own row, so each row sums to nothing: one running sum fills all.
-    filled = edges.cumsum() > 0
-    images = [
-        filled[s : s + rows * w].reshape(rows, w)[:, : w - 1]
-        for s, (rows, _), w in zip(start.tolist(), shape.tolist(), width.tolist(), strict=True)
-    ]
-    return [images[i : i + 3] for i in range(0, len(images), 3)]
+    return edges.cumsum() > 0, layout
