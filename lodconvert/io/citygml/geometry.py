@@ -269,55 +269,64 @@ class _Walker:
         unplaced = []
         ancestor: etree._Element | None = element
         while ancestor is not None and ancestor not in self.places:
-            unplaced.append(ancestor)
-            ancestor = None if self._settled(ancestor) else ancestor.getparent()
+            name, parent = local(ancestor), ancestor.getparent()
+            unplaced.append((ancestor, name, parent))
+            ancestor = None if self._settled(ancestor, name, parent) else parent
         found: dict[Any, _Place | None] = {}
-        for each in reversed(unplaced):
-            found[each] = place = self._found(each, found)
+        for each, name, parent in reversed(unplaced):
+            found[each] = place = self._found(each, name, parent, found)
             if each is element or len(each) > 1:
                 self.places[each] = place
         return found[element] if element in found else self.places[element]
 
-    def _settled(self, element: etree._Element) -> bool:
-        """Whether where ``element`` lies is known without its parent's place."""
-        name = local(element)
-        parent = element.getparent()
-        return (
-            parent is None
-            or element is self.top.element
-            or name in NOT_SURFACES
+    def _settled(self, element: etree._Element, name: str, parent: etree._Element | None) -> bool:
+        """Whether where ``element`` (its local ``name``, its ``parent``) lies is known without
+        its parent's place."""
+        if parent is None or element is self.top.element:
+            return True
+        return not _plain(name) and (
+            name in NOT_SURFACES
             or LOD_PROPERTY.fullmatch(name) is not None
             or (name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)) is not None)
             or (name == "interior" and local(parent) == "Solid")
         )
 
-    def _found(self, element: etree._Element, found: dict[Any, _Place | None]) -> _Place | None:
-        """Where ``element`` lies, its parent's place known (remembered, or just ``found``)
-        unless :meth:`_settled`."""
-        name = local(element)
-        parent = element.getparent()
-        if parent is None or element is self.top.element or name in NOT_SURFACES:
+    def _found(
+        self,
+        element: etree._Element,
+        name: str,
+        parent: etree._Element | None,
+        found: dict[Any, _Place | None],
+    ) -> _Place | None:
+        """Where ``element`` (its local ``name``, its ``parent``) lies, its parent's place known
+        (remembered, or just ``found``) unless :meth:`_settled`."""
+        if parent is None or element is self.top.element:
             return None
-        if (match := LOD_PROPERTY.fullmatch(name)) is not None:
-            above = self._above(element)
-            if above is None:
+        if not _plain(name):
+            if name in NOT_SURFACES:
                 return None
-            holder, semantic = above
-            if match.group(2) in ("FootPrint", "RoofEdge"):
-                semantic = name[4:]
-            return _Place(holder, f"lod{match.group(1)}", semantic, False)
-        if name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)):
-            above = self._above(element)
-            lod = _relief_lod(parent, self.root)
-            return None if above is None or lod is None else _Place(above[0], lod, "", False)
-        if name == "interior" and local(parent) == "Solid":
-            return None
+            if (match := LOD_PROPERTY.fullmatch(name)) is not None:
+                above = self._above(element)
+                if above is None:
+                    return None
+                holder, semantic = above
+                if match.group(2) in ("FootPrint", "RoofEdge"):
+                    semantic = name[4:]
+                return _Place(holder, f"lod{match.group(1)}", semantic, False)
+            if name == "tin" and RELIEF_NAMESPACE.fullmatch(namespace(element)):
+                above = self._above(element)
+                lod = _relief_lod(parent, self.root)
+                return None if above is None or lod is None else _Place(above[0], lod, "", False)
+            if name == "interior" and local(parent) == "Solid":
+                return None
         outer = found[parent] if parent in found else self.places[parent]
         if outer is None:
             return None
-        flip = outer.flip ^ (name == "OrientableSurface" and element.get("orientation") == "-")
-        implicit = element if name == "ImplicitGeometry" else outer.implicit
-        return _Place(outer.holder, outer.lod, outer.semantic, flip, implicit)
+        if name == "OrientableSurface":
+            return outer._replace(flip=outer.flip ^ (element.get("orientation") == "-"))
+        if name == "ImplicitGeometry":
+            return outer._replace(implicit=element)
+        return outer
 
     def _above(self, prop: etree._Element) -> tuple[Holder, str] | None:
         """For a geometry property: the holder it belongs to and the semantic type of the
@@ -350,6 +359,17 @@ class _Walker:
         if holder is None and not feature_next:
             return None
         return holder or self.top, semantic
+
+
+@functools.lru_cache(maxsize=4096)
+def _plain(name: str) -> bool:
+    """Whether an element of local name ``name`` lies where its parent does, whatever its
+    parent (not a geometry property, curve, TIN property or interior shell)."""
+    return not (
+        name in NOT_SURFACES
+        or LOD_PROPERTY.fullmatch(name) is not None
+        or name in ("tin", "interior")
+    )
 
 
 def _relief_lod(component: etree._Element, top: etree._Element) -> str | None:
@@ -425,11 +445,7 @@ def _collect(top: Holder, root: etree._Element, gml: str, templates: Templates |
     :func:`gather` says."""
     walker = _Walker(top, {holder.element: holder for holder in top.walk()}, root)
     items = _ITEMS[gml](top.element)
-    polygon_ids: dict[str, etree._Element] = {}
-    for item in items:
-        for key in _GML_IDS:
-            if (value := item.get(key)) is not None and item.get(XLINK_HREF) is None:
-                polygon_ids[value] = item
+    polygon_ids: dict[str, etree._Element] | None = None  # found when a link needs them
     for item in items:
         href = item.get(XLINK_HREF)
         place = walker.place(item)
@@ -441,6 +457,8 @@ def _collect(top: Holder, root: etree._Element, gml: str, templates: Templates |
                 polygon = Polygon(place.lod, place.semantic, place.flip, item, place.implicit)
                 holder.polygons.append(polygon)
             continue
+        if polygon_ids is None:
+            polygon_ids = _polygon_ids(items)
         target = polygon_ids.get(href.removeprefix("#"))
         direct = walker.place(target) if target is not None else None
         if direct is not None and (
@@ -449,6 +467,16 @@ def _collect(top: Holder, root: etree._Element, gml: str, templates: Templates |
         ):
             continue  # read where it lies: by its own part, or here with its semantics
         holder.add_linked(item, place, templates)
+
+
+def _polygon_ids(items: list[etree._Element]) -> dict[str, etree._Element]:
+    """The ``items`` that link nowhere (polygons), by their ``gml:id``s."""
+    ids = {}
+    for item in items:
+        for key in _GML_IDS:
+            if (value := item.get(key)) is not None and item.get(XLINK_HREF) is None:
+                ids[value] = item
+    return ids
 
 
 # --- an object's coordinates, read a part at a time -----------------------------------------------
