@@ -118,18 +118,33 @@ class Surface:
         textured = self.texture is not None and self.uv is not None
         if not textured and self.vertex_colors is None:
             return np.repeat(base[None, :], k, axis=0)
-        bary = self.barycentric(face_ids, points)
         corners = self.faces[face_ids]
         if textured:
-            uv = np.einsum("ij,ijk->ik", bary, self.uv[corners])
+            uv = np.einsum("ij,ijk->ik", self.barycentric(face_ids, points), self.uv[corners])
             h, w = self.texture.shape[:2]
             x = np.floor((uv[:, 0] % 1.0) * w).astype(np.int64).clip(0, w - 1)
             y = np.floor((1.0 - (uv[:, 1] % 1.0)) * h).astype(np.int64).clip(0, h - 1)
             rgba = self.texture[y, x].astype(np.float64)
         else:
-            rgba = np.einsum("ij,ijk->ik", bary, self.vertex_colors[corners].astype(np.float64))
+            rgba = _interpolated(self, face_ids, points, self.vertex_colors[corners])
         rgba = rgba * (base.astype(np.float64) / 255.0)
         return np.clip(np.rint(rgba), 0, 255).astype(np.uint8)
+
+
+def _interpolated(
+    surface: Surface, face_ids: np.ndarray, points: np.ndarray, colors: np.ndarray
+) -> np.ndarray:
+    """The colours (k, 4) float64 at ``points`` on faces ``face_ids`` of ``surface`` whose
+    corners have ``colors`` ((k, 3, 4) uint8), interpolated across each face; a face whose
+    corners share one colour has it, as interpolating gives it within a few ulps (which no
+    rounding to bytes, after any base colour, can tell: a byte times a byte over 255 is never
+    within 1/510 of a half)."""
+    rgba = colors[:, 0].astype(np.float64)
+    mixed = np.flatnonzero((colors != colors[:, :1]).any(axis=(1, 2)))
+    if len(mixed):
+        bary = surface.barycentric(face_ids[mixed], points[mixed])
+        rgba[mixed] = np.einsum("ij,ijk->ik", bary, colors[mixed].astype(np.float64))
+    return rgba
 
 
 def _move_bounds(derived: dict[str, Any], moved: dict[str, Any], offset: np.ndarray) -> None:
