@@ -58,6 +58,25 @@ def test_the_top_takes_the_roofs_colour_and_the_walls_the_walls() -> None:
     assert (np.abs(up) > 0.99).sum() == 2  # the top's two triangles, no floor
 
 
+def test_colours_inside_faces_are_interpolated_from_their_corners_times_the_base() -> None:
+    """A prism's faces each have one colour at every point; a face whose corners differ shades
+    from one to the next; both are modulated by the base colour and rounded to bytes."""
+    vertices = np.array([[0, 0, 0], [4, 0, 0], [0, 4, 0], [4, 4, 0]], float)
+    corners = np.array(
+        [[200, 10, 10, 255], [200, 10, 10, 255], [200, 10, 10, 255], [0, 0, 255, 255]]
+    )
+    surface = Surface(
+        vertices,
+        np.array([[0, 1, 2], [1, 3, 2]]),
+        vertex_colors=corners.astype(np.uint8),
+        base_color=np.array([255, 128, 255, 255], np.uint8),
+    )
+    points = np.array([[1.0, 1.0, 0.0], [3.0, 2.0, 0.0], [4.0, 4.0, 0.0]])
+    colors = surface.colors_at(np.array([0, 1, 1]), points).tolist()
+    # (3, 2) on the second face: half from (4, 0), a quarter each from (4, 4) and (0, 4)
+    assert colors == [[200, 5, 10, 255], [150, 4, 71, 255], [0, 0, 255, 255]]
+
+
 def notched(depth: float) -> Mesh:
     """A 20 × 10 × 6 block with a notch ``depth`` deep and 2 m wide in its long south side."""
     a, b, c = (
