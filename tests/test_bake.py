@@ -7,6 +7,7 @@ import pytest
 import trimesh
 
 from lodconvert.bake import NumpyBackend, bake_points
+from lodconvert.bake.grid import SlabHits
 from lodconvert.bake.pcd import occupied_hits
 from lodconvert.model import BakeParams, Node, Surface
 
@@ -162,6 +163,46 @@ def test_hole_filters_match_opencv(kind: str) -> None:
         ey, ex = np.nonzero(grown)
         fy, fx = _filled(mask, kind, y, x)
         assert (fy.tolist(), fx.tolist()) == (ey.tolist(), ex.tolist())
+
+
+@pytest.mark.parametrize("stack", [1, 5_000, 1 << 20])
+def test_slab_images_filtered_together_fill_as_each_alone(
+    monkeypatch: pytest.MonkeyPatch, stack: int
+) -> None:
+    """Slab images filtered stacked (one at a time, a few, all of them) add the same pixels,
+    depths and faces, to the last bit, as each slab filtered alone: on the torus knot, where
+    many slab images gain a pixel or two."""
+    from lodconvert.bake import filters
+    from lodconvert.bake.grid import Grid
+    from lodconvert.io import read_scene
+
+    from .conftest import SAMPLE
+
+    (node,) = read_scene(SAMPLE).nodes
+    grid = Grid.for_bounds(node.geometry.bounds, 96, 3)
+    monkeypatch.setattr(filters, "STACK_PIXELS", stack)
+    for hits in NumpyBackend().rasterize(node.geometry, grid):
+        for kind in ("median", "gaussian"):
+            together = filters.fill_holes(hits, grid, kind)
+            alone = [_added(filters.fill_holes(slab, grid, kind), slab) for slab in _slabs(hits)]
+            for name in ("slab", "iu", "iv", "depth", "face"):
+                expected = np.concatenate([getattr(added, name) for added in alone])
+                assert getattr(_added(together, hits), name).tobytes() == expected.tobytes()
+
+
+def _slabs(hits: SlabHits) -> list[SlabHits]:
+    """``hits`` slab by slab."""
+    return [_taken(hits, hits.slab == slab) for slab in np.unique(hits.slab)]
+
+
+def _added(filled: SlabHits, hits: SlabHits) -> SlabHits:
+    """What filling ``hits`` added."""
+    return _taken(filled, np.arange(len(filled)) >= len(hits))
+
+
+def _taken(hits: SlabHits, keep: np.ndarray) -> SlabHits:
+    arrays = (hits.slab, hits.iu, hits.iv, hits.depth, hits.face)
+    return SlabHits(hits.axis, hits.sign, *(a[keep] for a in arrays))
 
 
 @pytest.mark.parametrize("resolution", [3, 16, 61])

@@ -53,7 +53,9 @@ height stays true where the whole cell's would not), each member's outlines as c
 F at :data:`MIN_CELL_F`, roofs and walls sharing their corners (a vertex per corner, not per
 colour: seen that far, a wall is a few pixels high), and keeps the lighter faithful one: its
 children are block proxies and simplified meshes already, which a tier up cannot simplify much
-further (their floors' rings stay in place).
+further (their floors' rings stay in place). Where neither reaches :data:`MIN_CELL_F`, it
+mixes them (:func:`_mixed_level`): blocks where they keep the F, and the fewest members' own
+far content, or objects' own coarsest levels, that lift it there.
 ``auto`` makes all three and keeps the cheapest (points at :data:`~.plan.POINT_COST`; then
 the fewer bytes) of those whose silhouette F against the members' finest geometry at
 ``Y_cell`` (:func:`~.plan.silhouette_estimate`) is at least :data:`MIN_CELL_F`; when none is,
@@ -71,12 +73,21 @@ from typing import Any
 import numpy as np
 
 from ..bake import Backend
+from ..bake.grid import Grid
+from ..bake.numpy import silhouettes
 from ..bake.qem import simplify_within
 from ..chain import ChainOptions, point_level_at
 from ..errors import UsageError
 from ..limits import DEFAULT_LIMITS, Limits
 from ..model import WHITE, CellChain, Level, LodChain, Mesh, Surface
-from ..plan import level_bytes, level_cost, mesh_silhouette_estimate, silhouette_estimate
+from ..plan import (
+    SilhouetteEstimate,
+    _source_masks,
+    level_bytes,
+    level_cost,
+    mesh_silhouette_estimate,
+    silhouette_estimate,
+)
 from ..ranges import cutoff, diagonal
 from .blocks import block_proxy, blocks_of, object_footprint, shared_corners
 
@@ -114,6 +125,9 @@ SIMPLIFY_PX = (8.0, 4.0, 2.0, 1.0)
 switch distance in the reference view (one pixel at d is 2·d·tan(fov/2)/height_px metres:
 0.77 m at 1 km, 1080 px, 45°), all within half the 16 px screen-space error at which CesiumJS
 refines a tile by default (a tile's geometric error is 16 px at its switch)."""
+
+PROBES = 64
+"""Objects whose silhouettes a mixed far level (:func:`_mixed_level`) draws at once."""
 
 Member = LodChain | CellChain
 Warn = Callable[[str], None]
@@ -257,18 +271,25 @@ def bake_cell(
         level = point_level_at(source, "FAR", switch, options, backend, plan.cell_id, warn, limits)
         if level is not None:
             candidates["points"] = (level, _silhouette_f(source, level, switch, options))
-    blocks = None
+    found = None
+    of_cells = any(isinstance(m, CellChain) for m in members)
     if kind in ("blocks", "auto"):
         found = _blocks_level(objects, origin, source, switch, options)
-        if any(isinstance(m, CellChain) for m in members):
+        if of_cells:
             found = _lighter(found, _member_blocks_level(members, origin, source, switch, options))
         if found is not None:
-            level, f, blocks = found
-            candidates["blocks"] = (level, f)
+            candidates["blocks"] = found[:2]
     mesh_facts: dict[str, Any] = {"mesh_levels_finer": 0}
     if kind in ("mesh", "auto") or not candidates:
         level, f, mesh_facts = _mesh_level(members, objects, origin, source, switch, options)
         candidates["mesh"] = (level, f)
+    if found is not None and found[1] < MIN_CELL_F and of_cells:
+        cost = min(
+            (level_cost(lv) for lv, f in candidates.values() if f >= MIN_CELL_F), default=math.inf
+        )
+        found = _lighter(found, _mixed_level(members, origin, source, switch, options, cost))
+        candidates["blocks"] = found[:2]
+    blocks = found[2] if found is not None else None
     chosen, why = _choice(candidates, kind)
     cutoffs = [switch]
     if options.cull is not None:
@@ -561,6 +582,183 @@ def _member_blocks_level(
         "shared_corners": True,
     }
     return level, f, facts
+
+
+def _mixed_level(
+    members: list[Member],
+    origin: np.ndarray,
+    source: Mesh,
+    distance: float,
+    options: ChainOptions,
+    cost: float = math.inf,
+) -> Made | None:
+    """A cell of finer cells whose block proxies of each member apart stay below
+    :data:`MIN_CELL_F` (:func:`_member_blocks_level`, outlines at the finest of
+    :data:`BLOCK_PX`): block proxies where they keep the F, and, where they cost it, a member's
+    own far content (:func:`_far_meshes`: a finer cell's far mesh, a building's coarsest level)
+    or, inside such a member, single objects' own coarsest levels with blocks of the rest.
+    Which ones cost the F is found on the silhouettes (:func:`_gains`); of the objects, then of
+    the members, those that raise the F most per vertex added come first, and the fewest of
+    them that reach :data:`MIN_CELL_F` are kept (the lighter of the two ways). Its level, F
+    and facts; ``None`` when neither way reaches it with fewer than ``cost`` vertices (a
+    faithful far level of another kind costs that much)."""
+    pixel = distance / options.view.focal_px
+    tolerance, closing = min(BLOCK_PX) * pixel, BLOCK_CLOSING_PX * pixel
+    chains = [m.objects() for m in members]
+    prints = [[object_footprint(c, _finest_mesh(c)) for c in row] for row in chains]
+    parts: dict[tuple[int, frozenset[int] | None], tuple[Mesh | None, int]] = {}
+
+    def part(i: int, own: frozenset[int] | None = frozenset()) -> tuple[Mesh | None, int]:
+        """Member ``i`` about the cell's origin and its blocks: its own far content (``own``
+        None), else block proxies of its objects but ``own`` and those objects' own coarsest
+        levels."""
+        if (i, own) not in parts:
+            if own is None:
+                meshes, blocks = _far_meshes(members[i]), 0
+            else:
+                rest = [p for k, p in enumerate(prints[i]) if p is not None and k not in own]
+                found = blocks_of(rest, closing) if rest else None
+                proxy = block_proxy(found, tolerance, math.inf) if found else None
+                blocks = len(found.polygons) if proxy is not None and found else 0
+                meshes = [shared_corners(proxy)] if proxy is not None else []
+                meshes += [mesh for k in sorted(own) for mesh in _far_meshes(chains[i][k])]
+            mesh = _merged(meshes).translated(-origin) if meshes else None
+            parts[i, own] = mesh, blocks
+        return parts[i, own]
+
+    def made(choice: dict[int, frozenset[int] | None]) -> tuple[Level | None, float]:
+        """The cell with ``choice``'s members as :func:`part` makes them (blocks elsewhere)
+        and its F."""
+        meshes = [m for i in range(len(members)) if (m := part(i, choice.get(i, frozenset()))[0])]
+        if not meshes:
+            return None, 0.0
+        level = Level("FAR", "merged", mesh=_one_part(_merged(meshes)))
+        return level, _silhouette_f(source, level, distance, options)
+
+    base, _ = made({})
+    if base is None or base.count >= cost:
+        return None
+    both = np.stack([source.bounds, base.mesh.bounds])  # the grid its F was measured on
+    grid, want = _source_masks(
+        source, pixel, np.stack([both[:, 0].min(0), both[:, 1].max(0)]), True
+    )
+    found = []
+    gains, tried = _gains(members, part, lambda i, k: _far_meshes(chains[i][k]), origin, grid, want)
+    for way, ranked in gains.items():
+        low, high = 1, len(ranked)  # the fewest of ``ranked`` that reach MIN_CELL_F
+        if not ranked or made(_choice_of(ranked))[1] < MIN_CELL_F:
+            continue
+        while low < high:
+            middle = (low + high) // 2
+            level, f = made(_choice_of(ranked[:middle]))
+            if f >= MIN_CELL_F:
+                high = middle
+            elif level is not None and level.count >= cost:
+                break  # those that reach it add more
+            else:
+                low = middle + 1
+        choice = _choice_of(ranked[:low])
+        level, f = made(choice)
+        if level is None or level.count >= cost or f < MIN_CELL_F:
+            continue
+        kept = choice.values()
+        facts = {
+            "blocks": sum(part(i, choice.get(i, frozenset()))[1] for i in range(len(members))),
+            "objects": sum(p is not None for row in prints for p in row),
+            "tolerance_px": min(BLOCK_PX),
+            "band_m": None,
+            "tried": tried,
+            "own_far": {
+                "by": way,
+                "members": sum(v is None for v in kept),
+                "objects": sum(len(v or ()) for v in kept),
+            },
+            "shared_corners": True,
+        }
+        found.append((level, f, facts))
+    return min(found, key=lambda m: m[0].count) if found else None
+
+
+Ranked = list[tuple[float, int, frozenset[int] | None]]
+"""Gain in F per vertex added, member and its objects kept as their own (``None``: the member's
+own far content), best first."""
+
+
+def _gains(
+    members: list[Member],
+    part: Callable[[int, frozenset[int] | None], tuple[Mesh | None, int]],
+    own_object: Callable[[int, int], list[Mesh]],
+    origin: np.ndarray,
+    grid: Grid,
+    want: list[np.ndarray],
+) -> tuple[dict[str, Ranked], int]:
+    """Which members' blocks cost the cell's F, and which of their objects': each member's own
+    far content in place of its blocks, then, where that raises the F, each of its objects'
+    own coarsest level over the blocks, on the silhouettes ``want`` of the cell's objects
+    (``grid``); those that raise the F, ranked by gain per vertex added, and how many were
+    tried."""
+    blocks = [part(i)[0] for i in range(len(members))]
+    covered = [np.zeros(mask.shape, dtype=np.int32) for mask in want]
+    for mesh in blocks:
+        if mesh is not None:
+            for count, mask in zip(covered, silhouettes([mesh], grid)[0], strict=True):
+                count += mask
+    f = _masks_f(want, [count > 0 for count in covered])
+    gains: dict[str, Ranked] = {"members": [], "objects": []}
+    tried = 0
+    for i, mesh in enumerate(blocks):
+        own = part(i, None)[0]
+        if own is None:
+            continue
+        tried += 1
+        (drawn,) = silhouettes([own], grid)
+        if mesh is not None:
+            (mine,) = silhouettes([mesh], grid)
+            drawn = [d | (c - m > 0) for d, c, m in zip(drawn, covered, mine, strict=True)]
+        else:
+            drawn = [d | (c > 0) for d, c in zip(drawn, covered, strict=True)]
+        after = _masks_f(want, drawn)
+        if after <= f:
+            continue
+        added = own.vertex_count - (mesh.vertex_count if mesh is not None else 0)
+        gains["members"].append(((after - f) / max(added, 1), i, None))
+        objects = len(members[i].objects())
+        owned = [(k, _merged(meshes)) for k in range(objects) if (meshes := own_object(i, k))]
+        for start in range(0, len(owned) if objects > 1 else 0, PROBES):
+            batch = owned[start : start + PROBES]
+            tried += len(batch)
+            placed = [mesh.translated(-origin) for _, mesh in batch]
+            for (k, mesh), drawn in zip(batch, silhouettes(placed, grid), strict=True):
+                after = _masks_f(want, [d | (c > 0) for d, c in zip(drawn, covered, strict=True)])
+                if after > f:
+                    gain = (after - f) / max(mesh.vertex_count, 1)
+                    gains["objects"].append((gain, i, frozenset([k])))
+    for ranked in gains.values():
+        ranked.sort(key=lambda g: (-g[0], g[1], sorted(g[2] or ())))
+    return gains, tried
+
+
+def _masks_f(want: list[np.ndarray], got: list[np.ndarray]) -> float:
+    """Silhouette F of the masks ``got`` against ``want`` (worst precision and recall over the
+    views, as :func:`~.plan.mesh_silhouette_estimate` measures it)."""
+    precision = recall = 1.0
+    for w, g in zip(want, got, strict=True):
+        tp = int(np.count_nonzero(w & g))
+        fp, fn = int(np.count_nonzero(g & ~w)), int(np.count_nonzero(w & ~g))
+        if tp + fp + fn == 0:
+            continue
+        precision = min(precision, tp / (tp + fp) if tp + fp else 0.0)
+        recall = min(recall, tp / (tp + fn) if tp + fn else 1.0)
+    return SilhouetteEstimate(precision=precision, recall=recall).f
+
+
+def _choice_of(ranked: Ranked) -> dict[int, frozenset[int] | None]:
+    """Members with their own far content (None) or the objects of theirs with their own
+    coarsest levels, from ``ranked`` (gain, member, objects or None)."""
+    choice: dict[int, frozenset[int] | None] = {}
+    for _, i, own in ranked:
+        choice[i] = None if own is None else (choice.get(i) or frozenset()) | own
+    return choice
 
 
 def _raised(steps: list[int], which: list[int], step: int) -> list[int]:
