@@ -458,7 +458,7 @@ def _read_stage(
     executor = executor or stack.enter_context(_executor(run, baker, _object_count(scene)))
     if scene.spread is not None:  # reading (its rest, or all of it) by the executor
         with clock("read"):
-            scene.spread(executor.results, run.progress)
+            scene.spread(executor.results, run.progress, executor.task_seconds)
     return scene, crs_record, baker, executor
 
 
