@@ -450,8 +450,10 @@ def _read_stage(
     others = run.workers > 1 or run.scheduler is not None  # processes other than this one
     spread = {"spread": others and len(inputs) == 1 and _read_through(run)}
     baker = get_backend(run.backend)
-    # a cluster is reached first: an unreachable scheduler fails the run before any reading
-    executor = stack.enter_context(_executor(run, baker, None)) if run.scheduler else None
+    # a cluster is reached first: an unreachable scheduler fails the run before any reading;
+    # workers that will read are started first, so that they start while this process reads
+    early = run.scheduler or (spread["spread"] and "spread" in sources[0].read_options)
+    executor = stack.enter_context(_executor(run, baker, None)) if early else None
     with clock("read"):
         scene, crs_record = read_inputs(
             inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
