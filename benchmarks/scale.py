@@ -119,18 +119,23 @@ class Cluster:
 
 
 @contextmanager
-def local_cluster(workers: int) -> Iterator[Cluster | None]:
-    """A :class:`Cluster` of ``workers`` for the length of the benchmark (none for 0)."""
+def local_cluster(workers: int, root: Path = ROOT) -> Iterator[Cluster | None]:
+    """A :class:`Cluster` of ``workers`` running the lodconvert of checkout ``root`` for the
+    length of the benchmark (none for 0)."""
     if workers == 0:
         yield None
         return
     from distributed import LocalCluster
 
-    sys.path.insert(0, str(ROOT))  # the workers (spawned) import this lodconvert
-    with LocalCluster(
-        processes=True, n_workers=workers, threads_per_worker=1, host="127.0.0.1",
-        dashboard_address=":0",
-    ) as local:  # fmt: skip
+    sys.path.insert(0, str(root))  # the workers (spawned) import that lodconvert
+    try:
+        local = LocalCluster(
+            processes=True, n_workers=workers, threads_per_worker=1, host="127.0.0.1",
+            dashboard_address=":0",
+        )  # fmt: skip
+    finally:
+        sys.path.remove(str(root))
+    with local:
         yield Cluster(local, workers)
 
 
@@ -277,12 +282,13 @@ def benchmark(args: argparse.Namespace) -> str:
     rows = []
     setups = [str(w) for w in args.workers] + (["cluster"] if args.cluster else [])
     codes = ["", "before"] if args.baseline is not None else [""]
-    configurations = [(s, c) for c in codes for s in setups if not (c and s == "cluster")]
-    pool_of_cluster = (str(args.cluster), "")
+    configurations = [(s, c) for c in codes for s in setups]
     with (
         tempfile.TemporaryDirectory(prefix="lodconvert-scale-") as tmp,
         local_cluster(args.cluster) as cluster,
+        local_cluster(args.cluster if args.baseline else 0, args.baseline or ROOT) as before,
     ):
+        clusters = {"": cluster, "before": before}
         folder = Path(tmp)
         for sample in inputs(args, folder):
             for fmt in FORMATS:
@@ -293,7 +299,7 @@ def benchmark(args: argparse.Namespace) -> str:
                         out = folder / f"out_{setup}{code}.{fmt}"
                         root = args.baseline if code else ROOT
                         runs[setup, code].append(
-                            convert_once(sample.path, out, setup, cluster, root)
+                            convert_once(sample.path, out, setup, clusters[code], root)
                         )
                 same = len({run.output for each in runs.values() for run in each}) == 1
                 walls = {c: statistics.median(r.wall for r in runs[c]) for c in configurations}
@@ -302,8 +308,8 @@ def benchmark(args: argparse.Namespace) -> str:
                     main_cpu = statistics.median(r.main_cpu for r in each)
                     one = walls["1", code] if ("1", code) in walls else float("nan")
                     versus = ""
-                    if setup == "cluster" and pool_of_cluster in walls:
-                        versus = f"{wall / walls[pool_of_cluster]:.2f}"
+                    if setup == "cluster" and (str(args.cluster), code) in walls:
+                        versus = f"{wall / walls[str(args.cluster), code]:.2f}"
                     label = f"{args.cluster} (LocalCluster)" if setup == "cluster" else setup
                     rows.append(
                         [

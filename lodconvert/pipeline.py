@@ -52,7 +52,8 @@ from .tasks import (
     SerialExecutor,
     batches,
 )
-from .validate import check_written
+from .validate import check_written, streamed_check
+from .validate.along import CheckAlong
 
 Message = Callable[[str], None]
 Step = Callable[[str, int, "int | None"], None]
@@ -401,6 +402,7 @@ def convert(
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         pieces = _pieces(target, assembly.info, run, executor)
         skipped: list[dict[str, str]] = []
+        along = stack.enter_context(_check_along(sink, output_path, executor))
         items = iter_chains(
             scene, run.chain, baker, run.progress, run.warn, skipped, run.step, run.limits,
             run.strict, run.hlod, executor, clock, pieces,
@@ -413,7 +415,7 @@ def convert(
             )  # fmt: skip
         tally = _finished(scene, assembly.records, skipped, run, named)
         with clock("validate"):
-            _checked(sink, output_path, run.step)
+            _checked(sink, output_path, run.step, along)
         report = assembly.report(named, output_path, baker, run, skipped, clock, tally, crs_record)
         if run.also is not None:
             run.also(outputs, sink, report)
@@ -448,8 +450,10 @@ def _read_stage(
     others = run.workers > 1 or run.scheduler is not None  # processes other than this one
     spread = {"spread": others and len(inputs) == 1 and _read_through(run)}
     baker = get_backend(run.backend)
-    # a cluster is reached first: an unreachable scheduler fails the run before any reading
-    executor = stack.enter_context(_executor(run, baker, None)) if run.scheduler else None
+    # a cluster is reached first: an unreachable scheduler fails the run before any reading;
+    # workers that will read are started first, so that they start while this process reads
+    early = run.scheduler or (spread["spread"] and "spread" in sources[0].read_options)
+    executor = stack.enter_context(_executor(run, baker, None)) if early else None
     with clock("read"):
         scene, crs_record = read_inputs(
             inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
@@ -458,7 +462,7 @@ def _read_stage(
     executor = executor or stack.enter_context(_executor(run, baker, _object_count(scene)))
     if scene.spread is not None:  # reading (its rest, or all of it) by the executor
         with clock("read"):
-            scene.spread(executor.results, run.progress)
+            scene.spread(executor.results, run.progress, executor.task_seconds)
     return scene, crs_record, baker, executor
 
 
@@ -508,14 +512,33 @@ def _stat(path: str | Path) -> tuple[int, int] | None:
     return found.st_size, found.st_mtime_ns
 
 
-def _checked(sink: FileSink | DirectorySink, output_path: str | Path, step: Step) -> None:
+def _check_along(
+    sink: FileSink | DirectorySink, output_path: str | Path, executor: Executor
+) -> contextlib.AbstractContextManager[CheckAlong | None]:
+    """The check of the file ``sink`` stages, run while it is written where other processes
+    bake (so that this one mostly waits) and its format is checked as a stream; else
+    ``None``: it is checked once written."""
+    if isinstance(sink, DirectorySink) or isinstance(executor, SerialExecutor):
+        return contextlib.nullcontext()
+    if not streamed_check(output_path):
+        return contextlib.nullcontext()
+    return CheckAlong(sink.staged.temp, output_path)
+
+
+def _checked(
+    sink: FileSink | DirectorySink, output_path: str | Path, step: Step, along: CheckAlong | None
+) -> None:
     """Check the staged output of ``sink`` by its format (a folder's: its file named like
-    ``output_path``; ``step`` hears when)."""
+    ``output_path``), or take the result of ``along``, its check while it was written;
+    ``step`` hears when."""
     step("checking", 0, 1)
     staged = sink.staged.temp
     if isinstance(sink, DirectorySink):
         staged = staged / Path(output_path).name
-    check_written(staged, output_path)
+    if along is not None:
+        along.result()
+    else:
+        check_written(staged, output_path)
     step("checking", 1, 1)
 
 

@@ -4,6 +4,7 @@ reading it in one process."""
 
 from __future__ import annotations
 
+import functools
 import gzip
 import io
 import json
@@ -23,9 +24,11 @@ from lodconvert.io.citygml import members as members_module
 from lodconvert.io.citygml.members import Members
 from lodconvert.io.cityjson.parallel import ObjectsTask
 from lodconvert.io.geometry_checks import tally_of
+from lodconvert.io.spread import TASK_SECONDS
 from lodconvert.model import Mesh, Node, Scene
 from lodconvert.tasks import Executor, PoolExecutor
 
+from .conftest import SHARED, shared_data
 from .test_citygml import HEAD, box, building, tree
 from .test_cityjson import _features, delft, multi_lod
 
@@ -154,7 +157,7 @@ def _read(
                 yield result
 
         assert scene.spread is not None
-        scene.spread(kept, told.append)
+        scene.spread(kept, told.append, TASK_SECONDS)
         facts = [_facts(node) for node in scene.nodes]
     return scene, facts, results, told
 
@@ -392,3 +395,41 @@ def test_a_long_member_is_scanned_in_time_linear_in_its_bytes(
     start = time.perf_counter()
     assert [len(member) for _, member in Members(io.BytesIO(text))][1] > 16 << 20
     assert time.perf_counter() - start < 3.0
+
+
+def _run_here(kept: list[Any], tasks: Iterable[Any]) -> Iterator[Any]:
+    """Run each of ``tasks`` in this process, keeping it in ``kept``."""
+    for task in tasks:
+        kept.append(task)
+        yield task.run()
+
+
+@pytest.mark.parametrize(
+    "path", [SHARED / "data/citygml/potsdam_lod1_v1.gml", SHARED / "data/cityjson/delft.city.json"]
+)
+def test_a_city_is_read_in_tasks_of_the_work_its_executor_is_sized_for(
+    monkeypatch: pytest.MonkeyPatch, path: Path
+) -> None:
+    """A dask cluster's tasks hold three times the work of a pool's (its tasks cost more):
+    its reading tasks too, a third as many, and the city read is the same."""
+    path = shared_data(path)
+    made = spread.Sizer.__init__
+
+    def timed(self: spread.Sizer, least: int = spread.MIN_BYTES, most: int = 1 << 30) -> None:
+        """A sizer that reads a byte in a µs, or an object in 5 ms, with no floor."""
+        made(self, 1, most)
+        self.seconds_per_byte = 1e-6 if least == spread.MIN_BYTES else 5e-3
+
+    monkeypatch.setattr(spread.Sizer, "__init__", timed)
+    monkeypatch.setattr(spread.Sizer, "took", lambda self, seconds, size: None)
+    counts, read = [], []
+    for seconds in (0.1, 0.3):
+        scene = read_scene(path, spread=True)
+        tasks: list[Any] = []
+        assert scene.spread is not None
+        scene.spread(functools.partial(_run_here, tasks), print, seconds)
+        read.append([_facts(node) for node in scene.nodes])
+        counts.append(len(tasks))
+    assert read[0] == read[1]
+    assert counts[0] >= 10
+    assert abs(counts[0] / counts[1] - 3) < 0.5

@@ -5,6 +5,7 @@ stopping its workers and leaving nothing."""
 from __future__ import annotations
 
 import json
+import multiprocessing
 import re
 import signal
 import subprocess
@@ -25,6 +26,8 @@ from lodconvert.tasks import PoolExecutor, SerialExecutor
 
 from .conftest import ROOT, SHARED, shared_data, surface_of
 from .test_cityjson import _features
+from .test_cli import assert_one_line_error
+from .test_cli import run as run_cli
 from .worker_probe import Imported
 
 TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
@@ -289,3 +292,27 @@ def test_workers_that_read_and_bake_a_city_never_import_scipy(
     convert(shared_data(TUM), tmp_path / "tum.x3d", RunOptions(workers=2))
     assert {"lodconvert.io.citygml.parallel", "lodconvert.city.prisms"} <= set(imported)
     assert [name for name in imported if name.split(".")[0] == "scipy"] == []
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        '<?xml version="1.0"?>\n<CityModel xmlns="http://www.opengis.net/citygml/2.0">'
+        "<cityObjectMember><Building></cityObjectMember></CityModel>",
+        "<?xml version='1.0'?>\n<NotACity/>",
+    ],
+    ids=["broken-first-member", "not-citygml"],
+)
+def test_a_city_that_cannot_be_read_by_workers_fails_in_one_line_and_stops_them(
+    tmp_path: Path, text: str
+) -> None:
+    """The workers start before the city is opened: a city that cannot be read still gives
+    one line, writes nothing, and leaves no worker running."""
+    path = tmp_path / "bad.gml"
+    path.write_text(text, encoding="utf-8")
+    out = tmp_path / "out" / "bad.x3d"
+    out.parent.mkdir()
+    result = run_cli(path, "-o", out, "--workers", "2", "-q")
+    assert_one_line_error(result, 1, str(path))
+    assert list(out.parent.iterdir()) == []
+    assert multiprocessing.active_children() == []

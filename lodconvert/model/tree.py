@@ -84,9 +84,10 @@ class Node:
         return replace(text, cut=self.cut + text.cut) if self.cut else text
 
 
-Spread = Callable[[Callable[[Iterable[Any]], Iterator[Any]], Callable[[str], None]], None]
-"""``spread(results, progress)``: a reader told to read the rest of its nodes as tasks by an
-executor's ``results``, telling ``progress`` what it reads itself instead."""
+Spread = Callable[[Callable[[Iterable[Any]], Iterator[Any]], Callable[[str], None], float], None]
+"""``spread(results, progress, seconds)``: a reader told to read the rest of its nodes as tasks
+of about ``seconds`` of reading each by an executor's ``results``, telling ``progress`` what it
+reads itself instead."""
 
 
 @dataclass

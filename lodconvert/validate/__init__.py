@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
+from typing import BinaryIO
 
 from ..errors import InputError, LodConvertError
 from ..io import own_format
@@ -56,7 +57,30 @@ def errors_of(findings: Iterable[Finding]) -> list[Finding]:
 def check_written(written: Path, target: str | Path) -> None:
     """Raise a one-line :class:`LodConvertError` naming ``target`` when ``written`` (a freshly
     written temporary file in ``target``'s format) has an error finding."""
-    errors = errors_of(validate_file(written, kind=Path(target).suffix))
+    _fail_on_errors(validate_file(written, kind=Path(target).suffix), target)
+
+
+STREAMED = frozenset({".x3d"})
+"""The formats whose check reads the file once, from its start, as a stream."""
+
+
+def streamed_check(target: str | Path) -> bool:
+    """Whether ``target``'s format is checked reading its file as a stream
+    (:func:`check_stream`)."""
+    return Path(target).suffix.lower() in STREAMED
+
+
+def check_stream(stream: BinaryIO, target: str | Path) -> None:
+    """:func:`check_written` of a file of a :data:`STREAMED` format read from ``stream``."""
+    findings = Findings(Path(target))
+    own_format(Path(target), role="check").check(stream, findings, None)
+    _fail_on_errors(findings.items, target)
+
+
+def _fail_on_errors(findings: list[Finding], target: str | Path) -> None:
+    """Raise a one-line :class:`LodConvertError` naming ``target`` for the first error of
+    ``findings`` (and how many more), if any."""
+    errors = errors_of(findings)
     if errors:
         first = errors[0]
         more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
@@ -69,8 +93,10 @@ __all__ = [
     "ERROR",
     "WARNING",
     "Finding",
+    "check_stream",
     "check_written",
     "errors_of",
     "load_x3d_schema",
+    "streamed_check",
     "validate_file",
 ]

@@ -32,7 +32,7 @@ from ...model import Node
 from ...semantics import Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally
-from ..spread import Results, Sizer, add_tally, quiet
+from ..spread import TASK_SECONDS, Results, Sizer, add_tally, quiet
 from .document import Document
 from .members import Members, NotSplit
 from .names import MEMBERS
@@ -125,10 +125,13 @@ class SpreadReading:
         self.sizer = Sizer()
         self.told = False
 
-    def use(self, results: Results, progress: Callable[[str], None]) -> None:
-        """Read the rest of the document by ``results`` (an executor's); ``progress`` hears
-        where runs are read in this process instead."""
-        self.results, self.progress = results, progress
+    def use(
+        self, results: Results, progress: Callable[[str], None], seconds: float = TASK_SECONDS
+    ) -> None:
+        """Read the rest of the document by ``results`` (an executor's), in runs of about
+        ``seconds`` of reading; ``progress`` hears where runs are read in this process
+        instead."""
+        self.results, self.progress, self.sizer.seconds = results, progress, seconds
 
     def nodes(self) -> Iterator[Node]:
         """The document's city objects with geometry, in document order."""
@@ -169,8 +172,8 @@ class SpreadReading:
         return frame and self.sizer.timed
 
     def _runs(self, members: Members) -> Iterator[list[bytes]]:
-        """Runs of the members read, each of about :data:`~..spread.TASK_SECONDS` of reading
-        as measured so far (of one member until then)."""
+        """Runs of the members read, each of about the sizer's seconds of reading as measured
+        so far (of one member until then)."""
         run: list[bytes] = []
         size = 0
         for name, member in members:

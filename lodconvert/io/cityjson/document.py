@@ -85,8 +85,8 @@ def read_document(
             lambda: read_document(path, limits, types, palette, crs),
         )  # fmt: skip
 
-        def read_by(results: Results, progress: Callable[[str], None]) -> None:
-            reading.use(results, progress)
+        def read_by(results: Results, progress: Callable[[str], None], seconds: float) -> None:
+            reading.use(results, progress, seconds)
             if reading.roots is not None:
                 scene.size = checked(reading.roots)
 

@@ -27,7 +27,7 @@ from ...limits import Limits
 from ...model import Node
 from ..crs import Crs
 from ..geometry_checks import InputTally
-from ..spread import Results, Sizer, add_tally, quiet
+from ..spread import TASK_SECONDS, Results, Sizer, add_tally, quiet
 from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_nodes, read_kept
 from .source import Context, context_of
@@ -100,13 +100,16 @@ class SequenceReading:
         self.progress: Callable[[str], None] = quiet
         self.sizer = Sizer()
 
-    def use(self, results: Results, progress: Callable[[str], None]) -> None:
-        """Read the rest of the file by ``results`` (an executor's); a file with geometry
-        templates is read here (``progress`` hears so)."""
+    def use(
+        self, results: Results, progress: Callable[[str], None], seconds: float = TASK_SECONDS
+    ) -> None:
+        """Read the rest of the file by ``results`` (an executor's), in runs of about
+        ``seconds`` of reading; a file with geometry templates is read here (``progress``
+        hears so)."""
         if self.ctx.templates:
             progress(f"{self.ctx.tally.source}: geometry templates are read in the main process")
             return
-        self.results, self.progress = results, progress
+        self.results, self.progress, self.sizer.seconds = results, progress, seconds
 
     def nodes(self) -> Iterator[Node]:
         """The file's nodes, in line order."""
@@ -141,8 +144,8 @@ class SequenceReading:
                 yield from result.nodes
 
     def _runs(self) -> Iterator[Lines]:
-        """Runs of lines of about :data:`~..spread.TASK_SECONDS` of reading as measured so
-        far (of one line until then)."""
+        """Runs of lines of about the sizer's seconds of reading as measured so far (of one
+        line until then)."""
         run: Lines = []
         size = 0
         for number, line in self.lines:
@@ -260,13 +263,16 @@ class ObjectsReading:
         self.progress: Callable[[str], None] = quiet
         self.sizer = Sizer(MIN_OBJECTS, MAX_OBJECTS)
 
-    def use(self, results: Results, progress: Callable[[str], None]) -> None:
-        """Read the objects now by ``results`` (an executor's); a file with geometry
-        templates is read here (``progress`` hears so)."""
+    def use(
+        self, results: Results, progress: Callable[[str], None], seconds: float = TASK_SECONDS
+    ) -> None:
+        """Read the objects now by ``results`` (an executor's), in batches of about
+        ``seconds`` of reading; a file with geometry templates is read here (``progress``
+        hears so)."""
         if self.ctx.templates:
             progress(f"{self.ctx.tally.source}: geometry templates are read in the main process")
             return
-        self.progress = progress
+        self.progress, self.sizer.seconds = progress, seconds
         self.roots = self._read(results)
         self.check(self.roots)
 

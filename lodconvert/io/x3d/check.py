@@ -19,7 +19,7 @@ import functools
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 from lxml import etree
@@ -253,16 +253,18 @@ def _check_route(route: etree._Element, defined: set[str], findings: Findings) -
             )
 
 
-def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) -> None:
-    """Stream the document, checking nodes as they close; ``Shape`` s are cleared once checked
-    and each object's top-level ``Transform`` once it closes, so that memory stays small for
-    large files and many objects."""
+def check_x3d(path: Path | BinaryIO, findings: Findings, schema: etree.XMLSchema | None) -> None:
+    """Stream the document (a file, or a binary stream read once: then without ``schema``),
+    checking nodes as they close; ``Shape`` s are cleared once checked and each object's
+    top-level ``Transform`` once it closes, so that memory stays small for large files and
+    many objects."""
     root: etree._Element | None = None
     used: set[str] = set()
     defined: set[str] = set()  # DEF names seen so far
     chains = 0
     try:
-        events = etree.iterparse(str(path), events=("start", "end"), resolve_entities=False)
+        source = str(path) if isinstance(path, Path) else path
+        events = etree.iterparse(source, events=("start", "end"), resolve_entities=False)
         for event, element in events:
             if event == "start":
                 if root is None:
@@ -303,7 +305,7 @@ def check_x3d(path: Path, findings: Findings, schema: etree.XMLSchema | None) ->
             f"MetadataSet name='{METADATA_SET}'",
         )
     _check_components(root, used, findings)
-    if schema is not None:
+    if schema is not None and isinstance(path, Path):
         _check_schema(path, schema, findings)
 
 
