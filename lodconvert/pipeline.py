@@ -91,14 +91,15 @@ def iter_chains(
     """Bake the scene's objects (by ``executor``: in this process by default); objects with bad
     geometry are reported through ``warn`` (unless ``strict``: the caller fails), recorded in
     ``skipped`` and left out. ``step`` hears how many are done, ``clock`` how long planning
-    and baking took; ``pieces`` keeps what its formatter made of each chain where it was baked.
-    With ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`): one
+    and baking took; ``pieces`` keeps what its formatter made of each chain where it was baked
+    (those chains come without their geometry, but for LOD parents, which merge it). With
+    ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`): one
     :class:`CellChain` per cell of the coarsest tier, in grid order, each followed by the
     members it left out (objects or finer cells, drawn on their own)."""
     bakery = _Bakery(
         scene.source, options, executor or SerialExecutor(backend, progress), backend, warn,
         skipped, limits, strict, step, _object_count(scene), clock=clock or Clock(),
-        pieces=pieces,
+        pieces=pieces, lean=hlod is None,
     )  # fmt: skip
     if hlod is not None:
         yield from _cell_chains(scene, options, hlod, bakery)
@@ -120,7 +121,8 @@ class _Bakery:
     """Objects sent to an executor in batches and their outcomes taken in, in order, here in
     the main process: warnings told, skipped objects (bad geometry) reported and left out
     (``None``), progress stepped, and geometry placed by several nodes baked once (its key is
-    decided here, where the nodes were read)."""
+    decided here, where the nodes were read). With ``lean``, a chain whose piece of the output
+    was made where it was baked comes without its geometry (:class:`~.tasks.BakeTask`)."""
 
     source: str
     options: ChainOptions
@@ -135,6 +137,7 @@ class _Bakery:
     plan_only: bool = False
     clock: Clock = field(default_factory=lambda: Clock())
     pieces: Pieces | None = None
+    lean: bool = False
     done: int = 0
 
     def chains(
@@ -158,8 +161,9 @@ class _Bakery:
 
         formatter = self.pieces.formatter if self.pieces is not None else None
         made = batches(
-            sent(), per_object, self.limits, self.plan_only, formatter, self.executor.task_seconds
-        )
+            sent(), per_object, self.limits, self.plan_only, formatter,
+            self.executor.task_seconds, self.lean,
+        )  # fmt: skip
         tasks = self.clock.iterate("plan", made)
         for result in self.clock.iterate("execute", self.executor.results(tasks)):
             per_object[0] = result.seconds / len(result.outcomes)

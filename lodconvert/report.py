@@ -112,8 +112,7 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
     for level in chain.levels:
         entry: dict[str, Any] = {"name": level.name, "kind": level.kind, "count": level.count}
         if not level.is_points:
-            assert level.mesh is not None
-            entry["faces"] = len(level.mesh.faces)
+            entry["faces"] = level.faces
             if level.silhouette_f is not None:
                 entry["silhouette_f"] = round(level.silhouette_f, 4)
         else:

@@ -58,12 +58,15 @@ output; ``None``: nothing, the writer formats it), :mod:`.io`'s ``formatter``.""
 class BakeTask:
     """Objects to bake, each with the options to bake it with (γ already decided); with
     ``plan_only``, plan each chain (:func:`~.chain.plan_chain`) and bake nothing; with a
-    ``formatter``, each chain's piece of the output is made too."""
+    ``formatter``, each chain's piece of the output is made too, and with ``lean`` (where the
+    results are taken, nothing but the writer needs a chain's geometry) a chain whose piece was
+    made comes back without its geometry (:meth:`~.model.LodChain.without_geometry`)."""
 
     items: tuple[tuple[Node, ChainOptions], ...]
     limits: Limits = DEFAULT_LIMITS
     plan_only: bool = False
     formatter: Formatter | None = None
+    lean: bool = False
 
     def object_ids(self) -> list[str]:
         """The ids of the task's objects, in order."""
@@ -86,6 +89,8 @@ class BakeTask:
                 outcomes.append(Baked(None, str(exc), tuple(warnings)))
                 continue
             piece = self.formatter(chain) if self.formatter and node.transform is None else None
+            if piece is not None and self.lean:
+                chain = chain.without_geometry()
             outcomes.append(Baked(chain, None, tuple(warnings), piece))
         return BakeResult(tuple(outcomes), time.perf_counter() - start)
 
@@ -420,16 +425,18 @@ def batches(
     plan_only: bool = False,
     formatter: Formatter | None = None,
     seconds: float = TASK_SECONDS,
+    lean: bool = False,
 ) -> Iterator[BakeTask]:
     """``items`` as tasks of about ``seconds`` of work each, judged by ``per_object`` (a
     one-item list: seconds an object takes so far, updated by the caller; 0: not known yet, a
-    task of one object)."""  # fmt: skip
+    task of one object); ``plan_only``, ``formatter`` and ``lean`` as :class:`BakeTask` has
+    them."""  # fmt: skip
     batch: list[tuple[Node, ChainOptions]] = []
     for item in items:
         batch.append(item)
         wanted = int(seconds / per_object[0]) if per_object[0] > 0 else 1
         if len(batch) >= max(1, min(MAX_BATCH, wanted)):
-            yield BakeTask(tuple(batch), limits, plan_only, formatter)
+            yield BakeTask(tuple(batch), limits, plan_only, formatter, lean)
             batch = []
     if batch:
-        yield BakeTask(tuple(batch), limits, plan_only, formatter)
+        yield BakeTask(tuple(batch), limits, plan_only, formatter, lean)

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import pickle
 import re
 import signal
 import subprocess
@@ -20,8 +21,10 @@ import trimesh
 from lodconvert import pipeline
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
+from lodconvert.io import output_format
 from lodconvert.model import Node, Scene
-from lodconvert.pipeline import RunOptions, convert, iter_chains
+from lodconvert.pipeline import RunOptions, _output_info, convert, iter_chains, read_inputs
+from lodconvert.report import chain_record
 from lodconvert.tasks import PoolExecutor, SerialExecutor
 
 from .conftest import ROOT, SHARED, shared_data, surface_of
@@ -132,8 +135,8 @@ def test_two_workers_write_the_bytes_of_one(
 def test_objects_whose_names_clash_get_the_names_of_one_worker(
     tmp_path: Path, switching: str
 ) -> None:
-    """Workers write each chain's X3D text with the names its id gives; where an object before
-    it took them, the main process names and writes that chain as with one worker."""
+    """Workers write each chain's X3D text for whatever names the main process gives it; where
+    an object before it took those its id gives, it gets the names it gets with one worker."""
     scene = trimesh.Scene()
     for i, name in enumerate(["a b", "a_b", "a_b_2", "a_b_2_LOD4"]):
         box = trimesh.creation.box(extents=(1, 1 + i, 2))
@@ -316,3 +319,27 @@ def test_a_city_that_cannot_be_read_by_workers_fails_in_one_line_and_stops_them(
     assert_one_line_error(result, 1, str(path))
     assert list(out.parent.iterdir()) == []
     assert multiprocessing.active_children() == []
+
+
+@pytest.mark.parametrize("suffix", [".x3d", ".glb"])
+def test_chains_whose_output_workers_made_come_back_without_their_geometry(suffix: str) -> None:
+    """Where workers make each chain's piece of the output and nothing else needs its meshes
+    (a plain ``.x3d`` or ``.glb``), a chain comes back with its levels' counts in place of their
+    geometry: a fraction of the bytes to send, and the same report record as with one worker."""
+    source = shared_data(CITIES["kit"])
+    backend = get_backend("numpy")
+    chains = {}
+    for workers in (1, 2):
+        scene, crs = read_inputs([source])
+        info = _output_info([source], scene, crs, ChainOptions())
+        executor = SerialExecutor(backend) if workers == 1 else PoolExecutor(workers, "numpy")
+        pieces = output_format(f"kit{suffix}").pieces(info, {}) if workers == 2 else None
+        with executor:
+            chains[workers] = list(
+                iter_chains(scene, ChainOptions(), backend, executor=executor, pieces=pieces)
+            )
+    assert [chain_record(c) for c in chains[2]] == [chain_record(c) for c in chains[1]]
+    assert all(lv.mesh is lv.points is None for c in chains[2] for lv in c.levels)
+    assert all(lv.mesh is not None or lv.points is not None for c in chains[1] for lv in c.levels)
+    sizes = {w: sum(len(pickle.dumps(c)) for c in found) for w, found in chains.items()}
+    assert sizes[2] < sizes[1] / 4

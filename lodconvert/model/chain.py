@@ -31,6 +31,16 @@ levels are baked point clouds. Kinds are data: a level is drawn as triangles whe
 set, whatever its kind."""
 
 
+@dataclass(frozen=True)
+class Counts:
+    """How large a level's geometry is, where the geometry itself stayed where the level was
+    baked (:meth:`LodChain.without_geometry`): its vertices (points of a point level) and
+    triangles (``None`` for points)."""
+
+    count: int
+    faces: int | None
+
+
 @dataclass
 class Level:
     """One level of a chain: its ``name`` (``LOD4`` … ``LOD1``, as data, not by position), its
@@ -43,7 +53,8 @@ class Level:
     points are ``params.point_size`` pixels wide; viewers scale them with 1/distance.
     ``bake_seconds`` is the time spent baking it. ``silhouette_f`` is the level's silhouette F
     against the finest level where it switches in, where the planner measured one (prisms).
-    Geometry is relative to the chain's origin.
+    Geometry is relative to the chain's origin. A level without its geometry has ``counts``
+    in its place (:meth:`without_geometry`).
     """
 
     name: str
@@ -55,25 +66,42 @@ class Level:
     design_distance: float | None = None
     bake_seconds: float = 0.0
     silhouette_f: float | None = None
+    counts: Counts | None = None
 
     def __post_init__(self) -> None:
         if self.mesh is not None and not isinstance(self.mesh, Mesh):
             self.mesh = Mesh.of(self.mesh)
-        if (self.mesh is None) == (self.points is None):
-            raise ValueError(f"level {self.name} needs either a mesh or points")
+        if [self.mesh, self.points, self.counts].count(None) != 2:
+            raise ValueError(f"level {self.name} needs either a mesh, points or counts")
 
     @property
     def is_points(self) -> bool:
         """Whether the level is drawn as points (else as triangles)."""
+        if self.counts is not None:
+            return self.counts.faces is None
         return self.points is not None
 
     @property
     def count(self) -> int:
         """Vertices of a mesh level, points of a point level."""
+        if self.counts is not None:
+            return self.counts.count
         if self.mesh is not None:
             return self.mesh.vertex_count
         assert self.points is not None
         return len(self.points)
+
+    @property
+    def faces(self) -> int | None:
+        """Triangles of a mesh level; ``None`` for a point level."""
+        if self.counts is not None:
+            return self.counts.faces
+        return None if self.mesh is None else len(self.mesh.faces)
+
+    def without_geometry(self) -> Level:
+        """This level with its geometry's :class:`Counts` in place of the geometry."""
+        counts = Counts(self.count, self.faces)
+        return replace(self, mesh=None, points=None, counts=counts)
 
 
 @dataclass
@@ -126,6 +154,11 @@ class LodChain:
     def objects(self) -> list[LodChain]:
         """The object chains it holds: itself (as :meth:`CellChain.objects` gives a cell's)."""
         return [self]
+
+    def without_geometry(self) -> LodChain:
+        """This chain with every level's geometry left out (:meth:`Level.without_geometry`):
+        what is told and written of it where its output was made elsewhere."""
+        return replace(self, levels=[level.without_geometry() for level in self.levels])
 
 
 @dataclass

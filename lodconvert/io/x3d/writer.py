@@ -720,20 +720,23 @@ def _prism_regions(chain: LodChain, switching: str) -> int | None:
     return len(chain.cutoffs) if switching == "prism" else None
 
 
+_BASE = "\x00"
+"""The DEF base in a worker's text of a chain, replaced by the one the writer gives it: no
+text written holds this character (:func:`_escape`, :mod:`~lodconvert.model.safe_text`)."""
+
+
 @dataclass(frozen=True)
 class ChainText:
-    """A chain's text made by a worker (:class:`ChainTexts`): its DEF base, every name that
-    takes, and what its ``Transform`` holds (:func:`_piece_text`)."""
+    """What a chain's ``Transform`` holds, made by a worker (:class:`ChainTexts`) with
+    :data:`_BASE` for its DEF base (:func:`_piece_text`)."""
 
-    base: str
-    names: tuple[str, ...]
     inner: str
 
 
 @dataclass(frozen=True)
 class ChainTexts:
     """Makes the text of a chain that is not an instance of shared geometry, as the writer
-    would with ``switching`` when no object before it took its names (the writer checks that)."""
+    would with ``switching``, whatever DEF base the writer gives it."""
 
     switching: str = "lod"
 
@@ -742,10 +745,10 @@ class ChainTexts:
             return None
         _check_chain(chain)
         regions = _prism_regions(chain, self.switching)
-        base = _ncname(chain.object_id)
-        level_defs, names = _derived_names(base, chain.levels, regions)
-        inner = _piece_text(lambda out: _write_contents(out, chain, base, level_defs, regions))
-        return ChainText(base, tuple(names), inner)
+        level_defs, _ = _derived_names(_BASE, chain.levels, regions)
+        return ChainText(
+            _piece_text(lambda out: _write_contents(out, chain, _BASE, level_defs, regions))
+        )
 
 
 def chain_texts(info: OutputInfo, switching: str = "lod") -> ChainTexts:
@@ -759,20 +762,19 @@ def _write_chain(out: _Out, chain: LodChain, doc: _Document) -> None:
     ``USE`` d by later instances. With prism switching the LOD goes into a ``Switch`` that
     draws nothing, followed by the nodes that draw its levels (:func:`_write_prism`). Positions
     are less ``doc.shift``: an object's translation, or an instance's placement (its chain
-    keeps its origin, as its facts declare). A worker's text of the chain is used where its
-    names are free."""
+    keeps its origin, as its facts declare). A worker's text of the chain is used where there
+    is one, with the DEF base given here."""
     piece: ChainText | None = doc.pieces.take(chain)
-    if piece is not None and doc.used.isdisjoint(piece.names):
-        doc.used.update(piece.names)
-        placed = {"DEF": piece.base, "translation": format_exact(chain.origin - doc.shift)}
-        with out.node("Transform", placed):
-            out.inserted(piece.inner)
-        return
-    _check_chain(chain)
     shared = doc.written.get(id(chain.levels))
     prism_regions = doc.prism_regions(chain)
     levels = [] if shared else chain.levels
     base, level_defs = _unique_names(chain.object_id, doc.used, levels, prism_regions)
+    if piece is not None:
+        placed = {"DEF": base, "translation": format_exact(chain.origin - doc.shift)}
+        with out.node("Transform", placed):
+            out.inserted(piece.inner.replace(_BASE, base))
+        return
+    _check_chain(chain)
     origin = chain.origin if chain.transform is not None else chain.origin - doc.shift
     transform = {"DEF": base, "translation": format_exact(origin)}
     with contextlib.ExitStack() as stack:
