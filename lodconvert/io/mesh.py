@@ -41,7 +41,6 @@ from .geometry_checks import (
     checked_vertices,
     kept_faces,
 )
-from .gltf import srgb_rgba
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb", ".gltf")
 LINEAR_COLOR_SUFFIXES = (".glb", ".gltf")
@@ -121,7 +120,11 @@ def _color_bytes(values: object | None, linear: bool) -> np.ndarray | None:
     unit = _unit_rgba(values)
     if unit is None:
         return None
-    return srgb_rgba(unit) if linear else np.rint(unit * 255.0).astype(np.uint8)
+    if not linear:
+        return np.rint(unit * 255.0).astype(np.uint8)
+    from .gltf import srgb_rgba  # not at the top: a city reader in a worker needs no glTF
+
+    return srgb_rgba(unit)
 
 
 def _image_rgba(image: object | None) -> np.ndarray | None:

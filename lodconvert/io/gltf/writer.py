@@ -40,7 +40,6 @@ from dataclasses import dataclass
 from typing import IO, Any, BinaryIO
 
 import numpy as np
-from PIL import Image as PILImage
 
 from ...errors import LodConvertError
 from ...model import CellChain, Level, LodChain, PointCloud, Surface
@@ -158,6 +157,8 @@ def _alpha_mode(*alphas: np.ndarray | None) -> str:
 
 def _png(rgba: np.ndarray) -> bytes:
     """Deterministic PNG bytes of an RGBA uint8 image (no timestamps or text chunks)."""
+    from PIL import Image as PILImage  # only for textures: a worker baking none never loads it
+
     out = io.BytesIO()
     PILImage.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8), "RGBA").save(out, format="PNG")
     return out.getvalue()

@@ -109,7 +109,6 @@ from dataclasses import astuple, dataclass, field, replace
 from typing import BinaryIO
 
 import numpy as np
-from PIL import Image as PILImage
 
 from ...errors import UsageError
 from ...model import CellChain, Level, LodChain, Mesh, Surface
@@ -574,6 +573,8 @@ def texture_url(rgba: np.ndarray) -> str:
     would be longer than :data:`MAX_TEXTURE_URL` is halved (2×2 box average, odd edges
     rounded up) until it fits; texture coordinates stay valid as they are relative.
     """
+    from PIL import Image as PILImage  # only for textures: a worker baking none never loads it
+
     image = PILImage.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8))
     while True:
         png = io.BytesIO()
