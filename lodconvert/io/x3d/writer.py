@@ -977,7 +977,7 @@ def write_x3d(
     """Write ``chains`` as an X3D 4.0 XML document to the binary ``handle``, each object's
     levels switching as ``switching`` says (one of :data:`SWITCHING_MODES`; else
     :class:`~lodconvert.errors.UsageError`); a chain's text in ``pieces`` (made by a worker,
-    :class:`ChainTexts`) is written as it is.
+    :class:`ChainTexts`) is written with the DEF names given here.
 
     The document is streamed: each chain is written (and flushed) as the iterable yields it, so
     only one chain's text is held in memory. Same input, same bytes.
