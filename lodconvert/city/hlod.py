@@ -272,10 +272,11 @@ def bake_cell(
         if level is not None:
             candidates["points"] = (level, _silhouette_f(source, level, switch, options))
     found = None
-    of_cells = any(isinstance(m, CellChain) for m in members)
+    # a cell of finer cells, or of scattered members: blocks of each member apart
+    apart = beside_cell or any(isinstance(m, CellChain) for m in members)
     if kind in ("blocks", "auto"):
         found = _blocks_level(objects, origin, source, switch, options)
-        if of_cells:
+        if apart:
             found = _lighter(found, _member_blocks_level(members, origin, source, switch, options))
         if found is not None:
             candidates["blocks"] = found[:2]
@@ -283,7 +284,7 @@ def bake_cell(
     if kind in ("mesh", "auto") or not candidates:
         level, f, mesh_facts = _mesh_level(members, objects, origin, source, switch, options)
         candidates["mesh"] = (level, f)
-    if found is not None and found[1] < MIN_CELL_F and of_cells:
+    if found is not None and found[1] < MIN_CELL_F and apart:
         cost = min(
             (level_cost(lv) for lv, f in candidates.values() if f >= MIN_CELL_F), default=math.inf
         )
