@@ -110,23 +110,10 @@ def test_a_worker_converting_a_city_into_x3d_loads_no_gltf_format_and_no_pillow(
     """A worker process starts by importing what its tasks use; one that read, baked and
     wrote the X3D text of a city's buildings (untextured) has loaded neither the glTF format
     (its reader and checks) nor Pillow, which only textures need."""
-    from lodconvert import pipeline
-    from lodconvert.pipeline import RunOptions, convert
-    from lodconvert.tasks import PoolExecutor
-
     from .conftest import SHARED, shared_data
-    from .worker_probe import Imported
+    from .worker_probe import imported_by_workers
 
-    imported: list[str] = []
-
-    class Probed(PoolExecutor):
-        def close(self) -> None:
-            if self._workers:
-                imported.extend(next(self.results([Imported()])))
-            super().close()
-
-    monkeypatch.setattr(pipeline, "PoolExecutor", Probed)
     source = shared_data(SHARED / "data" / "citygml" / "kit_testcases_lod2_100bldg_v3.gml")
-    convert(source, tmp_path / "kit.x3d", RunOptions(workers=2))
+    imported = imported_by_workers(monkeypatch, source, tmp_path / "kit.x3d")
     assert {"lodconvert.io.citygml.parallel", "lodconvert.io.x3d.writer"} <= set(imported)
     assert [n for n in imported if n.startswith(("lodconvert.io.gltf", "PIL"))] == []

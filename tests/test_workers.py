@@ -18,12 +18,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from lodconvert import pipeline
 from lodconvert.bake import get_backend
 from lodconvert.chain import ChainOptions
 from lodconvert.io import output_format
 from lodconvert.model import Node, Scene
-from lodconvert.pipeline import RunOptions, _output_info, convert, iter_chains, read_inputs
+from lodconvert.pipeline import _output_info, iter_chains, read_inputs
 from lodconvert.report import chain_record
 from lodconvert.tasks import PoolExecutor, SerialExecutor
 
@@ -31,7 +30,7 @@ from .conftest import ROOT, SHARED, shared_data, surface_of
 from .test_cityjson import _features
 from .test_cli import assert_one_line_error
 from .test_cli import run as run_cli
-from .worker_probe import Imported
+from .worker_probe import imported_by_workers
 
 TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
 CITIES = {
@@ -283,16 +282,7 @@ def test_workers_that_read_and_bake_a_city_never_import_scipy(
     """A worker process starts by importing what it needs; scipy took the most of that (0.25 s
     of CPU per worker and run, for the connected parts of a footprint), so a worker that read,
     baked and formatted TUM's buildings must not have imported it."""
-    imported: list[str] = []
-
-    class Probed(PoolExecutor):
-        def close(self) -> None:
-            if self._workers:
-                imported.extend(next(self.results([Imported()])))
-            super().close()
-
-    monkeypatch.setattr(pipeline, "PoolExecutor", Probed)
-    convert(shared_data(TUM), tmp_path / "tum.x3d", RunOptions(workers=2))
+    imported = imported_by_workers(monkeypatch, shared_data(TUM), tmp_path / "tum.x3d")
     assert {"lodconvert.io.citygml.parallel", "lodconvert.city.prisms"} <= set(imported)
     assert [name for name in imported if name.split(".")[0] == "scipy"] == []
 
