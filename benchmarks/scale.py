@@ -5,12 +5,12 @@ Converts TUM Munich (1×, unzipped), districts of shifted copies of it (made as
 ``benchmarks/city.py`` makes them) and a district of shifted copies of Delft's CityJSON into X3D
 and into glTF with the CLI, each run in a fresh child process (not pinned: the workers need the
 cores), the set-ups interleaved (1, 2, cluster, 1, …) so that load on a shared machine falls on
-all alike. The cluster (worker processes of one thread on 127.0.0.1) is started by the script
-once and serves every run, as a cluster would:
+all alike, after one untimed conversion of 1× TUM in each. The cluster (worker processes of one
+thread on 127.0.0.1) is started by the script once and serves every run, as a cluster would:
 
     python benchmarks/scale.py                    # writes results/scale.md
     python benchmarks/scale.py --runs 3 --factors 1,10,100 --delft 10
-    python benchmarks/scale.py --workers 1,2,4,8,16 --cluster 0 --out many_cores.md
+    python benchmarks/scale.py --workers 1,2,4,8,16 --cluster 16 --formats x3d --out many_cores.md
 
 Per configuration, medians of ``--runs`` runs: wall seconds, CPU seconds of the whole process
 tree (the child's ``wait4`` rusage, which holds its workers': it waits for each; with the
@@ -275,6 +275,21 @@ def inputs(args: argparse.Namespace, folder: Path) -> Iterator[Input]:
         district.path.unlink()
 
 
+def warm_up(
+    configurations: list[tuple[str, str]],
+    clusters: dict[str, Cluster | None],
+    baseline: Path | None,
+    folder: Path,
+) -> None:
+    """Convert 1× TUM once in each configuration, untimed, so that no timed run pays for cold
+    caches or for a cluster still starting."""
+    sample = write_district(Template(tum_document()), 1, folder / "warm_up.gml")
+    for setup, code in configurations:
+        root = baseline if code and baseline is not None else ROOT
+        convert_once(sample.path, folder / "warm_up.x3d", setup, clusters[code], root)
+    sample.path.unlink()
+
+
 def benchmark(args: argparse.Namespace) -> str:
     """Run every configuration, interleaved; the results file's text."""
     started = time.perf_counter()
@@ -290,16 +305,21 @@ def benchmark(args: argparse.Namespace) -> str:
     ):
         clusters = {"": cluster, "before": before}
         folder = Path(tmp)
+        warm_up(configurations, clusters, args.baseline, folder)
         for sample in inputs(args, folder):
-            for fmt in FORMATS:
+            for fmt in args.formats:
                 runs: dict[tuple[str, str], list[Run]] = {c: [] for c in configurations}
                 for i in range(args.runs):
                     for setup, code in configurations:
                         print(f"{sample.name} → {fmt}, {setup} {code}, run {i + 1}", flush=True)
                         out = folder / f"out_{setup}{code}.{fmt}"
                         root = args.baseline if code else ROOT
-                        runs[setup, code].append(
-                            convert_once(sample.path, out, setup, clusters[code], root)
+                        run = convert_once(sample.path, out, setup, clusters[code], root)
+                        runs[setup, code].append(run)
+                        print(
+                            f"  wall {run.wall:.2f} s, CPU {run.cpu:.2f} s,"
+                            f" main CPU {run.main_cpu:.2f} s, peak {run.peak_mib:.0f} MiB",
+                            flush=True,
                         )
                 same = len({run.output for each in runs.values() for run in each}) == 1
                 walls = {c: statistics.median(r.wall for r in runs[c]) for c in configurations}
@@ -399,6 +419,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--cluster", type=int, default=2, help="LocalCluster workers (default 2; 0: none)"
+    )
+    parser.add_argument(
+        "--formats",
+        type=lambda text: text.split(","),
+        default=list(FORMATS),
+        help="output formats (default x3d,glb)",
     )
     parser.add_argument("--out", type=Path, default=HERE / "results" / "scale.md")
     parser.add_argument(
