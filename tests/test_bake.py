@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
 import trimesh
 
-from lodconvert.bake import NumpyBackend, bake_points
+from lodconvert.bake import NumpyBackend, bake_points, get_backend, gl
 from lodconvert.bake.grid import SlabHits
 from lodconvert.bake.pcd import occupied_hits
 from lodconvert.model import BakeParams, Node, Surface
@@ -250,3 +252,16 @@ def test_silhouettes_of_several_surfaces_are_each_ones_own() -> None:
             assert masks[axis].shape == grid.image_shape(axis)
             assert np.array_equal(masks[axis], own[axis])
     assert not np.array_equal(together[0][0], together[1][0])
+
+
+def test_auto_makes_no_gl_context_where_no_gpu_device_exists(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    def refuse(purpose: str, require: int = 330) -> None:
+        raise AssertionError("auto made a GL context on a machine with no GPU device")
+
+    backends = sys.modules["lodconvert.bake"]  # the package, not lodconvert.bake()
+    monkeypatch.setattr(backends, "GPU_DEVICES", ("/nonexistent/renderD*",))
+    monkeypatch.setattr(gl, "create_context", refuse)
+    assert not backends.gpu_device_present()
+    assert get_backend("auto").name == "numpy"
