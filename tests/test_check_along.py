@@ -1,10 +1,15 @@
-"""An X3D output checked while it is written (worker processes bake meanwhile): the check reads
-the staged file as it grows, refuses a broken output as the check of the finished file does,
-and stops with a failed write, leaving nothing."""
+"""An X3D output checked while it is written (worker processes bake meanwhile): the check, a
+process of its own, reads the staged file as it grows, refuses a broken output as the check of
+the finished file does, and stops with a failed write or a killed main process, leaving
+nothing."""
 
 from __future__ import annotations
 
 import dataclasses
+import multiprocessing
+import os
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -14,7 +19,7 @@ import pytest
 
 from lodconvert.errors import InputError
 from lodconvert.io import streamed, x3d
-from lodconvert.validate.along import Abandoned, GrowingFile
+from lodconvert.validate.along import Abandoned, CheckAlong, GrowingFile
 
 from .conftest import SHARED, shared_data
 from .test_cli import assert_one_line_error, run
@@ -22,14 +27,14 @@ from .test_cli import assert_one_line_error, run
 KIT = SHARED / "data" / "citygml" / "kit_testcases_lod2_100bldg_v3.gml"
 
 
-def _write_slowly(path: Path, pieces: list[bytes], done: GrowingFile) -> threading.Thread:
+def _write_slowly(path: Path, pieces: list[bytes], done: threading.Event) -> threading.Thread:
     def write() -> None:
         with path.open("wb") as handle:
             for piece in pieces:
                 handle.write(piece)
                 handle.flush()
                 time.sleep(0.01)
-        done.finished()
+        done.set()
 
     thread = threading.Thread(target=write)
     thread.start()
@@ -40,8 +45,9 @@ def test_a_growing_file_is_read_whole_as_it_is_written(tmp_path: Path) -> None:
     path = tmp_path / "out.x3d"
     path.write_bytes(b"")
     pieces = [bytes([i]) * (i * 1000 + 1) for i in range(20)]
-    growing = GrowingFile(path)
-    writer = _write_slowly(path, pieces, growing)
+    finished = threading.Event()
+    growing = GrowingFile(path, finished, lambda: False)
+    writer = _write_slowly(path, pieces, finished)
     read = bytearray()
     while data := growing.read(4096):
         read += data
@@ -53,12 +59,60 @@ def test_a_growing_file_is_read_whole_as_it_is_written(tmp_path: Path) -> None:
 def test_a_file_whose_writing_failed_stops_its_reader(tmp_path: Path) -> None:
     path = tmp_path / "out.x3d"
     path.write_bytes(b"<X3D")
-    growing = GrowingFile(path)
+    abandoned = threading.Event()
+    growing = GrowingFile(path, threading.Event(), abandoned.is_set)
     assert growing.read(100) == b"<X3D"
-    threading.Timer(0.05, growing.abandon).start()
+    threading.Timer(0.05, abandoned.set).start()
     with pytest.raises(Abandoned):
         growing.read(100)
     growing.close()
+
+
+def _checks_running() -> list[multiprocessing.process.BaseProcess]:
+    return [p for p in multiprocessing.active_children() if p.name == "lodconvert-check"]
+
+
+_KILLED_WRITER = """
+import os, signal, sys
+from pathlib import Path
+from lodconvert.validate.along import CheckAlong
+path = Path(sys.argv[1])
+path.write_bytes(b"<X3D")
+with CheckAlong(path, path) as along:
+    print(along.process.pid, flush=True)
+    os.kill(os.getpid(), signal.SIGKILL)
+"""
+
+
+def test_the_check_ends_with_a_killed_main_process(tmp_path: Path) -> None:
+    """A main process killed mid-write (SIGKILL: nothing of it runs on) leaves no check
+    waiting for the rest of its file."""
+    psutil = pytest.importorskip("psutil")
+    killed = subprocess.run(
+        [sys.executable, "-c", _KILLED_WRITER, str(tmp_path / "out.x3d")],
+        capture_output=True, text=True, env={**os.environ, "PYTHONPATH": os.getcwd()},
+    )  # fmt: skip
+    assert killed.returncode == -9, killed.stderr
+    check = int(killed.stdout.split()[0])
+    while _running(psutil, check):  # it must end by itself (a hang here is the failure)
+        time.sleep(0.05)
+
+
+def _running(psutil: Any, pid: int) -> bool:
+    """Whether process ``pid`` runs (not ended, nor ended and waiting to be reaped)."""
+    try:
+        return psutil.Process(pid).status() != psutil.STATUS_ZOMBIE
+    except psutil.NoSuchProcess:
+        return False
+
+
+def test_a_check_runs_in_a_process_of_its_own(tmp_path: Path) -> None:
+    path = tmp_path / "out.x3d"
+    path.write_bytes(b"<X3D")
+    with CheckAlong(path, path) as along:
+        assert along.process.pid != os.getpid()
+        assert _checks_running()
+    assert not _checks_running()
 
 
 def _x3d_writer(monkeypatch: pytest.MonkeyPatch, write: Any) -> None:
@@ -98,7 +152,7 @@ def test_a_broken_x3d_written_beside_workers_is_refused(
     assert_one_line_error(result, 1, str(out), "output fails validation", "XML_SYNTAX")
     assert out.read_bytes() == b"previous output"
     assert [p.name for p in tmp_path.iterdir()] == ["kit.x3d"]
-    assert not [t for t in threading.enumerate() if t.name == "lodconvert-check"]
+    assert not _checks_running()
 
 
 def test_a_write_that_fails_beside_workers_stops_the_check(
@@ -117,4 +171,4 @@ def test_a_write_that_fails_beside_workers_stops_the_check(
     result = run(shared_data(KIT), "-o", out, "--workers", "2", "-q")
     assert_one_line_error(result, 1, "cannot be written")
     assert list(tmp_path.iterdir()) == []
-    assert not [t for t in threading.enumerate() if t.name == "lodconvert-check"]
+    assert not _checks_running()
