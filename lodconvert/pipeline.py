@@ -39,7 +39,7 @@ from .io.crs import checked_crs_option
 from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
-from .model import CellChain, LodChain, Node, Scene
+from .model import CellChain, LodChain, Node, PackedNode, Scene, is_city_object
 from .report import Records, cell_record, chain_record, options_record, report_text, run_report
 from .reproject import SOURCE_CRS_KEYS, Georef, in_one_crs
 from .sinks import DirectorySink, FileSink, Outputs
@@ -141,16 +141,18 @@ class _Bakery:
     done: int = 0
 
     def chains(
-        self, objects: Iterable[tuple[Node, float | None]]
+        self, objects: Iterable[tuple[Node | PackedNode, float | None]]
     ) -> Iterator[LodChain | ChainPlan | None]:
         """The chain (the plan, with ``plan_only``) of each of ``objects`` (each with the plot
         radius to use as its γ, or ``None``), in order; ``None`` for one that is skipped."""
         seen: set[int | None] = set()  # keys of geometry placed by a node sent before
         shared: dict[int, LodChain | ChainPlan] = {}
-        order: deque[tuple[Node, float | None, bool]] = deque()  # each object, and if sent
+        order: deque[tuple[Node | PackedNode, float | None, bool]] = (
+            deque()
+        )  # each object, and if sent
         per_object = [0.0]
 
-        def sent() -> Iterator[tuple[Node, ChainOptions]]:
+        def sent() -> Iterator[tuple[Node | PackedNode, ChainOptions]]:
             for node, radius in objects:
                 key = id(node.geometry) if node.transform is not None else None
                 first = key is None or key not in seen
@@ -179,7 +181,7 @@ class _Bakery:
         return replace(self.options, gamma=radius) if radius is not None else self.options
 
     def _taken(
-        self, obj: Node, outcome: Baked, shared: dict[int, LodChain | ChainPlan]
+        self, obj: Node | PackedNode, outcome: Baked, shared: dict[int, LodChain | ChainPlan]
     ) -> LodChain | ChainPlan | None:
         """The chain of ``outcome`` for ``obj`` (placed by its transform, kept in ``shared``
         for other nodes of its geometry), or ``None`` when it was skipped."""
@@ -200,11 +202,14 @@ class _Bakery:
             self.step("converting", self.done, self.total)
 
     def _reused(
-        self, job: tuple[Node, float | None, bool], shared: dict[int, LodChain | ChainPlan]
+        self,
+        job: tuple[Node | PackedNode, float | None, bool],
+        shared: dict[int, LodChain | ChainPlan],
     ) -> LodChain | ChainPlan | None:
         """The chain of an object whose geometry an earlier node placed: that node's chain
         with this one's id, attributes and placement (baked here when that node's failed)."""
         obj, radius, _ = job
+        assert isinstance(obj, Node)  # placed by a transform: never packed
         base = shared.get(id(obj.geometry))
         if base is None:
             task = BakeTask(((obj, self._options(radius)),), self.limits, self.plan_only)
@@ -219,7 +224,7 @@ class _Bakery:
             self.done += 1
             self.step("converting", self.done, self.total)
 
-    def _skip(self, obj: Node, reason: str) -> None:
+    def _skip(self, obj: Node | PackedNode, reason: str) -> None:
         """Report ``obj`` as skipped for ``reason``."""
         if self.total != 1 and not self.strict:  # with one object, the run's error says it
             self.warn(f"{self.source}: object {reason} — skipped")
@@ -288,14 +293,16 @@ def merged(scenes: Sequence[Scene]) -> Scene:
     return whole
 
 
-def _with_plot_radii(scene: Scene, options: ChainOptions) -> Iterator[tuple[Node, float | None]]:
+def _with_plot_radii(
+    scene: Scene, options: ChainOptions
+) -> Iterator[tuple[Node | PackedNode, float | None]]:
     """The scene's nodes with geometry, each with the plot radius to use as its γ: unless
     ``options`` set γ, a city object's (a node with its own LoDs) comes from its neighbours'
     spacing (:mod:`.city.plots`), so a city is read through first, its nodes parked on disk
     (:class:`~.spool.NodeSpool`); a mesh file's nodes stay streamed (radius ``None``)."""
     nodes = scene.with_geometry()
     first = next(nodes, None) if options.gamma is None else None
-    if first is None or not first.lods:
+    if first is None or not is_city_object(first):
         for node in itertools.chain([first] if first is not None else [], nodes):
             yield node, None
         return
@@ -305,7 +312,7 @@ def _with_plot_radii(scene: Scene, options: ChainOptions) -> Iterator[tuple[Node
 
 
 def _spooled(
-    nodes: Iterable[Node], options: ChainOptions, spool: NodeSpool
+    nodes: Iterable[Node | PackedNode], options: ChainOptions, spool: NodeSpool
 ) -> tuple[np.ndarray, list[float | None]]:
     """Park ``nodes`` in ``spool``; their ground centres ((n, 2), scene coordinates) and the
     plot radius of each city object standing on the ground, from its neighbours among them
@@ -315,8 +322,8 @@ def _spooled(
     city: list[bool] = []
     for node in nodes:
         spool.add(node)
-        centres.append(_ground_centre(node))
-        city.append(bool(node.lods) and node.type not in GROUND_COVERS)
+        centres.append(node.centre if isinstance(node, PackedNode) else node.ground_centre())
+        city.append(is_city_object(node) and node.type not in GROUND_COVERS)
     placed = np.array(centres, dtype=np.float64).reshape(-1, 2)
     radii: list[float | None] = [None] * len(placed)
     chosen = np.flatnonzero(city)
@@ -324,15 +331,6 @@ def _spooled(
         for i, radius in zip(chosen, plot_radii(placed[chosen]).tolist(), strict=True):
             radii[i] = radius
     return placed, radii
-
-
-def _ground_centre(node: Node) -> tuple[float, float]:
-    """Where ``node``'s bounding-box centre is, seen from above, in scene coordinates."""
-    centre = np.append(node.geometry.bounds.mean(axis=0), 1.0)
-    if node.transform is not None:
-        centre = np.asarray(node.transform, dtype=np.float64) @ centre
-    x, y = node.offset[:2] + centre[:2]
-    return float(x), float(y)
 
 
 STAGES = ("read", "plan", "execute", "assemble", "write", "validate")

@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from .io.crs import CrsError, frame_pipeline, pyproj_crs, vertical_reference
-from .model import Mesh, Node, Scene, Surface
+from .model import Mesh, Node, Scene, Surface, unpacked
 
 Message = Callable[[str], None]
 SOURCE_CRS_KEYS = ("local_frame", "vertical_crs")
@@ -166,7 +166,7 @@ def _reprojected_node(node: Node, reprojection: Reprojection) -> Node:
 def _reprojected(scene: Scene, reprojection: Reprojection) -> Scene:
     """``scene`` in the target's CRS, its nodes transformed as they are taken."""
     nodes: Iterator[Node] | list[Node] = (
-        _reprojected_node(node, reprojection) for node in scene.nodes
+        _reprojected_node(unpacked(node), reprojection) for node in scene.nodes
     )
     if isinstance(scene.nodes, list):
         nodes = list(nodes)

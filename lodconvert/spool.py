@@ -9,7 +9,8 @@ so no input nests them too deep to pickle) in memory while their geometry takes 
 :data:`SPOOL_MEMORY`, and writes the rest to an anonymous temporary file as they are read,
 keeping only their position there; it gives the nodes back in the same order (or any node by its
 index, for grouping them into cells: :mod:`.city.hlod`). Nodes placed by a transform stay in
-memory: they share their geometry with other nodes, which a file would not.
+memory: they share their geometry with other nodes, which a file would not. Nodes that workers
+read come parked and pickled already (:class:`~.model.PackedNode`) and are kept as they came.
 """
 
 from __future__ import annotations
@@ -17,12 +18,9 @@ from __future__ import annotations
 import pickle
 import tempfile
 from collections.abc import Iterator
-from dataclasses import replace
 from typing import IO
 
-import numpy as np
-
-from .model import Node
+from .model import Node, PackedNode
 from .sinks import writing_temporary
 
 SPOOL_MEMORY = 64 << 20
@@ -39,19 +37,19 @@ class NodeSpool:
     def __init__(self, memory: int | None = None) -> None:
         # the spool owns the file: closed by close() or leaving its ``with`` block
         self._file: IO[bytes] = tempfile.TemporaryFile(prefix="lodconvert-spool-")  # noqa: SIM115
-        self._entries: list[Node | int] = []
+        self._entries: list[Node | PackedNode | int] = []
         self._room = SPOOL_MEMORY if memory is None else memory
         """Bytes of geometry it may still hold in memory (default :data:`SPOOL_MEMORY`)."""
 
-    def add(self, node: Node) -> None:
+    def add(self, node: Node | PackedNode) -> None:
         """Park ``node`` (kept in memory when it is placed by a transform, or while there is
-        room); a full temporary folder is one line naming it (:func:`~.sinks.writing`)."""
+        room; a packed node as it came); a full temporary folder is one line naming it
+        (:func:`~.sinks.writing`)."""
         if node.transform is not None:
             self._entries.append(node)
             return
-        text = node.written()
-        parked = replace(node, id=text.id, children=[], attributes=text.attributes, cut=text.cut)
-        weight = _geometry_bytes(parked)
+        parked = node if isinstance(node, PackedNode) else node.parked()
+        weight = parked.weight if isinstance(parked, PackedNode) else parked.geometry_bytes()
         if weight <= self._room:
             self._room -= weight
             self._entries.append(parked)
@@ -60,10 +58,10 @@ class NodeSpool:
         with writing_temporary():
             pickle.dump(parked, self._file, protocol=pickle.HIGHEST_PROTOCOL)
 
-    def get(self, index: int) -> Node:
+    def get(self, index: int) -> Node | PackedNode:
         """Node ``index`` (in the order added), read back from the file."""
         entry = self._entries[index]
-        if isinstance(entry, Node):
+        if not isinstance(entry, int):
             return entry
         with writing_temporary():  # the seek writes what is still buffered
             self._file.seek(entry)
@@ -72,7 +70,7 @@ class NodeSpool:
     def __len__(self) -> int:
         return len(self._entries)
 
-    def __iter__(self) -> Iterator[Node]:
+    def __iter__(self) -> Iterator[Node | PackedNode]:
         """The nodes in the order they were added, each read back as it is taken."""
         for index in range(len(self._entries)):
             yield self.get(index)
@@ -86,16 +84,3 @@ class NodeSpool:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _geometry_bytes(node: Node) -> int:
-    """Bytes of the arrays of ``node``'s geometry and source LoDs (each array once)."""
-    arrays = {
-        id(value): value.nbytes
-        for mesh in (node.geometry, *node.lods.values())
-        if mesh is not None
-        for part in mesh.parts
-        for value in vars(part).values()
-        if isinstance(value, np.ndarray)
-    }
-    return sum(arrays.values())

@@ -38,7 +38,7 @@ from .bake import Backend, get_backend
 from .chain import ChainOptions, ChainPlan, Progress, bake_chain, plan_chain
 from .errors import InputError
 from .limits import DEFAULT_LIMITS, Limits
-from .model import LodChain, Node
+from .model import LodChain, Node, PackedNode, unpacked
 
 TASK_SECONDS = 0.1
 """Work a batch is sized for: a process pool costs about 0.1 ms a task, so this keeps the
@@ -62,7 +62,7 @@ class BakeTask:
     results are taken, nothing but the writer needs a chain's geometry) a chain whose piece was
     made comes back without its geometry (:meth:`~.model.LodChain.without_geometry`)."""
 
-    items: tuple[tuple[Node, ChainOptions], ...]
+    items: tuple[tuple[Node | PackedNode, ChainOptions], ...]
     limits: Limits = DEFAULT_LIMITS
     plan_only: bool = False
     formatter: Formatter | None = None
@@ -78,7 +78,8 @@ class BakeTask:
         ``progress`` hears what is being baked as it happens."""
         start = time.perf_counter()
         outcomes = []
-        for node, options in self.items:
+        for item, options in self.items:
+            node = unpacked(item)
             warnings: list[str] = []
             try:
                 chain = plan_chain(node, options) if self.plan_only else bake_chain(
@@ -419,7 +420,7 @@ def default_workers() -> int:
 
 
 def batches(
-    items: Iterable[tuple[Node, ChainOptions]],
+    items: Iterable[tuple[Node | PackedNode, ChainOptions]],
     per_object: list[float],
     limits: Limits,
     plan_only: bool = False,
@@ -431,7 +432,7 @@ def batches(
     one-item list: seconds an object takes so far, updated by the caller; 0: not known yet, a
     task of one object); ``plan_only``, ``formatter`` and ``lean`` as :class:`BakeTask` has
     them."""  # fmt: skip
-    batch: list[tuple[Node, ChainOptions]] = []
+    batch: list[tuple[Node | PackedNode, ChainOptions]] = []
     for item in items:
         batch.append(item)
         wanted = int(seconds / per_object[0]) if per_object[0] > 0 else 1

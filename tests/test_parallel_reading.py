@@ -25,7 +25,7 @@ from lodconvert.io.citygml.members import Members
 from lodconvert.io.cityjson.parallel import ObjectsTask
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.io.spread import TASK_SECONDS
-from lodconvert.model import Mesh, Node, Scene
+from lodconvert.model import Mesh, Node, Scene, unpacked
 from lodconvert.tasks import Executor, PoolExecutor
 
 from .conftest import SHARED, shared_data
@@ -116,6 +116,12 @@ def _facts(node: Node) -> Any:
     )
 
 
+def _parked_facts(scene: Scene) -> list[Any]:
+    """The facts of each node of ``scene`` with geometry as it waits to be baked (workers give
+    them parked and packed, :class:`~lodconvert.model.PackedNode`)."""
+    return [_facts(unpacked(node).parked()) for node in scene.with_geometry()]
+
+
 class _Kills:
     """A task whose unpickling kills the process doing it (a worker taking it), and that
     fails as ``task`` fails."""
@@ -147,7 +153,7 @@ def _read(
     results: list[Any] = []
     told: list[str] = []
     if not spread:
-        return scene, [_facts(node) for node in scene.nodes], results, told
+        return scene, _parked_facts(scene), results, told
     with workers() as executor:
 
         def kept(tasks: Iterable[Any]) -> Iterator[Any]:
@@ -158,7 +164,7 @@ def _read(
 
         assert scene.spread is not None
         scene.spread(kept, told.append, TASK_SECONDS)
-        facts = [_facts(node) for node in scene.nodes]
+        facts = _parked_facts(scene)
     return scene, facts, results, told
 
 
@@ -428,7 +434,7 @@ def test_a_city_is_read_in_tasks_of_the_work_its_executor_is_sized_for(
         tasks: list[Any] = []
         assert scene.spread is not None
         scene.spread(functools.partial(_run_here, tasks), print, seconds)
-        read.append([_facts(node) for node in scene.nodes])
+        read.append(_parked_facts(scene))
         counts.append(len(tasks))
     assert read[0] == read[1]
     assert counts[0] >= 10

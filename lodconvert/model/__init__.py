@@ -2,7 +2,7 @@
 
 from .chain import MESH_KINDS, BakeParams, CellChain, Level, LodChain
 from .geometry import GREY, WHITE, Mesh, PointCloud, Surface
-from .tree import Node, Scene
+from .tree import Node, PackedNode, Scene, is_city_object, unpacked
 
 __all__ = [
     "GREY",
@@ -14,7 +14,10 @@ __all__ = [
     "LodChain",
     "Mesh",
     "Node",
+    "PackedNode",
     "PointCloud",
     "Scene",
     "Surface",
+    "is_city_object",
+    "unpacked",
 ]

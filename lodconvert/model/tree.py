@@ -10,6 +10,7 @@ parent's frame. Readers may yield nodes lazily; nothing here knows a file format
 
 from __future__ import annotations
 
+import pickle
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -83,6 +84,84 @@ class Node:
         text = object_text(self.id, self.object_attributes())
         return replace(text, cut=self.cut + text.cut) if self.cut else text
 
+    def parked(self) -> Node:
+        """This node as it waits to be baked apart from the others: without its children (each
+        with geometry is an object of its own), its id and attributes (its parts' with them)
+        as outputs keep them (:meth:`written`)."""
+        text = self.written()
+        return replace(self, id=text.id, children=[], attributes=text.attributes, cut=text.cut)
+
+    def ground_centre(self) -> tuple[float, float]:
+        """Where its geometry's bounding-box centre is, seen from above, in scene coordinates."""
+        assert self.geometry is not None
+        centre = np.append(self.geometry.bounds.mean(axis=0), 1.0)
+        if self.transform is not None:
+            centre = np.asarray(self.transform, dtype=np.float64) @ centre
+        x, y = self.offset[:2] + centre[:2]
+        return float(x), float(y)
+
+    def geometry_bytes(self) -> int:
+        """Bytes of the arrays of its geometry and source LoDs (each array once)."""
+        arrays = {
+            id(value): value.nbytes
+            for mesh in (self.geometry, *self.lods.values())
+            if mesh is not None
+            for part in mesh.parts
+            for value in vars(part).values()
+            if isinstance(value, np.ndarray)
+        }
+        return sum(arrays.values())
+
+
+@dataclass(frozen=True)
+class PackedNode:
+    """A node with geometry and no transform, parked (:meth:`Node.parked`) and pickled by the
+    worker that read it, with what the main process plans with: the main process passes it on
+    to the worker that bakes it without unpickling it (README, "Workers")."""
+
+    id: str
+    type: str
+    city: bool
+    """Whether it has source LoDs of its own (a city object)."""
+    centre: tuple[float, float]
+    """:meth:`Node.ground_centre`."""
+    weight: int
+    """:meth:`Node.geometry_bytes`."""
+    data: bytes
+
+    transform = None
+    """Placed by no transform (nodes that are keep sharing their geometry, unpacked)."""
+
+    @classmethod
+    def of(cls, node: Node) -> PackedNode:
+        """``node`` parked and packed."""
+        parked = node.parked()
+        data = pickle.dumps(parked, protocol=pickle.HIGHEST_PROTOCOL)
+        return cls(
+            parked.id, parked.type, bool(parked.lods), parked.ground_centre(),
+            parked.geometry_bytes(), data,
+        )  # fmt: skip
+
+    def node(self) -> Node:
+        """The parked node, unpickled."""
+        node = pickle.loads(self.data)
+        assert isinstance(node, Node)
+        return node
+
+    def walk(self) -> Iterator[PackedNode]:
+        """Itself (it has no children)."""
+        yield self
+
+
+def unpacked(node: Node | PackedNode) -> Node:
+    """``node``, unpacked where it is packed."""
+    return node.node() if isinstance(node, PackedNode) else node
+
+
+def is_city_object(node: Node | PackedNode) -> bool:
+    """Whether ``node`` has source LoDs of its own."""
+    return node.city if isinstance(node, PackedNode) else bool(node.lods)
+
 
 Spread = Callable[[Callable[[Iterable[Any]], Iterator[Any]], Callable[[str], None], float], None]
 """``spread(results, progress, seconds)``: a reader told to read the rest of its nodes as tasks
@@ -96,7 +175,8 @@ class Scene:
     facts (source file, CRS, attributes, size)."""
 
     source: str
-    nodes: Iterable[Node] = field(default_factory=list)
+    nodes: Iterable[Node | PackedNode] = field(default_factory=list)
+    """Its nodes; those read by workers may come packed (:class:`PackedNode`)."""
     crs: str | None = None
     attributes: dict[str, Any] = field(default_factory=dict)
     size: int | None = None
@@ -108,14 +188,14 @@ class Scene:
     spread: Spread | None = None
     """How the reader can read the rest of its nodes in workers (None: it cannot)."""
 
-    def __iter__(self) -> Iterator[Node]:
+    def __iter__(self) -> Iterator[Node | PackedNode]:
         return iter(self.nodes)
 
-    def walk(self) -> Iterator[Node]:
+    def walk(self) -> Iterator[Node | PackedNode]:
         """Every node, depth first (consumes a lazy scene)."""
         for node in self.nodes:
             yield from node.walk()
 
-    def with_geometry(self) -> Iterator[Node]:
-        """The nodes that carry geometry, depth first."""
-        return (node for node in self.walk() if node.geometry is not None)
+    def with_geometry(self) -> Iterator[Node | PackedNode]:
+        """The nodes that carry geometry, depth first (packed ones all do)."""
+        return (n for n in self.walk() if isinstance(n, PackedNode) or n.geometry is not None)

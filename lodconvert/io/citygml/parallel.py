@@ -28,7 +28,7 @@ from lxml import etree
 
 from ...errors import InputError
 from ...limits import Limits
-from ...model import Node
+from ...model import Node, PackedNode
 from ...semantics import Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally
@@ -56,11 +56,12 @@ class _Taken(set[str]):
 
 @dataclass(frozen=True)
 class ReadResult:
-    """What a worker read of a run of members: the nodes with geometry, the ids it took in
-    order (``collided``: one was asked for twice), what the tally counted, the document's
-    counts, and the reason it could not read the run (then nothing else)."""
+    """What a worker read of a run of members: the nodes with geometry (packed: the main
+    process passes them on unopened), the ids it took in order (``collided``: one was asked
+    for twice), what the tally counted, the document's counts, and the reason it could not
+    read the run (then nothing else)."""
 
-    nodes: tuple[Node, ...] = ()
+    nodes: tuple[PackedNode, ...] = ()
     ids: frozenset[str] = frozenset()
     collided: bool = False
     tally: InputTally | None = None
@@ -97,7 +98,10 @@ class ReadTask:
         document = Document(Path(self.source), self.limits, self.types, tally, self.palette)
         document.crs, document.taken = self.crs, _Taken()
         try:
-            nodes = tuple(document.read(io.BytesIO(self.prolog + self.members + self.root_end)))
+            read = document.read(io.BytesIO(self.prolog + self.members + self.root_end))
+            nodes = tuple(
+                PackedNode.of(n) for node in read for n in node.walk() if n.geometry is not None
+            )
         except InputError as exc:
             return ReadResult(error=str(exc))
         taken = document.taken
@@ -133,7 +137,7 @@ class SpreadReading:
         instead."""
         self.results, self.progress, self.sizer.seconds = results, progress, seconds
 
-    def nodes(self) -> Iterator[Node]:
+    def nodes(self) -> Iterator[Node | PackedNode]:
         """The document's city objects with geometry, in document order."""
         document = self.document
         stream = open_document(document.path, document.limits)
@@ -210,7 +214,7 @@ class SpreadReading:
             sent.append(task)
             yield task
 
-    def _taken(self, task: ReadTask, result: ReadResult) -> Iterator[Node]:
+    def _taken(self, task: ReadTask, result: ReadResult) -> Iterator[Node | PackedNode]:
         """The nodes of ``task``: a worker's, merged into the document's state, where they
         are what this process would read; else read here."""
         document = self.document
