@@ -5,8 +5,10 @@ Converts TUM Munich (1×, unzipped), districts of shifted copies of it (made as
 ``benchmarks/city.py`` makes them) and a district of shifted copies of Delft's CityJSON into X3D
 and into glTF with the CLI, each run in a fresh child process (not pinned: the workers need the
 cores), the set-ups interleaved (1, 2, cluster, 1, …) so that load on a shared machine falls on
-all alike, after one untimed conversion of 1× TUM in each. The cluster (worker processes of one
-thread on 127.0.0.1) is started by the script once and serves every run, as a cluster would:
+all alike, after one untimed conversion of 1× TUM in each (which also leaves the modules'
+bytecode, as an installed package has it, where ``PYTHONDONTWRITEBYTECODE`` kept it from a
+checkout). The cluster (worker processes of one thread on 127.0.0.1) is started by the script
+once and serves every run, as a cluster would:
 
     python benchmarks/scale.py                    # writes results/scale.md
     python benchmarks/scale.py --runs 3 --factors 1,10,100 --delft 10
@@ -189,9 +191,9 @@ def convert_once(
     command = [*LODCONVERT, str(source), "-o", str(output), "-qq", *where]
     command += ["--report", str(report), *options]
     env = {
-        **os.environ,
+        **{k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"},
         "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
-    }
+    }  # bytecode written once (by the warm-up) and then read, as an installed package has it
     before = cluster.cpu() if cluster is not None and setup == "cluster" else 0.0
     started = time.perf_counter()
     child = subprocess.Popen(command, env=env, cwd=root)
