@@ -117,7 +117,7 @@ class Node:
 class PackedNode:
     """A node with geometry and no transform, parked (:meth:`Node.parked`) and pickled by the
     worker that read it, with what the main process plans with: the main process passes it on
-    to the worker that bakes it without unpickling it (README, "Workers")."""
+    to the worker that bakes it without unpickling it (README, `--workers`)."""
 
     id: str
     type: str
