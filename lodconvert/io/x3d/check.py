@@ -310,9 +310,15 @@ def check_x3d(path: Path | BinaryIO, findings: Findings, schema: etree.XMLSchema
 
 
 def _top_level(element: etree._Element) -> bool:
-    """Whether ``element`` is a child of the ``Scene``."""
+    """Whether ``element`` is an object's node: a child of the ``Scene``, or of a ``Transform``
+    that is one (the scene frame of a georeferenced file, which holds every object)."""
     parent = element.getparent()
-    return parent is not None and parent.tag == "Scene"
+    if parent is None:
+        return False
+    if parent.tag == "Scene":
+        return True
+    holder = parent.getparent()
+    return parent.tag == "Transform" and holder is not None and holder.tag == "Scene"
 
 
 def _forget(element: etree._Element) -> None:
