@@ -39,7 +39,7 @@ from .io.crs import checked_crs_option
 from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
-from .model import CellChain, LodChain, Node, PackedNode, Scene, is_city_object
+from .model import CellChain, LodChain, Node, PackedNode, Scene
 from .report import Records, cell_record, chain_record, options_record, report_text, run_report
 from .reproject import SOURCE_CRS_KEYS, Georef, in_one_crs
 from .sinks import DirectorySink, FileSink, Outputs
@@ -147,9 +147,8 @@ class _Bakery:
         radius to use as its γ, or ``None``), in order; ``None`` for one that is skipped."""
         seen: set[int | None] = set()  # keys of geometry placed by a node sent before
         shared: dict[int, LodChain | ChainPlan] = {}
-        order: deque[tuple[Node | PackedNode, float | None, bool]] = (
-            deque()
-        )  # each object, and if sent
+        # each object, and whether it was sent
+        order: deque[tuple[Node | PackedNode, float | None, bool]] = deque()
         per_object = [0.0]
 
         def sent() -> Iterator[tuple[Node | PackedNode, ChainOptions]]:
@@ -302,7 +301,7 @@ def _with_plot_radii(
     (:class:`~.spool.NodeSpool`); a mesh file's nodes stay streamed (radius ``None``)."""
     nodes = scene.with_geometry()
     first = next(nodes, None) if options.gamma is None else None
-    if first is None or not is_city_object(first):
+    if first is None or not first.is_city_object():
         for node in itertools.chain([first] if first is not None else [], nodes):
             yield node, None
         return
@@ -322,8 +321,8 @@ def _spooled(
     city: list[bool] = []
     for node in nodes:
         spool.add(node)
-        centres.append(node.centre if isinstance(node, PackedNode) else node.ground_centre())
-        city.append(is_city_object(node) and node.type not in GROUND_COVERS)
+        centres.append(node.ground_centre())
+        city.append(node.is_city_object() and node.type not in GROUND_COVERS)
     placed = np.array(centres, dtype=np.float64).reshape(-1, 2)
     radii: list[float | None] = [None] * len(placed)
     chosen = np.flatnonzero(city)

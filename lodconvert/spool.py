@@ -48,8 +48,8 @@ class NodeSpool:
         if node.transform is not None:
             self._entries.append(node)
             return
-        parked = node if isinstance(node, PackedNode) else node.parked()
-        weight = parked.weight if isinstance(parked, PackedNode) else parked.geometry_bytes()
+        parked = node.parked()
+        weight = parked.geometry_bytes()
         if weight <= self._room:
             self._room -= weight
             self._entries.append(parked)

@@ -2,7 +2,7 @@
 
 from .chain import MESH_KINDS, BakeParams, CellChain, Level, LodChain
 from .geometry import GREY, WHITE, Mesh, PointCloud, Surface
-from .tree import Node, PackedNode, Scene, is_city_object, unpacked
+from .tree import Node, PackedNode, Scene, unpacked
 
 __all__ = [
     "GREY",
@@ -18,6 +18,5 @@ __all__ = [
     "PointCloud",
     "Scene",
     "Surface",
-    "is_city_object",
     "unpacked",
 ]

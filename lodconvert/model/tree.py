@@ -100,6 +100,10 @@ class Node:
         x, y = self.offset[:2] + centre[:2]
         return float(x), float(y)
 
+    def is_city_object(self) -> bool:
+        """Whether it has source LoDs of its own."""
+        return bool(self.lods)
+
     def geometry_bytes(self) -> int:
         """Bytes of the arrays of its geometry and source LoDs (each array once)."""
         arrays = {
@@ -138,7 +142,7 @@ class PackedNode:
         parked = node.parked()
         data = pickle.dumps(parked, protocol=pickle.HIGHEST_PROTOCOL)
         return cls(
-            parked.id, parked.type, bool(parked.lods), parked.ground_centre(),
+            parked.id, parked.type, parked.is_city_object(), parked.ground_centre(),
             parked.geometry_bytes(), data,
         )  # fmt: skip
 
@@ -148,19 +152,29 @@ class PackedNode:
         assert isinstance(node, Node)
         return node
 
+    # what the main process asks of a node it parks, as a Node answers it
+
     def walk(self) -> Iterator[PackedNode]:
         """Itself (it has no children)."""
         yield self
+
+    def parked(self) -> PackedNode:
+        """Itself: it was parked where it was packed."""
+        return self
+
+    def is_city_object(self) -> bool:
+        return self.city
+
+    def ground_centre(self) -> tuple[float, float]:
+        return self.centre
+
+    def geometry_bytes(self) -> int:
+        return self.weight
 
 
 def unpacked(node: Node | PackedNode) -> Node:
     """``node``, unpacked where it is packed."""
     return node.node() if isinstance(node, PackedNode) else node
-
-
-def is_city_object(node: Node | PackedNode) -> bool:
-    """Whether ``node`` has source LoDs of its own."""
-    return node.city if isinstance(node, PackedNode) else bool(node.lods)
 
 
 Spread = Callable[[Callable[[Iterable[Any]], Iterator[Any]], Callable[[str], None], float], None]
