@@ -7,8 +7,8 @@ and into glTF with the CLI, each run in a fresh child process (not pinned: the w
 cores), the set-ups interleaved (1, 2, cluster, 1, …) so that load on a shared machine falls on
 all alike, after one untimed conversion of 1× TUM in each (which also leaves the modules'
 bytecode, as an installed package has it, where ``PYTHONDONTWRITEBYTECODE`` kept it from a
-checkout). The cluster (worker processes of one thread on 127.0.0.1) is started by the script
-once and serves every run, as a cluster would:
+checkout). The cluster (worker processes of one thread on 127.0.0.1) is started once, in a
+process of its own as a cluster's scheduler runs apart from its clients, and serves every run:
 
     python benchmarks/scale.py                    # writes results/scale.md
     python benchmarks/scale.py --runs 3 --factors 1,10,100 --delft 10
@@ -16,9 +16,9 @@ once and serves every run, as a cluster would:
 
 Per configuration, medians of ``--runs`` runs: wall seconds, CPU seconds of the whole process
 tree (the child's ``wait4`` rusage, which holds its workers': it waits for each; with the
-cluster, plus what its worker processes and this one, where its scheduler runs, spent
-meanwhile), buildings/s, the peak RSS of the whole process tree (sampled every 50 ms; the
-cluster's workers: their peak so far, added), the speed-up over 1 worker (wall) and the
+cluster, plus what its scheduler, nannies and workers spent meanwhile), buildings/s, the peak
+RSS of the whole process tree (sampled every 50 ms; the cluster's processes: their peak so far,
+added), the speed-up over 1 worker (wall) and the
 cluster's wall time over the pool's of as many workers. The outputs of each input and format
 are compared byte for byte (they must be the same).
 """
@@ -30,7 +30,6 @@ import hashlib
 import json
 import math
 import os
-import resource
 import shutil
 import statistics
 import subprocess
@@ -92,32 +91,45 @@ class Input:
 
 
 class Cluster:
-    """A dask LocalCluster on 127.0.0.1 (worker processes of one thread each) and the CPU
-    seconds and peak memory of the processes it runs in."""
+    """A dask LocalCluster on 127.0.0.1 (worker processes of one thread each) served by a
+    process of its own (``process``: its scheduler and nannies, as ``dask scheduler`` and
+    ``dask worker`` would run apart from the client), and the CPU seconds and peak memory of
+    the processes it runs in."""
 
-    def __init__(self, local: Any, workers: int) -> None:
-        from distributed import Client
-
-        self.address = local.scheduler_address
+    def __init__(self, process: subprocess.Popen[str], address: str, workers: int) -> None:
+        self.process = process
+        self.address = address
         self.size = workers
-        with Client(local) as client:
-            pids = client.run(os.getpid)
-        self.workers = [psutil.Process(pid) for pid in pids.values()]
+        host = psutil.Process(process.pid)
+        self.processes = [host, *host.children(recursive=True)]
 
     def cpu(self) -> float:
-        """CPU seconds of its workers and of this process (its scheduler and nannies) so far."""
-        own = resource.getrusage(resource.RUSAGE_SELF)
-        times = [worker.cpu_times() for worker in self.workers]
-        return own.ru_utime + own.ru_stime + sum(t.user + t.system for t in times)
+        """CPU seconds of its scheduler, nannies and workers so far."""
+        return sum(sum(p.cpu_times()[:2]) for p in self.processes)
 
     def peak_mib(self) -> float:
-        """The sum of its workers' peak RSS (``VmHWM``) so far, in MiB."""
+        """The sum of its processes' peak RSS (``VmHWM``) so far, in MiB."""
         total = 0.0
-        for worker in self.workers:
-            status = Path(f"/proc/{worker.pid}/status").read_text()
+        for process in self.processes:
+            status = Path(f"/proc/{process.pid}/status").read_text()
             line = next(line for line in status.splitlines() if line.startswith("VmHWM:"))
             total += int(line.split()[1]) / 1024
         return total
+
+
+SERVE_CLUSTER = """
+import sys
+from distributed import Client, LocalCluster
+
+with LocalCluster(
+    processes=True, n_workers={workers}, threads_per_worker=1, host="127.0.0.1",
+    dashboard_address=":0",
+) as local, Client(local) as client:
+    client.wait_for_workers({workers})
+    print(local.scheduler_address, flush=True)
+    sys.stdin.read()  # until the benchmark closes it
+"""
+"""What the cluster's own process runs: a LocalCluster that serves until its stdin closes."""
 
 
 @contextmanager
@@ -127,18 +139,23 @@ def local_cluster(workers: int, root: Path = ROOT) -> Iterator[Cluster | None]:
     if workers == 0:
         yield None
         return
-    from distributed import LocalCluster
-
-    sys.path.insert(0, str(root))  # the workers (spawned) import that lodconvert
-    try:
-        local = LocalCluster(
-            processes=True, n_workers=workers, threads_per_worker=1, host="127.0.0.1",
-            dashboard_address=":0",
-        )  # fmt: skip
-    finally:
-        sys.path.remove(str(root))
-    with local:
-        yield Cluster(local, workers)
+    env = {
+        **os.environ,
+        "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")]),
+    }
+    code = SERVE_CLUSTER.format(workers=workers)
+    with subprocess.Popen(
+        [sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+        env=env, cwd=root,
+    ) as process:  # fmt: skip
+        assert process.stdin is not None and process.stdout is not None
+        address = process.stdout.readline().strip()
+        if not address:
+            raise SystemExit("the LocalCluster did not start")
+        try:
+            yield Cluster(process, address, workers)
+        finally:
+            process.stdin.close()
 
 
 def _tree_rss(root: psutil.Process) -> int:
@@ -381,9 +398,10 @@ def results_text(
             " main CPU s: the main process's own (sampled every 50 ms, so up to 50 ms short);"
             " buildings / main CPU s: the most buildings/s that any number of workers could give"
             " while the main process does what it does;"
-            " peak RSS: the whole tree's, sampled every 50 ms (the cluster's workers' peaks"
-            " added). Read+plan s: the main process reading the city (with workers: cutting it"
-            " into runs of members and taking what the workers read) and parking it; main-only"
+            " peak RSS: the whole tree's, sampled every 50 ms (the peaks of the cluster's"
+            " processes added: its scheduler and nannies run in a process of their own)."
+            " Read+plan s: the main process reading the city (with workers: cutting it into runs"
+            " of members and taking what the workers read) and parking it; main-only"
             " s: that and the other stages only the main process works in (`assemble`, `write`,"
             " `validate`); execute s: the time it spent baking (1 worker) or waiting for the"
             " workers' results. Speed-up: wall of 1 worker over this row's, same code. Cluster /"
