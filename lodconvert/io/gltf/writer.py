@@ -650,6 +650,10 @@ class _Document:
             self.flush_blob()
         start = self.blob_length + pad
         self.blob_length = start + len(data)
+        if self._layout is _COMPACT:  # as _Layout.text lays it out, without the walk
+            tail = "}" if target is None else f',"target":{target}}}'
+            text = f'{{"buffer":0,"byteOffset":{start},"byteLength":{len(data)}{tail}'
+            return self.buffer_views.append_text(text)
         view = _object(buffer=0, byteOffset=start, byteLength=len(data), target=target)
         return self.buffer_views.append(view)
 
