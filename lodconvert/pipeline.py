@@ -39,7 +39,7 @@ from .io.crs import checked_crs_option
 from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
-from .model import CellChain, LodChain, Node, PackedNode, Scene
+from .model import CellChain, LodChain, Node, PackedNode, Scene, with_geometry
 from .report import Records, cell_record, chain_record, options_record, report_text, run_report
 from .reproject import SOURCE_CRS_KEYS, Georef, in_one_crs
 from .sinks import DirectorySink, FileSink, Outputs
@@ -113,7 +113,7 @@ def _object_count(scene: Scene) -> int | None:
     """How many objects with geometry ``scene`` holds (``None``: unknown before reading)."""
     if scene.size is not None or not isinstance(scene.nodes, list):
         return scene.size
-    return sum(1 for node in scene.nodes for n in node.walk() if n.geometry is not None)
+    return sum(1 for _ in with_geometry(scene.nodes))
 
 
 @dataclass

@@ -296,6 +296,30 @@ def test_a_cityjson_file_read_by_workers_is_the_file_read_in_one_process(tmp_pat
     assert two.size == one.size == 9
 
 
+@pytest.mark.usefixtures("one_member_a_task")
+def test_cityjson_objects_alone_come_back_packed_and_parts_are_joined_here(
+    tmp_path: Path,
+) -> None:
+    """The node of an object with neither parts nor a parent comes back from its worker packed
+    (the main process parks it as it came, never unpickling it); a building with a part and
+    the part come back as nodes, and the part is joined to its building here: the nodes are
+    those of one process."""
+    document = json.loads(multi_lod().read_text())
+    objects = document["CityObjects"]
+    whole, part = [key for key in objects if key != "2128302"][3:5]
+    objects[part]["type"] = "BuildingPart"
+    objects[part]["parents"] = [whole]
+    objects[whole]["children"] = [part]
+    path = tmp_path / "parts.city.json"
+    path.write_text(json.dumps(document))
+    _, one_facts, _, _ = _read(path, spread=False)
+    _, two_facts, results, _ = _read(path, spread=True)
+    assert two_facts == one_facts and len(one_facts) == 9
+    kinds = {n.id: type(n).__name__ for r in results for n in r.nodes if n is not None}
+    assert kinds.pop(whole) == kinds.pop(part) == "Node"
+    assert set(kinds.values()) == {"PackedNode"} and len(kinds) >= 7
+
+
 class _Shipped(Executor):
     """Each task and its result pickled and unpickled, as to and from a worker, in this
     process; the tasks kept, each with its bytes."""

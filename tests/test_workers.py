@@ -107,6 +107,13 @@ CASES = [
     ),
     pytest.param("sig3d", ".glb", (), id="sig3d-glb", marks=pytest.mark.slow),
     pytest.param("delft", ".x3d", (), id="delft-x3d", marks=pytest.mark.slow),
+    pytest.param(
+        "delft",
+        ".glb",
+        ("--crs", "EPSG:28992", "--hlod", "250"),
+        id="delft-crs-hlod",
+        marks=pytest.mark.slow,
+    ),
     pytest.param("multi_lod", ".glb", (), id="multi-lod-glb", marks=pytest.mark.slow),
 ]
 
@@ -337,12 +344,13 @@ def test_chains_whose_output_workers_made_come_back_without_their_geometry(suffi
     assert sizes[2] < sizes[1] / 4
 
 
+@pytest.mark.parametrize("city", ["kit", "delft"])
 def test_what_workers_read_goes_to_be_baked_unopened(
-    monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+    monkeypatch: pytest.MonkeyPatch, tmp_path: Path, city: str
 ) -> None:
-    """The objects workers read come back packed and go to the workers that bake them as they
-    came: the main process never unpickles their geometry (nor pickles it again), which took
-    a fifth of its CPU."""
+    """The objects workers read (CityGML members, CityJSON objects without parts) come back
+    packed and go to the workers that bake them as they came: the main process never
+    unpickles their geometry (nor pickles it again), which took a fifth of its CPU."""
     parked: list[str] = []
     opened: list[str] = []
     add, node = spool.NodeSpool.add, PackedNode.node
@@ -357,7 +365,7 @@ def test_what_workers_read_goes_to_be_baked_unopened(
 
     monkeypatch.setattr(spool.NodeSpool, "add", noted_add)
     monkeypatch.setattr(PackedNode, "node", noted_node)
-    report = convert(shared_data(CITIES["kit"]), tmp_path / "kit.x3d", RunOptions(workers=2))
+    report = convert(shared_data(CITIES[city]), tmp_path / "city.x3d", RunOptions(workers=2))
     assert len(report["objects"]) == len(parked) > 50
     assert parked.count("PackedNode") >= 0.9 * len(parked)  # all but what this process read
     assert opened == []

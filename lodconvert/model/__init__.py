@@ -2,7 +2,7 @@
 
 from .chain import MESH_KINDS, BakeParams, CellChain, Level, LodChain
 from .geometry import GREY, WHITE, Mesh, PointCloud, Surface
-from .tree import Node, PackedNode, Scene, unpacked
+from .tree import Node, PackedNode, Scene, unpacked, with_geometry
 
 __all__ = [
     "GREY",
@@ -19,4 +19,5 @@ __all__ = [
     "Scene",
     "Surface",
     "unpacked",
+    "with_geometry",
 ]

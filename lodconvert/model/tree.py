@@ -172,6 +172,13 @@ class PackedNode:
         return self.weight
 
 
+def with_geometry(nodes: Iterable[Node | PackedNode]) -> Iterator[Node | PackedNode]:
+    """The nodes of the trees of ``nodes`` that carry geometry, depth first (packed ones all
+    do)."""
+    walked = (n for node in nodes for n in node.walk())
+    return (n for n in walked if isinstance(n, PackedNode) or n.geometry is not None)
+
+
 def unpacked(node: Node | PackedNode) -> Node:
     """``node``, unpacked where it is packed."""
     return node.node() if isinstance(node, PackedNode) else node
@@ -212,4 +219,4 @@ class Scene:
 
     def with_geometry(self) -> Iterator[Node | PackedNode]:
         """The nodes that carry geometry, depth first (packed ones all do)."""
-        return (n for n in self.walk() if isinstance(n, PackedNode) or n.geometry is not None)
+        return with_geometry(self.nodes)

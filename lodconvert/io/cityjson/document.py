@@ -13,7 +13,7 @@ from typing import Any
 
 from ...errors import InputError
 from ...limits import Limits
-from ...model import Node, Scene
+from ...model import Node, PackedNode, Scene, with_geometry
 from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
@@ -69,9 +69,9 @@ def read_document(
     ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs, str(path)), palette)
     objects = data.get("CityObjects") or {}
 
-    def checked(nodes: list[Node]) -> int:
+    def checked(nodes: list[Node | PackedNode]) -> int:
         """How many nodes with geometry ``nodes`` hold; :class:`InputError` for none."""
-        size = sum(1 for node in nodes for n in node.walk() if n.geometry is not None)
+        size = sum(1 for _ in with_geometry(nodes))
         if not size and not tally.skipped:
             if tally.dropped_faces:
                 raise tally.nothing_left()

@@ -11,7 +11,7 @@ from typing import Any
 
 from ...city.lods import finest
 from ...errors import InputError
-from ...model import Mesh, Node
+from ...model import Mesh, Node, PackedNode
 from ..geometry_checks import check_extent
 from .geometry import SURFACE_DEPTH, Lod, lod_key, lod_label, read_lod
 from .source import Context
@@ -191,11 +191,14 @@ class Objects:
     objects: dict[str, Any]
     types: frozenset[str] | None
     children: dict[str, list[str]] = field(init=False)
+    below: set[str] = field(init=False)
+    """The keys of objects that are another's child."""
     order: list[str] = field(init=False)
     too_deep: dict[str, int] = field(init=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         self.children = _children(self.objects)
+        self.below = {child for kids in self.children.values() for child in kids}
         order: list[str] = []
         self.roots(lambda key: order.append(key))
         self.order = order
@@ -204,18 +207,22 @@ class Objects:
         """Object ``key`` read (:func:`read_kept`)."""
         return read_kept(key, self.objects[key], ctx, self.too_deep.get(key))
 
-    def roots(self, node_of: Callable[[str], Node | None]) -> list[Node]:
+    def alone(self, key: str) -> bool:
+        """Whether object ``key`` has neither children nor a parent: its node is a root that
+        nothing is joined to (so a worker may pack it)."""
+        return not self.children[key] and key not in self.below
+
+    def roots(self, node_of: Callable[[str], Node | PackedNode | None]) -> list[Node | PackedNode]:
         """The root nodes: each object of a kept type (all, when ``types`` is None, else those
         types and the descendants of kept objects; a ``type`` that is not a string is of no
         type) that ``node_of`` gives a node with geometry or children, its children below it;
-        kept descendants of objects left out (None) take their place. Objects in a cycle of
-        ``children``/``parents`` that no root reaches hang below the first of them in file
-        order."""
-        objects, types, children = self.objects, self.types, self.children
-        below = {child for kids in children.values() for child in kids}
+        kept descendants of objects left out (None) take their place; a packed node (of an
+        object :meth:`alone`) as it is. Objects in a cycle of ``children``/``parents`` that no
+        root reaches hang below the first of them in file order."""
+        objects, types, children, below = self.objects, self.types, self.children, self.below
         seen: set[str] = set()
 
-        def build(key: str, kept: bool, depth: int) -> list[Node]:
+        def build(key: str, kept: bool, depth: int) -> list[Node | PackedNode]:
             if key in seen:  # a cycle, or a second parent
                 return []
             seen.add(key)
@@ -229,6 +236,8 @@ class Objects:
             node = node_of(key) if kept else None
             if node is None:
                 return kids
+            if isinstance(node, PackedNode):  # alone: no parts to absorb, no children
+                return [node]
             node.children.extend(kids)
             if node.type not in PART_TYPES and node.transform is None:
                 _absorb_parts(node)

@@ -6,9 +6,11 @@ process, batches of CityObjects with the rows of the vertices they use (:class:`
 :class:`UsedRows`); the main process joins parts to their objects once all are read. Each
 worker reads as one process reads and gives back the nodes and what it counted; the main
 process takes the results in order, so nodes, skipped objects and counts are those of one
-process. A file with geometry templates is read in the main process (its instances share one
-mesh per template); a task whose workers died is read in the main process; one a worker cannot
-read has the file read by the one-process reader, so that the error is the one it gives."""
+process. The node of an object with neither parts nor a parent comes back packed, as CityGML's
+do (:class:`~..citygml.parallel.ReadTask`). A file with geometry templates is read in the main
+process (its instances share one mesh per template); a task whose workers died is read in the
+main process; one a worker cannot read has the file read by the one-process reader, so that the
+error is the one it gives."""
 
 from __future__ import annotations
 
@@ -24,7 +26,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...limits import Limits
-from ...model import Node
+from ...model import Node, PackedNode
 from ..crs import Crs
 from ..geometry_checks import InputTally
 from ..spread import TASK_SECONDS, Results, Sizer, add_tally, quiet
@@ -201,7 +203,7 @@ class ObjectsResult:
     """The node of each object of a task (None: left out), in order, and what reading them
     counted, or why they could not be read."""
 
-    nodes: tuple[Node | None, ...] = ()
+    nodes: tuple[Node | PackedNode | None, ...] = ()
     tally: InputTally | None = None
     error: str | None = None
     died: str | None = None
@@ -213,9 +215,12 @@ class ObjectsResult:
 class ObjectsTask:
     """CityObjects of a ``.json`` file to read, each ``(key, object, below)`` (``below``: how
     many objects are left out with one nested too deep, else None), against the file's
-    vertices (in metres): only the rows the objects use (:class:`UsedRows`)."""
+    vertices (in metres): only the rows the objects use (:class:`UsedRows`). The node of an
+    object ``alone`` (:meth:`~.objects.Objects.alone`) comes back packed
+    (:class:`~...model.PackedNode`) where it has geometry and no transform."""
 
     objects: tuple[tuple[str, Any, int | None], ...]
+    alone: tuple[bool, ...]
     vertices: UsedRows
     materials: list[Any]
     declared: Crs | None
@@ -231,7 +236,8 @@ class ObjectsTask:
         ctx = Context(tally, vertices, self.declared, self.materials, palette=self.palette)
         try:
             reads = [read_kept(key, obj, ctx, below) for key, obj, below in self.objects]
-            nodes = tuple(checked_nodes(reads))
+            read = zip(checked_nodes(reads), self.alone, strict=True)
+            nodes = tuple(_packed(node) if alone else node for node, alone in read)
         except InputError as exc:
             return ObjectsResult(error=str(exc))
         return ObjectsResult(nodes, tally, seconds=time.process_time() - start)
@@ -239,6 +245,13 @@ class ObjectsTask:
     def failed(self, reason: str) -> ObjectsResult:
         """The result of objects no worker could read, for ``reason``."""
         return ObjectsResult(died=reason)
+
+
+def _packed(node: Node | None) -> Node | PackedNode | None:
+    """``node`` packed where it has geometry and neither children nor a transform."""
+    if node is None or node.geometry is None or node.children or node.transform is not None:
+        return node
+    return PackedNode.of(node)
 
 
 class ObjectsReading:
@@ -254,12 +267,12 @@ class ObjectsReading:
         ctx: Context,
         types: frozenset[str] | None,
         read_here: Callable[[], list[Node]],
-        check: Callable[[list[Node]], object],
+        check: Callable[[list[Node | PackedNode]], object],
         again: Callable[[], object],
     ) -> None:
         self.tree = Objects(objects, types)
         self.ctx, self.read_here, self.check, self.again = ctx, read_here, check, again
-        self.roots: list[Node] | None = None
+        self.roots: list[Node | PackedNode] | None = None
         self.progress: Callable[[str], None] = quiet
         self.sizer = Sizer(MIN_OBJECTS, MAX_OBJECTS)
 
@@ -276,19 +289,19 @@ class ObjectsReading:
         self.roots = self._read(results)
         self.check(self.roots)
 
-    def nodes(self) -> Iterator[Node]:
+    def nodes(self) -> Iterator[Node | PackedNode]:
         """The root nodes, read here if :meth:`use` did not read them."""
         if self.roots is None:
             self.roots = self.read_here()
             self.check(self.roots)
         yield from self.roots
 
-    def _read(self, results: Results) -> list[Node]:
+    def _read(self, results: Results) -> list[Node | PackedNode]:
         """Every object read (the first here, to time it; the rest by ``results``, in
         order); the roots."""
         tree, ctx = self.tree, self.ctx
         keys = iter(tree.order)
-        nodes: dict[str, Node | None] = {}
+        nodes: dict[str, Node | PackedNode | None] = {}
         for key in keys:
             start = time.process_time()
             nodes[key] = next(checked_nodes([tree.read(key, ctx)]))
@@ -331,8 +344,8 @@ class ObjectsReading:
         tree, ctx, tally = self.tree, self.ctx, self.ctx.tally
         objects = tuple((key, tree.objects[key], tree.too_deep.get(key)) for key in keys)
         return ObjectsTask(
-            objects, UsedRows.of(ctx.vertices, objects), ctx.materials, ctx.declared,
-            tally.source, tally.limits, ctx.palette,
+            objects, tuple(tree.alone(key) for key in keys), UsedRows.of(ctx.vertices, objects),
+            ctx.materials, ctx.declared, tally.source, tally.limits, ctx.palette,
         )  # fmt: skip
 
     def _one_process_error(self, error: InputError) -> InputError:
