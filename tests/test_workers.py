@@ -42,7 +42,7 @@ CITIES = {
     "delft": SHARED / "data" / "cityjson" / "delft.city.json",
     "multi_lod": SHARED / "data" / "cityjson" / "multi_lod_10bldg.city.json",
 }
-"""Real cities read in workers (CityGML) or in the main process (CityJSON) beside TUM."""
+"""Real cities, CityGML and CityJSON, read by workers as by one process, beside TUM."""
 
 
 def _lodconvert(*args: object) -> subprocess.CompletedProcess[str]:
