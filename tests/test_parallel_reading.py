@@ -271,12 +271,13 @@ def ten_objects(folder: Path) -> Path:
 @pytest.mark.usefixtures("one_member_a_task")
 def test_a_sequence_read_by_workers_is_the_sequence_read_in_one_process(tmp_path: Path) -> None:
     """A CityJSONSeq file of ten buildings, a line that is no feature among them: a line a
-    task, the same nodes, the same line reported."""
+    task, the same nodes, the same line reported; what the workers read comes back packed."""
     path = ten_lines(tmp_path)
     one, one_facts, _, _ = _read(path, spread=False)
     two, two_facts, results, _ = _read(path, spread=True)
     assert two_facts == one_facts and len(one_facts) == 10
     assert sum(len(result.nodes) for result in results) >= 8
+    assert {type(node).__name__ for result in results for node in result.nodes} == {"PackedNode"}
     assert tally_of(two).skipped == tally_of(one).skipped
     assert [entry["id"] for entry in tally_of(two).skipped] == ["line 6"]
 

@@ -7,10 +7,10 @@ process, batches of CityObjects with the rows of the vertices they use (:class:`
 worker reads as one process reads and gives back the nodes and what it counted; the main
 process takes the results in order, so nodes, skipped objects and counts are those of one
 process. The node of an object with neither parts nor a parent comes back packed, as CityGML's
-do (:class:`~..citygml.parallel.ReadTask`). A file with geometry templates is read in the main
-process (its instances share one mesh per template); a task whose workers died is read in the
-main process; one a worker cannot read has the file read by the one-process reader, so that the
-error is the one it gives."""
+do (:class:`~..citygml.parallel.ReadTask`); so do the nodes of a run of lines. A file with
+geometry templates is read in the main process (its instances share one mesh per template); a
+task whose workers died is read in the main process; one a worker cannot read has the file read
+by the one-process reader, so that the error is the one it gives."""
 
 from __future__ import annotations
 
@@ -44,7 +44,7 @@ ReadLines = Callable[[Iterator[tuple[int, bytes]], dict[str, Any], Context, Any]
 class LinesResult:
     """The nodes of a run of lines and what reading them counted, or why it could not."""
 
-    nodes: tuple[Node, ...] = ()
+    nodes: tuple[Node | PackedNode, ...] = ()
     tally: InputTally | None = None
     error: str | None = None
     died: str | None = None
@@ -55,7 +55,8 @@ class LinesResult:
 @dataclass(frozen=True)
 class LinesTask:
     """A run of a CityJSONSeq file's lines to read against its ``header`` in ``declared``
-    (the main process's CRS, its frame settled), by ``read``."""
+    (the main process's CRS, its frame settled), by ``read``. Its features' nodes come back
+    packed (:func:`_flattened`)."""
 
     lines: Lines
     header: dict[str, Any]
@@ -72,7 +73,7 @@ class LinesTask:
         tally = InputTally(self.source, self.limits)
         try:
             ctx = context_of(self.header, tally, self.declared, self.palette)
-            nodes = tuple(self.read(_each(self.lines), self.header, ctx, self.types))
+            nodes = _flattened(list(self.read(_each(self.lines), self.header, ctx, self.types)))
         except InputError as exc:
             return LinesResult(error=str(exc))
         return LinesResult(nodes, tally, seconds=time.process_time() - start)
@@ -80,6 +81,16 @@ class LinesTask:
     def failed(self, reason: str) -> LinesResult:
         """The result of a run no worker could read, for ``reason``."""
         return LinesResult(died=reason)
+
+
+def _flattened(roots: list[Node]) -> tuple[Node | PackedNode, ...]:
+    """The nodes with geometry of the trees of ``roots``, in the order the main process walks
+    them, each packed as it parks them; ``roots`` as they are where a node is placed by a
+    transform (an instance, which cannot be packed)."""
+    found = [node for root in roots for node in root.walk() if node.geometry is not None]
+    if any(node.transform is not None for node in found):
+        return tuple(roots)
+    return tuple(PackedNode.of(node) for node in found)
 
 
 class SequenceReading:
@@ -113,7 +124,7 @@ class SequenceReading:
             return
         self.results, self.progress, self.sizer.seconds = results, progress, seconds
 
-    def nodes(self) -> Iterator[Node]:
+    def nodes(self) -> Iterator[Node | PackedNode]:
         """The file's nodes, in line order."""
         with closing(self.lines):
             runs = self._runs()
