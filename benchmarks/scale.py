@@ -2,17 +2,19 @@
 ``--workers N`` and against an N-worker dask ``LocalCluster`` (``--scheduler``).
 
 Converts TUM Munich (1×, unzipped), districts of shifted copies of it (made as
-``benchmarks/city.py`` makes them) and a district of shifted copies of Delft's CityJSON into X3D
-and into glTF with the CLI, each run in a fresh child process (not pinned: the workers need the
-cores), the set-ups interleaved (1, 2, cluster, 1, …) so that load on a shared machine falls on
-all alike, after one untimed conversion of 1× TUM in each (which also leaves the modules'
-bytecode, as an installed package has it, where ``PYTHONDONTWRITEBYTECODE`` kept it from a
-checkout). The cluster (worker processes of one thread on 127.0.0.1) is started once, in a
-process of its own as a cluster's scheduler runs apart from its clients, and serves every run:
+``benchmarks/city.py`` makes them) and a district of shifted copies of Delft's CityJSON (with
+``--sequence``, as CityJSONSeq too) into X3D and into glTF with the CLI, each run in a fresh
+child process (not pinned: the workers need the cores), the set-ups interleaved (1, 2, cluster,
+1, …) so that load on a shared machine falls on all alike, after one untimed conversion of 1×
+TUM in each (which also leaves the modules' bytecode, as an installed package has it, where
+``PYTHONDONTWRITEBYTECODE`` kept it from a checkout). The cluster (worker processes of one
+thread on 127.0.0.1) is started once, in a process of its own as a cluster's scheduler runs
+apart from its clients, and serves every run:
 
     python benchmarks/scale.py                    # writes results/scale.md
     python benchmarks/scale.py --runs 3 --factors 1,10,100 --delft 10
     python benchmarks/scale.py --workers 1,2,4,8,16 --cluster 16 --formats x3d --out many_cores.md
+    python benchmarks/scale.py --factors "" --delft 10 --sequence --baseline CHECKOUT
 
 Per configuration, medians of ``--runs`` runs: wall seconds, CPU seconds of the whole process
 tree (the child's ``wait4`` rusage, which holds its workers': it waits for each; with the
@@ -281,6 +283,40 @@ def _shifted_indices(boundaries: Any, base: int) -> Any:
     return boundaries + base
 
 
+def write_sequence(district: Input, path: Path) -> Input:
+    """``district`` (a CityJSON file whose objects have neither parents nor children) as a
+    CityJSONSeq file: its header, then each object as a feature of the vertices it uses."""
+    document = json.loads(district.path.read_text(encoding="utf-8"))
+    header = {key: document[key] for key in ("type", "version", "transform", "metadata")}
+    lines = [json.dumps({**header, "CityObjects": {}, "vertices": []})]
+    for key, obj in document["CityObjects"].items():
+        used = sorted({i for g in obj.get("geometry", []) for i in _indices(g["boundaries"])})
+        index = {old: new for new, old in enumerate(used)}
+        for geometry in obj.get("geometry", []):
+            geometry["boundaries"] = _renumbered(geometry["boundaries"], index)
+        vertices = [document["vertices"][i] for i in used]
+        feature = {"type": "CityJSONFeature", "id": key, "CityObjects": {key: obj}}
+        lines.append(json.dumps({**feature, "vertices": vertices}))
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return Input(path, district.name.replace("CityJSON", "CityJSONSeq"), district.buildings)
+
+
+def _indices(boundaries: Any) -> Iterator[int]:
+    """The vertex indices of CityJSON ``boundaries``."""
+    if isinstance(boundaries, list):
+        for part in boundaries:
+            yield from _indices(part)
+    else:
+        yield boundaries
+
+
+def _renumbered(boundaries: Any, index: dict[int, int]) -> Any:
+    """CityJSON ``boundaries`` with each vertex index replaced by ``index``'s."""
+    if isinstance(boundaries, list):
+        return [_renumbered(part, index) for part in boundaries]
+    return index[boundaries]
+
+
 def inputs(args: argparse.Namespace, folder: Path) -> Iterator[Input]:
     """The districts to convert, each written when its turn comes (and removed after)."""
     template = Template(tum_document())
@@ -291,6 +327,10 @@ def inputs(args: argparse.Namespace, folder: Path) -> Iterator[Input]:
     if args.delft and DELFT.is_file():
         district = write_delft_district(args.delft, folder / f"delft_{args.delft}x.city.json")
         yield district
+        if args.sequence:
+            sequence = write_sequence(district, folder / f"delft_{args.delft}x.city.jsonl")
+            yield sequence
+            sequence.path.unlink()
         district.path.unlink()
 
 
@@ -433,6 +473,11 @@ def main(argv: list[str] | None = None) -> int:
         type=int,
         default=10,
         help="copies of Delft (10; 0: none)",
+    )
+    parser.add_argument(
+        "--sequence",
+        action="store_true",
+        help="convert the Delft district as CityJSONSeq too (one feature a line)",
     )
     parser.add_argument(
         "--workers", type=_numbers, default=[1, 2], help="worker counts to run (default 1,2)"
