@@ -39,7 +39,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
@@ -268,7 +268,7 @@ def write_delft_district(factor: int, path: Path) -> Input:
                 if key in copy:
                     copy[key] = [ref + suffix for ref in copy[key]]
             for geometry in copy.get("geometry", []):
-                geometry["boundaries"] = _shifted_indices(geometry["boundaries"], base)
+                geometry["boundaries"] = _renumbered(geometry["boundaries"], base.__add__)
             objects[name + suffix] = copy
     document["CityObjects"], document["vertices"] = objects, all_vertices
     path.write_text(json.dumps(document), encoding="utf-8")
@@ -276,11 +276,11 @@ def write_delft_district(factor: int, path: Path) -> Input:
     return Input(path, f"{factor}× Delft CityJSON", buildings)
 
 
-def _shifted_indices(boundaries: Any, base: int) -> Any:
-    """CityJSON ``boundaries`` with every vertex index moved by ``base``."""
+def _renumbered(boundaries: Any, change: Callable[[int], int]) -> Any:
+    """CityJSON ``boundaries`` with each vertex index ``i`` replaced by ``change(i)``."""
     if isinstance(boundaries, list):
-        return [_shifted_indices(part, base) for part in boundaries]
-    return boundaries + base
+        return [_renumbered(part, change) for part in boundaries]
+    return change(boundaries)
 
 
 def write_sequence(district: Input, path: Path) -> Input:
@@ -293,7 +293,7 @@ def write_sequence(district: Input, path: Path) -> Input:
         used = sorted({i for g in obj.get("geometry", []) for i in _indices(g["boundaries"])})
         index = {old: new for new, old in enumerate(used)}
         for geometry in obj.get("geometry", []):
-            geometry["boundaries"] = _renumbered(geometry["boundaries"], index)
+            geometry["boundaries"] = _renumbered(geometry["boundaries"], index.__getitem__)
         vertices = [document["vertices"][i] for i in used]
         feature = {"type": "CityJSONFeature", "id": key, "CityObjects": {key: obj}}
         lines.append(json.dumps({**feature, "vertices": vertices}))
@@ -308,13 +308,6 @@ def _indices(boundaries: Any) -> Iterator[int]:
             yield from _indices(part)
     else:
         yield boundaries
-
-
-def _renumbered(boundaries: Any, index: dict[int, int]) -> Any:
-    """CityJSON ``boundaries`` with each vertex index replaced by ``index``'s."""
-    if isinstance(boundaries, list):
-        return [_renumbered(part, index) for part in boundaries]
-    return index[boundaries]
 
 
 def inputs(args: argparse.Namespace, folder: Path) -> Iterator[Input]:

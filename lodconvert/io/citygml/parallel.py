@@ -28,7 +28,7 @@ from lxml import etree
 
 from ...errors import InputError
 from ...limits import Limits
-from ...model import Node, PackedNode
+from ...model import Node, PackedNode, with_geometry
 from ...semantics import Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally
@@ -99,9 +99,7 @@ class ReadTask:
         document.crs, document.taken = self.crs, _Taken()
         try:
             read = document.read(io.BytesIO(self.prolog + self.members + self.root_end))
-            nodes = tuple(
-                PackedNode.of(n) for node in read for n in node.walk() if n.geometry is not None
-            )
+            nodes = tuple(PackedNode.of(n) for n in with_geometry(read))
         except InputError as exc:
             return ReadResult(error=str(exc))
         taken = document.taken

@@ -26,7 +26,7 @@ import numpy as np
 
 from ...errors import InputError
 from ...limits import Limits
-from ...model import Node, PackedNode
+from ...model import Node, PackedNode, with_geometry
 from ..crs import Crs
 from ..geometry_checks import InputTally
 from ..spread import TASK_SECONDS, Results, Sizer, add_tally, quiet
@@ -87,7 +87,7 @@ def _flattened(roots: list[Node]) -> tuple[Node | PackedNode, ...]:
     """The nodes with geometry of the trees of ``roots``, in the order the main process walks
     them, each packed as it parks them; ``roots`` as they are where a node is placed by a
     transform (an instance, which cannot be packed)."""
-    found = [node for root in roots for node in root.walk() if node.geometry is not None]
+    found = list(with_geometry(roots))
     if any(node.transform is not None for node in found):
         return tuple(roots)
     return tuple(PackedNode.of(node) for node in found)
