@@ -195,9 +195,9 @@ def convert_once(
     report: Path | None = None,
 ) -> Run:
     """Convert ``source`` into ``output`` (a tileset: its folder removed first) in a child
-    process by the lodconvert of checkout ``root``: with ``--workers setup``, or on ``cluster``
-    (``setup`` ``cluster``), and further CLI ``options``; its report is ``report`` (default:
-    ``output`` with the suffix ``.json``)."""
+    process by the lodconvert of checkout ``root``: with ``--workers setup``, its default
+    (``setup`` ``default``), or on ``cluster`` (``setup`` ``cluster``), and further CLI
+    ``options``; its report is ``report`` (default: ``output`` with the suffix ``.json``)."""
     if output.name == "tileset.json":
         shutil.rmtree(output.parent, ignore_errors=True)
     output.unlink(missing_ok=True)
@@ -205,8 +205,8 @@ def convert_once(
     if setup == "cluster":
         assert cluster is not None
         where = ["--scheduler", cluster.address]
-    else:
-        where = ["--workers", setup]
+    else:  # "default": as many as lodconvert picks
+        where = [] if setup == "default" else ["--workers", setup]
     command = [*LODCONVERT, str(source), "-o", str(output), "-qq", *where]
     command += ["--report", str(report), *options]
     env = {

@@ -35,6 +35,7 @@ from .city.plots import plot_radii
 from .clock import Clock
 from .errors import InputError, UsageError
 from .io import Format, OutputInfo, Pieces, input_format, output_format
+from .io.archive import inflated_size
 from .io.crs import checked_crs_option
 from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
@@ -51,6 +52,7 @@ from .tasks import (
     PoolExecutor,
     SerialExecutor,
     batches,
+    default_workers,
 )
 from .validate import check_written, streamed_check
 from .validate.along import CheckAlong
@@ -343,14 +345,15 @@ Also = Callable[[Outputs, FileSink, dict[str, Any]], None]
 @dataclass(frozen=True)
 class RunOptions:
     """How one conversion runs: the chain options, the baker and how many processes bake
-    (``workers``: 1 bakes in this process) or the dask scheduler whose workers do
+    (``workers``: 1 bakes in this process; ``None``: as many as the inputs' size pays for,
+    :func:`~.tasks.default_workers`) or the dask scheduler whose workers do
     (``scheduler``: an address or a scheduler file), the report file, the readers' and writer's
     options, limits, ``strict`` (a broken object fails the run), LOD parents (``hlod``), what
     hears of progress, warnings and steps, and ``also`` (more outputs to stage)."""
 
     chain: ChainOptions = field(default_factory=ChainOptions)
     backend: str = "auto"
-    workers: int = 1
+    workers: int | None = 1
     scheduler: str | None = None
     report_path: str | Path | None = None
     read_options: Mapping[str, Any] = field(default_factory=dict)
@@ -368,7 +371,7 @@ class RunOptions:
         self.chain.check()
         if self.hlod is not None:
             self.hlod.check()
-        if self.workers < 1:
+        if self.workers is not None and self.workers < 1:
             raise UsageError(f"must be at least 1, got {self.workers}", "workers")
         if self.scheduler is not None:
             _check_scheduler(self.scheduler, self.workers)
@@ -393,8 +396,7 @@ def convert(
     sources = [input_format(path) for path in inputs]
     named = " + ".join(str(path) for path in inputs)
     folder = target.output_folder(Path(output_path)) if target.output_folder else None
-    if folder is not None and run.hlod is None:
-        run = replace(run, hlod=HlodOptions())
+    run = _resolved(run, inputs, folder)
     clock = Clock(*STAGES)
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = _sink(outputs, output_path, folder, inputs, run)
@@ -423,6 +425,18 @@ def convert(
         if report_sink is not None:
             _stage_report(report_sink, report)
     return report
+
+
+def _resolved(run: RunOptions, inputs: Sequence[str | Path], folder: Path | None) -> RunOptions:
+    """``run`` with what it leaves open decided: LOD parents for a folder output (``folder``),
+    and where it gives no ``workers``, as many as the size of ``inputs`` pays for
+    (:func:`~.tasks.default_workers`; 1 with a scheduler)."""
+    if folder is not None and run.hlod is None:
+        run = replace(run, hlod=HlodOptions())
+    if run.workers is None:
+        size = sum(inflated_size(Path(path)) for path in inputs)
+        run = replace(run, workers=1 if run.scheduler else default_workers(size))
+    return run
 
 
 def _sink(
@@ -550,10 +564,11 @@ def _stage_report(sink: FileSink, report: dict[str, Any]) -> None:
             stream.write(piece.encode())
 
 
-def _check_scheduler(scheduler: str, workers: int) -> None:
+def _check_scheduler(scheduler: str, workers: int | None) -> None:
     """:class:`UsageError` unless dask.distributed is installed, ``scheduler`` is an address or
-    a scheduler file, and ``workers`` is 1 (the cluster's workers read and bake)."""
-    if workers != 1:
+    a scheduler file, and ``workers`` is 1 or left open (the cluster's workers read and
+    bake)."""
+    if workers not in (1, None):
         raise UsageError(
             "is for this machine's processes; with a dask scheduler, its workers read and bake",
             "workers",
@@ -577,6 +592,7 @@ def _executor(run: RunOptions, backend: Backend, objects: int | None) -> Executo
         return DaskExecutor(run.scheduler, backend.name, run.progress)
     if run.workers == 1 or objects == 1:
         return SerialExecutor(backend, run.progress)
+    run.progress(f"{run.workers} worker processes")
     return PoolExecutor(run.workers, backend.name, run.progress)
 
 

@@ -47,6 +47,10 @@ DEPTH = 2
 """Tasks sent to one worker at most: the one it works on and the next."""
 MAX_BATCH = 256
 """Objects a batch holds at most (memory in flight stays small)."""
+INPUT_BYTES_PER_WORKER = 6 * 2**20
+"""Input a worker process is started for by default: starting one costs about 0.3 CPU s (an
+interpreter, imports), and below about 12 MiB of city two of them made a run slower, not faster
+(README, "Worker processes")."""
 
 
 Formatter = Callable[[LodChain], Any]
@@ -414,9 +418,12 @@ def _death(code: int | None) -> str:
     return f"the worker process converting it died twice ({how})"
 
 
-def default_workers() -> int:
-    """The cores this process may run on."""
-    return len(os.sched_getaffinity(0))
+def default_workers(input_bytes: int) -> int:
+    """Worker processes for inputs of ``input_bytes`` in all: one for each
+    :data:`INPUT_BYTES_PER_WORKER`, up to the cores this process may run on (at least one: the
+    main process)."""
+    wanted = -(-input_bytes // INPUT_BYTES_PER_WORKER)
+    return max(1, min(len(os.sched_getaffinity(0)), wanted))
 
 
 def batches(

@@ -73,8 +73,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--workers",
         type=int,
         metavar="N",
-        help="processes baking objects (default: the cores this process may use; 1 bakes in "
-        "the main process)",
+        help="processes reading a city and baking objects (default: one for each 6 MiB of "
+        "input, up to the cores this process may use; 1 reads and bakes in the main process)",
     )
     bake.add_argument(
         "--scheduler",
@@ -183,14 +183,6 @@ def _logs_off(off: bool) -> Iterator[None]:
         logging.disable(previous)
 
 
-def _default_workers(args: argparse.Namespace) -> int:
-    """``--workers`` when not given: none of this machine's with ``--scheduler`` (1: the
-    main process only reads and writes), else the cores this process may use."""
-    from ..tasks import default_workers
-
-    return 1 if args.scheduler else default_workers()
-
-
 def run(args: argparse.Namespace, console: Console) -> int:
     """Convert, print what was made, return the exit code."""
     from ..pipeline import RunOptions, convert
@@ -231,7 +223,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     run = RunOptions(
         options,
         backend=args.backend,
-        workers=args.workers if args.workers is not None else _default_workers(args),
+        workers=args.workers,
         scheduler=args.scheduler,
         progress=console.progress,
         step=console.step,
