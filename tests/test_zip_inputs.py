@@ -4,6 +4,7 @@ line when it holds none or several."""
 
 from __future__ import annotations
 
+import gzip
 import json
 import zipfile
 from pathlib import Path
@@ -13,6 +14,7 @@ import pytest
 
 from lodconvert.errors import InputError
 from lodconvert.io import read_scene
+from lodconvert.io.archive import inflated_size
 from lodconvert.limits import Limits
 
 from .conftest import SHARED, shared_data
@@ -133,3 +135,18 @@ def test_a_corrupt_cityjsonseq_member_is_a_one_line_error(tmp_path: Path) -> Non
     result = run(path, "-o", tmp_path / "out.glb")
     assert_one_line_error(result, 1, "ten.zip")
     assert not (tmp_path / "out.glb").exists()
+
+
+def test_inputs_are_sized_as_they_inflate_for_the_default_workers(tmp_path: Path) -> None:
+    """The default ``--workers`` counts what a compressed city holds, not its compressed bytes
+    (TUM Munich's zip is 0.9 MB and holds 12 MB of CityGML)."""
+    text = b"<CityModel>" + b" " * 100_000 + b"</CityModel>"
+    plain = tmp_path / "city.gml"
+    plain.write_bytes(text)
+    packed = zipped(tmp_path / "city.zip", {"readme.txt": b"licence", "city.gml": text})
+    squeezed = tmp_path / "city.gml.gz"
+    squeezed.write_bytes(gzip.compress(text))
+    assert packed.stat().st_size < len(text) // 10
+    assert [inflated_size(p) for p in (plain, packed, squeezed)] == [len(text)] * 3
+    assert inflated_size(tmp_path / "absent.zip") == 0
+    assert inflated_size(zipped(tmp_path / "none.zip", {"a.txt": b"x"})) == 0
