@@ -26,7 +26,7 @@ from pathlib import Path
 
 from city import Template, tum_document, write_district
 from scale import Run, convert_once, local_cluster
-from tables import markdown_table, write_results
+from tables import machine_line, markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
 PROFILER = "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED"
@@ -76,9 +76,7 @@ def benchmark(args: argparse.Namespace) -> str:
         [
             "# dask's worker profiler and a --scheduler run",
             "",
-            f"Machine: {len(os.sched_getaffinity(0))} cores usable ({os.uname().machine}, Python "
-            f"{sys.version.split()[0]}); load average {load:.1f} at the start, "
-            f"{os.getloadavg()[0]:.1f} at the end; {time.perf_counter() - started:.0f} s in all.",
+            machine_line(load, time.perf_counter() - started),
             f"Command: `{command}`; {args.factor}× TUM Munich to X3D; medians over"
             f" {args.rounds} rounds. Same bytes in every run: {'yes' if same else '**NO**'}.",
             "",

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from city import DATA, TUM, Template, tum_document, write_district
 from scale import Run, convert_once
-from tables import markdown_table, write_results
+from tables import machine_line, markdown_table, write_results
 
 from lodconvert.io.archive import inflated_size
 from lodconvert.tasks import INPUT_BYTES_PER_WORKER, default_workers
@@ -89,9 +89,7 @@ def benchmark(args: argparse.Namespace) -> str:
             "# The default --workers: one per "
             f"{INPUT_BYTES_PER_WORKER / 2**20:.0f} MiB of input, up to the cores",
             "",
-            f"Machine: {cores} cores usable ({os.uname().machine}, Python "
-            f"{sys.version.split()[0]}); load average {load:.1f} at the start, "
-            f"{os.getloadavg()[0]:.1f} at the end; {time.perf_counter() - started:.0f} s in all.",
+            machine_line(load, time.perf_counter() - started),
             f"Command: `{command}`; medians of {args.runs} interleaved runs each, to X3D.",
             "",
             markdown_table(header, rows, 1),

@@ -48,7 +48,7 @@ from typing import Any
 import psutil
 from city import DATA, TUM, Template, tum_document, write_district
 from objects import ROOT
-from tables import markdown_table, write_results
+from tables import machine_line, markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
 DELFT = DATA / "cityjson" / "delft.city.json"
@@ -414,15 +414,12 @@ def results_text(
     args: argparse.Namespace, header: list[str], rows: list[list[str]], load: float, took: float
 ) -> str:
     """The results file: machine, command, table and what the columns mean."""
-    cores = len(os.sched_getaffinity(0))
     command = " ".join(["python", "benchmarks/scale.py", *sys.argv[1:]])
     return "\n".join(
         [
             "# Worker processes and a dask cluster: --workers 1 vs N vs --scheduler",
             "",
-            f"Machine: {cores} cores usable ({os.uname().machine}, {psutil.cpu_count()} in all, "
-            f"Python {sys.version.split()[0]}); load average {load:.1f} at the start, "
-            f"{os.getloadavg()[0]:.1f} at the end; {took:.0f} s in all.",
+            machine_line(load, took),
             f"Command: `{command}`; medians of {args.runs} interleaved runs each.",
             "",
             markdown_table(header, rows, 3),

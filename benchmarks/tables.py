@@ -21,6 +21,16 @@ def write_results(path: Path, text: str) -> None:
     print(text)
 
 
+def machine_line(load: float, seconds: float) -> str:
+    """The machine line of a results file run on every core: the cores usable, Python, the
+    load average at the start (``load``) and now, and the run's ``seconds``."""
+    return (
+        f"Machine: {len(os.sched_getaffinity(0))} cores usable ({os.uname().machine}, "
+        f"{os.cpu_count()} in all, Python {platform.python_version()}); load average "
+        f"{load:.1f} at the start, {os.getloadavg()[0]:.1f} at the end; {seconds:.0f} s in all."
+    )
+
+
 def one_core_facts(command: str, seconds: float) -> list[str]:
     """The date, machine, software and command lines of a one-core results file."""
     import lodconvert
