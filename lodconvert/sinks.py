@@ -27,19 +27,24 @@ import fcntl
 import os
 import re
 import shutil
+import stat
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
+from . import __version__, manifest, nofollow
 from .errors import InputError, LodConvertError
 
 Check = Callable[[Path], None]
 """Called with a complete staged file (or directory) before the commit; raises to refuse it."""
 RESUME = ".resume"
-"""The folder inside a resumable staged directory holding its run's key (``run``) and what its
-writer records to resume; removed before the directory is checked and committed."""
+"""The folder inside a staged directory holding the journal of the files its runs wrote
+(``written``), its run's key (``run``, when resumable) and what its writer records to resume;
+removed before the directory is checked and committed."""
+JOURNAL = f"{RESUME}/written"
+RUN = f"{RESUME}/run"
 WRITE_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS})
 """Errors of a write that no input or option causes: a full disk, a full quota, a file too
 large for its file system, a file system turned read-only. (Not EIO: input read lazily while
@@ -79,9 +84,27 @@ class _Staged:
     temp: Path
     check: Check | None = None
     lock: int | None = None
-    """A descriptor of ``temp`` holding its ``flock`` while this run lives."""
+    """A descriptor of ``temp`` holding its ``flock`` while this run lives (for a directory,
+    the descriptor every file inside it is reached from)."""
     resumed: bool = False
     """Whether ``temp`` is a killed run's staged directory of the same key, taken over."""
+    directory: bool = False
+    written: set[str] = field(default_factory=set)
+    """A staged directory's files that its runs wrote (the journal :data:`JOURNAL` keeps)."""
+
+    def note(self, relative: str) -> bool:
+        """Journal ``relative`` as written in this staged directory before it is; returns
+        whether it already was (it may then be replaced)."""
+        if relative in self.written:
+            return True
+        assert self.lock is not None
+        names = nofollow.parts(JOURNAL)
+        with nofollow.parent(self.lock, names) as folder:
+            fd = os.open(names[-1], os.O_WRONLY | os.O_APPEND | os.O_NOFOLLOW, dir_fd=folder)
+        with os.fdopen(fd, "ab") as journal:
+            journal.write(f"{relative}\n".encode())
+        self.written.add(relative)
+        return False
 
 
 def _staged_pattern(target: Path) -> re.Pattern[str]:
@@ -97,10 +120,11 @@ another run, failing to lock them too, leaves them alone."""
 
 
 def _held(path: Path) -> int | None:
-    """A descriptor of ``path`` holding its exclusive ``flock`` (waiting for it), or ``None``
-    when ``path`` no longer names the locked file (another run removed it meanwhile)."""
+    """A descriptor of ``path`` (never through a link) holding its exclusive ``flock``
+    (waiting for it), or ``None`` when ``path`` no longer names the locked file (another run
+    removed it meanwhile)."""
     try:
-        fd = os.open(path, os.O_RDONLY)
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
     except FileNotFoundError:
         return None
     try:
@@ -110,26 +134,49 @@ def _held(path: Path) -> int | None:
             os.close(fd)
             raise
     with contextlib.suppress(OSError):
-        if os.path.samestat(os.fstat(fd), os.stat(path)):
+        if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
             return fd
     os.close(fd)
     return None
 
 
-def _clear_dead_runs(target: Path, resume: str | None = None) -> int | None:
+def _journal(fd: int) -> set[str]:
+    """The files the journal of the staged directory ``fd`` lists."""
+    data = nofollow.read(fd, JOURNAL, manifest.LIMIT) or b""
+    return {line for line in data.decode("utf-8", "replace").splitlines() if line}
+
+
+def _foreign(fd: int, written: set[str]) -> tuple[str, str] | None:
+    """The first entry of the staged directory ``fd`` that its runs did not write (a link,
+    another user's file, a file its journal does not list): its relative path and what it is;
+    ``None`` where there is none."""
+    own = {JOURNAL, RUN}
+    for relative, found in nofollow.walk(fd):
+        why = nofollow.what(found)
+        if why is None and stat.S_ISREG(found.st_mode) and relative not in written | own:
+            why = "a file no run wrote there"
+        if why is not None:
+            return relative, why
+    return None
+
+
+def _clear_dead_runs(target: Path, resume: str | None = None) -> tuple[int, set[str]] | None:
     """Remove what runs that are no longer alive staged for ``target``: its staged names in its
-    folder that no process holds locked. A staged directory of the ``resume`` key is kept
-    instead, and a descriptor holding its lock returned (``None``: there is none)."""
+    folder that no process holds locked and that hold only what those runs wrote (anything
+    else, a link above all, is left alone). A staged directory of the ``resume`` key is kept
+    instead, and a descriptor holding its lock returned with its journal (``None``: there is
+    none); one holding anything its runs did not write is refused (:class:`InputError`)."""
     pattern = _staged_pattern(target)
     try:
         names = [name for name in os.listdir(target.parent) if pattern.fullmatch(name)]
     except OSError:
         return None
+    ours = None if resume is None else _resume_name(target, resume).name
     kept = None
-    for name in names:
+    for name in sorted(names):
         path = target.parent / name
-        try:
-            fd = os.open(path, os.O_RDONLY)
+        try:  # a link fails here (ELOOP): never ours to follow or remove
+            fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
         except OSError:
             continue
         try:
@@ -137,8 +184,26 @@ def _clear_dead_runs(target: Path, resume: str | None = None) -> int | None:
         except OSError:  # locked by a live run (or locks unsupported here): leave it
             os.close(fd)
             continue
-        if kept is None and resume is not None and _resumable(path, resume):
-            kept = fd
+        found = os.fstat(fd)
+        if stat.S_ISDIR(found.st_mode):
+            written = _journal(fd)
+            stray = _foreign(fd, written) or (
+                None if (why := nofollow.what(found)) is None else (".", why)
+            )
+            if stray is not None:
+                os.close(fd)
+                if name == ours:
+                    raise InputError(
+                        f"the staged folder {name!r} that an interrupted run left holds "
+                        f"{stray[0]!r}, {stray[1]}; remove that folder and run again",
+                        str(target),
+                    )
+                continue
+            if kept is None and name == ours and _resumable(fd, resume):
+                kept = fd, written
+                continue
+        elif nofollow.what(found) is not None:
+            os.close(fd)
             continue
         _remove(path)
         os.close(fd)
@@ -150,12 +215,9 @@ def _resume_name(target: Path, resume: str) -> Path:
     return target.parent / f".{target.name}.{resume[:8]}.tmp"
 
 
-def _resumable(path: Path, resume: str) -> bool:
-    """Whether ``path`` is a staged directory of the run of key ``resume``."""
-    try:
-        return (path / RESUME / "run").read_text() == resume
-    except (OSError, UnicodeDecodeError):
-        return False
+def _resumable(fd: int, resume: str | None) -> bool:
+    """Whether the staged directory ``fd`` is one of the run of key ``resume``."""
+    return resume is not None and nofollow.read(fd, RUN, 1 << 12) == resume.encode()
 
 
 @dataclass
@@ -171,7 +233,8 @@ class FileSink:
     def open(self) -> Iterator[BinaryIO]:
         """The staged file, opened for binary writing (flushed to disk when the block ends);
         a failed write is one line naming the output (:func:`writing`)."""
-        with writing(self.path), self.staged.temp.open("wb") as handle:
+        flags = os.O_WRONLY | os.O_TRUNC | os.O_NOFOLLOW | os.O_CLOEXEC
+        with writing(self.path), os.fdopen(os.open(self.staged.temp, flags), "wb") as handle:
             yield handle
             handle.flush()
             os.fsync(handle.fileno())
@@ -202,15 +265,43 @@ class DirectorySink:
 
     @contextlib.contextmanager
     def file(self, relative: str | Path) -> Iterator[BinaryIO]:
-        """A file at ``relative`` inside the staged directory (folders made as needed)."""
-        relative = Path(relative)
-        if relative.is_absolute() or ".." in relative.parts:
-            raise ValueError(f"{relative} is not a path inside the output directory")
-        target = self.staged.temp / relative
-        with writing(self.path / relative):
-            target.parent.mkdir(parents=True, exist_ok=True)
-            with target.open("wb") as handle:
+        """A file at ``relative`` inside the staged directory (folders made as needed), never
+        written through a link: one found on the way is :class:`LodConvertError`, and so is
+        any entry there that no run of this output wrote."""
+        name = "/".join(nofollow.parts(relative))
+        with writing(self.path / name), self._inside(name):
+            replace = self.staged.note(name)
+            with os.fdopen(nofollow.create(_root(self.staged), name, replace), "wb") as handle:
                 yield handle
+
+    def read(self, relative: str | Path, limit: int) -> bytes | None:
+        """The file at ``relative`` inside the staged directory (at most ``limit`` bytes) when
+        a run of this output wrote it; ``None`` otherwise (absent, a link, not written)."""
+        name = "/".join(nofollow.parts(relative))
+        if name not in self.staged.written:
+            return None
+        return nofollow.read(_root(self.staged), name, limit)
+
+    def prune(self, folder: str, keep: set[str]) -> None:
+        """Remove the files of ``folder`` (inside the staged directory) that runs of this
+        output wrote, but for those named in ``keep``."""
+        prefix = "/".join(nofollow.parts(folder)) + "/"
+        for name in sorted(self.staged.written):
+            rest = name.removeprefix(prefix)
+            if rest != name and "/" not in rest and rest not in keep:
+                nofollow.remove(_root(self.staged), name)
+
+    @contextlib.contextmanager
+    def _inside(self, name: str) -> Iterator[None]:
+        """:class:`nofollow.Foreign` in the block as one line naming the output."""
+        try:
+            yield
+        except nofollow.Foreign as exc:
+            raise LodConvertError(
+                f"cannot write {name}: the staged folder holds {exc.relative!r}, {exc.what} "
+                "that this run did not make",
+                str(self.path),
+            ) from None
 
 
 @dataclass
@@ -282,23 +373,21 @@ class Outputs:
     def _resumed(self, target: Path, check: Check | None, resume: str) -> _Staged | None:
         """The staged directory of ``target`` for the run of key ``resume``: a dead run's,
         taken over, or a new one with the key recorded (``None``: a live run holds the name)."""
-        lock = _clear_dead_runs(target, resume)
+        kept = _clear_dead_runs(target, resume)
         temp = _resume_name(target, resume)
-        resumed = lock is not None
-        if lock is None:
+        if kept is not None:
+            lock, written = kept
+            staged = _Staged(target, temp, check, lock, True, True, written)
+        else:
             try:
                 temp.mkdir(mode=0o700)
-            except FileExistsError:  # a live run of the same key stages it
+            except OSError:  # a live run of the same key stages it (or :meth:`_stage` says why)
                 return None
-            except OSError:
-                return None  # :meth:`_stage` says why in one line
             lock = _held(temp)
             if lock is None:
                 return None
-            with writing(target):
-                (temp / RESUME).mkdir()
-                (temp / RESUME / "run").write_text(resume)
-        staged = _Staged(target, temp, check, lock, resumed)
+            staged = _Staged(target, temp, check, lock, directory=True)
+            _begin(staged, resume)
         self._staged.append(staged)
         return staged
 
@@ -327,7 +416,9 @@ class Outputs:
                     f"({os.strerror(exc.errno or errno.EIO)})",
                     str(target),
                 ) from exc
-        staged = _Staged(target, Path(temp), check, lock)
+        staged = _Staged(target, Path(temp), check, lock, directory=directory)
+        if directory:
+            _begin(staged)
         self._staged.append(staged)
         return staged
 
@@ -336,10 +427,12 @@ class Outputs:
         left changed. Returns the targets written."""
         try:
             for staged in self._staged:
-                if staged.temp.is_dir():
-                    _remove(staged.temp / RESUME)
+                if staged.directory:
+                    _sealed(staged)
                 if staged.check is not None:
                     staged.check(staged.temp)
+                if staged.directory:
+                    manifest.write(_root(staged), f"lodconvert {__version__}")
         except BaseException:
             self.discard()
             raise
@@ -347,14 +440,11 @@ class Outputs:
         try:
             for staged in self._staged:
                 backup = None
-                if staged.target.exists():
+                if os.path.lexists(staged.target):
                     backup = Path(f"{staged.temp}.old")
                     os.replace(staged.target, backup)
                 done.append((staged, backup))
-                if staged.temp.is_file():
-                    staged.temp.chmod(0o644)
-                elif staged.temp.is_dir():  # made private by mkdtemp
-                    staged.temp.chmod(0o755)
+                staged.temp.chmod(0o755 if staged.directory else 0o644)  # made private by mkdtemp
                 os.replace(staged.temp, staged.target)
         except BaseException:
             for staged, backup in reversed(done):
@@ -365,8 +455,10 @@ class Outputs:
             self.discard()
             raise
         for _, backup in done:
-            if backup is not None:
+            if backup is not None and not backup.is_dir():
                 _remove(backup)
+            elif backup is not None:
+                manifest.remove_listed(backup)
         written = [staged.target for staged in self._staged]
         self._release()
         return written
@@ -383,6 +475,35 @@ class Outputs:
             if staged.lock is not None:
                 os.close(staged.lock)
         self._staged.clear()
+
+
+def _root(staged: _Staged) -> int:
+    """The descriptor a staged directory's files are reached from."""
+    assert staged.lock is not None
+    return staged.lock
+
+
+def _begin(staged: _Staged, resume: str | None = None) -> None:
+    """Start the journal of a new staged directory (and record its run's key ``resume``)."""
+    with writing(staged.target):
+        os.mkdir(RESUME, 0o700, dir_fd=_root(staged))
+        os.close(nofollow.create(_root(staged), JOURNAL, replace=False))
+        if resume is not None:
+            with os.fdopen(nofollow.create(_root(staged), RUN, replace=False), "wb") as stream:
+                stream.write(resume.encode())
+
+
+def _sealed(staged: _Staged) -> None:
+    """Check that a staged directory holds only what its runs wrote (:class:`LodConvertError`
+    naming the output otherwise), then remove its :data:`RESUME` folder."""
+    stray = _foreign(_root(staged), staged.written)
+    if stray is not None:
+        raise LodConvertError(
+            f"the staged folder holds {stray[0]!r}, {stray[1]} that this run did not make; "
+            "nothing was written",
+            str(staged.target),
+        )
+    shutil.rmtree(RESUME, dir_fd=_root(staged))
 
 
 def _remove(path: Path) -> None:

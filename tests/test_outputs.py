@@ -17,7 +17,7 @@ from lodconvert import spool
 from lodconvert.errors import InputError
 from lodconvert.sinks import Outputs
 
-from .conftest import ROOT, SAMPLE
+from .conftest import ROOT, SAMPLE, shared_data
 from .test_cli import assert_one_line_error, run
 
 FAST = ("--resolution", "24,12,6")
@@ -124,9 +124,25 @@ def test_a_directory_output_replaces_the_old_one_whole(tmp_path: Path) -> None:
     (old / "stale").mkdir(parents=True)
     with Outputs() as outputs, outputs.directory(old).file("0/1.bin") as handle:
         handle.write(b"x")
-    assert sorted(str(p.relative_to(old)) for p in old.rglob("*")) == ["0", "0/1.bin"]
+    listed = [".lodconvert-manifest.json", "0", "0/1.bin"]
+    assert sorted(str(p.relative_to(old)) for p in old.rglob("*")) == listed
     with pytest.raises(InputError, match="is a file"):
         Outputs().directory(old / "0" / "1.bin")
+
+
+def test_a_replaced_directory_loses_only_the_files_its_manifest_lists(tmp_path: Path) -> None:
+    old = tmp_path / "tiles"
+    with Outputs() as outputs, outputs.directory(old).file("0/1.bin") as handle:
+        handle.write(b"x")
+    (old / "0" / "mine.txt").write_text("the user's")  # added after the run
+    with Outputs() as outputs, outputs.directory(old).file("2.bin") as handle:
+        handle.write(b"y")
+    assert sorted(str(p.relative_to(old)) for p in old.rglob("*")) == [
+        ".lodconvert-manifest.json",
+        "2.bin",
+    ]
+    [kept] = tmp_path.glob(".tiles.*.tmp.old/0/mine.txt")
+    assert kept.read_text() == "the user's"
 
 
 def test_library_convert_runs_again_and_write_checks_like_the_cli(tmp_path: Path) -> None:
@@ -193,6 +209,26 @@ def test_a_full_disk_is_one_line_naming_the_output_and_leaves_nothing(
     done = _in_a_small_tmpfs(small, f"{convert}; echo exit=$?; ls -A {shlex.quote(str(small))}")
     lines = done.stderr.strip().splitlines()
     assert lines == [f"lodconvert: error: {out}: cannot write: No space left on device"], done
+    assert done.stdout.split() == ["exit=1"]  # and the tmpfs holds no file
+
+
+def test_a_full_disk_under_a_tileset_names_the_output_not_its_staged_folder(
+    tmp_path: Path,
+) -> None:
+    city = ROOT.parent / "shared" / "data" / "cityjson" / "multi_lod_10bldg.city.json"
+    shared_data(city)
+    small = tmp_path / "small"
+    small.mkdir()
+    out = small / "out" / "tileset.json"
+    convert = shlex.join(
+        [sys.executable, "-m", "lodconvert", str(city), "-o", str(out), "--crs", "EPSG:7415"]
+    )
+    done = _in_a_small_tmpfs(
+        small, f"{convert}; echo exit=$?; ls -A {shlex.quote(str(small))}", size="64k"
+    )
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith(f"lodconvert: error: {small}/out/"), line
+    assert line.endswith(": cannot write: No space left on device") and ".tmp" not in line, line
     assert done.stdout.split() == ["exit=1"]  # and the tmpfs holds no file
 
 

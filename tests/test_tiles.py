@@ -345,11 +345,15 @@ def test_a_folder_holding_the_input_is_refused(tmp_path: Path) -> None:
 
 def test_a_tileset_of_ours_holding_the_input_is_not_replaced(tmp_path: Path) -> None:
     out = convert("multi_lod", tmp_path / "out").parent
-    moved = out / "tiles" / "district.city.json"
-    shutil.copy(inputs("multi_lod")[0], moved)
+    tile = sorted((out / "tiles").glob("*.glb"))[0]  # a file of ours, listed in its manifest
     unchanged = _unchanged(out)
+    result = run(tile, "-o", out / "tileset.json", *RD_NAP, *FAST)
+    assert_one_line_error(result, 1, tile.name, "an input of this run")
+    moved = out / "tiles" / "district.city.json"
+    shutil.copy(inputs("multi_lod")[0], moved)  # a file of the user's: not ours to replace
     result = run(moved, "-o", out / "tileset.json", *RD_NAP, *FAST)
-    assert_one_line_error(result, 1, "district.city.json", "an input of this run")
+    assert_one_line_error(result, 1, "district.city.json", "not written by lodconvert")
+    moved.unlink()
     unchanged()
 
 
@@ -646,20 +650,21 @@ def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_p
 
     from lodconvert.io.tiles.task import TileTask, Where
     from lodconvert.reproject import Georef
+    from lodconvert.sinks import Outputs
 
     georef = Georef("EPSG:25832", pyproj.CRS("EPSG:25832"))
     where = Where(georef, "EPSG:25832", "test", "EPSG:25832")
-    folder = tmp_path / "staged" / "tiles"
     corners = np.array(
         [[690000.0, 5335000.0, 520.0], [690010, 5335000, 520], [690000, 5335010, 530]]
     )
-    task = TileTask(
-        "t.glb", str(folder), where, corners, np.full((3, 4), 200, np.uint8), None, None, (), "test"
-    )
+    task = TileTask("t.glb", where, corners, np.full((3, 4), 200, np.uint8), None, None, (), "test")
     result = task.run()
     assert result.error is None and result.data is not None and result.data[:4] == b"glTF"
-    assert not (tmp_path / "staged").exists()
-    written = task.written(result)
-    assert (folder / "t.glb").read_bytes() == result.data and written.data is None
-    kept = task.kept()
+    assert list(tmp_path.iterdir()) == []
+    with Outputs() as outputs:
+        sink = outputs.directory(tmp_path / "out", resume="k" * 64)
+        written = task.written(sink, result)
+        staged = next(tmp_path.glob(".out.*.tmp"))
+        assert (staged / "tiles" / "t.glb").read_bytes() == result.data and written.data is None
+        kept = task.kept(sink)
     assert kept is not None and kept.reused and np.array_equal(kept.box, result.box)

@@ -399,11 +399,16 @@ def test_html_option_writes_a_cesium_page_inside_a_tileset(tmp_path: Path) -> No
     assert config["pointCloudShading"] == extras["point_cloud_shading"]
     assert config["pointCloudShading"]["geometricErrorScale"] == pytest.approx(1.5 / 12)
     assert _import_map(text) == {"cesium": f"{CDN}cesium@1.145.0/Build/Cesium/index.js"}
-    assert sorted(p.name for p in tileset.parent.iterdir()) == ["tiles", "tileset.json", page.name]
+    names = sorted(p.name for p in tileset.parent.iterdir())
+    assert names == [".lodconvert-manifest.json", "tiles", "tileset.json", page.name]
     assert run("validate", tileset).returncode == 0
     result = run(*inputs("multi_lod"), "-o", tileset, *RD_NAP, *TILES_FAST)
     assert result.returncode == 0, result.stderr
-    assert sorted(p.name for p in tileset.parent.iterdir()) == ["tiles", "tileset.json"]
+    assert sorted(p.name for p in tileset.parent.iterdir()) == [
+        ".lodconvert-manifest.json",
+        "tiles",
+        "tileset.json",
+    ]
 
 
 def test_view_command_writes_a_tilesets_page_and_refuses_other_json(tmp_path: Path) -> None:

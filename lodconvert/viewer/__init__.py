@@ -46,6 +46,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, ClassVar
 
+from .. import __version__, manifest
 from ..errors import UsageError
 from ..sinks import Outputs
 from .config import page_config
@@ -228,9 +229,13 @@ def write_page(
     page's folder unless ``served``, see :func:`library_base`), both before writing."""
     asset = Path(asset)
     page = Path(page) if page is not None else page_path(asset)
-    text = render_page(asset, page, library, served)
+    data = render_page(asset, page, library, served).encode("utf-8")
     with Outputs(inputs=[asset]) as outputs:
-        outputs.file(page).write_bytes(text.encode("utf-8"))
+        outputs.file(page).write_bytes(data)
+        if page.parent == asset.parent and FORMATS.get(asset.suffix.lower()) == "tiles":
+            listed = manifest.adding(asset.parent, page.name, data, f"lodconvert {__version__}")
+            if listed is not None:  # the tileset's list of its files names the page too
+                outputs.file(asset.parent / manifest.NAME).write_bytes(listed)
     return page
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import InputError
-from ..io.tiles import GENERATOR
+from ..io.tiles import written_by_lodconvert
 
 
 def tileset_config(path: Path) -> dict[str, Any]:
@@ -25,7 +25,7 @@ def tileset_config(path: Path) -> dict[str, Any]:
     except (OSError, ValueError, AttributeError) as error:
         raise InputError(f"is not a tileset lodconvert can read ({error})", str(path)) from None
     extras = asset.get("extras", {}).get("lodconvert") if isinstance(asset, dict) else None
-    if not str(asset.get("generator", "")).startswith(GENERATOR) or not isinstance(extras, dict):
+    if not written_by_lodconvert(asset.get("generator")) or not isinstance(extras, dict):
         raise InputError("is not a tileset lodconvert wrote (its asset.generator)", str(path))
     return {
         "format": "tiles",

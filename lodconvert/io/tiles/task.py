@@ -1,14 +1,16 @@
 """One tile's content as a picklable task, run by any executor (:mod:`lodconvert.tasks`): its
 vertices (scene coordinates) placed in ECEF and in the tile's ENU frame and encoded as a GLB;
 the result is the GLB, the tile's frame and content box, which the main process writes into
-the staged tileset folder (:meth:`TileTask.written`), so that a worker needs no access to it.
+the staged tileset folder through its sink (:meth:`TileTask.written`), so that a worker needs no
+access to it.
 
 Resuming: a task is keyed by a hash of everything that makes its file (:meth:`TileTask.key`:
 the placement, the geometry, colours and features, the generator). Beside the file the main
 process records the key, the file's SHA-256, frame and box (``.resume/tiles/NAME.json`` in the
-staged folder); a resumed run whose task finds its record of the same key, and the file there
-with the recorded hash, takes the record instead of running the task (:meth:`TileTask.kept`). A
-file a killed run left half-written has no record yet, or another hash, and is made again.
+staged folder). A resumed run whose task finds its record of the same key, and the file with
+the recorded hash, both written by a run of that folder (its journal), takes the record instead
+of running the task (:meth:`TileTask.kept`). A file a killed run left half-written has no
+record yet, or another hash, and is made again.
 """
 
 from __future__ import annotations
@@ -16,13 +18,12 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ...errors import LodConvertError
-from ...sinks import RESUME, writing
+from ...sinks import RESUME, DirectorySink
 from .content import mesh_glb, points_glb
 from .metadata import Feature
 from .placement import Placement, world_to_frame
@@ -30,8 +31,12 @@ from .placement import Placement, world_to_frame
 # glTF content is y-up; 3D Tiles turns it z-up: (x, y, z) -> (x, -z, y). ENU (e, n, u) is
 # therefore written as (e, u, -n).
 ENU_TO_GLTF = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+TILES = "tiles"
+"""The folder of the tiles' files in the tileset folder."""
 RECORDS = f"{RESUME}/tiles"
 """Where tasks record what they wrote, inside the staged folder."""
+RECORD_BYTES = 1 << 16
+"""Largest record read back."""
 
 
 @dataclass(frozen=True)
@@ -72,12 +77,11 @@ class TileResult:
 
 @dataclass(frozen=True)
 class TileTask:
-    """The GLB ``name`` in ``folder`` (the staged ``tiles/``): a triangle mesh (``faces``; with
+    """The GLB ``name`` in the tileset's ``tiles/``: a triangle mesh (``faces``; with
     ``feature_ids`` into ``features``, or none for a merged far level) or, without ``faces``,
     points; ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes."""
 
     name: str
-    folder: str
     where: Where
     vertices: np.ndarray
     colors: np.ndarray
@@ -113,25 +117,30 @@ class TileTask:
         box = np.stack([local.min(axis=0), local.max(axis=0)])
         return TileResult(frame, box, data=data, key=self.key())
 
-    def _paths(self) -> tuple[Path, Path]:
-        """The tile's file in the staged folder and its record."""
-        folder = Path(self.folder)
-        return folder / self.name, folder.parent / RECORDS / f"{self.name}.json"
+    def _paths(self) -> tuple[str, str]:
+        """The tile's file in the tileset folder and its record."""
+        return f"{TILES}/{self.name}", f"{RECORDS}/{self.name}.json"
 
-    def kept(self) -> TileResult | None:
-        """What an interrupted run recorded of this tile, where its file is whole and was made
-        of the same (its key); ``None`` otherwise."""
-        return _kept(*self._paths(), self.key())
+    def kept(self, sink: DirectorySink) -> TileResult | None:
+        """What an interrupted run recorded of this tile in ``sink``'s staged folder, where its
+        file is whole and was made of the same (its key); ``None`` otherwise."""
+        path, record = self._paths()
+        found = sink.read(record, RECORD_BYTES)
+        data = None if found is None else sink.read(path, 1 << 40)
+        return None if data is None else _kept(found, data, self.key())
 
-    def written(self, result: TileResult) -> TileResult:
-        """Write the file and record of ``result`` (this task's) into the staged folder; a
-        failed write is one line naming the file (:func:`~lodconvert.sinks.writing`)."""
+    def written(self, sink: DirectorySink, result: TileResult) -> TileResult:
+        """Write the file and record of ``result`` (this task's) through ``sink``; a failed
+        write is one line naming the file."""
         assert result.data is not None and result.key is not None
         path, record = self._paths()
-        with writing(path):
-            path.parent.mkdir(parents=True, exist_ok=True)
-            path.write_bytes(result.data)
-            _record(record, result.key, hashlib.sha256(result.data).hexdigest(), *_placed(result))
+        with sink.file(path) as handle:
+            handle.write(result.data)
+        frame, box = _placed(result)
+        sha256 = hashlib.sha256(result.data).hexdigest()
+        text = {"key": result.key, "sha256": sha256, "frame": frame.tolist(), "box": box.tolist()}
+        with sink.file(record) as handle:
+            handle.write(json.dumps(text).encode())
         return replace(result, data=None, key=None)
 
     def _glb(self, gltf: np.ndarray) -> bytes:
@@ -152,22 +161,15 @@ def _placed(result: TileResult) -> tuple[np.ndarray, np.ndarray]:
     return result.frame, result.box
 
 
-def _record(path: Path, key: str, sha256: str, frame: np.ndarray, box: np.ndarray) -> None:
-    """Record a written tile (its key, its file's hash, frame and box) at ``path``."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps({"key": key, "sha256": sha256, "frame": frame.tolist(), "box": box.tolist()})
-    path.write_text(text)
-
-
-def _kept(path: Path, record: Path, key: str) -> TileResult | None:
-    """The result recorded at ``record`` for the tile file ``path`` when its key is ``key``
+def _kept(record: bytes, data: bytes, key: str) -> TileResult | None:
+    """The result ``record`` holds for the tile file of bytes ``data`` when its key is ``key``
     and the file is whole (its recorded hash); ``None`` otherwise."""
     try:
-        found = json.loads(record.read_text())
-        if found["key"] != key or hashlib.sha256(path.read_bytes()).hexdigest() != found["sha256"]:
+        found = json.loads(record)
+        if found["key"] != key or hashlib.sha256(data).hexdigest() != found["sha256"]:
             return None
         frame, box = np.array(found["frame"], dtype=np.float64), np.array(found["box"])
-    except (OSError, ValueError, KeyError, TypeError):
+    except (ValueError, KeyError, TypeError):
         return None
     if frame.shape != (4, 4) or box.shape != (2, 3):
         return None

@@ -27,7 +27,6 @@ import math
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -37,7 +36,7 @@ from ...model import CellChain, LodChain, Mesh
 from .. import OutputInfo
 from .metadata import Feature
 from .placement import Placement, world_to_frame
-from .task import TileResult, TileTask, Where
+from .task import TILES, TileResult, TileTask, Where
 
 DEFAULT_SSE = 16.0
 """CesiumJS's default maximumScreenSpaceError."""
@@ -46,7 +45,6 @@ EXTERNAL_BYTES = 2_000_000
 tileset of its own (``tiles/NAME.json``)."""
 MARGIN = 0.001
 """Metres a bounding box is grown by on every side (float32 content rounding, flat content)."""
-TILES = "tiles"
 
 
 @dataclass
@@ -124,7 +122,6 @@ class TilesetWriter:
         georef = info.georef
         named = f"{self.placement.label}|{georef.frame}|{georef.crs.to_wkt()}"
         self.where = Where(georef, info.crs, info.source, named)
-        self.folder = Path(sink.staged.temp) / TILES
         self.point_scale: float | None = None
         self._queued: list[tuple[Tile, TileTask]] = []
 
@@ -155,8 +152,8 @@ class TilesetWriter:
         """A tile whose content ``name`` (``.glb``) is made by a task queued for the executor
         (its frame and box are filled in from the task's result); see :class:`TileTask`."""
         task = TileTask(
-            f"{name}.glb", str(self.folder), self.where, vertices, colors, faces, feature_ids,
-            features, self.info.generator,
+            f"{name}.glb", self.where, vertices, colors, faces, feature_ids, features,
+            self.info.generator,
         )  # fmt: skip
         tile = Tile(None, None, error, task.name)
         self._queued.append((tile, task))
@@ -253,7 +250,7 @@ class TilesetWriter:
             for top in self.tops(items):
                 children.append(top)
                 for tile, task in self._queued:
-                    kept = task.kept() if self.sink.resumed else None
+                    kept = task.kept(self.sink) if self.sink.resumed else None
                     waiting.append((tile, task, kept))
                     if kept is None:
                         yield task
@@ -272,7 +269,7 @@ class TilesetWriter:
                     assert result is not None
                     if result.error is not None:
                         raise LodConvertError(result.error)
-                    kept, result = task.written(result), None
+                    kept, result = task.written(self.sink, result), None
                 tile.frame, tile.box = kept.frame, kept.box
                 made, reused = made + 1, reused + kept.reused
         if self.sink.resumed and self.progress is not None:
@@ -307,9 +304,7 @@ class TilesetWriter:
             kept.update([tile.content] if tile.content else [])
             kept.add(f"{(tile.content or 'tile').removesuffix('.glb')}.json")
             stack.extend(tile.children)
-        for path in self.folder.iterdir():
-            if path.name not in kept:
-                path.unlink()
+        self.sink.prune(TILES, kept)
 
     def _asset(self) -> dict[str, Any]:
         """The tileset's ``asset``: version, generator, and in ``extras.lodconvert`` the
