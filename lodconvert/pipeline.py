@@ -577,7 +577,7 @@ def _check_scheduler(scheduler: str, workers: int | None) -> None:
         from .dask_executor import scheduler_address
     except ImportError:
         raise UsageError(
-            "needs dask.distributed: pip install 'lodconvert[dask]'", "scheduler"
+            "needs dask.distributed: pip install '.[dask]' in a clone of lodconvert", "scheduler"
         ) from None
     scheduler_address(scheduler)
 
