@@ -679,6 +679,7 @@ class _Assembly:
             named, output_path, baker, run.chain, self.records, skipped, clock.timings, tally
         )
         report["crs"] = crs_record
+        report["up"] = "z" if self.info.city else run.read_options.get("up") or "y"
         report["frame"] = self.frame.record() if self.frame is not None else None
         if self.hlod is not None:
             report["hlod"] = {"kind": self.hlod.kind, "cells": self.cells, "draw": self.draw}
@@ -712,6 +713,8 @@ def read_inputs(
     if (read_options or {}).get("crs") is not None:
         checked_crs_option(read_options["crs"])
     sources = sources or [input_format(path) for path in inputs]
+    if (read_options or {}).get("up") is not None:
+        _check_up(inputs, sources)
     scenes = [
         source.read_file(path, limits=limits, **(read_options or {}))
         for source, path in zip(sources, inputs, strict=True)
@@ -724,6 +727,18 @@ def read_inputs(
             )
     one_crs = in_one_crs(scenes, warn)
     return merged(one_crs.scenes), one_crs.record
+
+
+def _check_up(inputs: Sequence[str | Path], sources: Sequence[Format]) -> None:
+    """:class:`UsageError` where an up axis is given for an input whose reader takes none: a
+    city model, z-up by definition and turned y-up by its frame (:mod:`.io.frame`)."""
+    for path, source in zip(inputs, sources, strict=True):
+        if "up" not in source.read_options:
+            raise UsageError(
+                f"is for mesh files; {path} is a city model, z-up by definition (its scene is "
+                "turned y-up already)",
+                "up",
+            )
 
 
 def _reader_skipped(

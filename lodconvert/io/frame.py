@@ -16,15 +16,33 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import LodConvertError
+from ..errors import LodConvertError, UsageError
 from ..model import CellChain, LodChain
 
 ROTATION = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 """Source z-up axes → scene y-up axes: (x, y, z) ↦ (x, z, −y), a turn of −90° about x."""
+UP_AXES = ("x", "y", "z", "-x", "-y", "-z")
+"""The up axes a mesh may be read with (``--up``)."""
+_TO_Y_UP = {
+    "x": [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],  # (x, y, z) ↦ (−y, x, z)
+    "y": np.eye(3),
+    "z": ROTATION,
+    "-x": [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],  # (x, y, z) ↦ (y, −x, z)
+    "-y": np.diag([1.0, -1.0, -1.0]),  # (x, y, z) ↦ (x, −y, −z)
+    "-z": [[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]],  # (x, y, z) ↦ (x, −z, y)
+}
 AXES = "source (x, y, z) -> scene (x, z, -y): y up, north -z"
 MEANING = "source = origin + rotation^T * scene (rotation row-major; scene = file coordinates)"
 MAX_OFFSET = 1e5
 """Largest magnitude of a node offset from the scene origin (float32 keeps 8 mm there)."""
+
+
+def y_up(up: str) -> np.ndarray:
+    """The rotation (3, 3) turning axis ``up`` (one of :data:`UP_AXES`) to +y, glTF's and X3D's
+    up: a quarter or half turn about x or z (``z`` is :data:`ROTATION`, as for a city)."""
+    if up not in _TO_Y_UP:
+        raise UsageError(f"must be one of {', '.join(UP_AXES)}, got {up!r}", "up")
+    return np.array(_TO_Y_UP[up], dtype=np.float64)
 
 
 @dataclass(frozen=True)
