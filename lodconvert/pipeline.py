@@ -162,6 +162,7 @@ class _Bakery:
                     seen.add(key)
                     yield node, self._options(radius)
 
+        self.step("converting", self.done, self.total)  # the stage starts: nothing sent yet
         formatter = self.pieces.formatter if self.pieces is not None else None
         made = batches(
             sent(), per_object, self.limits, self.plan_only, formatter,
