@@ -3,9 +3,10 @@ matrices in float32, so a city model's scene (with or without a CRS) or one with
 written turned z-up → y-up about one scene origin.
 
 Scene (file) coordinates are ``ROTATION · (source − origin)``: ``ROTATION`` maps the source's
-(x, y, z) to (x, z, −y), so east stays +x, up becomes +y and north −z. ``origin`` is the first
-object's origin rounded to whole metres (float64, recorded with the CRS), so offsets stay small;
-source coordinates come back as ``origin + ROTATIONᵀ · scene``. Plain meshes without a CRS
+(x, y, z) to (x, z, −y), so east stays +x, up becomes +y and north −z. ``origin`` is the input's
+first object's bounding-box centre rounded to whole metres (float64, recorded with the CRS), so
+offsets stay small and two outputs of one input (with and without LOD parents) share it; source
+coordinates come back as ``origin + ROTATIONᵀ · scene``. Plain meshes without a CRS
 get no frame: their own axes and coordinates are kept.
 """
 
@@ -90,12 +91,17 @@ def item_origin(item: LodChain | CellChain) -> np.ndarray:
     return item.transform[:3, :3] @ origin + item.transform[:3, 3]
 
 
-def scene_frame(framed: bool, first: LodChain | CellChain) -> SceneFrame | None:
-    """The frame of a scene whose first item is ``first``: its origin rounded to whole metres;
-    ``None`` where the scene is not ``framed`` (a plain mesh keeps its axes)."""
+def scene_frame(
+    framed: bool, first: LodChain | CellChain, at: np.ndarray | None = None
+) -> SceneFrame | None:
+    """The frame of a scene whose first item is ``first``: its origin ``at`` (where the input's
+    first object lies, :attr:`~lodconvert.io.OutputInfo.origin`: the same whatever groups the
+    objects into LOD parents) or else ``first``'s, rounded to whole metres; ``None`` where the
+    scene is not ``framed`` (a plain mesh keeps its axes)."""
     if not framed:
         return None
-    return SceneFrame(np.round(item_origin(first)) + 0.0)  # + 0.0: no negative zero
+    origin = item_origin(first) if at is None else np.asarray(at, dtype=np.float64)
+    return SceneFrame(np.round(origin) + 0.0)  # + 0.0: no negative zero
 
 
 def frame_from_record(record: Any) -> SceneFrame | None:
