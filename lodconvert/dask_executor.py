@@ -11,7 +11,7 @@ the task says (a batch's objects reported, a run of members read in the main pro
 run goes on. What a task tells of its progress comes back with its result, and is told here
 when that result is taken: no message of its own crosses the cluster.
 
-Needs the ``dask`` extra (``pip install 'lodconvert[dask]'``); :mod:`.tasks` does not.
+Needs the ``dask`` extra (``pip install '.[dask]'`` in a clone); :mod:`.tasks` does not.
 """
 
 from __future__ import annotations

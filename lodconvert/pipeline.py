@@ -89,13 +89,15 @@ def iter_chains(
     executor: Executor | None = None,
     clock: Clock | None = None,
     pieces: Pieces | None = None,
+    first_at: Callable[[np.ndarray], None] | None = None,
 ) -> Iterator[LodChain | CellChain]:
     """Bake the scene's objects (by ``executor``: in this process by default); objects with bad
     geometry are reported through ``warn`` (unless ``strict``: the caller fails), recorded in
     ``skipped`` and left out. ``step`` hears how many are done, ``clock`` how long planning
     and baking took; ``pieces`` keeps what its formatter made of each chain where it was baked
-    (those chains come without their geometry, but for LOD parents, which merge it). With
-    ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`): one
+    (those chains come without their geometry, but for LOD parents, which merge it);
+    ``first_at`` hears where the scene's first object lies (its bounding-box centre) before any
+    chain comes. With ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`): one
     :class:`CellChain` per cell of the coarsest tier, in grid order, each followed by the
     members it left out (objects or finer cells, drawn on their own)."""
     bakery = _Bakery(
@@ -103,12 +105,28 @@ def iter_chains(
         skipped, limits, strict, step, _object_count(scene), clock=clock or Clock(),
         pieces=pieces, lean=hlod is None,
     )  # fmt: skip
+    nodes = scene.with_geometry()
+    if first_at is not None:
+        nodes = _first_told(nodes, first_at)
     if hlod is not None:
-        yield from _cell_chains(scene, options, hlod, bakery)
+        yield from _cell_chains(nodes, options, hlod, bakery)
         return
-    for chain in bakery.chains(_with_plot_radii(scene, options)):
+    for chain in bakery.chains(_with_plot_radii(nodes, options)):
         if chain is not None:
             yield chain
+
+
+def _first_told(
+    nodes: Iterator[Node | PackedNode], first_at: Callable[[np.ndarray], None]
+) -> Iterator[Node | PackedNode]:
+    """``nodes``, telling ``first_at`` where the first lies (its bounding-box centre) as it
+    passes."""
+    first = next(nodes, None)
+    if first is None:
+        return
+    first_at(np.array(first.placed_centre()))
+    yield first
+    yield from nodes
 
 
 def _object_count(scene: Scene) -> int | None:
@@ -162,6 +180,7 @@ class _Bakery:
                     seen.add(key)
                     yield node, self._options(radius)
 
+        self.step("converting", self.done, self.total)  # the stage starts: nothing sent yet
         formatter = self.pieces.formatter if self.pieces is not None else None
         made = batches(
             sent(), per_object, self.limits, self.plan_only, formatter,
@@ -234,15 +253,15 @@ class _Bakery:
 
 
 def _cell_chains(
-    scene: Scene, options: ChainOptions, hlod: HlodOptions, bakery: _Bakery
+    nodes: Iterable[Node | PackedNode], options: ChainOptions, hlod: HlodOptions, bakery: _Bakery
 ) -> Iterator[LodChain | CellChain]:
-    """The scene's objects baked and grouped into LOD parents, one coarsest cell at a time
+    """The objects ``nodes`` baked and grouped into LOD parents, one coarsest cell at a time
     (the objects wait on disk meanwhile, and go to be baked in the cells' order, so memory is
     bounded by the cells in flight), each followed by the members it left out; the cells are
     baked by the bakery's executor (:mod:`.city.cells`)."""
     hlod.check()
     with NodeSpool() as spool:
-        centres, radii = _spooled(scene.with_geometry(), options, spool)
+        centres, radii = _spooled(nodes, options, spool)
         plans = plan_cells(centres, hlod.sizes or (auto_size(centres),))
         order = (i for plan in plans for i in plan.object_indices())
         found = bakery.chains((spool.get(i), radii[i]) for i in order)
@@ -295,13 +314,12 @@ def merged(scenes: Sequence[Scene]) -> Scene:
 
 
 def _with_plot_radii(
-    scene: Scene, options: ChainOptions
+    nodes: Iterator[Node | PackedNode], options: ChainOptions
 ) -> Iterator[tuple[Node | PackedNode, float | None]]:
-    """The scene's nodes with geometry, each with the plot radius to use as its γ: unless
+    """``nodes`` (a scene's with geometry), each with the plot radius to use as its γ: unless
     ``options`` set γ, a city object's (a node with its own LoDs) comes from its neighbours'
     spacing (:mod:`.city.plots`), so a city is read through first, its nodes parked on disk
     (:class:`~.spool.NodeSpool`); a mesh file's nodes stay streamed (radius ``None``)."""
-    nodes = scene.with_geometry()
     first = next(nodes, None) if options.gamma is None else None
     if first is None or not first.is_city_object():
         for node in itertools.chain([first] if first is not None else [], nodes):
@@ -408,7 +426,7 @@ def convert(
         along = stack.enter_context(_check_along(sink, output_path, executor))
         items = iter_chains(
             scene, run.chain, baker, run.progress, run.warn, skipped, run.step, run.limits,
-            run.strict, run.hlod, executor, clock, pieces,
+            run.strict, run.hlod, executor, clock, pieces, assembly.first_at,
         )  # fmt: skip
         with clock("write"):
             chains = clock.iterate("assemble", assembly.recorded(items))
@@ -577,7 +595,7 @@ def _check_scheduler(scheduler: str, workers: int | None) -> None:
         from .dask_executor import scheduler_address
     except ImportError:
         raise UsageError(
-            "needs dask.distributed: pip install 'lodconvert[dask]'", "scheduler"
+            "needs dask.distributed: pip install '.[dask]' in a clone of lodconvert", "scheduler"
         ) from None
     scheduler_address(scheduler)
 
@@ -633,7 +651,7 @@ def _georef(scene: Scene) -> Georef | None:
 @dataclass
 class _Assembly:
     """What the run records of each baked item as the writer takes it: the objects' records,
-    the LOD parents and their draw counts, and the writers' scene frame (from the first)."""
+    the LOD parents and their draw counts, and the writers' scene frame (at the first object)."""
 
     scene: Scene
     info: OutputInfo
@@ -644,13 +662,19 @@ class _Assembly:
     frame: SceneFrame | None = None
     started: bool = False
 
+    def first_at(self, centre: np.ndarray) -> None:
+        """Where the input's first object lies: the scene frame's origin, for the writer too
+        (:attr:`~.io.OutputInfo.origin`), whatever the LOD parents bake first."""
+        self.info.origin = centre
+
     def recorded(self, items: Iterable[LodChain | CellChain]) -> Iterator[LodChain | CellChain]:
         """``items``, each recorded as it passes."""
         tally = tally_of(self.scene)
         dropped = tally.dropped_by_object if tally is not None else {}
         for item in items:
             if not self.started:
-                self.frame, self.started = scene_frame(self.info.framed, item), True
+                frame = scene_frame(self.info.framed, item, self.info.origin)
+                self.frame, self.started = frame, True
             objects = item.objects()
             for chain in objects:
                 self.records.append(
@@ -679,6 +703,7 @@ class _Assembly:
             named, output_path, baker, run.chain, self.records, skipped, clock.timings, tally
         )
         report["crs"] = crs_record
+        report["up"] = "z" if self.info.city else run.read_options.get("up") or "y"
         report["frame"] = self.frame.record() if self.frame is not None else None
         if self.hlod is not None:
             report["hlod"] = {"kind": self.hlod.kind, "cells": self.cells, "draw": self.draw}
@@ -712,6 +737,8 @@ def read_inputs(
     if (read_options or {}).get("crs") is not None:
         checked_crs_option(read_options["crs"])
     sources = sources or [input_format(path) for path in inputs]
+    if (read_options or {}).get("up") is not None:
+        _check_up(inputs, sources)
     scenes = [
         source.read_file(path, limits=limits, **(read_options or {}))
         for source, path in zip(sources, inputs, strict=True)
@@ -724,6 +751,18 @@ def read_inputs(
             )
     one_crs = in_one_crs(scenes, warn)
     return merged(one_crs.scenes), one_crs.record
+
+
+def _check_up(inputs: Sequence[str | Path], sources: Sequence[Format]) -> None:
+    """:class:`UsageError` where an up axis is given for an input whose reader takes none: a
+    city model, z-up by definition and turned y-up by its frame (:mod:`.io.frame`)."""
+    for path, source in zip(inputs, sources, strict=True):
+        if "up" not in source.read_options:
+            raise UsageError(
+                f"is for mesh files; {path} is a city model, z-up by definition (its scene is "
+                "turned y-up already)",
+                "up",
+            )
 
 
 def _reader_skipped(
@@ -781,7 +820,7 @@ def object_ranges(
     )  # fmt: skip
     rows = [
         _range_record(planned, options)
-        for planned in plan.chains(_with_plot_radii(scene, options))
+        for planned in plan.chains(_with_plot_radii(scene.with_geometry(), options))
         if isinstance(planned, ChainPlan)
     ]
     _reader_skipped(scene, skipped, warn if rows else _quiet)

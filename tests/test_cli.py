@@ -168,6 +168,18 @@ def test_bad_options_are_usage_errors(work: Path, args: list[str], words: list[s
     assert not out.exists()
 
 
+def test_a_scheduler_without_dask_says_the_install_that_works_from_a_clone(
+    work: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """lodconvert is on no package index: the missing dask extra is installed from the clone."""
+    monkeypatch.setitem(sys.modules, "lodconvert.dask_executor", None)  # its import fails
+    out = work / "out.x3d"
+    result = run(SAMPLE, "-o", out, "--scheduler", "tcp://127.0.0.1:8786")
+    assert_one_line_error(result, 2, "--scheduler needs dask.distributed", "pip install '.[dask]'")
+    assert "lodconvert[dask]" not in result.stderr
+    assert not out.exists()
+
+
 def test_debug_shows_the_traceback(work: Path) -> None:
     result = run(work / "missing.ply", "-o", work / "o.x3d", "--debug")
     assert result.returncode == 1 and "Traceback" in result.stderr

@@ -31,6 +31,8 @@ from lodconvert.validate import validate_file
 from lodconvert.viewer.config import page_config
 
 from .conftest import SAMPLE, SHARED, shared_data
+from .test_cityjson import city, square, surface_object, write_json
+from .test_cli import run
 
 TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
 FAR = np.array([500000.0, 5400000.0, 100.0])
@@ -327,3 +329,60 @@ def test_a_city_without_a_crs_is_upright_too(tmp_path: Path) -> None:
     assert doc["nodes"][root]["name"] == "scene_frame"
     scene = etree.parse(str(tmp_path / "city.x3d")).getroot().find("Scene")
     assert scene[0].get("DEF") == "scene_frame"
+
+
+def _street(tmp_path: Path) -> Path:
+    """Four flat buildings 10 m square (CityJSON, z-up), the first 900 m north-east of the
+    others: in 250 m cells it lies in the last cell of the grid, not the first."""
+    corners = []
+    for x, y in ((900.0, 900.0), (0.0, 0.0), (300.0, 0.0), (600.0, 600.0)):
+        corners += [[x + dx, y + dy, dz] for z in (0.0, 6.0) for dx, dy, dz in square(z)]
+    objects = {
+        f"b{k}": surface_object(
+            [[8 * k, 8 * k + 1, 8 * k + 2, 8 * k + 3]],
+            [[8 * k + 7, 8 * k + 6, 8 * k + 5, 8 * k + 4]],
+        )
+        for k in range(4)
+    }
+    return write_json(tmp_path / "street.city.json", city(objects, corners))
+
+
+def _origins(source: Path, folder: Path, flags: dict[str, tuple[str, ...]]) -> dict[str, list]:
+    """The scene origin each run of ``source`` (``flags`` by name; a name's suffix is the
+    output's) records in its file and its report."""
+    origins = {}
+    for name, extra in flags.items():
+        out, report = folder / name, folder / f"{name}.json"
+        result = run(source, "-o", out, "--report", report, "--levels", "2", *extra, "-q")
+        assert result.returncode == 0, result.stderr
+        frame = own_format(out).read_frame(out)
+        origins[name] = frame.origin.tolist()
+        assert json.loads(report.read_text())["frame"]["origin"] == origins[name]
+    return origins
+
+
+def test_the_scene_origin_depends_on_the_input_not_on_lod_parents(tmp_path: Path) -> None:
+    """Two outputs of one city overlay with one offset: the scene origin is where the input's
+    first building lies, with LOD parents (whose first cell holds other buildings) or without."""
+    flags = {
+        "plain.x3d": (),
+        "cells.glb": ("--hlod", "250"),
+        "tiers.x3d": ("--hlod", "250,1000"),
+    }
+    origins = _origins(_street(tmp_path), tmp_path, flags)
+    assert origins == {name: [905.0, 905.0, 3.0] for name in flags}, origins
+
+
+@pytest.mark.slow
+def test_a_real_citys_scene_origin_is_the_same_with_and_without_lod_parents(
+    tmp_path: Path,
+) -> None:
+    """TUM Munich (290 buildings): the origin was (4467678, 5334745, 526) plain, (4467674,
+    5334671, 527) with --hlod 250 and (4467817, 5334750, 529) with --hlod 250,1000."""
+    flags = {
+        "plain.glb": (),
+        "cells.x3d": ("--hlod", "250"),
+        "tiers.glb": ("--hlod", "250,1000"),
+    }
+    origins = _origins(_tum(), tmp_path, flags)
+    assert origins == {name: [4467678.0, 5334745.0, 526.0] for name in flags}, origins

@@ -1,6 +1,7 @@
 """The set-up scripts' apt_install (scripts/_env.sh) waits while another process holds apt's or
 dpkg's lock instead of failing: run against a lock file of the test's own, held by a child
-process, with stand-ins for dpkg, apt-get and sudo on PATH (nothing is installed, no root)."""
+process, with stand-ins for dpkg, apt-get and sudo on PATH (nothing is installed, no root).
+scripts/test.sh lets tests skip what is absent; only CI (.ci/run) makes them fail instead."""
 
 from __future__ import annotations
 
@@ -95,3 +96,57 @@ def test_apt_install_gives_up_after_the_wait(tmp_path: Path, stand_ins: dict[str
     assert run.returncode == 1, run.stderr
     assert f"{lock} is still held by process {child.pid} after 1 s" in run.stderr
     assert not Path(stand_ins["APT_LOG"]).exists()
+
+
+REQUIRE_FLAGS = (
+    "LODCONVERT_REQUIRE_VALIDATORS",
+    "LODCONVERT_REQUIRE_GL",
+    "LODCONVERT_REQUIRE_BROWSER",
+)
+
+FAKE_ENV = """set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+apt_install() { :; }
+make_venv() { :; }
+npm_install_pinned() { :; }
+"""
+"""scripts/_env.sh with nothing installed."""
+
+FAKE_PYTHON = """#!/bin/sh
+echo "$2" $(env | grep '^LODCONVERT_REQUIRE_' | sort) >> "$(dirname "$0")/../../calls.log"
+"""
+""".venv/bin/python that logs, per call, the module it runs (pytest, ruff) and the
+LODCONVERT_REQUIRE_* flags it runs with."""
+
+
+def _flags_of(tmp_path: Path, script: str) -> list[str]:
+    """The LODCONVERT_REQUIRE_* flags the pytest of ``script`` (scripts/test.sh or .ci/run,
+    copied into a tree with stand-ins for _env.sh and the venv) ran with."""
+    for name in ("scripts/test.sh", ".ci/run"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text((ROOT / name).read_text())
+    (tmp_path / "scripts" / "_env.sh").write_text(FAKE_ENV)
+    python = tmp_path / ".venv" / "bin" / "python"
+    python.parent.mkdir(parents=True)
+    python.write_text(FAKE_PYTHON)
+    python.chmod(0o755)
+    env = {k: v for k, v in os.environ.items() if not k.startswith("LODCONVERT_REQUIRE_")}
+    run = subprocess.run(
+        ["bash", script], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60
+    )
+    assert run.returncode == 0, run.stderr
+    calls = [line.split() for line in (tmp_path / "calls.log").read_text().splitlines()]
+    (pytest_flags,) = [flags for module, *flags in calls if module == "pytest"]
+    return pytest_flags
+
+
+def test_the_test_script_lets_tests_skip_what_is_absent(tmp_path: Path) -> None:
+    """scripts/test.sh on a fresh clone (no ../shared, no validators) runs pytest with no
+    LODCONVERT_REQUIRE_* flag, so the tests that need what is absent skip."""
+    assert _flags_of(tmp_path, "scripts/test.sh") == []
+
+
+def test_ci_requires_validators_gl_and_a_browser(tmp_path: Path) -> None:
+    """.ci/run runs scripts/test.sh's pytest with every LODCONVERT_REQUIRE_* flag set, so that
+    a missing validator, GL context or Chromium fails the run."""
+    assert _flags_of(tmp_path, ".ci/run") == sorted(f"{flag}=1" for flag in REQUIRE_FLAGS)

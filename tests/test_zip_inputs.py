@@ -58,8 +58,9 @@ def same_nodes(got: Path, expected: Path) -> None:
 
 
 def test_a_city_json_in_a_zip_reads_and_converts_as_the_file(tmp_path: Path) -> None:
-    path = zipped(tmp_path / "delft.zip", {"3-20-DELFSHAVEN/delft.city.json": DELFT.read_bytes()})
-    same_nodes(path, shared_data(DELFT))
+    data = shared_data(DELFT).read_bytes()
+    path = zipped(tmp_path / "delft.zip", {"3-20-DELFSHAVEN/delft.city.json": data})
+    same_nodes(path, DELFT)
     result = run(path, "-o", tmp_path / "delft.glb", "--backend", "numpy", "-q")
     assert result.returncode == 0, result.stderr
     assert "570 object(s)" in result.stderr

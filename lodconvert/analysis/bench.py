@@ -6,7 +6,7 @@ the same grid drawing the original mesh — the shape of the PCD paper's Tables 
 centred on x = 0, rows at y = 0, s·α, 2·s·α, … going away from the camera. Each instance's LOD
 centre (the bounding-box centre) sits above its lattice point so that the object's lowest point
 touches the ground. Models are taken as y-up (glTF's convention, and the Stanford scans') and
-turned z-up (``up="z"`` leaves them as they are).
+turned z-up (``up="z"`` leaves them as they are; any of x, y, z, -x, -y, -z as ``convert --up``).
 
 **Camera.** Fixed, in units of α, whatever N: the eye at :data:`EYE` (5 α in front of the first
 row, 1.5 α above the ground), looking at :data:`TARGET` (12 α down the middle of the grid, on
@@ -52,6 +52,7 @@ import numpy as np
 
 from ..errors import InputError, UsageError
 from ..io import read_chains, read_scene
+from ..io.frame import ROTATION, y_up
 from ..model import Level, LodChain
 from ..ranges import REFERENCE_VIEW, ReferenceView
 from .render import OffscreenRenderer, look_at, perspective
@@ -208,12 +209,9 @@ def grid_points(count: int, spacing: float) -> np.ndarray:
 
 
 def up_rotation(up: str) -> np.ndarray:
-    """Rotation (3, 3) taking a model's ``up`` axis ("y" or "z") to world +z."""
-    if up == "y":
-        return np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-    if up == "z":
-        return np.eye(3)
-    raise UsageError(f"must be y or z, got {up!r}", "up")
+    """Rotation (3, 3) taking a model's ``up`` axis (one of :data:`~..io.frame.UP_AXES`) to
+    world +z: to +y as ``convert --up`` turns it, then +y to +z."""
+    return ROTATION.T @ y_up(up)
 
 
 def frustum_planes(view_proj: np.ndarray) -> np.ndarray:

@@ -2,8 +2,9 @@
 
 On a terminal, progress is a bar per stage (reading, converting, checking) with count, rate and
 time left (tqdm); elsewhere (a log, CI) it is a plain line per stage at most every
-:data:`LINE_SECONDS` and when the stage ends. ``-v`` adds every step's detail, ``-q`` keeps the
-final summary line only, ``-qq`` (``--silent``) prints errors only.
+:data:`LINE_SECONDS` and when the stage ends (unless its last line already said its count), each
+with the time from the stage's start to its count. ``-v`` adds every step's detail, ``-q`` keeps
+the final summary line only, ``-qq`` (``--silent``) prints errors only.
 """
 
 from __future__ import annotations
@@ -29,9 +30,10 @@ class Console:
         self.start = time.perf_counter()
         self._bar = None
         self._stage: str | None = None
-        self._stage_start = self._last_line = 0.0
+        self._stage_start = self._last_line = self._done_at = 0.0
         self._done = 0
         self._total: int | None = None
+        self._printed: int | None = None  # the count the stage's last plain line said
 
     def progress(self, message: str) -> None:
         """A step's detail (shown with ``-v``)."""
@@ -46,6 +48,7 @@ class Console:
         if stage != self._stage:
             self.end_stage()
             self._stage, self._stage_start, self._last_line = stage, now, now
+            self._printed = None
             if self.live:
                 from tqdm import tqdm
 
@@ -57,30 +60,33 @@ class Console:
                     leave=False,
                     mininterval=BAR_SECONDS,
                 )
-        self._done, self._total = done, total
+        self._done, self._total, self._done_at = done, total, now
         if self._bar is not None:
             self._bar.total = total
             self._bar.update(done - self._bar.n)
         elif now - self._last_line >= LINE_SECONDS:
             self._last_line = now
-            self._write(self._line(now))
+            self._print_line()
 
     def end_stage(self, report: bool = True) -> None:
-        """Close the current stage's bar, or print its last plain line (when ``report``)."""
+        """Close the current stage's bar, or print its last plain line (when ``report``, and
+        the stage's last line did not say its count already)."""
         if self._stage is None:
             return
         if self._bar is not None:
             self._bar.close()
             self._bar = None
-        elif report and not self.quiet and self._done:
-            self._write(self._line(time.perf_counter()))
+        elif report and not self.quiet and self._done and self._done != self._printed:
+            self._print_line()
         self._stage = None
 
-    def _line(self, now: float) -> str:
-        seconds = now - self._stage_start
+    def _print_line(self) -> None:
+        """The stage's plain line: its count, and the time from its start to that count."""
+        seconds = self._done_at - self._stage_start
         total = f"/{self._total:,}" if self._total else ""
         rate = f", {self._done / seconds:,.0f}/s" if seconds > 0 and self._done > 1 else ""
-        return f"{self._stage}: {self._done:,}{total} ({seconds:.1f} s{rate})"
+        self._write(f"{self._stage}: {self._done:,}{total} ({seconds:.1f} s{rate})")
+        self._printed = self._done
 
     def warn(self, message: str) -> None:
         """A problem that did not stop the run (shown unless ``-qq``)."""

@@ -24,6 +24,7 @@ from ..analysis.bench import (
     run_bench,
 )
 from ..cli import EXIT_OK, Console, parse_list
+from ..io.frame import UP_AXES
 
 DESCRIPTION = (
     "Render a k×k grid of instances of an object from a fixed camera, each drawing the level its "
@@ -71,7 +72,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--object", metavar="ID", help="object to instance (default: the first)")
     parser.add_argument(
-        "--up", choices=("y", "z"), default="y", help="the model's up axis (default y, as glTF)"
+        "--up",
+        choices=UP_AXES,
+        default="y",
+        help="the model's up axis (default y, as glTF; a negative one as --up=-z)",
     )
     parser.add_argument(
         "--no-frustum-culling",

@@ -26,6 +26,7 @@ from ..cli.options import (
 )
 from ..errors import UsageError
 from ..io import output_format
+from ..io.frame import UP_AXES
 from ..io.x3d import SWITCHING_MODES
 from ..limits import DEFAULT_LIMITS
 from ..sinks import DirectorySink, FileSink, Outputs
@@ -62,6 +63,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--version", action="version", version=f"lodconvert {__version__}")
     read = add_read_options(parser)
+    read.add_argument(
+        "--up",
+        choices=UP_AXES,
+        help="mesh files: the model's up axis, turned to +Y (glTF's and X3D's up) as it is "
+        "read; a negative one as --up=-z (default y; a usage error for city models, which are "
+        "z-up and turned already)",
+    )
     read.add_argument(
         "--strict",
         action="store_true",
@@ -229,7 +237,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         step=console.step,
         warn=console.warn,
         report_path=args.report,
-        read_options=read_options(args),
+        read_options={**read_options(args), "up": args.up},
         strict=args.strict,
         hlod=hlod,
         write_options={"switching": args.switching, "sse": args.sse},

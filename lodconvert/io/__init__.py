@@ -73,6 +73,11 @@ class OutputInfo:
     georef: Any = None
     """Where the scene's coordinates lie (:class:`~lodconvert.reproject.Georef`; ``None``
     without a CRS, or with one pyproj does not know), for outputs placed on the globe."""
+    origin: Any = None
+    """Where the input's first object lies (its bounding-box centre, a (3,) array, scene
+    coordinates): the scene frame's origin before rounding (:func:`~.frame.scene_frame`). The
+    pipeline sets it as that object is read, before any chain reaches the writer; ``None``: the
+    first chain's origin."""
 
     @property
     def framed(self) -> bool:

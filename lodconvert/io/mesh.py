@@ -34,6 +34,7 @@ from ..errors import InputError
 from ..limits import DEFAULT_LIMITS, Limits
 from ..model import Mesh, Node, Scene, Surface
 from . import Format, suffix_of
+from .frame import y_up
 from .geometry_checks import (
     InputTally,
     attach_tally,
@@ -545,14 +546,20 @@ def _nodes(
         )
 
 
-def read_mesh(path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_LIMITS) -> Scene:
+def read_mesh(
+    path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_LIMITS, up: str = "y"
+) -> Scene:
     """Read a mesh file into a Scene; raise :class:`InputError` with a one-line reason.
 
     ``merge_groups``: read an OBJ file's objects / groups as one node (other formats keep their
     scene-graph nodes). ``limits``: the decompressed size, vertices and faces the file may
-    hold. The scene carries an :class:`~.geometry_checks.InputTally` of the faces dropped (no
-    area) and the objects skipped (none left).
+    hold. ``up``: the model's up axis (:data:`~.frame.UP_AXES`), turned to +y as it is read:
+    each object's placement is turned (:func:`~.frame.y_up`). The scene carries an
+    :class:`~.geometry_checks.InputTally` of the faces dropped (no area) and the objects
+    skipped (none left).
     """
+    turn = np.eye(4)
+    turn[:3, :3] = y_up(up)  # before any work: a bad axis is a usage error
     path = Path(path)
     suffix = suffix_of(path)
     if not path.exists():
@@ -587,6 +594,8 @@ def read_mesh(path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_L
         raise InputError(f"cannot be read as {fmt}: {reason}", str(path)) from None
 
     instances = _obj_instances(loaded, labels) if suffix == ".obj" else _graph_instances(loaded)
+    if up != "y":
+        instances = [inst._replace(transform=turn @ inst.transform) for inst in instances]
     file_name = path.name.split(".")[0]
     checked = _checked_geometry(loaded, tally)
     kept = _kept(loaded, instances, checked, tally)
@@ -599,5 +608,8 @@ def read_mesh(path: Path, merge_groups: bool = False, limits: Limits = DEFAULT_L
 
 
 FORMAT = Format(
-    name="mesh", suffixes=MESH_SUFFIXES, read=read_mesh, read_options=("merge_groups", "limits")
+    name="mesh",
+    suffixes=MESH_SUFFIXES,
+    read=read_mesh,
+    read_options=("merge_groups", "limits", "up"),
 )

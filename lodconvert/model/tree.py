@@ -91,14 +91,19 @@ class Node:
         text = self.written()
         return replace(self, id=text.id, children=[], attributes=text.attributes, cut=text.cut)
 
-    def ground_centre(self) -> tuple[float, float]:
-        """Where its geometry's bounding-box centre is, seen from above, in scene coordinates."""
+    def placed_centre(self) -> tuple[float, float, float]:
+        """Where its geometry's bounding-box centre is, in scene coordinates."""
         assert self.geometry is not None
         centre = np.append(self.geometry.bounds.mean(axis=0), 1.0)
         if self.transform is not None:
             centre = np.asarray(self.transform, dtype=np.float64) @ centre
-        x, y = self.offset[:2] + centre[:2]
-        return float(x), float(y)
+        x, y, z = self.offset + centre[:3]
+        return float(x), float(y), float(z)
+
+    def ground_centre(self) -> tuple[float, float]:
+        """Where its geometry's bounding-box centre is, seen from above, in scene coordinates."""
+        x, y, _ = self.placed_centre()
+        return x, y
 
     def is_city_object(self) -> bool:
         """Whether it has source LoDs of its own."""
@@ -127,8 +132,8 @@ class PackedNode:
     type: str
     city: bool
     """Whether it has source LoDs of its own (a city object)."""
-    centre: tuple[float, float]
-    """:meth:`Node.ground_centre`."""
+    centre: tuple[float, float, float]
+    """:meth:`Node.placed_centre`."""
     weight: int
     """:meth:`Node.geometry_bytes`."""
     data: bytes
@@ -142,7 +147,7 @@ class PackedNode:
         parked = node.parked()
         data = pickle.dumps(parked, protocol=pickle.HIGHEST_PROTOCOL)
         return cls(
-            parked.id, parked.type, parked.is_city_object(), parked.ground_centre(),
+            parked.id, parked.type, parked.is_city_object(), parked.placed_centre(),
             parked.geometry_bytes(), data,
         )  # fmt: skip
 
@@ -165,8 +170,11 @@ class PackedNode:
     def is_city_object(self) -> bool:
         return self.city
 
-    def ground_centre(self) -> tuple[float, float]:
+    def placed_centre(self) -> tuple[float, float, float]:
         return self.centre
+
+    def ground_centre(self) -> tuple[float, float]:
+        return self.centre[0], self.centre[1]
 
     def geometry_bytes(self) -> int:
         return self.weight

@@ -7,7 +7,8 @@
 // state (`tiles`: the tiles selected, `failed`: tiles that failed to load, `selected`, `picked`,
 // `settled`: the view's tiles loaded and drawn) and setCamera / screenPoint. ?target=X,Y,Z (ECEF metres) &range= &heading=
 // &pitch= (degrees) in the URL set the first view, else it frames the whole tileset from the
-// south, 35° above the horizon.
+// south, 35° above the horizon. The light comes from above the camera (not from the sun at the
+// clock's time).
 
 const config = JSON.parse(document.getElementById("lodconvert-config").textContent);
 const readout = document.getElementById("readout");
@@ -16,6 +17,9 @@ const PITCH_DEG = -35;
 /** How far (CSS pixels) the pointer may move between press and release of a click. */
 const CLICK_SLOP_PX = 4;
 const HIGHLIGHT = "#ff9900";
+/** The light's intensity (CesiumJS's diffuse term is the colour / π times it): a roof seen from
+ * 35° to 60° above shows within a few levels of its own colour, as the three.js page shows it. */
+const LIGHT_INTENSITY = 3;
 let Cesium, widget, tileset, highlighted = null;
 
 const state = {
@@ -172,6 +176,28 @@ function watchFrames() {
   });
 }
 
+/** Light the scene from above the camera, each frame: down-and-forward, half-way between the
+ * view direction and straight down, so that roofs face it nearly straight on and the walls
+ * facing the camera are half lit. CesiumJS's default light, the sun at the clock's time, leaves
+ * a city dark at night and at dusk. */
+function lightFromAboveTheCamera(scene) {
+  const light = new Cesium.DirectionalLight({
+    direction: new Cesium.Cartesian3(0, 0, -1),
+    intensity: LIGHT_INTENSITY,
+  });
+  const down = new Cesium.Cartesian3();
+  scene.light = light;
+  scene.preRender.addEventListener(() => {
+    const camera = scene.camera;
+    Cesium.Ellipsoid.WGS84.geodeticSurfaceNormal(camera.positionWC, down);
+    Cesium.Cartesian3.negate(down, down);
+    const forward = Cesium.Cartesian3.add(camera.directionWC, down, light.direction);
+    // looking straight up, the two cancel: light from straight above
+    if (Cesium.Cartesian3.magnitude(forward) < 1e-6) Cesium.Cartesian3.clone(down, forward);
+    Cesium.Cartesian3.normalize(forward, light.direction);
+  });
+}
+
 /** Resolves once the view is settled after a change. */
 function settle() {
   state.settled = false;
@@ -237,6 +263,7 @@ async function start() {
     maximumRenderTimeChange: Infinity,
   });
   widget.scene.globe.baseColor = Cesium.Color.fromCssColorString("#4a4f58");
+  lightFromAboveTheCamera(widget.scene);
   readout.textContent = `loading ${config.asset} …`;
   tileset = await Cesium.Cesium3DTileset.fromUrl(config.asset, {
     maximumScreenSpaceError: config.sse,

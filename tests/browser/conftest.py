@@ -5,7 +5,7 @@ The site is a temporary folder holding links to ``node_modules`` (the viewer lib
 installed at the repository root) and ``pages`` (this folder's test pages), and the files the
 tests write; :func:`lodconvert.viewer.serve` serves it, as ``lodconvert view --serve`` does.
 Without Chromium, node or the npm packages the tests skip, or fail where
-``LODCONVERT_REQUIRE_BROWSER=1`` (as ``scripts/test.sh`` sets).
+``LODCONVERT_REQUIRE_BROWSER=1`` (as ``.ci/run`` sets).
 """
 
 from __future__ import annotations

@@ -2,11 +2,11 @@
 token, no imagery, no terrain) through lodconvert's tileset page (``lodconvert view
 DIR/tileset.json``), driven by tiles.mjs: TUM Munich in 250 m and 1 km cells loads with no
 tile failing; from near, clicking a known building picks its feature in a leaf tile, with the
-source's id and attributes, and the inspect panel shows them; from far, the cells show their
-far levels, not their buildings' tiles. A small city with point far levels loads and shows them
-from afar. Without CesiumJS the page says where it failed to load it. Each camera's tiles
-selected and bytes requested are recorded (and printed in the viewer measurements). Every wait
-is on page state."""
+source's id and attributes, and the inspect panel shows them; a roof shows in its own colour;
+from far, the cells show their far levels, not their buildings' tiles. A small city with point
+far levels loads and shows them from afar. Without CesiumJS the page says where it failed to
+load it. Each camera's tiles selected and bytes requested are recorded (and printed in the
+viewer measurements). Every wait is on page state."""
 
 from __future__ import annotations
 
@@ -17,8 +17,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from lodconvert.io.tiles.check import accessor, frame_points, read_glb
+from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.viewer import write_page
 
 from ..conftest import ROOT, require
@@ -139,6 +141,40 @@ def test_cesium_picks_a_building_near_and_shows_far_levels_far(
     assert kinds == {"far level"}, message
     assert all(Path(camera["shot"]).stat().st_size > 10_000 for camera in (near, far))
     _record(measure, "TUM", [seen_near, seen_far])
+
+
+ROOF_TOLERANCE = 24
+"""How far (in a channel, 0-255) a lit roof's colour may lie from its own: the three.js page shows
+TUM's roofs at (178, 92, 76), CesiumJS's default light (the sun at the clock's time) at
+(77, 27, 25) in a night-time run."""
+
+
+def _colour_at(shot: Path, at: dict[str, float]) -> np.ndarray:
+    """The median colour of the 9×9 pixels around CSS pixel ``at`` of screenshot ``shot``."""
+    x, y = round(at["x"]), round(at["y"])
+    pixels = np.asarray(Image.open(shot).convert("RGB"))[y - 4 : y + 5, x - 4 : x + 5]
+    return np.median(pixels.reshape(-1, 3), axis=0)
+
+
+def test_cesium_shows_a_roof_in_its_own_colour(
+    tum: Path, look: Drive, site: Path, tmp_path: Path, measure: Callable[[str, str], None]
+) -> None:
+    """A flat roof seen from 35° and 60° above, whatever the time of day, shows about the roof
+    colour its tile holds, as three.js shows it: the page's light comes from above the camera."""
+    roof, _ = _roof(tum, EXPOSED)
+    cameras = [
+        {"name": f"roof {-pitch}°", "target": roof, "range": NEAR_M, "pitch": pitch}
+        for pitch in (-35, -60)
+    ]
+    for camera in cameras:
+        camera["shot"] = str(tmp_path / f"roof{-camera['pitch']}.png")
+    out = look("cameras", page=_page(site, tum), cameras=cameras)
+    expected = DEFAULT_CLASS_COLORS["roof"][:3]
+    for camera, seen in zip(cameras, out["result"]["cameras"], strict=True):
+        colour = _colour_at(Path(camera["shot"]), seen["at"])
+        measure(f"CesiumJS TUM {camera['name']}, roof colour", f"{colour.astype(int).tolist()}")
+        message = f"{camera['name']}: {colour} against {expected}\n{console_text(out)}"
+        assert np.abs(colour - expected).max() <= ROOF_TOLERANCE, message
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,8 @@
 // tilesSelected, tiles ([{uri, kind, geometricError}]), bytes (content bytes requested: tile
 // .glb and .json files, the page's tileset.json included), requests (their number), failed
 // (tiles that failed to load) and, with click, what the click picked and the inspect panel's
-// heading and rows. benchmarks call it too (tilesbench).
+// heading and rows; with a target, where it shows (`at`: CSS pixels). benchmarks call it too
+// (tilesbench).
 
 import { doing, evaluate, run, waitFor } from "./harness.mjs";
 
@@ -82,6 +83,10 @@ async function look(page, base, params, camera) {
     const bytes = requested.reduce((a, b) => a + b, 0);
     const out = { name: camera.name, tilesSelected: seen.tiles.length, ...seen, bytes,
       requests: requested.length };
+    if (camera.target) {
+      out.at = await evaluate(page, `projecting ${camera.target}`,
+        (p) => window.lodconvertViewer.screenPoint(p), camera.target);
+    }
     if (camera.click) {
       await clickAt(page, camera.target);
       out.picked = await evaluate(page, "reading the pick", () => window.lodconvertViewer.picked);

@@ -741,7 +741,7 @@ class _Document:
     def add(self, item: LodChain | CellChain) -> None:
         """Add a chain, or a LOD parent with everything in it, to the scene."""
         if not self.scene_nodes:
-            self.frame = scene_frame(self.info.framed, item)
+            self.frame = scene_frame(self.info.framed, item, self.info.origin)
         self.scene_nodes.append(len(self.nodes))
         self._add(item)
 

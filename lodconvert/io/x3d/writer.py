@@ -997,7 +997,7 @@ def write_x3d(
         with out.node("Scene"):
             items = iter(chains)
             first = next(items, None)
-            frame = scene_frame(info.framed, first) if first is not None else None
+            frame = scene_frame(info.framed, first, info.origin) if first is not None else None
             box = SceneBox(frame)
             shift = frame.origin if frame is not None else np.zeros(3)
             doc = _Document(switching, shift, pieces or Pieces())
