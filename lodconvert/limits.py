@@ -34,6 +34,9 @@ class Limits:
     input."""
     sequence_line_bytes: int = 64 * MIB
     """Bytes of one line of a CityJSONSeq input (its header or one feature)."""
+    tileset_json_bytes: int = 16 * MIB
+    """Bytes of one tileset JSON that ``validate`` and ``view`` read (the top file and each
+    external tileset); a larger file is refused before it is read."""
 
     def check(self) -> None:
         """Raise :class:`UsageError` unless every limit is a positive whole number."""

@@ -49,16 +49,24 @@ def parse_list(text: str, kind: type, flag: str) -> tuple:
     return values
 
 
-def add_read_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup:
-    """``--limit`` and the reading options ``--merge-groups``, ``--types``, ``--colors`` and
-    ``--crs``; returns their group."""
+def add_limit_option(
+    parser: argparse.ArgumentParser, example: str = "decompressed_bytes=8G"
+) -> None:
+    """``--limit NAME=VALUE`` (repeatable): the run's :class:`~lodconvert.limits.Limits` are
+    ``DEFAULT_LIMITS.with_text(args.limit)``."""
     parser.add_argument(
         "--limit",
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help="raise (or lower) a limit, e.g. decompressed_bytes=8G (see the README's table)",
+        help=f"raise (or lower) a limit, e.g. {example} (see the README's table)",
     )
+
+
+def add_read_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup:
+    """``--limit`` and the reading options ``--merge-groups``, ``--types``, ``--colors`` and
+    ``--crs``; returns their group."""
+    add_limit_option(parser)
     read = parser.add_argument_group("reading")
     read.add_argument(
         "--merge-groups",

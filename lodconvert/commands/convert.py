@@ -220,7 +220,9 @@ def run(args: argparse.Namespace, console: Console) -> int:
         page = page_path(args.output)
         if isinstance(sink, DirectorySink):  # a tileset: the page goes inside its folder
             source = sink.staged.temp / page.with_suffix("").name
-            text = render_page(Path(args.output), page, args.viewer_lib, source=source)
+            text = render_page(
+                Path(args.output), page, args.viewer_lib, source=source, limits=limits
+            )
             with sink.file(page.name) as handle:
                 handle.write(text.encode("utf-8"))
         else:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 
 from ..cli import EXIT_ERROR, EXIT_OK, Console
+from ..cli.options import add_limit_option
+from ..limits import DEFAULT_LIMITS
 from ..validate import errors_of, validate_file
 
 DESCRIPTION = (
@@ -25,6 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="PATH",
         help="also validate X3D against this XSD (or folder holding x3d-4.0.xsd and catalog.xml)",
     )
+    add_limit_option(parser, "tileset_json_bytes=64M")
     parser.add_argument("-q", "--quiet", action="store_true", help="print errors only")
 
 
@@ -32,8 +35,9 @@ def run(args: argparse.Namespace, console: Console) -> int:
     """Print the findings of every file and a summary line per file (errors only with
     --quiet) on stdout."""
     failed = False
+    limits = DEFAULT_LIMITS.with_text(args.limit)
     for path in args.files:
-        findings = validate_file(path, x3d_schema=args.x3d_schema)
+        findings = validate_file(path, x3d_schema=args.x3d_schema, limits=limits)
         errors = errors_of(findings)
         failed = failed or bool(errors)
         for finding in errors if args.quiet else findings:

@@ -7,7 +7,8 @@ import threading
 import urllib.parse
 
 from ..cli import EXIT_OK, Console
-from ..cli.options import add_viewer_lib_option
+from ..cli.options import add_limit_option, add_viewer_lib_option
+from ..limits import DEFAULT_LIMITS
 from ..viewer import library_mounts, serve, write_page
 
 DESCRIPTION = (
@@ -37,12 +38,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "and print the page's URL (Ctrl-C stops)",
     )
     parser.add_argument("--port", type=int, default=0, help="port for --serve (default: any)")
+    add_limit_option(parser, "tileset_json_bytes=64M")
     parser.add_argument("-q", "--quiet", action="store_true", help="print errors only")
 
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Write the page; with --serve, serve its folder (and the library's) until interrupted."""
-    page = write_page(args.asset, args.output, args.viewer_lib, served=args.serve)
+    limits = DEFAULT_LIMITS.with_text(args.limit)
+    page = write_page(args.asset, args.output, args.viewer_lib, served=args.serve, limits=limits)
     console.info(f"wrote {page}")
     if args.serve:
         mounts = library_mounts(args.viewer_lib, page.parent)

@@ -17,16 +17,21 @@ from ..errors import InputError, LodConvertError
 from ..io import own_format
 from ..io.findings import ERROR, WARNING, Finding, Findings
 from ..io.x3d.check import load_x3d_schema
+from ..limits import DEFAULT_LIMITS, Limits
 
 
 def validate_file(
-    path: str | Path, x3d_schema: str | Path | None = None, kind: str | None = None
+    path: str | Path,
+    x3d_schema: str | Path | None = None,
+    kind: str | None = None,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> list[Finding]:
     """Check ``path`` and return its findings (empty when it passes).
 
-    ``kind`` is the format suffix (``.x3d``, ``.glb``, ``.gltf``; default: ``path``'s suffix).
-    ``x3d_schema`` is an XSD file (or a folder holding ``x3d-4.0.xsd``) that X3D documents are
-    validated against too. Raises :class:`LodConvertError` only when that schema cannot be
+    ``kind`` is the format suffix (``.x3d``, ``.glb``, ``.gltf``, ``.json``; default:
+    ``path``'s suffix). ``x3d_schema`` is an XSD file (or a folder holding ``x3d-4.0.xsd``)
+    that X3D documents are validated against too; ``limits`` bound what a tileset's check
+    reads (``tileset_json_bytes``). Raises :class:`LodConvertError` only when that schema cannot be
     loaded; every problem of the file itself is a finding.
     """
     path = Path(path)
@@ -45,7 +50,7 @@ def validate_file(
         findings.error("EMPTY", "the file is empty")
     else:
         schema = load_x3d_schema(x3d_schema) if x3d_schema is not None and kind == ".x3d" else None
-        check(path, findings, schema)
+        check(path, findings, limits if kind == ".json" else schema)
     return findings.items
 
 

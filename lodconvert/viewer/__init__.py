@@ -48,6 +48,7 @@ from typing import Any, ClassVar
 
 from .. import __version__, manifest
 from ..errors import UsageError
+from ..limits import DEFAULT_LIMITS, Limits
 from ..sinks import Outputs
 from .config import page_config
 from .tileset import tileset_config
@@ -189,12 +190,13 @@ def render_page(
     library: str | None = None,
     served: bool = False,
     source: Path | None = None,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> str:
     """The HTML of the page at ``page`` showing ``asset`` (``served``: see
     :func:`library_base`); the configuration is read from ``source`` (default ``asset``: a
-    staged copy while the run has not committed it)."""
+    staged copy while the run has not committed it), a tileset's within ``limits``."""
     tiles = FORMATS.get(asset.suffix.lower()) == "tiles"
-    config = (tileset_config if tiles else page_config)(source or asset)
+    config = tileset_config(source or asset, limits) if tiles else page_config(source or asset)
     config["asset"] = _url(asset, page.parent)
     kind = config["format"]
     base = library_base(kind, library, page.parent, served)
@@ -222,14 +224,17 @@ def write_page(
     page: str | Path | None = None,
     library: str | None = None,
     served: bool = False,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> Path:
     """Write the viewer page of ``asset`` (atomically; default :func:`page_path`) and return
     its path. Raises :class:`~lodconvert.errors.InputError` for an asset lodconvert did not
-    write and :class:`~lodconvert.errors.UsageError` for a bad ``library`` (one outside the
-    page's folder unless ``served``, see :func:`library_base`), both before writing."""
+    write (or a tileset that cannot be read within ``limits``, that names files outside its
+    folder or whose external tilesets form a cycle: :func:`.tileset.tileset_config`) and
+    :class:`~lodconvert.errors.UsageError` for a bad ``library`` (one outside the page's
+    folder unless ``served``, see :func:`library_base`), both before writing."""
     asset = Path(asset)
     page = Path(page) if page is not None else page_path(asset)
-    data = render_page(asset, page, library, served).encode("utf-8")
+    data = render_page(asset, page, library, served, limits=limits).encode("utf-8")
     with Outputs(inputs=[asset]) as outputs:
         outputs.file(page).write_bytes(data)
         if page.parent == asset.parent and FORMATS.get(asset.suffix.lower()) == "tiles":

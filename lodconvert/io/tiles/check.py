@@ -2,7 +2,9 @@
 on its staged folder): what the official validator does not check, and what lodconvert
 promises.
 
-- every URI resolves to a file inside the tileset's folder (external tilesets checked in turn);
+- every content URI names a file inside the tileset's folder, external tilesets read each once
+  and within the run's limits (:mod:`.tree`, which reads and walks the tileset for this
+  module and for ``lodconvert view``);
 - geometricError: the tileset's ≥ its root's, strictly decreasing from parent to child (equal
   only from a tile to the root of the external tileset it refers to), 0 at leaves;
   ``refine`` ``REPLACE`` everywhere;
@@ -16,12 +18,16 @@ from __future__ import annotations
 
 import json
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ...limits import DEFAULT_LIMITS, Limits
 from ..findings import Findings
+from ..gltf.stream import Source, too_deep
+from .tree import MAX_DEPTH, Problem, Tile, walk
 
 TOLERANCE = 1e-3
 """Metres a position or a child's corner may lie outside a box (float rounding)."""
@@ -33,65 +39,73 @@ _BYTES = {"INT8": 1, "UINT8": 1, "INT16": 2, "UINT16": 2, "INT32": 4, "UINT32": 
           "UINT64": 8, "FLOAT32": 4, "FLOAT64": 8}  # fmt: skip
 
 
-def check_tileset(path: Path, findings: Findings, _options: Any = None) -> None:
-    """Check the tileset ``path`` (its external tilesets and contents too) into ``findings``."""
+def check_tileset(path: Path, findings: Findings, options: Any = None) -> None:
+    """Check the tileset ``path`` (its external tilesets and contents too) into ``findings``;
+    ``options`` the run's :class:`~lodconvert.limits.Limits` (default: the defaults; anything
+    else, such as an X3D schema, is ignored)."""
+    limits = options if isinstance(options, Limits) else DEFAULT_LIMITS
     try:
-        _Checker(path.parent.resolve(), findings).tileset(path, np.eye(4), None)
+        _Checker(findings).run(path, limits)
     except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
         findings.error("JSON", f"not a tileset as lodconvert writes them ({type(exc).__name__})")
 
 
+@dataclass(frozen=True)
+class _State:
+    """What a tile's checks leave for the tiles below it: its frame (ECEF), its geometric
+    error and whether points lie in its box (``None``: it has none)."""
+
+    frame: np.ndarray
+    error: float
+    inside: _BoxTest | None
+
+
 class _Checker:
-    """The checks of one tileset folder (``folder``, resolved), reported into ``findings``."""
+    """The checks of one tileset, reported into ``findings``; the tileset is read and walked by
+    :func:`.tree.walk`, which reports what it finds unreadable too."""
 
-    def __init__(self, folder: Path, findings: Findings) -> None:
-        self.folder, self.findings = folder, findings
+    def __init__(self, findings: Findings) -> None:
+        self.findings = findings
 
-    def _resolved(self, base: Path, uri: Any, where: str) -> Path | None:
-        """The file a content ``uri`` of the JSON file ``base`` names, if it lies in the
-        folder; else an error and ``None``."""
-        if not isinstance(uri, str) or not uri or "://" in uri or uri.startswith("/"):
-            self.findings.error("URI", f"{where}: content uri {uri!r} is not a relative path")
-            return None
-        target = (base.parent / uri).resolve()
-        if not target.is_relative_to(self.folder) or not target.is_file():
-            self.findings.error("URI", f"{where}: content uri {uri!r} resolves to no file here")
-            return None
-        return target
+    def _problem(self, problem: Problem) -> None:
+        self.findings.error(problem.code, str(problem))
 
-    def tileset(self, path: Path, frame: np.ndarray, parent_error: float | None) -> None:
-        """Check the tileset JSON ``path`` whose root lies in ``frame`` (ECEF), under a tile of
-        geometric error ``parent_error`` (``None``: the top tileset)."""
-        try:
-            data = json.loads(path.read_bytes())
-            root = data["root"]
-            error = float(data["geometricError"])
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            self.findings.error("JSON", f"{path.name}: not a tileset ({exc})")
-            return
-        if error < float(root.get("geometricError", 0.0)):
-            self.findings.error(
-                "GEOMETRIC_ERROR",
-                f"{path.name}: the tileset's geometricError {error} is below its root's "
-                f"{root.get('geometricError')}",
-            )
-        if parent_error is not None and float(root.get("geometricError", 0.0)) > parent_error:
-            self.findings.error(
-                "GEOMETRIC_ERROR",
-                f"{path.name}: root geometricError above the tile referring to it",
-            )
-        self.tile(path, root, frame, None, "root")
+    def run(self, path: Path, limits: Limits) -> None:
+        """Check every tile of the tileset ``path``."""
+        for tile in walk(path, self._problem, limits):
+            tile.state = self.tile(tile)
 
-    def tile(
-        self, base: Path, tile: dict, frame: np.ndarray, parent: dict | None, where: str
-    ) -> None:
-        """Check ``tile`` (of the JSON file ``base``, in its parent's ``frame``) and every
-        tile under it."""
-        transform = tile.get("transform")
+    def tile(self, tile: Tile) -> _State | None:
+        """Check ``tile`` (and, for a file's root, its tileset's geometric error) against the
+        tile above it; what the tiles below it need (``None``: they are not checked, as
+        ``tile`` was not)."""
+        node, where = tile.node, tile.where
+        if tile.parent is None:  # a file's root: above it, the tile that refers to the file
+            referrer = tile.referrer
+            above = referrer.state if referrer is not None else None
+            if referrer is not None and above is None:
+                return None
+            frame = np.eye(4) if above is None else above.frame
+            if not self._tileset(tile, None if above is None else above.error):
+                return None
+            parent = None
+        else:
+            above, parent = tile.parent.state, tile.parent.node
+            if above is None:
+                return None
+            frame = above.frame
+        transform = node.get("transform")
         if transform is not None:
             frame = frame @ np.asarray(transform, dtype=np.float64).reshape(4, 4).T
-        error = float(tile.get("geometricError", -1.0))
-        if tile.get("refine", "REPLACE" if parent is not None else None) != "REPLACE":
+        if parent is not None and above.inside is not None:
+            box = node.get("boundingVolume", {}).get("box")
+            if box is not None and not above.inside(_corners(frame, box)):
+                self.findings.error(
+                    "VOLUME",
+                    f"{tile.parent.where}: child {tile.index}'s box lies outside its own",
+                )
+        error = float(node.get("geometricError", -1.0))
+        if node.get("refine", "REPLACE" if parent is not None else None) != "REPLACE":
             self.findings.error("REFINE", f"{where}: refine is not REPLACE")
         if parent is not None and not error < float(parent["geometricError"]):
             self.findings.error(
@@ -99,33 +113,45 @@ class _Checker:
                 f"{where}: geometricError {error} is not below its parent's "
                 f"{parent['geometricError']}",
             )
-        children = tile.get("children", [])
-        if not children and error != 0.0 and "content" in tile and not _external(tile):
+        children = node.get("children", [])
+        if not children and error != 0.0 and tile.contents and not _external(tile):
             self.findings.error("GEOMETRIC_ERROR", f"{where}: a leaf's geometricError is {error}")
-        box = tile.get("boundingVolume", {}).get("box")
+        box = node.get("boundingVolume", {}).get("box")
         if box is None:
             self.findings.error("VOLUME", f"{where}: no bounding box")
-            return
+            return _State(frame, error, None)
         centre, axes = np.asarray(box[:3], float), np.asarray(box[3:], float).reshape(3, 3)
         inside = _BoxTest(frame, centre, axes)
-        content = tile.get("content")
-        if content is not None:
-            target = self._resolved(base, content.get("uri"), where)
-            if target is not None and target.suffix == ".json":
-                self.tileset(target, frame, error)
-            elif target is not None:
-                positions = self.glb(target, where)
+        for content in tile.contents:
+            if content.target is not None and not content.external:
+                positions = self.glb(content.target, where)
                 if positions is not None and not inside(frame_points(frame, positions)):
                     self.findings.error("VOLUME", f"{where}: content lies outside its box")
-        for index, child in enumerate(children):
-            child_frame = frame
-            if child.get("transform") is not None:
-                matrix = np.asarray(child["transform"], dtype=np.float64).reshape(4, 4).T
-                child_frame = frame @ matrix
-            child_box = child.get("boundingVolume", {}).get("box")
-            if child_box is not None and not inside(_corners(child_frame, child_box)):
-                self.findings.error("VOLUME", f"{where}: child {index}'s box lies outside its own")
-            self.tile(base, child, frame, tile, f"{where}/{index}")
+        return _State(frame, error, inside)
+
+    def _tileset(self, root: Tile, parent_error: float | None) -> bool:
+        """Check the geometric error of the tileset whose root is ``root``, under a tile of
+        geometric error ``parent_error`` (``None``: the top tileset); whether it has one."""
+        data, node, name = root.tileset, root.node, root.file
+        assert data is not None
+        value = data.get("geometricError")
+        try:
+            error = float(value)
+        except (TypeError, ValueError):
+            self.findings.error("JSON", f"{name}: not a tileset (geometricError {value!r})")
+            return False
+        if error < float(node.get("geometricError", 0.0)):
+            self.findings.error(
+                "GEOMETRIC_ERROR",
+                f"{name}: the tileset's geometricError {error} is below its root's "
+                f"{node.get('geometricError')}",
+            )
+        if parent_error is not None and float(node.get("geometricError", 0.0)) > parent_error:
+            self.findings.error(
+                "GEOMETRIC_ERROR",
+                f"{name}: root geometricError above the tile referring to it",
+            )
+        return True
 
     def glb(self, path: Path, where: str) -> np.ndarray | None:
         """The positions (glTF coordinates) of a GLB's primitives, its features checked."""
@@ -191,9 +217,9 @@ class _Checker:
                     self.findings.error("PROPERTY_TABLE", f"{where}: column {name} too short")
 
 
-def _external(tile: dict) -> bool:
+def _external(tile: Tile) -> bool:
     """Whether ``tile``'s content is an external tileset."""
-    return str(tile.get("content", {}).get("uri", "")).endswith(".json")
+    return any(str(content.uri).endswith(".json") for content in tile.contents)
 
 
 class _BoxTest:
@@ -238,7 +264,14 @@ def glb_parts(data: bytes) -> tuple[dict, bytes]:
     if magic != b"glTF" or total != len(data):
         raise ValueError("not a GLB")
     length, _ = struct.unpack_from("<I4s", data, 12)
-    document = json.loads(data[20 : 20 + length])
+    text = data[20 : 20 + length]
+    deep = ValueError(f"its JSON nests arrays and objects over {MAX_DEPTH} deep")
+    if too_deep(Source(text, 0, len(text), None), MAX_DEPTH):
+        raise deep
+    try:
+        document = json.loads(text)
+    except RecursionError:  # an encoding other than UTF-8 can hide brackets from too_deep
+        raise deep from None
     rest = 20 + length
     blob = b""
     if rest < len(data):
