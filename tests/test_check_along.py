@@ -274,3 +274,44 @@ def test_a_check_killed_while_the_output_is_written_ends_the_run_in_one_line(
     )  # fmt: skip
     assert_one_line_error(killed, 1, str(out), "signal SIGKILL")
     assert list(out.parent.iterdir()) == []
+
+
+_KILLS_THE_TRACKER = """
+import os, signal, sys, time
+from multiprocessing import resource_tracker
+from pathlib import Path
+from lodconvert.cli import main
+from lodconvert.validate.along import CheckAlong
+
+start = CheckAlong.__enter__
+
+
+def enter(self):
+    # multiprocessing's resource tracker killed just before the check's process starts
+    tracker = resource_tracker._resource_tracker._pid
+    os.kill(tracker, signal.SIGKILL)
+    while Path(f"/proc/{tracker}/stat").read_text().split()[2] != "Z":
+        time.sleep(0.01)
+    return start(self)
+
+
+CheckAlong.__enter__ = enter
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_killed_resource_tracker_is_started_again_without_a_word(tmp_path: Path) -> None:
+    """The process that starting worker processes starts, killed: the next process start (the
+    check's) starts another, and the run goes on; multiprocessing's warning that resources
+    might leak is not shown, as lodconvert gives it none to look after."""
+    out = tmp_path / "kit.x3d"
+    done = subprocess.run(
+        [sys.executable, "-c", _KILLS_THE_TRACKER, str(shared_data(KIT)), "-o", str(out),
+         "--workers", "2", "-q"],
+        capture_output=True, text=True, env={**os.environ, "PYTHONPATH": os.getcwd()},
+        timeout=300,
+    )  # fmt: skip
+    lines = done.stderr.splitlines()
+    assert done.returncode == 0 and len(lines) == 1, done.stderr
+    assert lines[0].startswith(f"wrote {out} (100 object(s)")
+    assert [p.name for p in tmp_path.iterdir()] == ["kit.x3d"]
