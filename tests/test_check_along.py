@@ -1,7 +1,8 @@
 """An X3D output checked while it is written (worker processes bake meanwhile): the check, a
 process of its own, reads the staged file as it grows, refuses a broken output as the check of
 the finished file does, and stops with a failed write or a killed main process, leaving
-nothing."""
+nothing; a killed check ends the run in one line, and a killed resource tracker is started
+again."""
 
 from __future__ import annotations
 
