@@ -9,13 +9,16 @@ task (a GL context only inside the worker). The scheduler re-runs a task whose w
 (dask's ``distributed.scheduler.allowed-failures`` times); once it gives up, the task fails as
 the task says (a batch's objects reported, a run of members read in the main process) and the
 run goes on. What a task tells of its progress comes back with its result, and is told here
-when that result is taken: no message of its own crosses the cluster.
+when that result is taken: no message of its own crosses the cluster. No wait on the
+scheduler is unbounded (:data:`REQUEST_SECONDS`): one that never answers ends the run as one
+that cannot be reached does.
 
 Needs the ``dask`` extra (``pip install '.[dask]'`` in a clone); :mod:`.tasks` does not.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import pickle
 import threading
@@ -25,9 +28,10 @@ import warnings
 from collections import deque
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Self
+from typing import Any, Self
 
 from distributed import Client, Future, KilledWorker
+from distributed.comm import registry
 
 from .bake import Backend, get_backend
 from .chain import Progress
@@ -36,10 +40,19 @@ from .tasks import DEPTH, BakeResult, BakeTask, Executor
 
 CONNECT_SECONDS = 10.0
 """How long connecting to the scheduler may take before the run fails."""
+ANSWER_SECONDS = 10.0
+"""How long the scheduler may take to answer once connected before the run fails."""
+REQUEST_SECONDS = CONNECT_SECONDS + ANSWER_SECONDS
+"""How long a request to the scheduler may take (the client's start: connecting, the handshake,
+the scheduler's identity; a count of its workers): dask bounds connecting, but neither the
+handshake that follows nor a reply on a connection it holds, so a listener that accepts and
+never answers held the run forever."""
 WORKERS_SECONDS = 20.0
 """How long the run waits for a first worker, and for one to come back once all are gone."""
 POLL_SECONDS = 2.0
 """How often a wait for a result looks whether the cluster still has workers."""
+STAFF_POLL_SECONDS = 0.1
+"""How often the wait for a first worker asks the scheduler (as dask's own wait does)."""
 TASK_SECONDS = 0.3
 """Work a batch of objects is sized for: a task costs the scheduler, the worker and this
 process about 6 ms of CPU in all (2 workers on 2 busy cores), so 2 % of its work."""
@@ -48,11 +61,13 @@ _local = threading.local()
 
 
 def scheduler_address(text: str) -> str:
-    """The scheduler address of ``--scheduler text``: an address (``tcp://host:port``, any
-    ``scheme://``) as it is, or the ``address`` of a scheduler file (``dask scheduler
-    --scheduler-file``); :class:`UsageError` for a file that is absent or not one."""
+    """The scheduler address of ``--scheduler text``: an address (``tcp://host:port``, or of
+    another scheme dask connects through: ``tls``, ``ws``, ``wss``, a plugin's) as it is, or
+    the ``address`` of a scheduler file (``dask scheduler --scheduler-file``);
+    :class:`UsageError` for a file that is absent or not one, and for an address dask cannot
+    connect to."""
     if "://" in text:
-        return text
+        return _checked(text, text)
     path = Path(text)
     try:
         record = json.loads(path.read_text(encoding="utf-8"))
@@ -67,6 +82,31 @@ def scheduler_address(text: str) -> str:
     address = record.get("address") if isinstance(record, dict) else None
     if not isinstance(address, str) or "://" not in address:
         raise UsageError(f"{text}: the scheduler file names no address", "scheduler")
+    return _checked(address, f"{text}: its address {address}")
+
+
+def _checked(address: str, named: str) -> str:
+    """``address`` if dask can connect through its scheme here and reads where it leads (a
+    host and port; an ``inproc://`` address of this process); else :class:`UsageError` naming
+    it as ``named``."""
+    scheme, location = address.split("://", 1)
+    try:
+        backend = registry.get_backend(scheme)
+    except ValueError:
+        known = ", ".join(f"{name}://" for name in sorted(registry.backends))
+        raise UsageError(
+            f"{named}: not a dask scheduler address (dask knows {known})", "scheduler"
+        ) from None
+    try:
+        backend.get_connector()
+    except Exception:  # a scheme whose support is not installed (ucx://)
+        raise UsageError(
+            f"{named}: dask cannot connect through {scheme}:// here", "scheduler"
+        ) from None
+    try:
+        backend.get_address_host(location)
+    except ValueError as exc:
+        raise UsageError(f"{named}: not a dask scheduler address ({exc})", "scheduler") from None
     return address
 
 
@@ -113,24 +153,44 @@ class DaskExecutor(Executor):
 
     def __enter__(self) -> Self:
         """Connect to the scheduler and wait for a worker (:class:`LodConvertError` naming the
-        address when neither comes in time)."""
+        address when neither comes in time, or what answers is no dask scheduler)."""
         address = self.address = scheduler_address(self.scheduler)
+        self._client = _connected(address)
         try:
-            self._client = Client(address, timeout=CONNECT_SECONDS, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
-            raise LodConvertError(
-                f"cannot reach the dask scheduler ({_first_line(exc)})", address
-            ) from None
-        try:
-            self._client.wait_for_workers(1, timeout=WORKERS_SECONDS)
-        except TimeoutError:
+            threads = self._first_threads()
+        except BaseException:
             self.close()
-            raise LodConvertError(
-                f"the dask scheduler has no worker (none joined in {WORKERS_SECONDS:g} s)", address
-            ) from None
+            raise
         if self.window is None:
-            self.window = (DEPTH + 1) * max(1, sum(self._client.nthreads().values()))
+            self.window = (DEPTH + 1) * threads
         return self
+
+    def _first_threads(self) -> int:
+        """The cluster's worker threads, once it has any (:class:`LodConvertError` when none
+        joins in :data:`WORKERS_SECONDS`)."""
+        deadline = time.monotonic() + WORKERS_SECONDS
+        while not (threads := self._threads()):
+            if time.monotonic() > deadline:
+                raise LodConvertError(
+                    f"the dask scheduler has no worker (none joined in {WORKERS_SECONDS:g} s)",
+                    self.address,
+                )
+            time.sleep(STAFF_POLL_SECONDS)
+        return threads
+
+    def _threads(self) -> int:
+        """The cluster's worker threads now; :class:`LodConvertError` when the scheduler is
+        lost or does not answer in :data:`REQUEST_SECONDS`."""
+        assert self._client is not None, "use DaskExecutor as a context"
+        try:
+            return sum(self._client.nthreads(callback_timeout=REQUEST_SECONDS).values())
+        except TimeoutError:
+            raise LodConvertError(
+                f"the dask scheduler stopped answering (nothing in {REQUEST_SECONDS:g} s)",
+                self.address,
+            ) from None
+        except OSError:
+            raise LodConvertError("lost the dask scheduler", self.address) from None
 
     def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
         """The result of each of ``tasks``, in order; a task the scheduler gave up on (its
@@ -204,11 +264,8 @@ class DaskExecutor(Executor):
         """``None`` when the cluster has workers; else since when it has none (``since``, or
         now), or :class:`LodConvertError` once that is :data:`WORKERS_SECONDS` ago, or when
         the scheduler does not answer."""
-        try:
-            if self._client.nthreads():
-                return None
-        except OSError:
-            raise LodConvertError("lost the dask scheduler", self.address) from None
+        if self._threads():
+            return None
         now = time.monotonic()
         if since is not None and now - since > WORKERS_SECONDS:
             raise LodConvertError(
@@ -220,7 +277,43 @@ class DaskExecutor(Executor):
         """Disconnect from the scheduler (the cluster's workers stay up)."""
         client, self._client = self._client, None
         if client is not None:
-            client.close()
+            _close(client)
+
+
+class _Client(Client):
+    """A dask client whose start ends within :data:`REQUEST_SECONDS`; one whose start failed
+    is closed at once (else ``Client.__del__`` closes it at exit, and prints a traceback when
+    that fails)."""
+
+    def start(self, **kwargs: Any) -> None:
+        try:
+            super().start(callback_timeout=REQUEST_SECONDS, **kwargs)
+        except BaseException:
+            _close(self)
+            raise
+
+
+def _connected(address: str) -> Client:
+    """A client of the scheduler at ``address``; :class:`LodConvertError` naming it when it
+    cannot be reached, does not answer, or answers as no dask scheduler does."""
+    try:
+        return _Client(address, timeout=CONNECT_SECONDS, set_as_default=False)
+    except TimeoutError:  # connected, then nothing came back in time
+        raise LodConvertError(
+            f"the dask scheduler does not answer (nothing in {REQUEST_SECONDS:g} s)", address
+        ) from None
+    except OSError as exc:
+        raise LodConvertError(
+            f"cannot reach the dask scheduler ({_first_line(exc)})", address
+        ) from None
+    except Exception as exc:  # not dask's protocol, or not a scheduler's answer (a worker's)
+        raise LodConvertError("what answers there is not a dask scheduler", address) from exc
+
+
+def _close(client: Client) -> None:
+    """Close ``client``, giving it :data:`ANSWER_SECONDS` (its scheduler may be gone)."""
+    with contextlib.suppress(Exception):
+        client.close(timeout=ANSWER_SECONDS)
 
 
 def _first_line(exc: BaseException) -> str:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import signal
+
 
 class LodConvertError(Exception):
     """Input or processing error: bad file, unreadable geometry, failed write (exit code 1)."""
@@ -26,3 +28,16 @@ class UsageError(Exception):
     def __init__(self, message: str, field: str | None = None) -> None:
         self.message, self.field = message, field
         super().__init__(f"{field} {message}" if field else message)
+
+
+def ended(code: int | None) -> str:
+    """How a process that ended with ``code`` (its ``exitcode``: negative for the signal that
+    ended it) ended, in words: ``signal SIGKILL``, ``exit 1``."""
+    if code is None:
+        return "exit code unknown"
+    if code >= 0:
+        return f"exit {code}"
+    try:
+        return f"signal {signal.Signals(-code).name}"
+    except ValueError:
+        return f"signal {-code}"

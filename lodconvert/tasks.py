@@ -36,7 +36,7 @@ from typing import Any, Self
 
 from .bake import Backend, get_backend
 from .chain import ChainOptions, ChainPlan, Progress, bake_chain, plan_chain
-from .errors import InputError
+from .errors import InputError, ended
 from .limits import DEFAULT_LIMITS, Limits
 from .model import LodChain, Node, PackedNode, unpacked
 
@@ -414,8 +414,7 @@ class PoolExecutor(Executor):
 
 def _death(code: int | None) -> str:
     """Why a task failed when its worker died with exit ``code`` twice."""
-    how = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else code
-    return f"the worker process converting it died twice ({how})"
+    return f"the worker process converting it died twice ({ended(code)})"
 
 
 def default_workers(input_bytes: int) -> int:

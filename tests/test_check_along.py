@@ -1,7 +1,8 @@
 """An X3D output checked while it is written (worker processes bake meanwhile): the check, a
 process of its own, reads the staged file as it grows, refuses a broken output as the check of
 the finished file does, and stops with a failed write or a killed main process, leaving
-nothing."""
+nothing; a killed check ends the run in one line, and a killed resource tracker is started
+again."""
 
 from __future__ import annotations
 
@@ -207,3 +208,111 @@ def test_a_city_is_checked_holding_one_object_at_a_time(
     # what lxml parsed ahead of the events it gave (a read's worth) and the skeleton; keeping
     # the objects, it held 2,220 of the file's 3,337 elements by the end
     assert max(held) < sum(1 for _ in document.iter()) / 4
+
+
+_KILLS_ITS_CHECK = """
+import dataclasses, multiprocessing, os, signal, sys, time
+from pathlib import Path
+from lodconvert.cli import main
+from lodconvert.io import streamed, x3d
+
+out = Path(sys.argv[sys.argv.index("-o") + 1])
+
+
+def read_to_the_end(check):
+    # whether the check has read the staged output as far as it is written
+    for fd in Path(f"/proc/{check.pid}/fd").iterdir():
+        target = Path(os.readlink(fd))
+        if target.parent == out.parent and target.name.startswith(f".{out.name}."):
+            info = Path(f"/proc/{check.pid}/fdinfo/{fd.name}").read_text()
+            return int(info.split()[1]) == target.stat().st_size
+    return False
+
+
+class KillsTheCheck:
+    # the staged output: once its first piece is written, the check is killed as it waits
+    # for more (its writing goes on)
+    def __init__(self, handle):
+        self.handle, self.killed = handle, False
+
+    def write(self, data):
+        written = self.handle.write(data)
+        if not self.killed:
+            self.handle.flush()
+            children = multiprocessing.active_children()
+            (check,) = [p for p in children if p.name == "lodconvert-check"]
+            while not read_to_the_end(check):
+                time.sleep(0.01)
+            os.kill(check.pid, signal.SIGKILL)
+            check.join()
+            self.killed = True
+        return written
+
+
+def write(chains, handle, info, **options):
+    x3d.write_x3d(chains, KillsTheCheck(handle), info, **options)
+
+
+x3d.FORMAT = dataclasses.replace(x3d.FORMAT, write=streamed({".x3d": write}))
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.slow
+def test_a_check_killed_while_the_output_is_written_ends_the_run_in_one_line(
+    tmp_path: Path,
+) -> None:
+    """The check's process killed (SIGKILL, as the out-of-memory killer ends one) while it waits
+    for more of the file: the run ends with one line naming the output and nothing written (it
+    waited for the dead check forever)."""
+    out = tmp_path / "out" / "kit.x3d"
+    out.parent.mkdir()
+    killed = subprocess.run(
+        [sys.executable, "-c", _KILLS_ITS_CHECK, str(shared_data(KIT)), "-o", str(out),
+         "--workers", "2", "-q"],
+        capture_output=True, text=True, env={**os.environ, "PYTHONPATH": os.getcwd()},
+        timeout=300,  # a safety net: the run waited for its dead check forever
+    )  # fmt: skip
+    assert_one_line_error(killed, 1, str(out), "signal SIGKILL")
+    assert list(out.parent.iterdir()) == []
+
+
+_KILLS_THE_TRACKER = """
+import os, signal, sys, time
+from multiprocessing import resource_tracker
+from pathlib import Path
+from lodconvert.cli import main
+from lodconvert.validate.along import CheckAlong
+
+start = CheckAlong.__enter__
+
+
+def enter(self):
+    # multiprocessing's resource tracker killed just before the check's process starts
+    tracker = resource_tracker._resource_tracker._pid
+    os.kill(tracker, signal.SIGKILL)
+    while Path(f"/proc/{tracker}/stat").read_text().split()[2] != "Z":
+        time.sleep(0.01)
+    return start(self)
+
+
+CheckAlong.__enter__ = enter
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_killed_resource_tracker_is_started_again_without_a_word(tmp_path: Path) -> None:
+    """The process that starting worker processes starts, killed: the next process start (the
+    check's) starts another, and the run goes on; multiprocessing's warning that resources
+    might leak is not shown, as lodconvert gives it none to look after."""
+    out = tmp_path / "kit.x3d"
+    done = subprocess.run(
+        [sys.executable, "-c", _KILLS_THE_TRACKER, str(shared_data(KIT)), "-o", str(out),
+         "--workers", "2", "-q"],
+        capture_output=True, text=True, env={**os.environ, "PYTHONPATH": os.getcwd()},
+        timeout=300,
+    )  # fmt: skip
+    lines = done.stderr.splitlines()
+    assert done.returncode == 0 and len(lines) == 1, done.stderr
+    assert lines[0].startswith(f"wrote {out} (100 object(s)")
+    assert [p.name for p in tmp_path.iterdir()] == ["kit.x3d"]

@@ -2,8 +2,9 @@
 worker on a 2-worker ``LocalCluster``, a city read by its workers as in one process, the
 workers' progress told as with one worker, broken objects reported the same, a task over dask's
 10 MB sent without its warning, a killed worker's task run again and then reported, a result
-that comes as its wait times out taken, an unreachable scheduler or a bad scheduler file
-failing at once, an interrupted run cancelling its tasks and leaving nothing."""
+that comes as its wait times out taken, an unreachable scheduler, one that does not answer
+or is none, and a bad address or scheduler file failing the run in one line, an interrupted
+run cancelling its tasks and leaving nothing."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -33,6 +35,7 @@ from lodconvert.tasks import Executor, PoolExecutor, SerialExecutor, batches
 
 from .conftest import ROOT, SHARED, shared_data
 from .fuzz import hostile_citygml
+from .test_cli import assert_one_line_error
 from .test_parallel_reading import (
     _read,
     _town,
@@ -238,6 +241,9 @@ def test_a_scheduler_file_gives_the_address(address: str, tmp_path: Path) -> Non
     assert out.stat().st_size > 0
 
 
+NOT_DASK = "not a dask scheduler address (dask knows inproc://, tcp://, tls://"
+
+
 @pytest.mark.parametrize(
     ("text", "options", "says"),
     [
@@ -245,22 +251,98 @@ def test_a_scheduler_file_gives_the_address(address: str, tmp_path: Path) -> Non
         ("notes.txt", (), "notes.txt: a scheduler file must be JSON"),
         ("other.json", (), "other.json: the scheduler file names no address"),
         ("tcp://127.0.0.1:1", ("--workers", "2"), "--workers is for this machine's processes"),
+        ("file:///etc/passwd", (), f"--scheduler file:///etc/passwd: {NOT_DASK}"),
+        ("ftp://127.0.0.1:21", (), f"--scheduler ftp://127.0.0.1:21: {NOT_DASK}"),
+        ("ftp.json", (), f"ftp.json: its address ftp://127.0.0.1:21: {NOT_DASK}"),
+        ("tcp://127.0.0.1", (), "tcp://127.0.0.1: not a dask scheduler address (missing port"),
     ],
-    ids=["absent", "not-json", "no-address", "with-workers"],
+    ids=["absent", "not-json", "no-address", "with-workers", "file", "ftp", "ftp-file", "no-port"],
 )
 def test_a_bad_scheduler_option_is_a_usage_error(
     text: str, options: tuple[str, ...], says: str, tmp_path: Path
 ) -> None:
+    """One line, exit 2, at once (an address of a scheme dask does not know printed dask's
+    ValueError, and a traceback from ``Client.__del__`` 20 s later)."""
     (tmp_path / "notes.txt").write_text("tcp://127.0.0.1:8786\n")
     (tmp_path / "other.json").write_text('{"type": "Scheduler"}')
+    (tmp_path / "ftp.json").write_text('{"address": "ftp://127.0.0.1:21"}')
     before = sorted(tmp_path.iterdir())
     value = text if "://" in text else tmp_path / text
     run = _lodconvert(
         shared_data(CITYJSON), "-o", tmp_path / "out.x3d", "--scheduler", value, *options
     )
-    assert run.returncode == 2, run.stderr
-    assert says in run.stderr.strip().splitlines()[-1]
+    assert_one_line_error(run, 2, says)
     assert sorted(tmp_path.iterdir()) == before
+
+
+@contextlib.contextmanager
+def _listener(answer: bytes) -> Iterator[str]:
+    """A TCP listener on 127.0.0.1 that accepts every connection, sends ``answer`` on it
+    (nothing: it stays silent) and keeps it open; its address."""
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        server.settimeout(0.1)  # so that the loop sees when to stop
+        done = threading.Event()
+        accepted: list[socket.socket] = []
+
+        def serve() -> None:
+            while not done.is_set():
+                try:
+                    connection, _ = server.accept()
+                except TimeoutError:
+                    continue
+                accepted.append(connection)
+                connection.sendall(answer)
+
+        thread = threading.Thread(target=serve, daemon=True)
+        thread.start()
+        try:
+            yield f"tcp://127.0.0.1:{server.getsockname()[1]}"
+        finally:
+            done.set()
+            thread.join()
+            for connection in accepted:
+                connection.close()
+
+
+def _lodconvert_to_its_end(*args: object) -> subprocess.CompletedProcess[str]:
+    """``lodconvert ARGS`` run to its end (a run still going after 300 s, a safety net, fails
+    the test)."""
+    command = [sys.executable, "-m", "lodconvert", *map(str, args)]
+    return subprocess.run(command, capture_output=True, text=True, cwd=ROOT, timeout=300)
+
+
+def test_a_listener_that_never_answers_fails_the_run_in_one_line(tmp_path: Path) -> None:
+    """A listener that accepts the connection and says nothing (a hung scheduler, a web
+    server waiting for a request): dask bounds connecting but not the handshake that
+    follows, which waited forever."""
+    with _listener(b"") as address:
+        run = _lodconvert_to_its_end(
+            shared_data(CITYJSON), "-o", tmp_path / "out.x3d", "--scheduler", address
+        )
+    says = f"lodconvert: error: {address}: the dask scheduler does not answer (nothing in 20 s)"
+    assert_one_line_error(run, 1, says)
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("what", ["web-server", "worker"])
+def test_what_is_not_a_dask_scheduler_fails_the_run_in_one_line(
+    what: str, cluster: Any, tmp_path: Path
+) -> None:
+    """A web server's answer (dask read its first bytes as a length, and ran out of memory)
+    and a dask worker's (it has no identity of a scheduler) end the run with one line."""
+    with contextlib.ExitStack() as stack:
+        if what == "worker":
+            address = next(iter(cluster.scheduler_info["workers"]))
+        else:
+            address = stack.enter_context(_listener(b"HTTP/1.1 400 Bad Request\r\n\r\n"))
+        run = _lodconvert_to_its_end(
+            shared_data(CITYJSON), "-o", tmp_path / "out.x3d", "--scheduler", address
+        )
+    says = f"lodconvert: error: {address}: what answers there is not a dask scheduler"
+    assert_one_line_error(run, 1, says)
+    assert list(tmp_path.iterdir()) == []
 
 
 def _baked(scene: Scene, executor: Executor) -> tuple[list[Any], list[str], list[dict[str, str]]]:
@@ -446,6 +528,34 @@ def test_a_scheduler_lost_mid_run_ends_it_with_one_line(tmp_path: Path) -> None:
             assert run.wait(60) == 1, stderr
     address = json.loads(scheduler_file.read_text())["address"]
     assert stderr.splitlines() == [f"lodconvert: error: {address}: lost the dask scheduler"]
+    assert list(out.parent.iterdir()) == []
+
+
+def test_a_scheduler_that_stops_answering_mid_run_ends_it_with_one_line(tmp_path: Path) -> None:
+    """A scheduler stopped (SIGSTOP: its connections stay open, nothing answers) while the
+    run waits for its batches: each look whether the cluster still has workers is bounded
+    (it waited forever)."""
+    scheduler_file = tmp_path / "scheduler.json"
+    with (
+        _dask_command("scheduler", "--host", "127.0.0.1", "--port", 0, "--no-dashboard",
+                      "--scheduler-file", scheduler_file) as scheduler,
+        _dask_command("worker", "--scheduler-file", scheduler_file, "--nthreads", 1,
+                      "--no-dashboard"),
+        distributed.Client(scheduler_file=str(scheduler_file), timeout=30) as client,
+    ):  # fmt: skip
+        client.wait_for_workers(1, timeout=30)
+        command, out = _slow_spheres(tmp_path, str(scheduler_file))
+        with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=ROOT) as run:
+            _until_baking(client, run)
+            scheduler.send_signal(signal.SIGSTOP)
+            try:
+                _, stderr = run.communicate(timeout=300)  # a safety net
+            finally:
+                run.kill()
+                scheduler.send_signal(signal.SIGCONT)
+    address = json.loads(scheduler_file.read_text())["address"]
+    says = f"lodconvert: error: {address}: the dask scheduler stopped answering (nothing in 20 s)"
+    assert run.returncode == 1 and stderr.splitlines() == [says], stderr
     assert list(out.parent.iterdir()) == []
 
 

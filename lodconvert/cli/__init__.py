@@ -13,12 +13,16 @@ terminated. Errors are one line on stderr (``lodconvert: error: FILE: what is wr
 from __future__ import annotations
 
 import argparse
+import contextlib
 import ctypes
 import importlib
+import multiprocessing
 import signal
 import sys
 import traceback
+import warnings
 from collections.abc import Callable, Sequence
+from multiprocessing import resource_tracker
 from types import FrameType
 
 from ..commands import COMMANDS, MAIN_COMMAND
@@ -144,6 +148,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lodconvert`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
     _return_freed_memory()
+    # multiprocessing starts its resource tracker again where it died, and warns that
+    # resources might leak: lodconvert gives it none to look after
+    warnings.filterwarnings("ignore", "resource_tracker: process died", UserWarning)
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         if argv and argv[0] in COMMANDS:
@@ -151,6 +158,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         return run_command(MAIN_COMMAND, argv)
     finally:
         signal.signal(signal.SIGTERM, previous)
+        _stop_resource_tracker()
+
+
+def _stop_resource_tracker() -> None:
+    """End multiprocessing's resource tracker, which starting the first worker or check
+    process started, and wait for it, once no process started here runs (it holds the
+    tracker's pipe open): else it ends a moment after this process, reparented. A later
+    process start here starts a new one."""
+    if multiprocessing.active_children():
+        return
+    with contextlib.suppress(ChildProcessError):  # already waited for
+        resource_tracker._resource_tracker._stop()
 
 
 __all__ = [

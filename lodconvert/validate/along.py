@@ -10,6 +10,7 @@ Only formats whose check reads the file once from its start can be checked so
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import pickle
 import signal
@@ -18,7 +19,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Protocol, Self
 
-from ..errors import LodConvertError
+from ..errors import LodConvertError, ended
 from . import check_stream
 
 POLL_SECONDS = 0.02
@@ -30,11 +31,10 @@ class Abandoned(Exception):
 
 
 class Flag(Protocol):
-    """An event that one side sets and the other waits for (a thread's or a process's)."""
+    """What a :class:`GrowingFile` asks of its ``finished``: whether it is set, and a wait for
+    it (a thread's event, or what the main process tells a check)."""
 
     def is_set(self) -> bool: ...
-
-    def set(self) -> None: ...
 
     def wait(self, timeout: float | None = None) -> bool: ...
 
@@ -65,20 +65,51 @@ class GrowingFile:
         self._handle.close()
 
 
-def _check_process(
-    written: Path, target: str | Path, finished: Flag, abandoned: Flag, answer: Connection
-) -> None:
-    """The checking process: check the file ``written`` as it grows; send ``None`` (passed,
-    or abandoned) or the error the check raised."""
+FINISHED, ABANDONED = "finished", "abandoned"
+"""What the main process tells its check: the file is written whole, or will not be."""
+
+
+class _Told:
+    """The check's end of the pipe through which the main process tells it :data:`FINISHED`
+    or :data:`ABANDONED` (the pipe's end, the main process gone, abandons the file too): the
+    ``finished`` :class:`Flag` of its :class:`GrowingFile`, and ``abandoned``. A pipe, not
+    :mod:`multiprocessing` events: a check killed while it waits on one leaves the main
+    process's next ``set()`` of it waiting forever."""
+
+    def __init__(self, conn: Connection) -> None:
+        self._conn = conn
+        self._heard: set[str] = set()
+
+    def _hear(self, timeout: float | None) -> None:
+        """Take in what was told, waiting up to ``timeout`` (``None``: until told) for
+        something."""
+        while ABANDONED not in self._heard and self._conn.poll(timeout):
+            try:
+                self._heard.add(self._conn.recv())
+            except (EOFError, OSError):
+                self._heard.add(ABANDONED)
+            timeout = 0
+
+    def is_set(self) -> bool:
+        self._hear(0)
+        return FINISHED in self._heard
+
+    def wait(self, timeout: float | None = None) -> bool:
+        self._hear(timeout)
+        return FINISHED in self._heard
+
+    def abandoned(self) -> bool:
+        self._hear(0)
+        return ABANDONED in self._heard
+
+
+def _check_process(written: Path, target: str | Path, told: Connection, answer: Connection) -> None:
+    """The checking process: check the file ``written`` as it grows, as ``told`` says; send
+    ``None`` (passed, or abandoned) or the error the check raised."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the main process stops it
     error: BaseException | None = None
-    parent = multiprocessing.parent_process()
-    assert parent is not None
-
-    def given_up() -> bool:  # by the writer, or with the main process (killed)
-        return abandoned.is_set() or not parent.is_alive()
-
-    growing = GrowingFile(written, finished, given_up)
+    orders = _Told(told)
+    growing = GrowingFile(written, orders, orders.abandoned)
     try:
         check_stream(growing, target)
     except Abandoned:
@@ -91,49 +122,57 @@ def _check_process(
         answer.send(error)
     except (pickle.PicklingError, TypeError, AttributeError):
         answer.send(LodConvertError(str(error)))
+    except OSError:  # the main process is gone
+        pass
 
 
 class CheckAlong:
     """The check of the staged file ``written`` of the output ``target``, run by a process of
     its own while the file is written (use as a context manager around the writing):
     :meth:`result` waits for it and raises what :func:`~lodconvert.validate.check_written`
-    would."""
+    would, or :class:`LodConvertError` when that process died."""
 
     def __init__(self, written: Path, target: str | Path) -> None:
         context = multiprocessing.get_context("spawn")
-        self._finished, self._abandoned = context.Event(), context.Event()
+        told, self._orders = context.Pipe(duplex=False)
         self._answer, answer = context.Pipe(duplex=False)
         self.process = context.Process(
             target=_check_process,
-            args=(written, target, self._finished, self._abandoned, answer),
+            args=(written, target, told, answer),
             name="lodconvert-check",
             daemon=True,
         )
-        self._sent_end = answer
+        self._their_ends = (told, answer)
         self.target = target
 
     def __enter__(self) -> Self:
         self.process.start()
-        self._sent_end.close()
+        for conn in self._their_ends:
+            conn.close()
         return self
+
+    def _tell(self, word: str) -> None:
+        """Tell the check ``word`` (nothing, once it has ended)."""
+        with contextlib.suppress(OSError):
+            self._orders.send(word)
 
     def result(self) -> None:
         """Wait for the check of the finished (and flushed) file; raise its error, if any."""
-        self._finished.set()
+        self._tell(FINISHED)
         try:
             error = self._answer.recv()
         except EOFError:  # it died without an answer
             self.process.join()
-            stopped = f"its check stopped (exit {self.process.exitcode})"
-            raise LodConvertError(stopped, str(self.target)) from None
+            died = f"the process checking it died ({ended(self.process.exitcode)})"
+            raise LodConvertError(died, str(self.target)) from None
         if error is not None:
             raise error
 
     def __exit__(self, *exc: object) -> None:
         """Stop the check (at once where the writing failed), and wait for it."""
-        self._abandoned.set()
-        self._finished.set()
+        self._tell(ABANDONED)
         if exc[0] is not None:
             self.process.terminate()
         self.process.join()
+        self._orders.close()
         self._answer.close()
