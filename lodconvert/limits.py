@@ -1,6 +1,6 @@
 """Limits on what one run may read and bake, so that memory and time follow what a file holds,
 not what it claims. Every limit can be raised (``--limit NAME=VALUE`` on the command line,
-``Limits(...)`` in the library); the README has the table.
+``Limits(...)`` in the library); docs/bad-input.md has the table.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ KIB, MIB, GIB = 1 << 10, 1 << 20, 1 << 30
 
 @dataclass(frozen=True)
 class Limits:
-    """The limits of one run (see the README's table for what each bounds and why)."""
+    """The limits of one run (docs/bad-input.md: what each bounds and why)."""
 
     decompressed_bytes: int = 2 * GIB
     """Bytes a compressed input (``.gz``, ``.zip``) may inflate to; inflation stops there."""

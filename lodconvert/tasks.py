@@ -50,7 +50,7 @@ MAX_BATCH = 256
 INPUT_BYTES_PER_WORKER = 6 * 2**20
 """Input a worker process is started for by default: starting one costs about 0.3 CPU s (an
 interpreter, imports), and below about 12 MiB of city two of them made a run slower, not faster
-(README, Options)."""
+(docs/options.md)."""
 
 
 Formatter = Callable[[LodChain], Any]

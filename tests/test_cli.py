@@ -220,13 +220,16 @@ def test_several_objects_stay_several_and_a_broken_one_is_skipped(work: Path) ->
     assert [s["id"] for s in data["skipped"]] == ["broken"]
 
 
+OPTIONS_PAGE = ROOT / "docs" / "options.md"
+"""Where the options of every command are listed (linked from the README)."""
+
+
 def _readme_options_table() -> str:
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = readme.split("\n## Options\n", 1)[1]
-    return "\n".join(line for line in section.split("\n\n")[0].splitlines() if line.startswith("|"))
+    section = OPTIONS_PAGE.read_text(encoding="utf-8").split("\n# Options\n", 1)[-1]
+    return "\n".join(line for line in section.split("\n\n")[1].splitlines() if line.startswith("|"))
 
 
-def test_readme_options_table_lists_every_option_of_the_main_command() -> None:
+def test_the_options_page_lists_every_option_of_the_main_command() -> None:
     table = _readme_options_table()
     first_cells = "\n".join(row.split(" | ")[0] for row in table.splitlines())
     listed_flags = set(re.findall(r"(?<![\w-])--?[a-z][a-z0-9-]*", first_cells))
@@ -236,11 +239,11 @@ def test_readme_options_table_lists_every_option_of_the_main_command() -> None:
 
 
 @pytest.mark.parametrize("name", sorted(set(COMMANDS) - {MAIN_COMMAND}))
-def test_readme_commands_table_lists_every_option_of_each_other_command(name: str) -> None:
+def test_the_options_page_lists_every_option_of_each_other_command(name: str) -> None:
     """Each other command's row names every option of its own (those it shares with the main
     command are in the options table; -h, -q, -v and --debug are every command's)."""
-    readme = (ROOT / "README.md").read_text(encoding="utf-8")
-    (row,) = [line for line in readme.splitlines() if line.startswith(f"| `lodconvert {name} ")]
+    page = OPTIONS_PAGE.read_text(encoding="utf-8")
+    (row,) = [line for line in page.splitlines() if line.startswith(f"| `lodconvert {name} ")]
     listed = set(re.findall(r"(?<![\w-])--?[a-z][a-z0-9-]*", row))
     shared = {s for a in command_parser(MAIN_COMMAND)._actions for s in a.option_strings}
     flags = {s for a in command_parser(name)._actions for s in a.option_strings} - shared

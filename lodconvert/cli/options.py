@@ -59,7 +59,7 @@ def add_limit_option(
         action="append",
         default=[],
         metavar="NAME=VALUE",
-        help=f"raise (or lower) a limit, e.g. {example} (see the README's table)",
+        help=f"raise (or lower) a limit, e.g. {example} (see docs/bad-input.md)",
     )
 
 
@@ -82,7 +82,7 @@ def add_read_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup
         "--colors",
         metavar="CLASS=#RRGGBB,..",
         help="city models: colours of the surface classes roof, wall, ground, other "
-        "(source materials win; defaults in the README)",
+        "(source materials win; defaults in docs/cities.md)",
     )
     read.add_argument(
         "--crs",
@@ -138,7 +138,7 @@ def add_range_options(parser: argparse.ArgumentParser) -> None:
         type=float,
         metavar="GAMMA",
         help=f"γ, must be > 1 (default: {DEFAULT_GAMMA:g} for a mesh's objects; for city objects "
-        "half the distance to the nearest neighbour, 2–100 m; see README)",
+        "half the distance to the nearest neighbour, 2–100 m; see docs/cities.md)",
     )
     group.add_argument(
         "--x", metavar="X1,X2,..", help="exponents, one per switch (default 0.33,0.66,1.0)"

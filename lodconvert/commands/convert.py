@@ -88,7 +88,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--scheduler",
         metavar="ADDRESS",
         help="bake on the workers of a dask.distributed cluster: its scheduler's address "
-        "(tcp://host:port) or scheduler file; instead of --workers (see README)",
+        "(tcp://host:port) or scheduler file; instead of --workers (see docs/cluster.md)",
     )
     add_range_options(parser)
     group = parser.add_argument_group("LOD parents (cities)")
@@ -259,7 +259,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         kept = ", ".join(f"{n:,} with {k}" for k, n in sorted(fewer.items()))
         console.info(
             f"{sum(fewer.values()):,} object(s) keep fewer levels ({kept} level(s)): no coarser "
-            "level was both cheaper and faithful there, so the finer one stays on (see README)"
+            "level was both cheaper and faithful there, so the finer one stays on (see docs/levels.md)"
         )
     unused = Counter(label for obj in objects for label in obj["unused"])
     if unused:

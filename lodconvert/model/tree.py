@@ -126,7 +126,7 @@ class Node:
 class PackedNode:
     """A node with geometry and no transform, parked (:meth:`Node.parked`) and pickled by the
     worker that read it, with what the main process plans with: the main process passes it on
-    to the worker that bakes it without unpickling it (README, `--workers`)."""
+    to the worker that bakes it without unpickling it (docs/cluster.md)."""
 
     id: str
     type: str
