@@ -259,7 +259,8 @@ def run(args: argparse.Namespace, console: Console) -> int:
         kept = ", ".join(f"{n:,} with {k}" for k, n in sorted(fewer.items()))
         console.info(
             f"{sum(fewer.values()):,} object(s) keep fewer levels ({kept} level(s)): no coarser "
-            "level was both cheaper and faithful there, so the finer one stays on (see docs/levels.md)"
+            "level was both cheaper and faithful there, so the finer one stays on "
+            "(see docs/levels.md)"
         )
     unused = Counter(label for obj in objects for label in obj["unused"])
     if unused:
