@@ -395,6 +395,8 @@ def convert(
     inputs = [input_path] if isinstance(input_path, str | Path) else list(input_path)
     sources = [input_format(path) for path in inputs]
     named = " + ".join(str(path) for path in inputs)
+    for path in (output_path, run.report_path):
+        _without_link_loop(path)
     folder = target.output_folder(Path(output_path)) if target.output_folder else None
     run = _resolved(run, inputs, folder)
     clock = Clock(*STAGES)
@@ -425,6 +427,20 @@ def convert(
         if report_sink is not None:
             _stage_report(report_sink, report)
     return report
+
+
+def _without_link_loop(path: str | Path | None) -> None:
+    """Raise :class:`InputError` naming the output ``path`` when a link on its way leads
+    back to itself (a link loop: nothing can be written through it)."""
+    if path is None:
+        return
+    for step in (*reversed(Path(path).parents), Path(path)):
+        try:
+            step.resolve()
+        except (RuntimeError, OSError):  # RuntimeError up to Python 3.12, OSError from 3.13
+            raise InputError(
+                f"cannot write here: {str(step)!r} is a link loop", str(path)
+            ) from None
 
 
 def _resolved(run: RunOptions, inputs: Sequence[str | Path], folder: Path | None) -> RunOptions:
