@@ -213,6 +213,40 @@ def test_a_document_broken_in_a_late_member_fails_as_in_one_process(tmp_path: Pa
     assert "is not well-formed XML (attributes construct error, line 2, column" in errors[0]
 
 
+def _lying_gz(text: bytes, trailer: slice) -> bytes:
+    """``text`` gzip-compressed, the trailer's CRC (``slice(-8, -4)``) or size
+    (``slice(-4, None)``) off by one."""
+    data = bytearray(gzip.compress(text))
+    data[trailer] = ((int.from_bytes(data[trailer], "little") + 1) % (1 << 32)).to_bytes(
+        4, "little"
+    )
+    return bytes(data)
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+@pytest.mark.parametrize("trailer", [slice(-8, -4), slice(-4, None)], ids=["crc", "size"])
+@pytest.mark.parametrize("make", ["gml", "lines", "objects"])
+def test_a_gz_whose_trailer_lies_fails_as_in_one_process(
+    tmp_path: Path, make: str, trailer: slice
+) -> None:
+    """A ``.gz`` whose trailer gives a CRC or size its data does not have: one error, the
+    same with workers as in one process (with workers it was ``BadGzipFile``)."""
+    if make == "gml":
+        source = tmp_path / "city.gml"
+        source.write_text(_city(*(building(f"b{i}", box(20.0 * i)) for i in range(5))))
+    else:
+        source = ten_lines(tmp_path) if make == "lines" else ten_objects(tmp_path)
+    path = source.with_name(source.name + ".gz")
+    path.write_bytes(_lying_gz(source.read_bytes(), trailer))
+    errors = []
+    for workers in (False, True):
+        with pytest.raises(InputError) as caught:
+            _read(path, workers)
+        errors.append(str(caught.value))
+    assert errors[0] == errors[1]
+    assert errors[0].startswith(f"{path}: cannot be read (")
+
+
 @pytest.mark.parametrize("chunk", [7, 1 << 20])
 def test_members_are_cut_past_comments_cdata_instructions_text_and_nesting(
     monkeypatch: pytest.MonkeyPatch, chunk: int
