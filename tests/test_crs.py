@@ -203,12 +203,34 @@ def test_no_transformation_is_one_line_naming_both_files_and_crss(tmp_path: Path
         in_one_crs([read_scene(citygml_sample(SIG3D.format(1))), read_scene(other)], print)
 
 
-@pytest.mark.parametrize("given", ["foo", "EPSG:99999"])
+@pytest.mark.parametrize(
+    "given",
+    ["foo", "EPSG:99999", "EPSG:" + "9" * 5_000, "EPSG:25832+" + "9" * 5_000],
+    ids=["foo", "unknown-code", "5000-digit-code", "5000-digit-vertical-code"],
+)
 def test_crs_option_must_name_a_crs(given: str, tmp_path: Path) -> None:
+    """Any code pyproj does not know is a usage error, shown cut to 80 characters (one of
+    5,000 digits was a ``ValueError`` and exit 1)."""
     out = tmp_path / "city.glb"
     result = run(delft(), "-o", out, "--crs", given)
-    assert_one_line_error(result, 2, "--crs", given)
+    assert_one_line_error(result, 2, "--crs", given[:40])
+    assert len(result.stderr) < 300
     assert not out.exists()
+
+
+def test_a_file_naming_a_code_of_5000_digits_reads_as_one_naming_an_unknown_crs(
+    tmp_path: Path,
+) -> None:
+    """An ``srsName`` whose EPSG code has 5,000 digits is a name like any pyproj does not
+    know (it was a ``ValueError``)."""
+    text = citygml_sample(SIG3D.format(1)).read_text(encoding="utf-8")
+    srs = re.search(r'srsName="([^"]*)"', text)
+    assert srs is not None
+    name = "EPSG:" + "9" * 5_000
+    path = tmp_path / "long.gml"
+    path.write_text(text.replace(srs.group(1), name), encoding="utf-8")
+    scene = read_scene(path)
+    assert scene.crs == name and len(list(scene.walk())) > 0
 
 
 def test_crs_given_to_a_mesh_is_warned_of_not_dropped_silently(tmp_path: Path) -> None:

@@ -14,6 +14,10 @@ from ..errors import LodConvertError, UsageError
 
 _EPSG = re.compile(r"(?:EPSG(?:/[\d.]+/|:[\d.]*:|:)|(?<=\d)\+)(\d+)", re.IGNORECASE)
 """EPSG codes in a URN, URL or ``EPSG:code`` name (``EPSG:h+v`` names a vertical CRS too)."""
+_CODE_DIGITS = 9
+"""Digits of the longest EPSG code read as one; a name with a longer one is no EPSG name."""
+_SHOWN = 80
+"""Characters of a CRS name a message shows."""
 
 
 NOT_DECLARED = "as in the source, not declared"
@@ -84,7 +88,7 @@ class Crs:
     @classmethod
     def of(cls, srs_name: str, where: str = "") -> Crs:
         codes = _EPSG.findall(srs_name)
-        if not codes:
+        if not codes or max(len(code) for code in codes) > _CODE_DIGITS:
             return cls(name=srs_name, where=where)
         vertical = f"EPSG:{codes[1]}" if len(codes) > 1 else None
         crs = cls(name=f"EPSG:{codes[0]}", vertical=vertical, where=where)
@@ -183,8 +187,15 @@ def checked_crs_option(text: str) -> str:
         pyproj_crs(crs.name or text, crs.vertical)
     except pyproj.exceptions.CRSError as exc:
         reason = str(exc).split("proj_create: ")[-1].rstrip(")") or "unknown"
-        raise UsageError(f"{text!r} names no CRS that pyproj knows ({reason})", "crs") from None
+        raise UsageError(
+            f"{_shortened(text)!r} names no CRS that pyproj knows ({_shortened(reason)})", "crs"
+        ) from None
     return text
+
+
+def _shortened(text: str) -> str:
+    """``text``, cut to :data:`_SHOWN` characters."""
+    return text if len(text) <= _SHOWN else text[: _SHOWN - 1] + "…"
 
 
 def vertical_reference(crs: Any) -> str:
