@@ -177,6 +177,30 @@ def test_parts_nested_too_deep_skip_their_building_only(tmp_path: Path) -> None:
     assert skipped["id"] == "B1" and "parts nested more than 32 deep" in skipped["reason"]
 
 
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_an_object_nested_past_the_depth_limit_is_skipped_alone(
+    tmp_path: Path, workers: str
+) -> None:
+    """Parts 300 deep and attribute sets 1,000 deep (past ``xml_depth`` 256, within what the
+    parser reads): each building one line naming the file and its id, the rest converted, the
+    summary counting both (the run failed naming neither)."""
+    deep = gml.building(gml.parts(300), "parts")
+    sets = gml.building(gml.attribute_sets(1000) + gml.surfaces(gml.cube()), "sets")
+    path = write(
+        tmp_path,
+        "city.gml",
+        gml.document(gml.box_building("a"), deep, sets, gml.box_building("b", x=5.0)),
+    )
+    run = run_cli(path, "-o", tmp_path / "out.glb", "--workers", workers)
+    assert run.code == 0, run.stderr
+    for name in ("parts", "sets"):
+        assert (
+            f"lodconvert: warning: {path}: object {name}: nests XML elements deeper than the "
+            "limit of 256 (raise it with --limit xml_depth=N) — skipped"
+        ) in run.stderr.splitlines()
+    assert "(2 object(s), 2 skipped," in run.stderr
+
+
 # --- coordinates ----------------------------------------------------------------------------------
 
 

@@ -383,17 +383,17 @@ def _relief_lod(component: etree._Element, top: etree._Element) -> str | None:
     return None
 
 
-def check_depth(element: etree._Element, depth_limit: int, source: str) -> None:
-    """:class:`InputError` when an element of the top-level object ``element`` lies deeper in
-    its document than ``depth_limit`` (checked before any of it is walked)."""
+def check_depth(element: etree._Element, depth_limit: int) -> None:
+    """:class:`BrokenObject` when an element of the top-level object ``element`` lies deeper
+    in its document than ``depth_limit`` (checked before any of it is walked; the parser
+    refuses a document nesting deeper than :data:`PARSER_DEPTH` itself)."""
     if depth_limit >= PARSER_DEPTH:
-        return  # the parser refuses deeper documents itself
+        return
     below = depth_limit - OBJECT_DEPTH
     if below < 0 or _deeper_than(below)(element):
-        raise InputError(
+        raise BrokenObject(
             f"nests XML elements deeper than the limit of {depth_limit} "
-            "(raise it with --limit xml_depth=N)",
-            source,
+            "(raise it with --limit xml_depth=N)"
         )
 
 
