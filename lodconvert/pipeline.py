@@ -403,7 +403,9 @@ def convert(
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = _sink(outputs, output_path, folder, inputs, run)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
-        scene, crs_record, baker, executor = _read_stage(inputs, sources, run, clock, stack)
+        scene, crs_record, baker, executor = _read_stage(
+            inputs, sources, run, clock, stack, target.georeferenced
+        )
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         pieces = _pieces(target, assembly.info, run, executor)
         skipped: list[dict[str, str]] = []
@@ -475,8 +477,10 @@ def _read_stage(
     run: RunOptions,
     clock: Clock,
     stack: contextlib.ExitStack,
+    georeferenced: bool = False,
 ) -> tuple[Scene, dict[str, Any], Backend, Executor]:
-    """The ``read`` stage: the scene of ``inputs`` and the report's ``crs``, the baker and the
+    """The ``read`` stage: the scene of ``inputs`` and the report's ``crs`` (``georeferenced``:
+    for an output placed on the globe by its CRS, :func:`read_inputs`), the baker and the
     executor, entered on ``stack`` (which reads too, where the reader spreads its work)."""
     others = run.workers > 1 or run.scheduler is not None  # processes other than this one
     spread = {"spread": others and len(inputs) == 1 and _read_through(run)}
@@ -487,7 +491,7 @@ def _read_stage(
     executor = stack.enter_context(_executor(run, baker, None)) if early else None
     with clock("read"):
         scene, crs_record = read_inputs(
-            inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
+            inputs, {**run.read_options, **spread}, run.limits, sources, run.warn, georeferenced
         )
     stack.enter_context(_input_kept_out_of_gc())
     executor = executor or stack.enter_context(_executor(run, baker, _object_count(scene)))
@@ -721,10 +725,13 @@ def read_inputs(
     limits: Limits = DEFAULT_LIMITS,
     sources: Sequence[Any] | None = None,
     warn: Message = _quiet,
+    georeferenced: bool = False,
 ) -> tuple[Scene, dict[str, Any]]:
     """The scene of ``inputs`` (one, or several in one CRS and merged: :func:`merged`), each
     read by its format (in ``sources`` where the caller found them) with the options it takes,
-    and the report's ``crs`` (:func:`~.reproject.in_one_crs`)."""
+    and the report's ``crs`` (:func:`~.reproject.in_one_crs`; ``georeferenced``: for an
+    output placed on the globe by its CRS, an input without one beside one with one is an
+    error)."""
     if (read_options or {}).get("crs") is not None:
         checked_crs_option(read_options["crs"])
     sources = sources or [input_format(path) for path in inputs]
@@ -738,7 +745,7 @@ def read_inputs(
                 f"{scene.source}: not a city model: --crs is not applied (a mesh keeps its own "
                 "axes and coordinates)"
             )
-    one_crs = in_one_crs(scenes, warn)
+    one_crs = in_one_crs(scenes, warn, georeferenced)
     return merged(one_crs.scenes), one_crs.record
 
 

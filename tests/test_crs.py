@@ -25,6 +25,7 @@ from .test_citygml import sample as citygml_sample
 from .test_cityjson import delft, write_json
 from .test_cli import assert_one_line_error, run
 
+FAST = ("--resolution", "24,12,6")
 BUILDINGS = 12
 """Delft buildings copied into another CRS."""
 
@@ -281,6 +282,36 @@ def test_a_streamed_citygml_file_without_crs_is_warned_of_alone_and_twice(tmp_pa
     assert f"{bare[0]}: declares no CRS; its coordinates are taken to be in EPSG:25832" in (
         result.stderr
     )
+
+
+def test_an_input_without_crs_beside_one_with_is_warned_of_and_refused_for_tiles(
+    tmp_path: Path,
+) -> None:
+    """A mesh, or a city model that declares no CRS, beside a house in EPSG:25832: each warned
+    of by name for glTF and X3D (the mesh was placed in EPSG:25832 silently), refused in one
+    line naming it for a tileset (3D Tiles place every input on the globe: both were
+    written)."""
+    house = citygml_sample(SIG3D.format(1))
+    bare = tmp_path / "bare.gml"
+    bare.write_text(
+        re.sub(r' srsName="[^"]*"', "", house.read_text(encoding="utf-8")), encoding="utf-8"
+    )
+    for other, what in ((SAMPLE, "is a mesh, which declares no CRS"), (bare, "declares no CRS")):
+        for name in ("both.glb", "both.x3d"):
+            result = run(house, other, "-o", tmp_path / name, "--backend", "numpy", *FAST)
+            far = other == SAMPLE and name == "both.glb"  # the knot 5,438 km off the origin
+            assert result.returncode == (1 if far else 0), result.stderr
+            warned = [line for line in result.stderr.splitlines() if "no CRS" in line]
+            assert warned == [
+                f"lodconvert: warning: {other}: {what}; its coordinates are taken to be in "
+                "EPSG:25832 + EPSG:5783" + (" (--crs EPSG:… names it)" if other == bare else "")
+            ]
+        tiles = tmp_path / "tiles" / "tileset.json"
+        result = run(house, other, "-o", tiles)
+        assert_one_line_error(
+            result, 1, str(other), what, f"beside {house.name} in EPSG:25832", "3D Tiles"
+        )
+        assert not tiles.parent.exists()
 
 
 def test_x3d_and_report_name_the_crs_and_its_vertical_reference(tmp_path: Path) -> None:

@@ -68,6 +68,7 @@ FORMAT = Format(
     check=check_tileset,
     write_options=("sse", "executor", "progress"),
     output_folder=output_folder,
+    georeferenced=True,
 )
 
 __all__ = ["DEFAULT_SSE", "FORMAT", "NAME", "output_folder", "write_tileset"]
