@@ -25,6 +25,7 @@ from lodconvert.io.citygml.members import Members
 from lodconvert.io.cityjson.parallel import ObjectsTask
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.io.spread import TASK_SECONDS
+from lodconvert.limits import DEFAULT_LIMITS, Limits
 from lodconvert.model import Mesh, Node, Scene, unpacked
 from lodconvert.tasks import Executor, PoolExecutor
 
@@ -145,11 +146,13 @@ def _read(
     spread: bool,
     killer: int | None = None,
     workers: Callable[[], Executor] = _two_workers,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> tuple[Scene, list[Any], list[Any], list[str]]:
     """The scene of ``path`` read in one process or by ``workers`` (default: two worker
-    processes), each member a task (``killer``: that task kills the workers that take it); the
-    facts of its nodes, the workers' results and what was told of reading in this process."""
-    scene = read_scene(path, spread=spread)
+    processes), each member a task (``killer``: that task kills the workers that take it)
+    under ``limits``; the facts of its nodes, the workers' results and what was told of
+    reading in this process."""
+    scene = read_scene(path, spread=spread, limits=limits)
     results: list[Any] = []
     told: list[str] = []
     if not spread:
@@ -314,6 +317,23 @@ def test_a_sequence_read_by_workers_is_the_sequence_read_in_one_process(tmp_path
     assert {type(node).__name__ for result in results for node in result.nodes} == {"PackedNode"}
     assert tally_of(two).skipped == tally_of(one).skipped
     assert [entry["id"] for entry in tally_of(two).skipped] == ["line 6"]
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_sequence_line_too_long_is_skipped_by_workers_as_in_one_process(tmp_path: Path) -> None:
+    """A feature line past ``sequence_line_bytes`` among ten: the same nodes and the same line
+    reported by number, with workers and in one process."""
+    path = ten_lines(tmp_path)
+    lines = path.read_bytes().splitlines()
+    lines.insert(3, b'{"type": "CityJSONFeature", "x": "' + b"x" * 30_000 + b'"}')
+    path.write_bytes(b"\n".join(lines) + b"\n")
+    limits = Limits(sequence_line_bytes=20_000)
+    one, one_facts, _, _ = _read(path, spread=False, limits=limits)
+    two, two_facts, results, _ = _read(path, spread=True, limits=limits)
+    assert two_facts == one_facts and len(one_facts) == 10
+    assert sum(len(result.nodes) for result in results) >= 8
+    assert tally_of(two).skipped == tally_of(one).skipped
+    assert [entry["id"] for entry in tally_of(two).skipped] == ["line 4", "line 7"]
 
 
 @pytest.mark.usefixtures("one_member_a_task")
