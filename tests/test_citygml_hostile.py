@@ -237,6 +237,30 @@ def test_no_numpy_warning_reaches_the_command_line(tmp_path: Path) -> None:
     assert "object tree: has coordinates up to 1e+300" in done.stderr
 
 
+@pytest.mark.parametrize(
+    ("count", "bad", "workers"),
+    [(3, 1, "1"), (3, 0, "1"), (100, 80, "1"), (100, 80, "2")],
+    ids=["middle", "first", "later-batch", "later-batch-workers"],
+)
+def test_a_latitude_beyond_90_skips_its_building_in_our_words(
+    tmp_path: Path, count: int, bad: int, workers: str
+) -> None:
+    """One latitude of 200 in a city in EPSG:4979: that building one line naming it, the rest
+    converted, no library warning on stderr. It failed the run where it was the first (the
+    frame's centre), had the building after it skipped in its place (the rings' offset taken
+    for the points'), or, later, reached the triangulation as infinite points (numpy's
+    warnings, the building kept)."""
+    path = write(tmp_path, "geo.gml", gml.geographic_city(count, bad))
+    run = run_cli(path, "-o", tmp_path / "out.glb", "-q", "--workers", workers)
+    assert run.code == 0, run.stderr
+    warned, summary = run.stderr.splitlines()
+    assert warned == (
+        f"lodconvert: warning: {path}: object b{bad}: has latitude 200, beyond ±90° (EPSG:4979) "
+        "— skipped"
+    )
+    assert summary.startswith("wrote ") and f"({count - 1} object(s), 1 skipped," in summary
+
+
 def test_inflation_stops_at_the_limit_with_work_to_match(tmp_path: Path) -> None:
     """Empty members inflating past ``decompressed_bytes`` stop there: 4× the limit costs
     about 4× the time."""

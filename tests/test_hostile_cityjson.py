@@ -15,6 +15,7 @@ import pytest
 from lodconvert.errors import InputError
 from lodconvert.io import read_scene
 from lodconvert.io.cityjson import sequence as sequence_module
+from lodconvert.io.geometry_checks import tally_of
 from lodconvert.limits import Limits
 
 from .fuzz.cases import CASES, SQUARE, city, city_object, sequence, zeros_gz
@@ -24,6 +25,7 @@ from .test_cli import run
 
 MB = 1 << 20
 GB = 1 << 30
+SQUARE_XY = ((0, 0), (1, 0), (1, 1), (0, 1))
 
 
 def _case(name: str, folder: Path) -> Path:
@@ -175,6 +177,23 @@ def test_coordinates_that_are_not_finite_skip_their_buildings_without_warnings(
     assert "uses vertex 4, whose coordinates are unreadable or not finite" in skipped["nan"]
     assert "uses vertex 6" in skipped["big"]
     assert "1 skipped" not in result.stderr and "3 skipped" in result.stderr
+
+
+def test_a_latitude_beyond_90_in_the_first_object_skips_it_alone(tmp_path: Path) -> None:
+    """Three squares in EPSG:4979, the first with a latitude of 200: that one skipped, the
+    local frame centred on the points within range (centred on all, at 126°, the run failed:
+    "not latitude and longitude")."""
+    squares = [
+        [[52 + dy * 1e-4, 13 + k * 1e-3 + dx * 1e-4, 0] for dx, dy in SQUARE_XY] for k in (0, 1, 2)
+    ]
+    squares[0][2][0] = 200
+    objects = {f"b{k}": city_object([[[4 * k + i for i in range(4)]]]) for k in range(3)}
+    src = tmp_path / "geo.city.json"
+    geographic = {"referenceSystem": "https://www.opengis.net/def/crs/EPSG/0/4979"}
+    src.write_bytes(city(objects, [p for square in squares for p in square], metadata=geographic))
+    scene = read_scene(src)
+    assert [node.id for node in scene.nodes] == ["b1", "b2"]
+    assert [entry["id"] for entry in tally_of(scene).skipped] == ["b0"]
 
 
 def test_unreadable_vertex_rows_skip_the_buildings_using_them(tmp_path: Path) -> None:

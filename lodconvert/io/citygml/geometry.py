@@ -707,11 +707,15 @@ def _coordinates(tops: list[Holder], crs: Crs) -> tuple[list[tuple[Holder, str]]
     metric = _metric(reads, crs)
     counts = np.concatenate([read.lengths for read in reads])
     pieces = np.split(metric, np.cumsum(counts)[:-1]) if len(counts) else []
-    offset = 0
+    offset = start = 0  # of the object's first ring, and of its first point
     read_tops = []
     for read in reads:
         cursor = 0
-        problem = _range_problem(metric[offset : offset + int(read.lengths.sum())])
+        absolute = read.points if read.relative is None else read.points[~read.relative]
+        problem = crs.beyond_range(absolute) or _range_problem(
+            metric[start : start + len(read.points)]
+        )
+        start += len(read.points)
         for polygon in read.polygons:
             n = read.layout[cursor]
             polygon.rings = [pieces[offset + i] for i in read.layout[cursor + 1 : cursor + 1 + n]]
