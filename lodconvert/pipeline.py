@@ -413,13 +413,17 @@ def convert(
     inputs = [input_path] if isinstance(input_path, str | Path) else list(input_path)
     sources = [input_format(path) for path in inputs]
     named = " + ".join(str(path) for path in inputs)
+    for path in (output_path, run.report_path):
+        _without_link_loop(path)
     folder = target.output_folder(Path(output_path)) if target.output_folder else None
     run = _resolved(run, inputs, folder)
     clock = Clock(*STAGES)
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = _sink(outputs, output_path, folder, inputs, run)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
-        scene, crs_record, baker, executor = _read_stage(inputs, sources, run, clock, stack)
+        scene, crs_record, baker, executor = _read_stage(
+            inputs, sources, run, clock, stack, target.georeferenced
+        )
         assembly = _Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         pieces = _pieces(target, assembly.info, run, executor)
         skipped: list[dict[str, str]] = []
@@ -443,6 +447,20 @@ def convert(
         if report_sink is not None:
             _stage_report(report_sink, report)
     return report
+
+
+def _without_link_loop(path: str | Path | None) -> None:
+    """Raise :class:`InputError` naming the output ``path`` when a link on its way leads
+    back to itself (a link loop: nothing can be written through it)."""
+    if path is None:
+        return
+    for step in (*reversed(Path(path).parents), Path(path)):
+        try:
+            step.resolve()
+        except (RuntimeError, OSError):  # RuntimeError up to Python 3.12, OSError from 3.13
+            raise InputError(
+                f"cannot write here: {str(step)!r} is a link loop", str(path)
+            ) from None
 
 
 def _resolved(run: RunOptions, inputs: Sequence[str | Path], folder: Path | None) -> RunOptions:
@@ -477,8 +495,10 @@ def _read_stage(
     run: RunOptions,
     clock: Clock,
     stack: contextlib.ExitStack,
+    georeferenced: bool = False,
 ) -> tuple[Scene, dict[str, Any], Backend, Executor]:
-    """The ``read`` stage: the scene of ``inputs`` and the report's ``crs``, the baker and the
+    """The ``read`` stage: the scene of ``inputs`` and the report's ``crs`` (``georeferenced``:
+    for an output placed on the globe by its CRS, :func:`read_inputs`), the baker and the
     executor, entered on ``stack`` (which reads too, where the reader spreads its work)."""
     others = run.workers > 1 or run.scheduler is not None  # processes other than this one
     spread = {"spread": others and len(inputs) == 1 and _read_through(run)}
@@ -489,7 +509,7 @@ def _read_stage(
     executor = stack.enter_context(_executor(run, baker, None)) if early else None
     with clock("read"):
         scene, crs_record = read_inputs(
-            inputs, {**run.read_options, **spread}, run.limits, sources, run.warn
+            inputs, {**run.read_options, **spread}, run.limits, sources, run.warn, georeferenced
         )
     stack.enter_context(_input_kept_out_of_gc())
     executor = executor or stack.enter_context(_executor(run, baker, _object_count(scene)))
@@ -730,10 +750,13 @@ def read_inputs(
     limits: Limits = DEFAULT_LIMITS,
     sources: Sequence[Any] | None = None,
     warn: Message = _quiet,
+    georeferenced: bool = False,
 ) -> tuple[Scene, dict[str, Any]]:
     """The scene of ``inputs`` (one, or several in one CRS and merged: :func:`merged`), each
     read by its format (in ``sources`` where the caller found them) with the options it takes,
-    and the report's ``crs`` (:func:`~.reproject.in_one_crs`)."""
+    and the report's ``crs`` (:func:`~.reproject.in_one_crs`; ``georeferenced``: for an
+    output placed on the globe by its CRS, an input without one beside one with one is an
+    error)."""
     if (read_options or {}).get("crs") is not None:
         checked_crs_option(read_options["crs"])
     sources = sources or [input_format(path) for path in inputs]
@@ -749,7 +772,7 @@ def read_inputs(
                 f"{scene.source}: not a city model: --crs is not applied (a mesh keeps its own "
                 "axes and coordinates)"
             )
-    one_crs = in_one_crs(scenes, warn)
+    one_crs = in_one_crs(scenes, warn, georeferenced)
     return merged(one_crs.scenes), one_crs.record
 
 

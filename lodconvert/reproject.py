@@ -182,11 +182,13 @@ class OneCrs:
     record: dict[str, Any]
 
 
-def in_one_crs(scenes: Sequence[Scene], warn: Message) -> OneCrs:
-    """``scenes`` in the CRS of the first that declares one (city inputs that declare none
-    are warned of and kept as they are); the report's ``crs``: the output's CRS, the vertical
-    reference of its heights and the inputs reprojected. Raises :class:`CrsError` naming both
-    files and CRSs where no transformation exists, and warns once per input where the best
+def in_one_crs(scenes: Sequence[Scene], warn: Message, georeferenced: bool = False) -> OneCrs:
+    """``scenes`` in the CRS of the first that declares one (inputs that declare none are
+    kept as they are: city inputs warned of, and where another declares one, meshes too); the
+    report's ``crs``: the output's CRS, the vertical reference of its heights and the inputs
+    reprojected. Raises :class:`CrsError` naming both files and CRSs where no transformation
+    exists, and, for an output placed on the globe by its CRS (``georeferenced``), naming an
+    input that declares none beside one that does; warns once per input where the best
     transformation is unavailable (PROJ without its datum grids)."""
     import pyproj
 
@@ -196,14 +198,11 @@ def in_one_crs(scenes: Sequence[Scene], warn: Message) -> OneCrs:
     reprojected: list[dict[str, Any]] = []
     for scene in scenes:
         if scene.crs is None:
-            if scene.city:
-                taken = (
-                    "written as they are"
-                    if first is None
-                    else f"taken to be in {target.label if target else first.crs}"
-                )
+            if first is not None:
+                _without_crs(scene, first, target, warn, georeferenced)
+            elif scene.city:
                 warn(
-                    f"{scene.source}: declares no CRS; its coordinates are {taken} "
+                    f"{scene.source}: declares no CRS; its coordinates are written as they are "
                     "(--crs EPSG:… names it)"
                 )
             done.append(scene)
@@ -240,6 +239,24 @@ def in_one_crs(scenes: Sequence[Scene], warn: Message) -> OneCrs:
         "reprojected": reprojected,
     }
     return OneCrs(done, record)
+
+
+def _without_crs(
+    scene: Scene, first: Scene, target: Georef | None, warn: Message, georeferenced: bool
+) -> None:
+    """Warn that ``scene``, which declares no CRS, is taken to be in ``first``'s; raise
+    :class:`CrsError` naming it instead for an output placed on the globe
+    (``georeferenced``)."""
+    what = "declares no CRS" if scene.city else "is a mesh, which declares no CRS"
+    hint = " (--crs EPSG:… names it)" if scene.city else ""
+    crs = target.label if target is not None else first.crs
+    if georeferenced:
+        raise CrsError(
+            f"{what}, beside {Path(first.source).name} in {crs}; a 3D Tiles output places "
+            f"every input on the globe by its CRS{hint or ': convert it on its own'}",
+            scene.source,
+        )
+    warn(f"{scene.source}: {what}; its coordinates are taken to be in {crs}{hint}")
 
 
 def _same_crs(scene: Scene, first: Scene) -> bool:

@@ -177,6 +177,30 @@ def test_parts_nested_too_deep_skip_their_building_only(tmp_path: Path) -> None:
     assert skipped["id"] == "B1" and "parts nested more than 32 deep" in skipped["reason"]
 
 
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_an_object_nested_past_the_depth_limit_is_skipped_alone(
+    tmp_path: Path, workers: str
+) -> None:
+    """Parts 300 deep and attribute sets 1,000 deep (past ``xml_depth`` 256, within what the
+    parser reads): each building one line naming the file and its id, the rest converted, the
+    summary counting both (the run failed naming neither)."""
+    deep = gml.building(gml.parts(300), "parts")
+    sets = gml.building(gml.attribute_sets(1000) + gml.surfaces(gml.cube()), "sets")
+    path = write(
+        tmp_path,
+        "city.gml",
+        gml.document(gml.box_building("a"), deep, sets, gml.box_building("b", x=5.0)),
+    )
+    run = run_cli(path, "-o", tmp_path / "out.glb", "--workers", workers)
+    assert run.code == 0, run.stderr
+    for name in ("parts", "sets"):
+        assert (
+            f"lodconvert: warning: {path}: object {name}: nests XML elements deeper than the "
+            "limit of 256 (raise it with --limit xml_depth=N) — skipped"
+        ) in run.stderr.splitlines()
+    assert "(2 object(s), 2 skipped," in run.stderr
+
+
 # --- coordinates ----------------------------------------------------------------------------------
 
 
@@ -211,6 +235,30 @@ def test_no_numpy_warning_reaches_the_command_line(tmp_path: Path) -> None:
     assert all(line.startswith(("lodconvert: warning: ", "wrote ")) for line in lines), lines
     assert "object bad: has NaN or infinite coordinates" in done.stderr
     assert "object tree: has coordinates up to 1e+300" in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("count", "bad", "workers"),
+    [(3, 1, "1"), (3, 0, "1"), (100, 80, "1"), (100, 80, "2")],
+    ids=["middle", "first", "later-batch", "later-batch-workers"],
+)
+def test_a_latitude_beyond_90_skips_its_building_in_our_words(
+    tmp_path: Path, count: int, bad: int, workers: str
+) -> None:
+    """One latitude of 200 in a city in EPSG:4979: that building one line naming it, the rest
+    converted, no library warning on stderr. It failed the run where it was the first (the
+    frame's centre), had the building after it skipped in its place (the rings' offset taken
+    for the points'), or, later, reached the triangulation as infinite points (numpy's
+    warnings, the building kept)."""
+    path = write(tmp_path, "geo.gml", gml.geographic_city(count, bad))
+    run = run_cli(path, "-o", tmp_path / "out.glb", "-q", "--workers", workers)
+    assert run.code == 0, run.stderr
+    warned, summary = run.stderr.splitlines()
+    assert warned == (
+        f"lodconvert: warning: {path}: object b{bad}: has latitude 200, beyond ±90° (EPSG:4979) "
+        "— skipped"
+    )
+    assert summary.startswith("wrote ") and f"({count - 1} object(s), 1 skipped," in summary
 
 
 def test_inflation_stops_at_the_limit_with_work_to_match(tmp_path: Path) -> None:

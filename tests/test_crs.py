@@ -25,6 +25,7 @@ from .test_citygml import sample as citygml_sample
 from .test_cityjson import delft, write_json
 from .test_cli import assert_one_line_error, run
 
+FAST = ("--resolution", "24,12,6")
 BUILDINGS = 12
 """Delft buildings copied into another CRS."""
 
@@ -203,12 +204,34 @@ def test_no_transformation_is_one_line_naming_both_files_and_crss(tmp_path: Path
         in_one_crs([read_scene(citygml_sample(SIG3D.format(1))), read_scene(other)], print)
 
 
-@pytest.mark.parametrize("given", ["foo", "EPSG:99999"])
+@pytest.mark.parametrize(
+    "given",
+    ["foo", "EPSG:99999", "EPSG:" + "9" * 5_000, "EPSG:25832+" + "9" * 5_000],
+    ids=["foo", "unknown-code", "5000-digit-code", "5000-digit-vertical-code"],
+)
 def test_crs_option_must_name_a_crs(given: str, tmp_path: Path) -> None:
+    """Any code pyproj does not know is a usage error, shown cut to 80 characters (one of
+    5,000 digits was a ``ValueError`` and exit 1)."""
     out = tmp_path / "city.glb"
     result = run(delft(), "-o", out, "--crs", given)
-    assert_one_line_error(result, 2, "--crs", given)
+    assert_one_line_error(result, 2, "--crs", given[:40])
+    assert len(result.stderr) < 300
     assert not out.exists()
+
+
+def test_a_file_naming_a_code_of_5000_digits_reads_as_one_naming_an_unknown_crs(
+    tmp_path: Path,
+) -> None:
+    """An ``srsName`` whose EPSG code has 5,000 digits is a name like any pyproj does not
+    know (it was a ``ValueError``)."""
+    text = citygml_sample(SIG3D.format(1)).read_text(encoding="utf-8")
+    srs = re.search(r'srsName="([^"]*)"', text)
+    assert srs is not None
+    name = "EPSG:" + "9" * 5_000
+    path = tmp_path / "long.gml"
+    path.write_text(text.replace(srs.group(1), name), encoding="utf-8")
+    scene = read_scene(path)
+    assert scene.crs == name and len(list(scene.walk())) > 0
 
 
 def test_crs_given_to_a_mesh_is_warned_of_not_dropped_silently(tmp_path: Path) -> None:
@@ -259,6 +282,36 @@ def test_a_streamed_citygml_file_without_crs_is_warned_of_alone_and_twice(tmp_pa
     assert f"{bare[0]}: declares no CRS; its coordinates are taken to be in EPSG:25832" in (
         result.stderr
     )
+
+
+def test_an_input_without_crs_beside_one_with_is_warned_of_and_refused_for_tiles(
+    tmp_path: Path,
+) -> None:
+    """A mesh, or a city model that declares no CRS, beside a house in EPSG:25832: each warned
+    of by name for glTF and X3D (the mesh was placed in EPSG:25832 silently), refused in one
+    line naming it for a tileset (3D Tiles place every input on the globe: both were
+    written)."""
+    house = citygml_sample(SIG3D.format(1))
+    bare = tmp_path / "bare.gml"
+    bare.write_text(
+        re.sub(r' srsName="[^"]*"', "", house.read_text(encoding="utf-8")), encoding="utf-8"
+    )
+    for other, what in ((SAMPLE, "is a mesh, which declares no CRS"), (bare, "declares no CRS")):
+        for name in ("both.glb", "both.x3d"):
+            result = run(house, other, "-o", tmp_path / name, "--backend", "numpy", *FAST)
+            far = other == SAMPLE and name == "both.glb"  # the knot 5,438 km off the origin
+            assert result.returncode == (1 if far else 0), result.stderr
+            warned = [line for line in result.stderr.splitlines() if "no CRS" in line]
+            assert warned == [
+                f"lodconvert: warning: {other}: {what}; its coordinates are taken to be in "
+                "EPSG:25832 + EPSG:5783" + (" (--crs EPSG:… names it)" if other == bare else "")
+            ]
+        tiles = tmp_path / "tiles" / "tileset.json"
+        result = run(house, other, "-o", tiles)
+        assert_one_line_error(
+            result, 1, str(other), what, f"beside {house.name} in EPSG:25832", "3D Tiles"
+        )
+        assert not tiles.parent.exists()
 
 
 def test_x3d_and_report_name_the_crs_and_its_vertical_reference(tmp_path: Path) -> None:

@@ -5,6 +5,7 @@ what a user sees of objects the reader leaves out. The one-line errors are cases
 
 from __future__ import annotations
 
+import gzip
 import json
 import time
 from pathlib import Path
@@ -13,6 +14,8 @@ import pytest
 
 from lodconvert.errors import InputError
 from lodconvert.io import read_scene
+from lodconvert.io.cityjson import sequence as sequence_module
+from lodconvert.io.geometry_checks import tally_of
 from lodconvert.limits import Limits
 
 from .fuzz.cases import CASES, SQUARE, city, city_object, sequence, zeros_gz
@@ -22,6 +25,7 @@ from .test_cli import run
 
 MB = 1 << 20
 GB = 1 << 30
+SQUARE_XY = ((0, 0), (1, 0), (1, 1), (0, 1))
 
 
 def _case(name: str, folder: Path) -> Path:
@@ -80,12 +84,43 @@ def test_a_gz_past_the_limit_is_refused_holding_a_chunk(tmp_path: Path, small_pe
     assert peak(512 * MB, "128M") - high < 16 * MB, high
 
 
-def test_a_long_sequence_line_is_refused_before_it_is_held(tmp_path: Path, small_peak: int):
+def _feature_line(name: str) -> bytes:
+    """The line of a feature of one object, ``name``, without its line break."""
+    return sequence({"CityObjects": {name: city_object()}, "vertices": SQUARE}).splitlines()[1]
+
+
+def test_a_long_sequence_line_is_skipped_without_being_held(tmp_path: Path, small_peak: int):
+    """A feature line of 256 MiB (in a ``.gz``) over a 4 MiB limit: that line reported by its
+    number and passed over as it streams, the features after it converted (the run failed:
+    "has a line longer than the limit"), the peak some 4 MiB above a small run's."""
     src = tmp_path / "long.city.jsonl.gz"
-    src.write_bytes(zeros_gz(256 * MB, sequence() + b'{"type": "CityJSONFeature", "x": "', b"x"))
+    head = sequence() + _feature_line("a") + b'\n{"type": "CityJSONFeature", "x": "'
+    after = gzip.compress(b'"}\n' + _feature_line("b") + b"\n", mtime=0)
+    src.write_bytes(zeros_gz(256 * MB, head, b"x") + after)
     result = run_cli(src, "-o", tmp_path / "long.glb", "--limit", "sequence_line_bytes=4M")
-    assert result.code == 1 and "line 2" in result.stderr, result.stderr
+    assert result.code == 0, result.stderr
+    assert (
+        f"lodconvert: warning: {src}: object line 3: is longer than the limit of 4,194,304 bytes "
+        "(sequence_line_bytes; raise it with --limit sequence_line_bytes=N) — skipped"
+    ) in result.stderr.splitlines()
+    assert "(2 object(s), 1 skipped," in result.stderr
     assert result.peak_bytes - small_peak < 32 * MB, (result.peak_bytes, small_peak)
+
+
+@pytest.mark.parametrize("chunk", [1, 5, 64, 1 << 16])
+def test_long_lines_are_passed_over_wherever_reads_cut_them(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, chunk: int
+) -> None:
+    """Lines over the limit (alone, in a row, first in a read, last in the file without a line
+    break) come as ``None`` under their numbers; the others as they are."""
+    monkeypatch.setattr(sequence_module, "CHUNK", chunk)
+    lines = [b"short", b"x" * 40, b"", b"y" * 21, b"z" * 20, b"  ok ", b"", b"w" * 100]
+    path = tmp_path / "lines.city.jsonl"
+    path.write_bytes(b"\n".join(lines))
+    read = list(sequence_module.sequence_lines(path, Limits(sequence_line_bytes=20)))
+    assert read == [
+        (1, b"short"), (2, None), (4, None), (5, b"z" * 20), (6, b"ok "), (8, None),
+    ]  # fmt: skip
 
 
 def _read_seconds(path: Path) -> float:
@@ -142,6 +177,23 @@ def test_coordinates_that_are_not_finite_skip_their_buildings_without_warnings(
     assert "uses vertex 4, whose coordinates are unreadable or not finite" in skipped["nan"]
     assert "uses vertex 6" in skipped["big"]
     assert "1 skipped" not in result.stderr and "3 skipped" in result.stderr
+
+
+def test_a_latitude_beyond_90_in_the_first_object_skips_it_alone(tmp_path: Path) -> None:
+    """Three squares in EPSG:4979, the first with a latitude of 200: that one skipped, the
+    local frame centred on the points within range (centred on all, at 126°, the run failed:
+    "not latitude and longitude")."""
+    squares = [
+        [[52 + dy * 1e-4, 13 + k * 1e-3 + dx * 1e-4, 0] for dx, dy in SQUARE_XY] for k in (0, 1, 2)
+    ]
+    squares[0][2][0] = 200
+    objects = {f"b{k}": city_object([[[4 * k + i for i in range(4)]]]) for k in range(3)}
+    src = tmp_path / "geo.city.json"
+    geographic = {"referenceSystem": "https://www.opengis.net/def/crs/EPSG/0/4979"}
+    src.write_bytes(city(objects, [p for square in squares for p in square], metadata=geographic))
+    scene = read_scene(src)
+    assert [node.id for node in scene.nodes] == ["b1", "b2"]
+    assert [entry["id"] for entry in tally_of(scene).skipped] == ["b0"]
 
 
 def test_unreadable_vertex_rows_skip_the_buildings_using_them(tmp_path: Path) -> None:

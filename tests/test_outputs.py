@@ -51,6 +51,20 @@ def test_an_unwritable_folder_is_refused(tmp_path: Path) -> None:
     assert_one_line_error(run(SAMPLE, "-o", locked / "o.glb", *FAST), 1, "not writable")
 
 
+@pytest.mark.parametrize("name", ["x.x3d", "tileset.json", "report"])
+def test_an_output_through_a_link_loop_is_one_line_naming_it(tmp_path: Path, name: str) -> None:
+    """A folder that is a link to itself (``ln -s out out``): the output (or the report) named
+    in one line, nothing written (a tileset's was a ``RuntimeError``)."""
+    loop = tmp_path / "out"
+    loop.symlink_to(loop)
+    output, more = loop / name, ()
+    if name == "report":
+        output, more = tmp_path / "x.glb", ("--report", loop / "r.json")
+    written = str(more[-1] if more else output)
+    assert_one_line_error(run(SAMPLE, "-o", output, *more, *FAST), 1, written, "link loop")
+    assert _files(tmp_path) == ["out"]
+
+
 def test_the_input_is_never_an_output(tmp_path: Path) -> None:
     copy = tmp_path / "knot.x3d"
     run(SAMPLE, "-o", copy, *FAST)

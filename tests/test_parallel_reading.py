@@ -25,6 +25,7 @@ from lodconvert.io.citygml.members import Members
 from lodconvert.io.cityjson.parallel import ObjectsTask
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.io.spread import TASK_SECONDS
+from lodconvert.limits import DEFAULT_LIMITS, Limits
 from lodconvert.model import Mesh, Node, Scene, unpacked
 from lodconvert.tasks import Executor, PoolExecutor
 
@@ -145,11 +146,13 @@ def _read(
     spread: bool,
     killer: int | None = None,
     workers: Callable[[], Executor] = _two_workers,
+    limits: Limits = DEFAULT_LIMITS,
 ) -> tuple[Scene, list[Any], list[Any], list[str]]:
     """The scene of ``path`` read in one process or by ``workers`` (default: two worker
-    processes), each member a task (``killer``: that task kills the workers that take it); the
-    facts of its nodes, the workers' results and what was told of reading in this process."""
-    scene = read_scene(path, spread=spread)
+    processes), each member a task (``killer``: that task kills the workers that take it)
+    under ``limits``; the facts of its nodes, the workers' results and what was told of
+    reading in this process."""
+    scene = read_scene(path, spread=spread, limits=limits)
     results: list[Any] = []
     told: list[str] = []
     if not spread:
@@ -211,6 +214,40 @@ def test_a_document_broken_in_a_late_member_fails_as_in_one_process(tmp_path: Pa
         errors.append(str(caught.value))
     assert errors[0] == errors[1]
     assert "is not well-formed XML (attributes construct error, line 2, column" in errors[0]
+
+
+def _lying_gz(text: bytes, trailer: slice) -> bytes:
+    """``text`` gzip-compressed, the trailer's CRC (``slice(-8, -4)``) or size
+    (``slice(-4, None)``) off by one."""
+    data = bytearray(gzip.compress(text))
+    data[trailer] = ((int.from_bytes(data[trailer], "little") + 1) % (1 << 32)).to_bytes(
+        4, "little"
+    )
+    return bytes(data)
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+@pytest.mark.parametrize("trailer", [slice(-8, -4), slice(-4, None)], ids=["crc", "size"])
+@pytest.mark.parametrize("make", ["gml", "lines", "objects"])
+def test_a_gz_whose_trailer_lies_fails_as_in_one_process(
+    tmp_path: Path, make: str, trailer: slice
+) -> None:
+    """A ``.gz`` whose trailer gives a CRC or size its data does not have: one error, the
+    same with workers as in one process (with workers it was ``BadGzipFile``)."""
+    if make == "gml":
+        source = tmp_path / "city.gml"
+        source.write_text(_city(*(building(f"b{i}", box(20.0 * i)) for i in range(5))))
+    else:
+        source = ten_lines(tmp_path) if make == "lines" else ten_objects(tmp_path)
+    path = source.with_name(source.name + ".gz")
+    path.write_bytes(_lying_gz(source.read_bytes(), trailer))
+    errors = []
+    for workers in (False, True):
+        with pytest.raises(InputError) as caught:
+            _read(path, workers)
+        errors.append(str(caught.value))
+    assert errors[0] == errors[1]
+    assert errors[0].startswith(f"{path}: cannot be read (")
 
 
 @pytest.mark.parametrize("chunk", [7, 1 << 20])
@@ -280,6 +317,23 @@ def test_a_sequence_read_by_workers_is_the_sequence_read_in_one_process(tmp_path
     assert {type(node).__name__ for result in results for node in result.nodes} == {"PackedNode"}
     assert tally_of(two).skipped == tally_of(one).skipped
     assert [entry["id"] for entry in tally_of(two).skipped] == ["line 6"]
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_sequence_line_too_long_is_skipped_by_workers_as_in_one_process(tmp_path: Path) -> None:
+    """A feature line past ``sequence_line_bytes`` among ten: the same nodes and the same line
+    reported by number, with workers and in one process."""
+    path = ten_lines(tmp_path)
+    lines = path.read_bytes().splitlines()
+    lines.insert(3, b'{"type": "CityJSONFeature", "x": "' + b"x" * 30_000 + b'"}')
+    path.write_bytes(b"\n".join(lines) + b"\n")
+    limits = Limits(sequence_line_bytes=20_000)
+    one, one_facts, _, _ = _read(path, spread=False, limits=limits)
+    two, two_facts, results, _ = _read(path, spread=True, limits=limits)
+    assert two_facts == one_facts and len(one_facts) == 10
+    assert sum(len(result.nodes) for result in results) >= 8
+    assert tally_of(two).skipped == tally_of(one).skipped
+    assert [entry["id"] for entry in tally_of(two).skipped] == ["line 4", "line 7"]
 
 
 @pytest.mark.usefixtures("one_member_a_task")

@@ -24,6 +24,8 @@ whichever of these it offers —
   folder that the output path names, checked to be one the run may replace; the writer's sink
   is then that folder (:class:`~lodconvert.sinks.DirectorySink`), and the run groups objects
   into LOD parents (``--hlod auto`` unless given);
+- ``georeferenced``: whether the output places the scene on the globe by its CRS (3D Tiles),
+  so that an input that declares no CRS cannot join one that does;
 - ``formatter(info, **write options)``: for a format whose text of a chain needs nothing of
   the rest of the document, a picklable callable that worker processes call on each chain they
   bake (``formatter(chain)`` → that chain's piece of the output, or ``None``); ``write`` then
@@ -99,6 +101,7 @@ class Format:
     read_frame: Callable[..., Any] | None = None
     check: Callable[..., None] | None = None
     output_folder: Callable[[Path], Path] | None = None
+    georeferenced: bool = False
     formatter: Callable[..., Callable[[LodChain], Any]] | None = None
     read_options: tuple[str, ...] = ()
     write_options: tuple[str, ...] = ()

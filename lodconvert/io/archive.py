@@ -33,7 +33,8 @@ _ZIP_METHODS = frozenset(
 
 class Capped(io.RawIOBase):
     """A binary stream that raises :class:`InputError` once more than ``limit`` bytes came
-    out of it (what a compressed input inflates to), or when what it inflates is broken."""
+    out of it (what a compressed input inflates to), or when what it inflates is broken (a
+    gzip trailer whose size or CRC does not match included), whoever reads it."""
 
     def __init__(self, stream: IO[bytes], limit: int, source: str) -> None:
         super().__init__()
@@ -45,7 +46,7 @@ class Capped(io.RawIOBase):
     def readinto(self, buffer: memoryview | bytearray) -> int:
         try:
             data = self.stream.read(len(buffer))
-        except (zlib.error, zipfile.BadZipFile, EOFError) as exc:
+        except (zlib.error, zipfile.BadZipFile, gzip.BadGzipFile, EOFError) as exc:
             raise InputError(f"cannot be read ({exc})", self.source) from None
         self.total += len(data)
         if self.total > self.limit:

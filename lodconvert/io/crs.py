@@ -14,6 +14,10 @@ from ..errors import LodConvertError, UsageError
 
 _EPSG = re.compile(r"(?:EPSG(?:/[\d.]+/|:[\d.]*:|:)|(?<=\d)\+)(\d+)", re.IGNORECASE)
 """EPSG codes in a URN, URL or ``EPSG:code`` name (``EPSG:h+v`` names a vertical CRS too)."""
+_CODE_DIGITS = 9
+"""Digits of the longest EPSG code read as one; a name with a longer one is no EPSG name."""
+_SHOWN = 80
+"""Characters of a CRS name a message shows."""
 
 
 NOT_DECLARED = "as in the source, not declared"
@@ -84,7 +88,7 @@ class Crs:
     @classmethod
     def of(cls, srs_name: str, where: str = "") -> Crs:
         codes = _EPSG.findall(srs_name)
-        if not codes:
+        if not codes or max(len(code) for code in codes) > _CODE_DIGITS:
             return cls(name=srs_name, where=where)
         vertical = f"EPSG:{codes[1]}" if len(codes) > 1 else None
         crs = cls(name=f"EPSG:{codes[0]}", vertical=vertical, where=where)
@@ -98,20 +102,24 @@ class Crs:
 
     def to_metric(self, points: np.ndarray, first: int | None = None) -> np.ndarray:
         """``points`` in metres: projected onto the local frame when geographic (the frame is
-        centred on the first call's points, or on its first ``first`` of them)."""
+        centred on the first call's points, or on its first ``first`` of them, those within
+        range: :meth:`beyond_range`; :class:`CrsError` where most are not, as the CRS is then
+        not the one they are in). A point beyond range becomes infinite."""
         if self.geographic is None or not len(points):
             return points
         if self.frame is None:
             lat_axis, lon_axis = self.geographic["axes"]
             centred = points[:first] if first else points
-            center = (centred.min(axis=0) + centred.max(axis=0)) / 2.0
-            if abs(center[lat_axis]) > 90.0 or abs(center[lon_axis]) > 180.0:
+            inside = centred[~self._beyond(centred)]
+            if 2 * len(inside) < len(centred):
+                center = (centred.min(axis=0) + centred.max(axis=0)) / 2.0
                 raise CrsError(
                     f"its coordinates are not latitude and longitude, as {self.name} has them "
                     f"(the first object lies at {center[lat_axis]:.6g}, {center[lon_axis]:.6g}); "
                     "the CRS declared or given with --crs is not the one they are in",
                     self.where or None,
                 )
+            center = (inside.min(axis=0) + inside.max(axis=0)) / 2.0
             self.frame = LocalFrame(
                 self.name or "",
                 float(np.round(center[lat_axis], 6)),
@@ -122,6 +130,25 @@ class Crs:
                 lon_axis,
             )
         return self.frame.project(points)
+
+    def beyond_range(self, points: np.ndarray) -> str | None:
+        """For a geographic CRS, why ``points`` ((n, 3) in its axis order) are not latitude and
+        longitude in it: the first beyond ±90° latitude or ±180° longitude, named; else None."""
+        if self.geographic is None or not len(points):
+            return None
+        beyond = self._beyond(points)
+        if not beyond.any():
+            return None
+        point = points[int(np.argmax(beyond))]
+        lat_axis, lon_axis = self.geographic["axes"]
+        if abs(point[lat_axis]) > 90.0:
+            return f"has latitude {point[lat_axis]:.6g}, beyond ±90° ({self.name})"
+        return f"has longitude {point[lon_axis]:.6g}, beyond ±180° ({self.name})"
+
+    def _beyond(self, points: np.ndarray) -> np.ndarray:
+        """Which of ``points`` lie beyond ±90° latitude or ±180° longitude (a geographic CRS)."""
+        lat_axis, lon_axis = self.geographic["axes"]
+        return (np.abs(points[:, lat_axis]) > 90.0) | (np.abs(points[:, lon_axis]) > 180.0)
 
 
 def _geographic(code: int) -> dict[str, Any] | None:
@@ -183,8 +210,15 @@ def checked_crs_option(text: str) -> str:
         pyproj_crs(crs.name or text, crs.vertical)
     except pyproj.exceptions.CRSError as exc:
         reason = str(exc).split("proj_create: ")[-1].rstrip(")") or "unknown"
-        raise UsageError(f"{text!r} names no CRS that pyproj knows ({reason})", "crs") from None
+        raise UsageError(
+            f"{_shortened(text)!r} names no CRS that pyproj knows ({_shortened(reason)})", "crs"
+        ) from None
     return text
+
+
+def _shortened(text: str) -> str:
+    """``text``, cut to :data:`_SHOWN` characters."""
+    return text if len(text) <= _SHOWN else text[: _SHOWN - 1] + "…"
 
 
 def vertical_reference(crs: Any) -> str:

@@ -400,7 +400,8 @@ CASES = (
             {"CityObjects": {"b": city_object()}, "vertices": SQUARE, "x": "x" * (2 << 20)},
         ),
         args=("--limit", "sequence_line_bytes=1M"),
-        words=("line 3", "longer than the limit of 1,048,576 bytes", "sequence_line_bytes="),
+        code=0,
+        words=("(1 object(s), 1 skipped,",),
     ),
     Case(
         "a CityJSONSeq header line of 2 MiB, over --limit sequence_line_bytes=1M",

@@ -146,6 +146,25 @@ def with_coordinate(value: str, *more: str) -> bytes:
     return document(building(surfaces(rings), "bad"), box_building("good", x=5.0), *more)
 
 
+def geographic_city(count: int, bad: int, latitude: str = "200") -> bytes:
+    """``count`` buildings ``b0``… in EPSG:4979 (latitude, longitude, height), cubes of some
+    7 m in a row at 52° N 13° E; building ``b{bad}`` has ``latitude`` for one of its
+    points."""
+    members = []
+    for k in range(count):
+        rings = []
+        for ring in cube(3.0 * k):
+            values = [float(v) for v in ring.split()]
+            points = zip(values[::3], values[1::3], values[2::3], strict=True)
+            rings.append(
+                " ".join(f"{52 + y * 1e-4:.7f} {13 + x * 1e-4:.7f} {z * 7:g}" for x, y, z in points)
+            )
+        if k == bad:
+            rings[1] = latitude + rings[1][rings[1].index(" ") :]
+        members.append(building(surfaces(rings), f"b{k}"))
+    return document(*members).replace(b"EPSG:25832", b"EPSG:4979")
+
+
 def without_ids(count: int, parts: bool) -> bytes:
     """``count`` objects without ``gml:id``: parts of one building (``parts``), else buildings
     without geometry (a name alone: each is skipped under an id of its own) before a good one."""

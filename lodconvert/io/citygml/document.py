@@ -145,10 +145,9 @@ class Document:
     def _collected(self, element: etree._Element) -> tuple[Node, Holder] | None:
         """A top-level city object's node (parts as children, without geometry) and its
         holder with the polygons found in it and their coordinates read (its elements freed,
-        a part at a time); None when the object is not read (or skipped:
-        parts nested too deep, no polygon; an object with no element in it is only counted).
-        :class:`InputError` when it nests deeper than the ``xml_depth`` limit, checked before
-        it is walked."""
+        a part at a time); None when the object is not read (or skipped: elements nested
+        deeper than the ``xml_depth`` limit, checked before it is walked, parts nested too
+        deep, no polygon; an object with no element in it is only counted)."""
         kind = local(element)
         if not len(element) and is_feature(kind) and kind not in NOT_OBJECTS:
             self._count("empty", kind)
@@ -162,8 +161,8 @@ class Document:
         if self.crs is None:
             srs = next((e.get("srsName") for e in element.iter() if e.get("srsName")), None)
             self.crs = Crs.of(srs, self.source) if srs else Crs()
-        check_depth(element, self.limits.xml_depth, self.source)
         try:
+            check_depth(element, self.limits.xml_depth)
             top = holders_of(element)
         except BrokenObject as exc:
             self._skip(object_id(gml_id_of(element) or kind, self.taken), str(exc))

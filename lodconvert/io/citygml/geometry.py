@@ -383,17 +383,17 @@ def _relief_lod(component: etree._Element, top: etree._Element) -> str | None:
     return None
 
 
-def check_depth(element: etree._Element, depth_limit: int, source: str) -> None:
-    """:class:`InputError` when an element of the top-level object ``element`` lies deeper in
-    its document than ``depth_limit`` (checked before any of it is walked)."""
+def check_depth(element: etree._Element, depth_limit: int) -> None:
+    """:class:`BrokenObject` when an element of the top-level object ``element`` lies deeper
+    in its document than ``depth_limit`` (checked before any of it is walked; the parser
+    refuses a document nesting deeper than :data:`PARSER_DEPTH` itself)."""
     if depth_limit >= PARSER_DEPTH:
-        return  # the parser refuses deeper documents itself
+        return
     below = depth_limit - OBJECT_DEPTH
     if below < 0 or _deeper_than(below)(element):
-        raise InputError(
+        raise BrokenObject(
             f"nests XML elements deeper than the limit of {depth_limit} "
-            "(raise it with --limit xml_depth=N)",
-            source,
+            "(raise it with --limit xml_depth=N)"
         )
 
 
@@ -707,11 +707,15 @@ def _coordinates(tops: list[Holder], crs: Crs) -> tuple[list[tuple[Holder, str]]
     metric = _metric(reads, crs)
     counts = np.concatenate([read.lengths for read in reads])
     pieces = np.split(metric, np.cumsum(counts)[:-1]) if len(counts) else []
-    offset = 0
+    offset = start = 0  # of the object's first ring, and of its first point
     read_tops = []
     for read in reads:
         cursor = 0
-        problem = _range_problem(metric[offset : offset + int(read.lengths.sum())])
+        absolute = read.points if read.relative is None else read.points[~read.relative]
+        problem = crs.beyond_range(absolute) or _range_problem(
+            metric[start : start + len(read.points)]
+        )
+        start += len(read.points)
         for polygon in read.polygons:
             n = read.layout[cursor]
             polygon.rings = [pieces[offset + i] for i in read.layout[cursor + 1 : cursor + 1 + n]]

@@ -56,12 +56,13 @@ transverse Mercator centred on the document's vertices (a CityJSONSeq file's: on
 feature's), whose PROJ definition becomes the scene's and every node's CRS and whose definition
 the scene's ``local_frame`` attribute keeps; template vertices are taken as metres from their
 reference points. CityJSONSeq is read line by line (:mod:`.sequence`: in chunks, blank lines
-skipped, a ``.gz`` stopped at ``decompressed_bytes`` and a line at ``sequence_line_bytes``):
+skipped, a ``.gz`` stopped at ``decompressed_bytes``, a line longer than
+``sequence_line_bytes`` passed over as it streams):
 the header line (``transform``, ``metadata``, ``geometry-templates``) first, then one
 ``CityJSONFeature`` per line; features are read until they hold :data:`~.document.BATCH`
 objects (or that many lines, or ``sequence_line_bytes`` of text), then triangulated together
 and their nodes yielded, so memory holds one batch of features at a time; a line that is not a
-feature is reported and skipped.
+feature, or is too long, is reported and skipped.
 """
 
 from __future__ import annotations

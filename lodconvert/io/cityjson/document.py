@@ -21,7 +21,7 @@ from ..spread import Results
 from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_node, checked_nodes
 from .parallel import ObjectsReading, SequenceReading
-from .sequence import sequence_lines
+from .sequence import Line, long_line, sequence_lines
 from .source import (
     Context,
     cityjson_object,
@@ -128,10 +128,17 @@ class _Feature:
 
 
 def _feature(
-    line: bytes, where: str, header: dict[str, Any], ctx: Context, types: frozenset[str] | None
+    line: bytes | None,
+    where: str,
+    header: dict[str, Any],
+    ctx: Context,
+    types: frozenset[str] | None,
 ) -> _Feature:
-    """The ``CityJSONFeature`` of a line, against the header's transform and context."""
+    """The ``CityJSONFeature`` of a line (``None``: one too long to read), against the
+    header's transform and context."""
     try:
+        if line is None:
+            raise InputError(long_line(ctx.tally.limits), where)
         try:
             text = line.decode("utf-8")
         except UnicodeDecodeError as exc:
@@ -156,15 +163,16 @@ def _feature(
 
 
 def _feature_nodes(
-    lines: Iterator[tuple[int, bytes]],
+    lines: Iterator[Line],
     header: dict[str, Any],
     ctx: Context,
     types: frozenset[str] | None,
 ) -> Iterator[Node]:
-    """The nodes of each ``CityJSONFeature`` line, a line that is not one recorded as
-    skipped. Lines are read until they hold :data:`BATCH` objects (or are that many, or
-    ``sequence_line_bytes`` of text), whose polygons are triangulated together; their nodes
-    are then yielded feature by feature, so memory holds one batch of features at a time."""
+    """The nodes of each ``CityJSONFeature`` line, a line that is not one (or is too long to
+    read) recorded as skipped. Lines are read until they hold :data:`BATCH` objects (or are
+    that many, or ``sequence_line_bytes`` of text), whose polygons are triangulated together;
+    their nodes are then yielded feature by feature, so memory holds one batch of features at
+    a time."""
     waiting: list[_Feature] = []
     objects = held = 0
     with closing(lines):
@@ -172,7 +180,7 @@ def _feature_nodes(
             feature = _feature(line, f"line {number}", header, ctx, types)
             waiting.append(feature)
             objects += len(feature.tree.objects) if feature.tree is not None else 0
-            held += len(line)
+            held += len(line or b"")
             full = held >= ctx.tally.limits.sequence_line_bytes
             if objects >= BATCH or len(waiting) >= BATCH or full:
                 yield from _finished_features(waiting, ctx.tally)
@@ -212,7 +220,9 @@ def read_sequence(
     executor: :mod:`.parallel`)."""
     lines = sequence_lines(path, limits)
     try:
-        _, first = next(lines, (1, b""))
+        number, first = next(lines, (1, b""))
+        if first is None:
+            raise InputError(f"line {number} {long_line(limits)}", str(path))
         try:
             text = first.decode("utf-8-sig")
         except UnicodeDecodeError as exc:

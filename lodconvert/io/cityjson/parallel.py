@@ -32,11 +32,12 @@ from ..geometry_checks import InputTally
 from ..spread import TASK_SECONDS, Results, Sizer, add_tally, quiet
 from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_nodes, read_kept
+from .sequence import Line
 from .source import Context, context_of
 
-Lines = list[tuple[int, bytes]]
+Lines = list[Line]
 """Lines of a file, each with its number."""
-ReadLines = Callable[[Iterator[tuple[int, bytes]], dict[str, Any], Context, Any], Iterator[Node]]
+ReadLines = Callable[[Iterator[Line], dict[str, Any], Context, Any], Iterator[Node]]
 """How one process reads lines into nodes: ``read(lines, header, ctx, types)``."""
 
 
@@ -100,7 +101,7 @@ class SequenceReading:
 
     def __init__(
         self,
-        lines: Iterator[tuple[int, bytes]],
+        lines: Iterator[Line],
         header: dict[str, Any],
         ctx: Context,
         types: frozenset[str] | None,
@@ -148,7 +149,7 @@ class SequenceReading:
                 if result.error is not None:
                     raise self._one_process_error(InputError(result.error))
                 if result.nodes:
-                    self.sizer.took(result.seconds, sum(len(line) for _, line in task.lines))
+                    self.sizer.took(result.seconds, _size(task.lines))
                 assert result.tally is not None
                 try:
                     add_tally(self.ctx.tally, result.tally)
@@ -163,7 +164,7 @@ class SequenceReading:
         size = 0
         for number, line in self.lines:
             run.append((number, line))
-            size += len(line)
+            size += len(line or b"")
             if size >= self.sizer.wanted():
                 yield run
                 run, size = [], 0
@@ -175,7 +176,7 @@ class SequenceReading:
         start = time.process_time()
         nodes = list(self.read(_each(run), self.header, self.ctx, self.types))
         if nodes:
-            self.sizer.took(time.process_time() - start, sum(len(line) for _, line in run))
+            self.sizer.took(time.process_time() - start, _size(run))
         yield from nodes
 
     def _tasks(self, runs: Iterator[Lines], sent: deque[LinesTask]) -> Iterator[LinesTask]:
@@ -204,7 +205,12 @@ def _died_here(ctx: Context, died: str) -> str:
     return f"{ctx.tally.source}: {died}; its objects are read in the main process"
 
 
-def _each(lines: Lines) -> Iterator[tuple[int, bytes]]:
+def _size(lines: Lines) -> int:
+    """Bytes of ``lines`` (a line too long to read: none)."""
+    return sum(len(line or b"") for _, line in lines)
+
+
+def _each(lines: Lines) -> Iterator[Line]:
     """``lines`` as the generator the reader takes (and closes)."""
     yield from lines
 

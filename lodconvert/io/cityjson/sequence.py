@@ -1,7 +1,7 @@
 """The lines of a CityJSONSeq file, read in chunks: blank lines are skipped without a Python
 step per line (a chunk of nothing but white space at once, shorter runs by a regular
 expression), a ``.gz`` or ``.zip`` stops once it inflates past ``decompressed_bytes``, and a
-line once it passes ``sequence_line_bytes``."""
+line longer than ``sequence_line_bytes`` is passed over as it streams (never held whole)."""
 
 from __future__ import annotations
 
@@ -10,25 +10,34 @@ import zlib
 from collections.abc import Iterator
 from pathlib import Path
 
-from ...errors import InputError
 from ...limits import Limits
 from ..archive import open_compressed
 from .source import CHUNK, unreadable
 
 _BLANK = re.compile(rb"[ \t\r\n]*")
+Line = tuple[int, "bytes | None"]
+"""A line's number (from 1) and its bytes (``None``: longer than ``sequence_line_bytes``)."""
 
 
-def sequence_lines(path: Path, limits: Limits) -> Iterator[tuple[int, bytes]]:
+def sequence_lines(path: Path, limits: Limits) -> Iterator[Line]:
     """Each line of ``path`` (what it inflates to, for ``.gz``/``.zip``) that holds more than
-    white space, with its number (from 1), without its line break. :class:`InputError` for a
-    file that cannot be read, one that inflates past ``limits.decompressed_bytes``
-    (:func:`..archive.open_compressed`) and a line longer than ``limits.sequence_line_bytes``."""
+    white space, with its number (from 1), without its line break; ``None`` for a line longer
+    than ``limits.sequence_line_bytes``, whose bytes past the limit are read and dropped up to
+    its end (:func:`long_line` says why). :class:`InputError` for a file that
+    cannot be read, and one that inflates past ``limits.decompressed_bytes``
+    (:func:`..archive.open_compressed`)."""
     longest = limits.sequence_line_bytes
     pending = bytearray()
-    number = 1
+    number, scanned, passing = 1, 0, False  # passing over a long line
     try:
         with open_compressed(path, limits) as stream:
             while chunk := stream.read(CHUNK):
+                if passing:
+                    end = chunk.find(b"\n")
+                    if end < 0:
+                        continue
+                    yield number, None
+                    number, passing, chunk = number + 1, False, chunk[end + 1 :]
                 if not pending and chunk.isspace():  # blank lines, skipped at C speed
                     number += chunk.count(b"\n")
                     continue
@@ -37,25 +46,27 @@ def sequence_lines(path: Path, limits: Limits) -> Iterator[tuple[int, bytes]]:
                 while True:
                     start = _BLANK.match(pending, at).end()
                     number += pending.count(b"\n", at, start)
-                    end = pending.find(b"\n", start)
+                    end = pending.find(b"\n", max(start, scanned))
                     if end < 0:
                         break
-                    _check_length(end - start, number, longest, path)
-                    yield number, bytes(pending[start:end])
+                    yield number, bytes(pending[start:end]) if end - start <= longest else None
                     number, at = number + 1, end + 1
                 del pending[:start]
-                _check_length(len(pending), number, longest, path)
+                scanned = len(pending)  # holds no line break: not searched again
+                if scanned > longest:
+                    pending.clear()
+                    scanned, passing = 0, True
     except (OSError, EOFError, zlib.error) as exc:
         raise unreadable(path, exc) from None
-    if pending:
+    if passing:
+        yield number, None
+    elif pending:
         yield number, bytes(pending)
 
 
-def _check_length(length: int, number: int, longest: int, path: Path) -> None:
-    """:class:`InputError` for line ``number`` when ``length`` passes ``longest`` bytes."""
-    if length > longest:
-        raise InputError(
-            f"has a line (line {number}) longer than the limit of {longest:,} bytes "
-            "(sequence_line_bytes; raise it with --limit sequence_line_bytes=N)",
-            str(path),
-        )
+def long_line(limits: Limits) -> str:
+    """Why a line longer than ``limits.sequence_line_bytes`` is not read."""
+    return (
+        f"is longer than the limit of {limits.sequence_line_bytes:,} bytes "
+        "(sequence_line_bytes; raise it with --limit sequence_line_bytes=N)"
+    )
