@@ -27,8 +27,9 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 from lodconvert.bake import NumpyBackend, get_backend  # noqa: E402
-from lodconvert.chain import ChainOptions, bake_chain  # noqa: E402
+from lodconvert.chain import ChainOptions  # noqa: E402
 from lodconvert.io import read_scene  # noqa: E402
+from lodconvert.plans import bake_chain  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 STANFORD = HERE.parents[1] / "shared" / "data" / "stanford"
@@ -91,7 +92,7 @@ def peak_memory(path: Path) -> dict:
     code = (
         "import resource,sys,time;"
         "from lodconvert.io import read_scene;"
-        "from lodconvert.chain import ChainOptions,bake_chain;"
+        "from lodconvert.chain import ChainOptions;from lodconvert.plans import bake_chain;"
         "from lodconvert.bake import NumpyBackend;"
         f"o=next(read_scene({str(path)!r}).with_geometry());"
         "base=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss;"

@@ -77,12 +77,13 @@ from lodconvert.analysis.city_render import (
     walk_cameras,
 )
 from lodconvert.bake import get_backend
-from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.chain import ChainOptions
 from lodconvert.city.hlod import HlodOptions
 from lodconvert.errors import LodConvertError
 from lodconvert.io import read_scene
 from lodconvert.model import CellChain, LodChain, Mesh, Node, Surface
 from lodconvert.pipeline import iter_chains, merged
+from lodconvert.plans import bake_chain
 
 HERE = Path(__file__).resolve().parent
 SIG3D = DATA / "citygml" / "sig3d_house_lod0-4"

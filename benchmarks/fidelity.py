@@ -52,9 +52,10 @@ from lodconvert.analysis.evaluate import (
 )
 from lodconvert.analysis.silhouette import SilhouetteRenderer
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import DEFAULT_INSET, DEFAULT_SPACING_PX, ChainOptions, bake_chain
+from lodconvert.chain import DEFAULT_INSET, DEFAULT_SPACING_PX, ChainOptions
 from lodconvert.io import read_chains, read_scene
 from lodconvert.model import LodChain, Node, Surface
+from lodconvert.plans import bake_chain
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent

@@ -33,7 +33,7 @@ from tables import markdown_table
 
 from lodconvert import convert
 from lodconvert.analysis.bench import PAPER_INSTANCES
-from lodconvert.commands.bench import (
+from lodconvert.cli.commands.bench import (
     bench_object_text,
     bench_table,
     bench_timing_text,

@@ -12,8 +12,6 @@ Library API (the command line is a thin layer over it)::
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
-
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -22,6 +20,7 @@ from .chain import ChainOptions
 from .errors import InputError, LodConvertError, UsageError
 from .model import LodChain, Node, Scene
 from .ranges import cutoffs
+from .version import __version__
 
 
 def read(path: str | Path, **options: Any) -> Scene:
@@ -35,7 +34,7 @@ def read(path: str | Path, **options: Any) -> Scene:
 def bake(obj: Node, options: ChainOptions | None = None, backend: str = "auto") -> LodChain:
     """Bake one object's LOD chain (see :mod:`lodconvert.chain` for how defaults are derived)."""
     from .bake import get_backend
-    from .chain import bake_chain
+    from .plans import bake_chain
 
     return bake_chain(obj, options or ChainOptions(), get_backend(backend))
 

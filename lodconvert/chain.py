@@ -26,16 +26,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .bake import Backend, Grid, bake_points
-from .city.lods import GROUND_COVERS, SLOTS, lod_name, source_levels, unused_levels
-from .city.prisms import FOOTPRINT_TOLERANCE_PX, LOW_F, MIN_PRISM_F, MORE_TRIANGLES, prism
 from .errors import InputError, UsageError
 from .limits import DEFAULT_LIMITS, Limits
 from .model import BakeParams, Level, LodChain, Mesh, Node, PointCloud
+from .model.lods import SLOTS, unused_levels
 from .plan import (
     POINT_COST,
     least_point_cost,
     level_cost,
-    mesh_silhouette_estimate,
     silhouette_estimate,
 )
 from .ranges import (
@@ -399,7 +397,7 @@ def point_level_at(
     return level if isinstance(level, Level) else None
 
 
-def _least_cost(surface: Mesh, opts: ChainOptions) -> float:
+def least_cost(surface: Mesh, opts: ChainOptions) -> float:
     """The draw cost at or below which a level is not replaced by points of ``surface``
     (:func:`~.plan.least_point_cost`; 0 where ``opts`` give the resolutions)."""
     return least_point_cost(surface) if not opts.resolutions else 0.0
@@ -457,14 +455,14 @@ class ChainPlan:
         return [cutoff(self.alpha, self.beta, self.gamma, x) for x in self.xs]
 
 
-def _points_may_pay(levels: Sequence[Level | None], floor: float) -> bool:
+def points_may_pay(levels: Sequence[Level | None], floor: float) -> bool:
     """Whether a point level after ``levels`` (those kept so far, ``None`` for one still to
     bake) may be cheaper than the last of them: unless that one costs no more than ``floor``
-    (:func:`_least_cost`)."""
+    (:func:`least_cost`)."""
     return not levels or levels[-1] is None or level_cost(levels[-1]) > floor
 
 
-def _framed(mesh: Mesh) -> tuple[np.ndarray, float, Mesh, np.ndarray]:
+def framed(mesh: Mesh) -> tuple[np.ndarray, float, Mesh, np.ndarray]:
     """The chain frame of ``mesh``: its bounding-box centre, α, and it and its bounds relative
     to that centre."""
     world = mesh.bounds
@@ -472,24 +470,7 @@ def _framed(mesh: Mesh) -> tuple[np.ndarray, float, Mesh, np.ndarray]:
     return origin, diagonal(world), mesh.translated(-origin), world - origin
 
 
-def plan_chain(obj: Node, opts: ChainOptions) -> ChainPlan:
-    """The plan of ``obj``'s chain (``opts.gamma`` ``None``: the default γ); nothing is
-    baked. ``lodconvert ranges`` prints it, :func:`bake_chain` bakes it."""
-    opts.check()
-    check_geometry(obj)
-    if opts.gamma is None:
-        opts = replace(opts, gamma=DEFAULT_GAMMA)
-    sources = source_levels(obj.lods)
-    if opts.keep_mesh and opts.levels == len(SLOTS) and any(k in SLOTS for k in sources):
-        return _source_plan(obj, sources, opts)
-    if opts.keep_mesh and opts.levels == len(SLOTS) and 0 in sources:
-        only_prism = _lod0_plan(obj, opts)
-        if only_prism is not None:
-            return only_prism
-    return _mesh_plan(obj, opts)
-
-
-def _plan(
+def plan_of(
     obj: Node,
     opts: ChainOptions,
     levels: list[PlannedLevel],
@@ -497,7 +478,7 @@ def _plan(
     dropped: dict[str, str],
     unused: dict[str, str],
 ) -> ChainPlan:
-    """The plan of ``obj`` of ``levels`` in ``frame`` (:func:`_framed`)."""
+    """The plan of ``obj`` of ``levels`` in ``frame`` (:func:`framed`)."""
     origin, alpha, surface, bounds = frame
     assert opts.gamma is not None
     text = obj.written()
@@ -518,9 +499,9 @@ def _plan(
     )
 
 
-def _mesh_plan(obj: Node, opts: ChainOptions) -> ChainPlan:
+def mesh_plan(obj: Node, opts: ChainOptions) -> ChainPlan:
     """A mesh's chain: the mesh (unless ``--no-mesh``) and points baked from it."""
-    frame = _framed(obj.geometry)
+    frame = framed(obj.geometry)
     alpha, surface = frame[1], frame[2]
     assert opts.gamma is not None
     xs = list(opts.exponents)
@@ -538,10 +519,10 @@ def _mesh_plan(obj: Node, opts: ChainOptions) -> ChainPlan:
                 LEVEL_NAMES[0], None, Level(name=LEVEL_NAMES[0], kind="mesh", mesh=surface)
             )
         )
-    floor = _least_cost(surface, opts)
+    floor = least_cost(surface, opts)
     for i in range(opts.pcd_levels):
         n = i + 1 if opts.keep_mesh else i
-        if not _points_may_pay([planned.level for planned in levels], floor):
+        if not points_may_pay([planned.level for planned in levels], floor):
             dropped[LEVEL_NAMES[n]] = NO_POINTS_PAY
             continue
         levels.append(PlannedLevel(LEVEL_NAMES[n], xs[n - 1] if n > 0 else None, index=i))
@@ -551,109 +532,7 @@ def _mesh_plan(obj: Node, opts: ChainOptions) -> ChainPlan:
         for label, mesh in obj.lods.items():
             if label not in unused and mesh is not obj.geometry:
                 unused[label] = f"{option}: every level is made from the finest geometry"
-    return _plan(obj, opts, levels, frame, dropped, unused)
-
-
-def _source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOptions) -> ChainPlan:
-    """The CityGML-style chain of a city object with its own LoDs (:mod:`.city.lods`): its
-    finest source LoD covers every slot up to its own; each coarser slot is the source's LoD
-    there, else (LOD1) a prism from its footprint, else (LOD3, LOD2) baked points where they
-    pay; a slot with none of these leaves the finer level on."""
-    finest_slot = max(k for k in sources if k in SLOTS)
-    finest = sources[finest_slot][1]
-    frame = _framed(finest)
-    origin, surface = frame[0], frame[2]
-    xs = list(opts.exponents)
-    name = f"LOD{finest_slot}"
-    levels = [PlannedLevel(name, None, Level(name=name, kind="source", mesh=surface))]
-    dropped: dict[str, str] = {}
-    for slot in range(finest_slot - 1, 0, -1):
-        index = SLOTS.index(slot) - 1  # LOD3 → 0 … LOD1 → 2: its cutoff and exponent
-        name = f"LOD{slot}"
-        level: Level | str | None = None
-        if slot in sources:
-            level = Level(name=name, kind="source", mesh=sources[slot][1].translated(-origin))
-        elif slot == 1 and obj.type in GROUND_COVERS:
-            level = f"a {obj.type} covers the ground: no prism"
-        elif slot == 1:
-            made = [p.level for p in levels if p.level is not None]
-            distance = cutoff(frame[1], opts.beta, opts.gamma, xs[index])
-            level = _prism_level(obj, finest, origin, surface, made[-1], distance, opts)
-        elif not _points_may_pay([p.level for p in levels], _least_cost(surface, opts)):
-            level = NO_POINTS_PAY
-        if isinstance(level, str):
-            dropped[name] = level
-            continue
-        levels.append(PlannedLevel(name, xs[index], level, index))
-    unused = unused_levels(obj.lods)
-    if 0 in sources and not any(p.level and p.level.kind == "prism" for p in levels):
-        unused[sources[0][0]] = (
-            f"LOD1 is the source's {lod_name(sources[1][0])}, not a prism of this footprint"
-            if 1 in sources
-            else dropped["LOD1"]
-        )
-    return _plan(obj, opts, levels, frame, dropped, unused)
-
-
-def _prism_level(
-    obj: Node,
-    finest: Mesh,
-    origin: np.ndarray,
-    surface: Mesh,
-    previous: Level,
-    distance: float,
-    opts: ChainOptions,
-) -> Level | str:
-    """The LOD1 prism of ``obj`` (its footprint simplified within
-    :data:`~.city.prisms.FOOTPRINT_TOLERANCE_PX` pixels at ``distance``, where it switches in), or
-    why it is left out: no footprint, no fewer triangles than ``previous`` (the source LoD
-    planned before it), or a silhouette F against ``surface`` (the finest level) below
-    :data:`~.city.prisms.MIN_PRISM_F` at ``distance``."""
-    pixel = distance / opts.view.focal_px
-    shape = prism(obj.lods, finest, obj.attributes, FOOTPRINT_TOLERANCE_PX * pixel)
-    if shape is None:
-        return "no footprint with area to extrude"
-    assert previous.mesh is not None
-    if shape.face_count >= previous.mesh.face_count:
-        return (
-            f"{MORE_TRIANGLES} {previous.name}: the prism has {shape.face_count:,} "
-            f"triangles, {previous.name} {previous.mesh.face_count:,}"
-        )
-    mesh = shape.translated(-origin)
-    f = mesh_silhouette_estimate(surface, mesh, distance, opts.view).f
-    if f < MIN_PRISM_F:
-        return f"{LOW_F} {f:.3f} where it switches in, below {MIN_PRISM_F}"
-    return Level(name="LOD1", kind="prism", mesh=mesh, silhouette_f=f)
-
-
-def _lod0_plan(obj: Node, opts: ChainOptions) -> ChainPlan | None:
-    """The chain of a city object whose only source LoD is 0 (footprints, roof edges): its
-    LOD1 prism, the height of which only ``measuredHeight`` can give (None without one, or for
-    a ground cover: then its LoD 0 surfaces are its geometry, as a mesh's)."""
-    if obj.type in GROUND_COVERS:
-        return None
-    shape = prism(obj.lods, obj.geometry, obj.attributes)
-    if shape is None:
-        return None
-    frame = _framed(shape)
-    level = Level(name="LOD1", kind="prism", mesh=frame[2])
-    dropped = {f"LOD{slot}": "the source has only LoD 0" for slot in SLOTS[:-1]}
-    return _plan(
-        obj, opts, [PlannedLevel("LOD1", None, level)], frame, dropped, unused_levels(obj.lods)
-    )
-
-
-def bake_chain(
-    obj: Node,
-    opts: ChainOptions,
-    backend: Backend,
-    progress: Progress | None = None,
-    warn: Progress | None = None,
-    limits: Limits = DEFAULT_LIMITS,
-) -> LodChain:
-    """Plan and bake ``obj``'s chain (levels relative to its bounding-box centre), within
-    ``limits`` (grid cells per level, working memory)."""
-    return bake_plan(plan_chain(obj, opts), opts, backend, progress, warn, limits)
+    return plan_of(obj, opts, levels, frame, dropped, unused)
 
 
 def bake_plan(
@@ -672,7 +551,7 @@ def bake_plan(
     dropped = dict(plan.dropped)
     for planned in plan.levels:
         level: Level | str | None = planned.level
-        if level is None and not _points_may_pay(levels, _least_cost(plan.surface, opts)):
+        if level is None and not points_may_pay(levels, least_cost(plan.surface, opts)):
             level = NO_POINTS_PAY
         elif level is None:
             if progress:

@@ -16,6 +16,8 @@ if TYPE_CHECKING:
 
 APT_INSTALL = "apt-get install -y --no-install-recommends libegl1 libgl1 libgl1-mesa-dri"
 PIP_INSTALL = "pip install moderngl"
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
+"""Names in ``GL_RENDERER`` of renderers that run on the CPU."""
 
 
 def create_context(purpose: str, require: int = 330) -> moderngl.Context:

@@ -25,12 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from . import __version__
 from .bake import Backend, get_backend
 from .chain import ChainOptions, ChainPlan
 from .city.cells import CellBaker
 from .city.hlod import HlodOptions, auto_size, draw_counts, plan_cells
-from .city.lods import GROUND_COVERS, source_levels
 from .city.plots import plot_radii
 from .clock import Clock
 from .errors import InputError, UsageError
@@ -41,6 +39,7 @@ from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import InputTally, attach_tally, tally_of
 from .limits import DEFAULT_LIMITS, Limits
 from .model import CellChain, LodChain, Node, PackedNode, Scene, with_geometry
+from .model.lods import GROUND_COVERS, source_levels
 from .report import Records, cell_record, chain_record, options_record, report_text, run_report
 from .reproject import SOURCE_CRS_KEYS, Georef, in_one_crs
 from .sinks import DirectorySink, FileSink, Outputs
@@ -56,6 +55,7 @@ from .tasks import (
 )
 from .validate import check_written, streamed_check
 from .validate.along import CheckAlong
+from .version import __version__
 
 Message = Callable[[str], None]
 Step = Callable[[str, int, "int | None"], None]
@@ -830,7 +830,7 @@ def object_ranges(
     scene: Scene, options: ChainOptions, warn: Message = _quiet
 ) -> list[dict[str, Any]]:
     """α, γ, the levels and the cutoffs of every object of ``scene`` (:func:`read_inputs`) as
-    :func:`convert` plans them (:func:`~.chain.plan_chain`), without baking: a level to bake
+    :func:`convert` plans them (:func:`~.plans.plan_chain`), without baking: a level to bake
     (``to_bake``) is kept, and its cutoff with it, where baking finds it cheaper than the level
     before and faithful. Objects that cannot be converted are reported through ``warn`` and
     left out; when none can, :class:`InputError`."""

@@ -16,9 +16,9 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, overload
 
-from . import __version__
 from .chain import ChainOptions
 from .model import CellChain, LodChain
+from .version import __version__
 
 if TYPE_CHECKING:
     from .bake import Backend

@@ -34,8 +34,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
-from . import __version__, manifest, nofollow
+from . import manifest, nofollow
 from .errors import InputError, LodConvertError
+from .version import __version__
 
 Check = Callable[[Path], None]
 """Called with a complete staged file (or directory) before the commit; raises to refuse it."""

@@ -35,10 +35,11 @@ from multiprocessing.reduction import ForkingPickler
 from typing import Any, Self
 
 from .bake import Backend, get_backend
-from .chain import ChainOptions, ChainPlan, Progress, bake_chain, plan_chain
+from .chain import ChainOptions, ChainPlan, Progress
 from .errors import InputError, ended
 from .limits import DEFAULT_LIMITS, Limits
 from .model import LodChain, Node, PackedNode, unpacked
+from .plans import bake_chain, plan_chain
 
 TASK_SECONDS = 0.1
 """Work a batch is sized for: a process pool costs about 0.1 ms a task, so this keeps the
@@ -61,7 +62,7 @@ output; ``None``: nothing, the writer formats it), :mod:`.io`'s ``formatter``.""
 @dataclass(frozen=True)
 class BakeTask:
     """Objects to bake, each with the options to bake it with (γ already decided); with
-    ``plan_only``, plan each chain (:func:`~.chain.plan_chain`) and bake nothing; with a
+    ``plan_only``, plan each chain (:func:`~.plans.plan_chain`) and bake nothing; with a
     ``formatter``, each chain's piece of the output is made too, and with ``lean`` (where the
     results are taken, nothing but the writer needs a chain's geometry) a chain whose piece was
     made comes back without its geometry (:meth:`~.model.LodChain.without_geometry`)."""

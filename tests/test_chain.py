@@ -9,10 +9,11 @@ import pytest
 import trimesh
 
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.chain import ChainOptions
 from lodconvert.errors import InputError, UsageError
 from lodconvert.model import Node, Surface
 from lodconvert.plan import level_cost
+from lodconvert.plans import bake_chain
 from lodconvert.ranges import projected_px
 
 from .conftest import degenerate_meshes, surface_of

@@ -17,7 +17,7 @@ import pytest
 import trimesh
 
 from lodconvert.cli import command_parser, main
-from lodconvert.commands import COMMANDS, MAIN_COMMAND
+from lodconvert.cli.commands import COMMANDS, MAIN_COMMAND
 
 from .conftest import ROOT, SAMPLE, degenerate_meshes
 

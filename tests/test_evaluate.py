@@ -30,11 +30,12 @@ from lodconvert.analysis.evaluate import (
 from lodconvert.analysis.render import fibonacci_directions, point_pixel_size
 from lodconvert.analysis.silhouette import SilhouetteRenderer
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain, outward_sign
+from lodconvert.chain import ChainOptions, outward_sign
 from lodconvert.errors import InputError, LodConvertError
 from lodconvert.io import read_chains
 from lodconvert.model import LodChain, Node, PointCloud, Surface
 from lodconvert.plan import level_cost
+from lodconvert.plans import bake_chain
 from lodconvert.ranges import cutoff
 
 from .conftest import degenerate_meshes, require, surface_of

@@ -17,11 +17,12 @@ import trimesh
 from PIL import Image
 
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.chain import ChainOptions
 from lodconvert.errors import InputError
 from lodconvert.io import OutputInfo, gltf, output_format, own_format
 from lodconvert.io.gltf import FORMAT, SRGB_TO_LINEAR, read_lod_gltf, write_glb, write_gltf
 from lodconvert.model import LodChain, Node, PointCloud, Surface
+from lodconvert.plans import bake_chain
 from lodconvert.ranges import screen_coverage
 
 ROOT = Path(__file__).resolve().parents[1]

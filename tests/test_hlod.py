@@ -46,7 +46,7 @@ from tests.test_citygml import sample
 from tests.test_cli import run
 from tests.test_gltf import _assert_valid as assert_khronos_valid
 from tests.test_gltf import _load as gltf_load
-from tests.test_sourcelods import block
+from tests.test_lods import block
 
 TUM = "tum_munich_lod2_v2.zip"
 

@@ -25,7 +25,7 @@ from lodconvert.model import CellChain, LodChain, Node, Scene
 from lodconvert.pipeline import iter_chains
 from lodconvert.viewer import page_config
 
-from .test_sourcelods import block
+from .test_lods import block
 
 SIZES = (50.0, 200.0)
 """Cell sides: the district below spans three 50 m cells a side, in two 200 m cells."""

@@ -5,6 +5,7 @@ none of the package's own modules."""
 
 from __future__ import annotations
 
+import ast
 import os
 import subprocess
 import sys
@@ -117,3 +118,75 @@ def test_a_worker_converting_a_city_into_x3d_loads_no_gltf_format_and_no_pillow(
     imported = imported_by_workers(monkeypatch, source, tmp_path / "kit.x3d")
     assert {"lodconvert.io.citygml.parallel", "lodconvert.io.x3d.writer"} <= set(imported)
     assert [n for n in imported if n.startswith(("lodconvert.io.gltf", "PIL"))] == []
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Each module of the package → the modules of the package it imports, anywhere in it
+    (inside functions too: an import put off until a call still ties the two)."""
+    modules = {name: ROOT / "/".join(name.split(".")) for name in _modules()}
+    paths = {
+        name: (path / "__init__.py" if path.is_dir() else path.with_suffix(".py"))
+        for name, path in modules.items()
+    }
+
+    def known(name: str) -> str | None:
+        while name and name not in modules:
+            name = name.rpartition(".")[0]
+        return name or None
+
+    graph: dict[str, set[str]] = {}
+    for name, path in paths.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        found: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                found.update(filter(None, (known(alias.name) for alias in node.names)))
+            elif isinstance(node, ast.ImportFrom):
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                prefix = ".".join([*base, node.module] if node.module else base)
+                prefix = node.module or "" if node.level == 0 else prefix
+                subs = [f"{prefix}.{alias.name}" for alias in node.names]
+                found.update(filter(None, (known(sub) for sub in subs)))
+                if not all(sub in modules for sub in subs):  # names the module itself defines
+                    found.update(filter(None, [known(prefix)]))
+        graph[name] = found - {name}
+    return graph
+
+
+def _cycle(graph: dict[str, set[str]], start: str) -> list[str] | None:
+    """A path of imports from ``start`` back to it, if there is one."""
+    paths = {start: [start]}
+    queue = [start]
+    while queue:
+        name = queue.pop(0)
+        for other in sorted(graph[name]):
+            if other == start:
+                return [*paths[name], start]
+            if other not in paths:
+                paths[other] = [*paths[name], other]
+                queue.append(other)
+    return None
+
+
+def test_no_module_imports_itself_back_through_others() -> None:
+    graph = _import_graph()
+    assert {"lodconvert.chain", "lodconvert.city.levels"} <= graph.keys()
+    cycles = [" → ".join(path) for name in graph if (path := _cycle(graph, name))]
+    assert cycles == []
+
+
+def test_no_module_imports_a_folder_that_imports_it_back() -> None:
+    """Rooms stay apart: a module outside a folder (``chain.py``) may import from it (``city/``)
+    or be imported by it, not both."""
+    graph = _import_graph()
+    folders = {name for name in graph if (PACKAGE.parent / name.replace(".", "/")).is_dir()}
+    found = []
+    for name, imported in graph.items():
+        for folder in folders - {"lodconvert"}:
+            inside = {other for other in graph if other == folder or other.startswith(f"{folder}.")}
+            if name in inside or not imported & inside:
+                continue
+            back = sorted(other for other in inside if name in graph[other])
+            if back:
+                found.append(f"{name} imports {folder}, which imports it back ({back[0]})")
+    assert found == []

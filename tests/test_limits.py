@@ -18,10 +18,11 @@ import pytest
 import trimesh
 
 from lodconvert.bake import NumpyBackend, bake_points
-from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.chain import ChainOptions
 from lodconvert.errors import UsageError
 from lodconvert.limits import Limits
 from lodconvert.model import BakeParams, Node, Surface
+from lodconvert.plans import bake_chain
 from lodconvert.ranges import MAX_ALPHA, cutoff
 
 from .test_cli import assert_one_line_error, run

@@ -16,10 +16,11 @@ from PIL import Image
 
 from lodconvert import convert
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.chain import ChainOptions
 from lodconvert.errors import InputError
 from lodconvert.io import read_scene
 from lodconvert.io.gltf import read_lod_gltf
+from lodconvert.plans import bake_chain
 
 FORMATS = ("obj", "ply", "stl", "off", "glb", "gltf")
 

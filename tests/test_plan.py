@@ -13,10 +13,11 @@ import pytest
 import trimesh
 
 from lodconvert.bake import NumpyBackend, bake_points
-from lodconvert.chain import ChainOptions, bake_chain, default_point_size, inset_points
+from lodconvert.chain import ChainOptions, default_point_size, inset_points
 from lodconvert.errors import LodConvertError
 from lodconvert.model import BakeParams, Mesh, Node
 from lodconvert.plan import POINT_COST, level_cost, silhouette_estimate
+from lodconvert.plans import bake_chain
 from lodconvert.ranges import cutoff
 
 from .conftest import require, surface_of

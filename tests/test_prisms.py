@@ -8,12 +8,13 @@ import pytest
 import trimesh
 
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.chain import ChainOptions
 from lodconvert.city.prisms import LOW_F, MORE_TRIANGLES, prism
 from lodconvert.model import Mesh, Node, Surface
+from lodconvert.plans import bake_chain
 
 from .test_plan import gabled_house
-from .test_sourcelods import block
+from .test_lods import block
 
 
 def house_of(mesh: trimesh.Trimesh) -> Mesh:

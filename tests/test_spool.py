@@ -6,7 +6,7 @@ import numpy as np
 
 from lodconvert.model import Node
 from lodconvert.spool import NodeSpool
-from tests.test_sourcelods import block
+from tests.test_lods import block
 
 
 def test_nodes_come_back_in_order_with_their_geometry_and_lods() -> None:

@@ -13,8 +13,8 @@ import trimesh
 
 from lodconvert import convert
 from lodconvert.chain import ChainOptions
-from lodconvert.city.lods import unused_levels
 from lodconvert.model import Mesh, Surface
+from lodconvert.model.lods import unused_levels
 
 from .conftest import ROOT, SHARED, shared_data
 from .test_cli import run

@@ -21,7 +21,7 @@ import pytest
 import trimesh
 
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.chain import ChainOptions
 from lodconvert.cli import main
 from lodconvert.errors import LodConvertError
 from lodconvert.io import OutputInfo, gltf, streamed
@@ -30,6 +30,7 @@ from lodconvert.io.gltf.check import MAX_JSON_DEPTH, check_gltf
 from lodconvert.io.x3d import write_x3d
 from lodconvert.io.x3d.check import check_x3d
 from lodconvert.model import LodChain, Node
+from lodconvert.plans import bake_chain
 from lodconvert.validate import Finding, errors_of, validate_file
 
 from .conftest import SAMPLE, X3D_SCHEMAS, require, surface_of

@@ -23,7 +23,7 @@ from lxml import etree
 from PIL import Image
 
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain
+from lodconvert.chain import ChainOptions
 from lodconvert.errors import InputError, UsageError
 from lodconvert.io import OutputInfo, output_format, own_format, read_scene, x3d
 from lodconvert.io.numbers import (
@@ -39,6 +39,7 @@ from lodconvert.io.numbers import (
 from lodconvert.io.x3d import point_properties, read_x3d_points, vertex_colors, write_x3d
 from lodconvert.model import LodChain, Node, Surface
 from lodconvert.model.safe_text import xml_text
+from lodconvert.plans import bake_chain
 
 from .conftest import stanford
 

@@ -12,11 +12,11 @@ from __future__ import annotations
 import glob
 
 from ..errors import LodConvertError
+from ..glcontext import SOFTWARE_RENDERERS
 from .grid import Grid, SlabHits
 from .numpy import NumpyBackend
 from .pcd import Backend, bake_points
 
-SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast")
 BACKENDS = ("auto", "numpy", "gl")
 GPU_DEVICES = ("/dev/dri/renderD*", "/dev/nvidia[0-9]*", "/dev/dxg")
 """Device nodes through which EGL reaches a GPU: DRM render nodes (Mesa's hardware drivers),

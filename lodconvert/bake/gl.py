@@ -39,9 +39,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import LodConvertError
-from ..glcontext import create_context
+from ..glcontext import SOFTWARE_RENDERERS, create_context
 from ..model import Mesh
-from . import SOFTWARE_RENDERERS
 from .grid import Grid, SlabHits
 from .numpy import EPS
 

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..model import LodChain, Mesh, Surface
-from .lods import GROUND_COVERS
+from ..model.lods import GROUND_COVERS
 from .prisms import (
     FootprintPart,
     coloured,

@@ -10,7 +10,7 @@ where plausible). Its top takes the roof's colour and its walls the walls' (the 
 geometry's own, so source materials win over class colours as they do there), as vertex
 colours of one part: one draw call. It has no floor: from a viewer's side of the ground the
 underside of a building is never seen. Only objects that stand on the ground get one
-(:data:`~.city.lods.GROUND_COVERS` get none). Coordinates are z-up, as in CityGML and
+(:data:`~lodconvert.model.lods.GROUND_COVERS` get none). Coordinates are z-up, as in CityGML and
 CityJSON.
 """
 
@@ -22,7 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..model import GREY, Mesh, Surface
-from .lods import source_levels
+from ..model.lods import source_levels
 
 CLOSED_TOLERANCE = 1e-3
 """Downward-facing triangles covering this much less ground than the upward-facing ones still

@@ -1,7 +1,7 @@
 """Command line: ``lodconvert FILE... -o OUT`` and ``lodconvert COMMAND ...``. No geometry here.
 
 The first argument picks a command when it is a command name (see
-:data:`~lodconvert.commands.COMMANDS`), else the main command, ``convert``, converts it (a file
+:data:`~lodconvert.cli.commands.COMMANDS`), else the main command, ``convert``, converts it (a file
 named like a command is converted as ``./NAME``). Every command is a module with ``DESCRIPTION``,
 ``add_arguments(parser)`` and ``run(args, console) -> int``.
 
@@ -25,8 +25,8 @@ from collections.abc import Callable, Sequence
 from multiprocessing import resource_tracker
 from types import FrameType
 
-from ..commands import COMMANDS, MAIN_COMMAND
 from ..errors import LodConvertError, UsageError
+from .commands import COMMANDS, MAIN_COMMAND
 from .console import Console
 from .options import (
     EXIT_ERROR,

@@ -129,7 +129,7 @@ class LodChain:
     dropped: dict[str, str] = field(default_factory=dict)
     """Levels the planner left out (name → why): the finer level stays on in their place."""
     unused: dict[str, str] = field(default_factory=dict)
-    """Source LoDs that no level is made from (label → why; :mod:`~lodconvert.city.lods`)."""
+    """Source LoDs that no level is made from (label → why; :mod:`~lodconvert.model.lods`)."""
     transform: np.ndarray | None = None
     """4×4 placement of the chain's frame (an instance of shared geometry): world =
     ``transform · (origin + local)``; ``None`` is the identity. Instances of one geometry share

@@ -46,10 +46,11 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, ClassVar
 
-from .. import __version__, manifest
+from .. import manifest
 from ..errors import UsageError
 from ..limits import DEFAULT_LIMITS, Limits
 from ..sinks import Outputs
+from ..version import __version__
 from .config import page_config
 from .tileset import tileset_config
 

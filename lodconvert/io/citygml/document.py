@@ -14,10 +14,10 @@ from pathlib import Path
 import numpy as np
 from lxml import etree
 
-from ...city.lods import finest
 from ...errors import InputError
 from ...limits import Limits
 from ...model import Mesh, Node, Surface
+from ...model.lods import finest
 from ...semantics import DEFAULT_PALETTE, Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent

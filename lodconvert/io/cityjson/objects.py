@@ -9,9 +9,9 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
-from ...city.lods import finest
 from ...errors import InputError
 from ...model import Mesh, Node, PackedNode
+from ...model.lods import finest
 from ..geometry_checks import check_extent
 from .geometry import SURFACE_DEPTH, Lod, lod_key, lod_label, read_lod
 from .source import Context

@@ -10,10 +10,11 @@ import pytest
 import trimesh
 
 from lodconvert.bake import NumpyBackend
-from lodconvert.chain import ChainOptions, bake_chain
-from lodconvert.city.lods import lod_rank, source_levels
+from lodconvert.chain import ChainOptions
 from lodconvert.city.prisms import footprint, prism
 from lodconvert.model import Mesh, Node, Surface
+from lodconvert.model.lods import lod_rank, source_levels
+from lodconvert.plans import bake_chain
 from lodconvert.polygons import triangulate
 from lodconvert.ranges import cutoff
 

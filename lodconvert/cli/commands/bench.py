@@ -8,7 +8,7 @@ import os
 import platform
 from typing import Any
 
-from ..analysis.bench import (
+from ...analysis.bench import (
     DEFAULT_BUDGET_S,
     DEFAULT_FRAMES,
     DEFAULT_WARMUP,
@@ -23,8 +23,9 @@ from ..analysis.bench import (
     read_object,
     run_bench,
 )
-from ..cli import EXIT_OK, Console, parse_list
-from ..io.frame import UP_AXES
+from ...io.frame import UP_AXES
+from ..console import Console
+from ..options import EXIT_OK, parse_list
 
 DESCRIPTION = (
     "Render a k×k grid of instances of an object from a fixed camera, each drawing the level its "

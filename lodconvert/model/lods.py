@@ -1,21 +1,15 @@
-"""City objects' own levels of detail, and the LOD1 prism derived where a source lacks one.
-
-The CityGML-style hierarchy has four levels, LOD4 (nearest, finest) to LOD1 (farthest,
-coarsest), in the slots of the ProxyPrismLOD paper's ranges. A source LoD label names its slot
-by its integer part: CityGML ``lod2`` and CityJSON ``"2.2"`` both fill LOD2 (of several labels
-for one slot the highest wins: CityJSON ``"1.3"`` over ``"1.2"``). ``lod0`` (footprints, roof
-edges) fills no slot; it is the footprint of a derived prism (:mod:`.city.prisms`). Only objects
-that stand on the ground get one: terrain and the surfaces that cover the ground
-(:data:`GROUND_COVERS`: land use, roads, squares, waterways) would become blocks from their
-lowest to their highest point.
-"""
+"""The LoD vocabulary both city readers use: a source LoD label names its slot by its integer
+part (CityGML ``lod2`` and CityJSON ``"2.2"`` both fill LOD2; of several labels for one slot the
+highest wins), LOD4 (nearest, finest) to LOD1 (farthest, coarsest). ``lod0`` (footprints, roof
+edges) fills no slot: it is the footprint of a derived prism (:mod:`lodconvert.city.prisms`).
+Terrain and the surfaces that cover the ground (:data:`GROUND_COVERS`) get no prism."""
 
 from __future__ import annotations
 
 import functools
 import re
 
-from ..model import Mesh
+from .geometry import Mesh
 
 SLOTS = (4, 3, 2, 1)
 """Source LoD of each level, finest first (``LOD4`` … ``LOD1``)."""

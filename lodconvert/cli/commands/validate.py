@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from ..cli import EXIT_ERROR, EXIT_OK, Console
-from ..cli.options import add_limit_option
-from ..limits import DEFAULT_LIMITS
-from ..validate import errors_of, validate_file
+from ...limits import DEFAULT_LIMITS
+from ...validate import errors_of, validate_file
+from ..console import Console
+from ..options import EXIT_ERROR, EXIT_OK, add_limit_option
 
 DESCRIPTION = (
     "Check .x3d, .glb and .gltf files and tileset.json: X3D structure (LOD ranges and children, "

@@ -9,10 +9,10 @@ MAIN_COMMAND = "convert"
 """What ``lodconvert FILE ...`` runs."""
 
 COMMANDS: dict[str, str] = {
-    "convert": "lodconvert.commands.convert",
-    "ranges": "lodconvert.commands.ranges",
-    "evaluate": "lodconvert.commands.evaluate",
-    "bench": "lodconvert.commands.bench",
-    "validate": "lodconvert.commands.validate",
-    "view": "lodconvert.commands.view",
+    "convert": "lodconvert.cli.commands.convert",
+    "ranges": "lodconvert.cli.commands.ranges",
+    "evaluate": "lodconvert.cli.commands.evaluate",
+    "bench": "lodconvert.cli.commands.bench",
+    "validate": "lodconvert.cli.commands.validate",
+    "view": "lodconvert.cli.commands.view",
 }

@@ -15,8 +15,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from ..analysis.contact_sheet import contact_sheet, legend, stack_images
-from ..analysis.evaluate import (
+from ...analysis.contact_sheet import contact_sheet, legend, stack_images
+from ...analysis.evaluate import (
     DEFAULT_DISTANCES,
     DEFAULT_SAMPLES,
     DEFAULT_SIZE,
@@ -29,12 +29,13 @@ from ..analysis.evaluate import (
     evaluate_object,
     match_references,
 )
-from ..analysis.silhouette import SilhouetteRenderer
-from ..cli import EXIT_OK, Console, parse_list
-from ..io import read_chains, read_scene
-from ..model import LodChain, Surface
-from ..ranges import REFERENCE_VIEW
-from ..sinks import Outputs
+from ...analysis.silhouette import SilhouetteRenderer
+from ...io import read_chains, read_scene
+from ...model import LodChain, Surface
+from ...ranges import REFERENCE_VIEW
+from ...sinks import Outputs
+from ..console import Console
+from ..options import EXIT_OK, parse_list
 
 DESCRIPTION = (
     "Score every level of a file lodconvert wrote against the source mesh it was converted "

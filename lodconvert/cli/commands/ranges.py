@@ -6,10 +6,17 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..cli import EXIT_OK, Console, add_range_options, chain_options
-from ..cli.options import add_bake_options, add_read_options, read_options
-from ..limits import DEFAULT_LIMITS
-from ..pipeline import object_ranges, read_inputs
+from ...limits import DEFAULT_LIMITS
+from ...pipeline import object_ranges, read_inputs
+from ..console import Console
+from ..options import (
+    EXIT_OK,
+    add_bake_options,
+    add_range_options,
+    add_read_options,
+    chain_options,
+    read_options,
+)
 
 DESCRIPTION = (
     "Print the levels, α (bounding-box diagonal), γ and the cutoffs Y = α·β·γˣ of every object "

@@ -11,11 +11,17 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-from ..bake import BACKENDS
-from ..city.hlod import KINDS, HlodOptions, parse_sizes
-from ..city.lods import lod_name
-from ..cli.console import Console
-from ..cli.options import (
+from ...bake import BACKENDS
+from ...city.hlod import KINDS, HlodOptions, parse_sizes
+from ...errors import UsageError
+from ...io import output_format
+from ...io.frame import UP_AXES
+from ...io.x3d import SWITCHING_MODES
+from ...limits import DEFAULT_LIMITS
+from ...model.lods import lod_name
+from ...sinks import DirectorySink, FileSink, Outputs
+from ..console import Console
+from ..options import (
     EXIT_OK,
     add_bake_options,
     add_range_options,
@@ -24,12 +30,6 @@ from ..cli.options import (
     chain_options,
     read_options,
 )
-from ..errors import UsageError
-from ..io import output_format
-from ..io.frame import UP_AXES
-from ..io.x3d import SWITCHING_MODES
-from ..limits import DEFAULT_LIMITS
-from ..sinks import DirectorySink, FileSink, Outputs
 from . import COMMANDS
 
 DESCRIPTION = (
@@ -47,7 +47,7 @@ OBJECT_LINES = 20
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of the main command."""
-    from .. import __version__
+    from ...version import __version__
 
     parser.add_argument(
         "input",
@@ -193,7 +193,7 @@ def _logs_off(off: bool) -> Iterator[None]:
 
 def run(args: argparse.Namespace, console: Console) -> int:
     """Convert, print what was made, return the exit code."""
-    from ..pipeline import RunOptions, convert
+    from ...pipeline import RunOptions, convert
 
     _check_switching(args)
     _check_tiles(args)
@@ -208,14 +208,14 @@ def run(args: argparse.Namespace, console: Console) -> int:
     if args.viewer_lib and not args.html:
         raise UsageError("--viewer-lib is for the page that --html writes")
     if args.html:
-        from ..viewer import check_library
+        from ...viewer import check_library
 
         check_library(args.output, args.viewer_lib)  # before baking, not after
 
     def stage_page(
         outputs: Outputs, sink: FileSink | DirectorySink, report: dict[str, Any]
     ) -> None:
-        from ..viewer import page_path, render_page
+        from ...viewer import page_path, render_page
 
         page = page_path(args.output)
         if isinstance(sink, DirectorySink):  # a tileset: the page goes inside its folder

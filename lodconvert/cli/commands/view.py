@@ -6,10 +6,10 @@ import argparse
 import threading
 import urllib.parse
 
-from ..cli import EXIT_OK, Console
-from ..cli.options import add_limit_option, add_viewer_lib_option
-from ..limits import DEFAULT_LIMITS
-from ..viewer import library_mounts, serve, write_page
+from ...limits import DEFAULT_LIMITS
+from ...viewer import library_mounts, serve, write_page
+from ..console import Console
+from ..options import EXIT_OK, add_limit_option, add_viewer_lib_option
 
 DESCRIPTION = (
     "Write a self-contained HTML page beside an .x3d, .glb or .gltf written by lodconvert that "
