@@ -13,8 +13,8 @@ from lodconvert.city.prisms import LOW_F, MORE_TRIANGLES, prism
 from lodconvert.model import Mesh, Node, Surface
 from lodconvert.plans import bake_chain
 
-from .test_plan import gabled_house
 from .test_lods import block
+from .test_plan import gabled_house
 
 
 def house_of(mesh: trimesh.Trimesh) -> Mesh:
