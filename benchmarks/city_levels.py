@@ -51,9 +51,10 @@ class Measured:
     def __init__(self, path: Path) -> None:
         import lodconvert.chain
         from lodconvert.bake import get_backend
+        from lodconvert.bakery import iter_chains
         from lodconvert.chain import ChainOptions
+        from lodconvert.context import RunContext
         from lodconvert.io import read_scene
-        from lodconvert.pipeline import iter_chains
         from lodconvert.ranges import default_xs
 
         estimate = lodconvert.chain.mesh_silhouette_estimate
@@ -77,7 +78,9 @@ class Measured:
         start = time.process_time()
         lodconvert.chain.mesh_silhouette_estimate = timed
         try:
-            for chain in iter_chains(read_scene(path), options, get_backend("numpy")):
+            for chain in iter_chains(
+                read_scene(path), options, RunContext.here(get_backend("numpy"))
+            ):
                 self._count(chain)
         finally:
             lodconvert.chain.mesh_silhouette_estimate = estimate

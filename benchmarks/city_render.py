@@ -77,12 +77,13 @@ from lodconvert.analysis.city_render import (
     walk_cameras,
 )
 from lodconvert.bake import get_backend
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.hlod import HlodOptions
+from lodconvert.context import RunContext, merged
 from lodconvert.errors import LodConvertError
 from lodconvert.io import read_scene
 from lodconvert.model import CellChain, LodChain, Mesh, Node, Surface
-from lodconvert.pipeline import iter_chains, merged
 from lodconvert.plans import bake_chain
 
 HERE = Path(__file__).resolve().parent
@@ -398,7 +399,9 @@ def district_items(
     try:
         scene = read_scene(path)
         hlod = HlodOptions(HLOD_SIZES, "auto")
-        return list(iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod))
+        return list(
+            iter_chains(scene, ChainOptions(), RunContext.here(get_backend("numpy")), hlod=hlod)
+        )
     finally:
         if path != TUM:
             path.unlink()

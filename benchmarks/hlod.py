@@ -85,11 +85,12 @@ def measure(path: Path, sizes: str, kind: str) -> tuple[list[str], list[list[str
     """One table row (``path`` baked into cells of ``sizes`` with far levels of ``kind``) and
     its rows of the per-tier table."""
     from lodconvert.bake import get_backend
+    from lodconvert.bakery import iter_chains
     from lodconvert.chain import ChainOptions
     from lodconvert.city.hlod import MIN_CELL_F, HlodOptions, draw_counts, parse_sizes
+    from lodconvert.context import RunContext
     from lodconvert.io import read_scene
     from lodconvert.model import CellChain
-    from lodconvert.pipeline import iter_chains
 
     hlod = HlodOptions(parse_sizes(sizes), kind)
     start = time.process_time()
@@ -98,7 +99,9 @@ def measure(path: Path, sizes: str, kind: str) -> tuple[list[str], list[list[str
     without = dict(with_cells)
     scene = read_scene(path)
     alone = 0
-    for item in iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod):
+    for item in iter_chains(
+        scene, ChainOptions(), RunContext.here(get_backend("numpy")), hlod=hlod
+    ):
         is_cell = isinstance(item, CellChain)
         for key, value in draw_counts([item]).items():
             if key in with_cells:

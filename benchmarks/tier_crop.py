@@ -106,10 +106,11 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     sys.path.insert(0, str(HERE.parent))
     from lodconvert.bake import get_backend
+    from lodconvert.bakery import iter_chains
     from lodconvert.chain import ChainOptions
     from lodconvert.city.hlod import HlodOptions, parse_sizes
+    from lodconvert.context import RunContext
     from lodconvert.model import CellChain
-    from lodconvert.pipeline import iter_chains
 
     sizes = parse_sizes(args.sizes)
     assert sizes is not None
@@ -123,7 +124,9 @@ def main(argv: list[str] | None = None) -> int:
         scene = in_cells(path, cells, sizes[-1])
         objects = len(scene.nodes)
         hlod = HlodOptions(sizes, args.kind)
-        items = list(iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod))
+        items = list(
+            iter_chains(scene, ChainOptions(), RunContext.here(get_backend("numpy")), hlod=hlod)
+        )
     seconds = time.process_time() - started
     found = [cell for item in items if isinstance(item, CellChain) for cell in item.cells()]
     print(

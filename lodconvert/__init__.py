@@ -58,7 +58,7 @@ def write(
     with Outputs() as outputs:
         sink = outputs.file(path)
         target.write_chains(chains, sink, info, **options)
-        check_written(sink.staged.temp, path)
+        sink.with_staged(lambda staged: check_written(staged, path))
 
 
 def convert(

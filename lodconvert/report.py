@@ -12,12 +12,19 @@ from __future__ import annotations
 import json
 import platform
 from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, overload
 
+import numpy as np
+
 from .chain import ChainOptions
-from .model import CellChain, LodChain
+from .city.hlod import HlodOptions, draw_counts
+from .clock import Clock
+from .io import OutputInfo
+from .io.frame import SceneFrame, scene_frame
+from .io.geometry_checks import tally_of
+from .model import CellChain, LodChain, Scene
 from .version import __version__
 
 if TYPE_CHECKING:
@@ -177,3 +184,71 @@ def run_report(
         },
         "timings": {k: round(v, 4) for k, v in timings.items()},
     }
+
+
+def _add_counts(total: dict[str, int], more: dict[str, int]) -> None:
+    for key, value in more.items():
+        total[key] = total.get(key, 0) + value
+
+
+@dataclass
+class Assembly:
+    """What the run records of each baked item as the writer takes it: the objects' records,
+    the LOD parents and their draw counts, and the writers' scene frame (at the first object)."""
+
+    scene: Scene
+    info: OutputInfo
+    hlod: HlodOptions | None
+    records: Records = field(default_factory=Records)
+    cells: list[dict[str, Any]] = field(default_factory=list)
+    draw: dict[str, dict[str, int]] = field(default_factory=lambda: {"without": {}, "with": {}})
+    frame: SceneFrame | None = None
+    started: bool = False
+
+    def first_at(self, centre: np.ndarray) -> None:
+        """Where the input's first object lies: the scene frame's origin, for the writer too
+        (:attr:`~.io.OutputInfo.origin`), whatever the LOD parents bake first."""
+        self.info.origin = centre
+
+    def recorded(self, items: Iterable[LodChain | CellChain]) -> Iterator[LodChain | CellChain]:
+        """``items``, each recorded as it passes."""
+        tally = tally_of(self.scene)
+        dropped = tally.dropped_by_object if tally is not None else {}
+        for item in items:
+            if not self.started:
+                frame = scene_frame(self.info.framed, item, self.info.origin)
+                self.frame, self.started = frame, True
+            objects = item.objects()
+            for chain in objects:
+                self.records.append(
+                    {**chain_record(chain), "dropped_faces": dropped.get(chain.object_id, 0)}
+                )
+            if isinstance(item, CellChain):
+                self.cells.extend(cell_record(cell) for cell in item.cells())
+            if self.hlod is not None:
+                _add_counts(self.draw["without"], draw_counts(objects))
+                _add_counts(self.draw["with"], draw_counts([item]))
+            yield item
+
+    def report(
+        self,
+        named: str,
+        output_path: str | Path,
+        baker: Backend,
+        options: ChainOptions,
+        up: str | None,
+        skipped: list[dict[str, str]],
+        clock: Clock,
+        tally: InputTally | None,
+        crs_record: dict[str, Any],
+    ) -> dict[str, Any]:
+        """The ``--report`` of the run (``up``: the up axis its meshes were read with)."""
+        report = run_report(
+            named, output_path, baker, options, self.records, skipped, clock.timings, tally
+        )
+        report["crs"] = crs_record
+        report["up"] = "z" if self.info.city else up or "y"
+        report["frame"] = self.frame.record() if self.frame is not None else None
+        if self.hlod is not None:
+            report["hlod"] = {"kind": self.hlod.kind, "cells": self.cells, "draw": self.draw}
+        return report

@@ -32,12 +32,13 @@ import tempfile
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, TypeVar
 
 from . import manifest, nofollow
 from .errors import InputError, LodConvertError
 from .version import __version__
 
+T = TypeVar("T")
 Check = Callable[[Path], None]
 """Called with a complete staged file (or directory) before the commit; raises to refuse it."""
 RESUME = ".resume"
@@ -249,6 +250,11 @@ class FileSink:
         """A sink for ``name`` in this output's folder."""
         return self.outputs.file(self.path.parent / name)
 
+    def with_staged(self, use: Callable[[Path], T]) -> T:
+        """``use`` called with the path of the staged copy, to check or read it before the
+        commit (the one way to that path outside this module)."""
+        return use(self.staged.temp)
+
 
 @dataclass
 class DirectorySink:
@@ -274,6 +280,13 @@ class DirectorySink:
             replace = self.staged.note(name)
             with os.fdopen(nofollow.create(_root(self.staged), name, replace), "wb") as handle:
                 yield handle
+
+    def with_staged(self, use: Callable[[Path], T], relative: str = "") -> T:
+        """``use`` called with the path of the staged folder (or of ``relative`` inside it), to
+        check or read it before the commit."""
+        return use(
+            self.staged.temp / "/".join(nofollow.parts(relative)) if relative else self.staged.temp
+        )
 
     def read(self, relative: str | Path, limit: int) -> bytes | None:
         """The file at ``relative`` inside the staged directory (at most ``limit`` bytes) when

@@ -11,13 +11,14 @@ import numpy as np
 import pytest
 
 from lodconvert.bake import get_backend
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.cells import CellBaker
 from lodconvert.city.hlod import HlodOptions, plan_cells
+from lodconvert.context import RunContext
 from lodconvert.io import read_scene
 from lodconvert.limits import DEFAULT_LIMITS
 from lodconvert.model import CellChain, Level, LodChain
-from lodconvert.pipeline import iter_chains
 from lodconvert.tasks import PoolExecutor, SerialExecutor
 
 from .conftest import SHARED, shared_data
@@ -66,8 +67,8 @@ def test_cells_baked_by_worker_processes_are_the_cells_of_one_process() -> None:
         warnings: list[str] = []
         with executor:
             items = iter_chains(
-                read_scene(scene_path), ChainOptions(levels=2), backend, warn=warnings.append,
-                hlod=hlod, executor=executor,
+                read_scene(scene_path), ChainOptions(levels=2),
+                RunContext(executor, backend, warn=warnings.append), hlod=hlod,
             )  # fmt: skip
             found[workers] = ([_summary(item) for item in items], warnings)
     assert found[2] == found[1]
@@ -82,7 +83,9 @@ def _town(
     """Eight objects baked in this process, in two 20 m cells 40 m apart (obj0–3 and obj4–7)
     (with ``sizes``, in the cells of those sizes), and their chains in the cells' order
     (``trap``: that object's chain kills the worker taking it)."""
-    chains = list(iter_chains(_scene(), ChainOptions(levels=2), get_backend("numpy")))
+    chains = list(
+        iter_chains(_scene(), ChainOptions(levels=2), RunContext.here(get_backend("numpy")))
+    )
     for i, chain in enumerate(chains):
         chain.origin = np.array([40.0 * (i // 4) + 2.0 * (i % 4), 0.0, 0.0])
         if chain.object_id == trap:

@@ -31,10 +31,11 @@ from lodconvert.analysis.city_render import (
     walk_cameras,
 )
 from lodconvert.bake import get_backend
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.hlod import HlodOptions
+from lodconvert.context import RunContext
 from lodconvert.model import CellChain, LodChain, Mesh, Node, Scene, Surface
-from lodconvert.pipeline import iter_chains
 
 from .conftest import gl_renderer
 
@@ -69,7 +70,11 @@ def baked(
     """The scene's chains (γ = ``gamma`` for all when given), grouped in LOD parents of
     ``sizes`` (merged-mesh far levels)."""
     hlod = HlodOptions(sizes, "mesh") if sizes is not None else None
-    return list(iter_chains(scene, ChainOptions(gamma=gamma), get_backend("numpy"), hlod=hlod))
+    return list(
+        iter_chains(
+            scene, ChainOptions(gamma=gamma), RunContext.here(get_backend("numpy")), hlod=hlod
+        )
+    )
 
 
 @pytest.fixture(scope="module")

@@ -25,12 +25,13 @@ import pytest
 import trimesh
 
 from lodconvert.bake import get_backend
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
+from lodconvert.context import RunContext
 from lodconvert.errors import LodConvertError
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.limits import DEFAULT_LIMITS
 from lodconvert.model import Scene
-from lodconvert.pipeline import iter_chains
 from lodconvert.tasks import Executor, PoolExecutor, SerialExecutor, batches
 
 from .conftest import ROOT, SHARED, shared_data
@@ -354,10 +355,7 @@ def _baked(scene: Scene, executor: Executor) -> tuple[list[Any], list[str], list
             iter_chains(
                 scene,
                 ChainOptions(),
-                get_backend("numpy"),
-                warn=warnings.append,
-                skipped=skipped,
-                executor=executor,
+                RunContext(executor, get_backend("numpy"), warn=warnings.append, skipped=skipped),
             )
         )
     return chains, warnings, skipped

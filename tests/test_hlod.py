@@ -16,6 +16,7 @@ from lxml import etree
 
 from lodconvert.bake import get_backend
 from lodconvert.bake.qem import simplify_within
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.blocks import block_proxy, blocks_of, object_footprint, shared_corners
 from lodconvert.city.hlod import (
@@ -34,11 +35,11 @@ from lodconvert.city.hlod import (
     parse_sizes,
     plan_cells,
 )
+from lodconvert.context import RunContext
 from lodconvert.errors import UsageError
 from lodconvert.io import read_chains, read_scene
 from lodconvert.io.gltf.rules import COMPONENT_SIZES, WIDTHS
 from lodconvert.model import CellChain, Level, LodChain, Mesh, Node, Scene, Surface
-from lodconvert.pipeline import iter_chains
 from lodconvert.plan import POINT_COST, level_bytes, mesh_silhouette_estimate
 from lodconvert.ranges import cutoff
 from tests.conftest import ROOT
@@ -86,7 +87,9 @@ def _cells(items: list[Item]) -> list[CellChain]:
 def _tum(kind: str) -> list[Item]:
     scene = read_scene(sample(TUM))
     hlod = HlodOptions((250.0, 1000.0), kind)
-    return list(iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod))
+    return list(
+        iter_chains(scene, ChainOptions(), RunContext.here(get_backend("numpy")), hlod=hlod)
+    )
 
 
 @pytest.fixture(scope="module")
@@ -400,7 +403,9 @@ def test_simplification_keeps_each_face_s_colour_without_bleeding() -> None:
 def test_a_district_of_one_building_is_a_cell_of_one(kind: str) -> None:
     house = block(10, 8, 6)
     scene = Scene("one", [Node("house", house, "Building", lods={"lod2": house})])
-    (cell,) = iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=HlodOptions(None, kind))
+    (cell,) = iter_chains(
+        scene, ChainOptions(), RunContext.here(get_backend("numpy")), hlod=HlodOptions(None, kind)
+    )
     assert [c.object_id for c in cell.objects()] == ["house"]
     assert cell.far.kind == ("pcd" if kind == "points" else "merged")
     assert_seamless(cell)
@@ -415,7 +420,10 @@ def test_blocks_of_a_district_without_footprints_fall_back_to_a_mesh_and_say_so(
     plaza = Node("plaza", square, "LandUse", {"type": "LandUse"}, lods={"lod1": square})
     scene = Scene("plaza", [plaza])
     (cell,) = iter_chains(
-        scene, ChainOptions(), get_backend("numpy"), hlod=HlodOptions(None, "blocks")
+        scene,
+        ChainOptions(),
+        RunContext.here(get_backend("numpy")),
+        hlod=HlodOptions(None, "blocks"),
     )
     assert cell.facts["kind"] == "mesh" and cell.facts["why"] == "no blocks level could be made"
     assert "blocks" not in cell.facts["counts"] and cell.far.count > 0

@@ -15,14 +15,15 @@ from lxml import etree
 
 import lodconvert
 from lodconvert.bake import get_backend
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.hlod import HlodOptions
+from lodconvert.context import RunContext
 from lodconvert.errors import InputError
 from lodconvert.io import own_format
 from lodconvert.io.gltf import read_lod_gltf
 from lodconvert.io.gltf.reader import _load as load_gltf
 from lodconvert.model import CellChain, LodChain, Node, Scene
-from lodconvert.pipeline import iter_chains
 from lodconvert.viewer import page_config
 
 from .test_lods import block
@@ -52,7 +53,7 @@ def items() -> list:
     plot radii of 2 m: most buildings switch soon enough for their cells to admit them."""
     hlod = HlodOptions(SIZES, "points")
     options = ChainOptions(gamma=2.0)
-    return list(iter_chains(_district(), options, get_backend("numpy"), hlod=hlod))
+    return list(iter_chains(_district(), options, RunContext.here(get_backend("numpy")), hlod=hlod))
 
 
 @pytest.fixture(scope="module")
@@ -133,7 +134,7 @@ def test_read_cells_says_where_the_cells_lie(written: dict[str, Path]) -> None:
 
 def test_files_without_cells_have_none(tmp_path: Path) -> None:
     scene = Scene("one", [Node("house", block(10, 8, 6), "Building")])
-    chains = list(iter_chains(scene, ChainOptions(), get_backend("numpy")))
+    chains = list(iter_chains(scene, ChainOptions(), RunContext.here(get_backend("numpy"))))
     for suffix in ("x3d", "glb"):
         path = tmp_path / f"house.{suffix}"
         lodconvert.write(chains, path, source="house")

@@ -175,9 +175,9 @@ def test_a_footprint_with_a_courtyard_keeps_it() -> None:
 
 
 def test_plot_radii_come_from_the_neighbours_spacing() -> None:
+    from lodconvert.bakery import object_ranges
     from lodconvert.city.plots import MAX_RADIUS
     from lodconvert.model import Scene
-    from lodconvert.pipeline import object_ranges
 
     houses = [block(8, 8, 6, x, 0.0) for x in (0.0, 20.0, 50.0)]
     far = block(8, 8, 6, 5000.0, 0.0)
@@ -208,8 +208,8 @@ def test_nearest_distances_are_those_a_kd_tree_gives() -> None:
 
 
 def test_inputs_merge_the_lods_of_one_city_object() -> None:
+    from lodconvert.inputs import merged
     from lodconvert.model import Scene
-    from lodconvert.pipeline import merged
 
     lod1, lod2, lod3 = block(10, 10, 8), block(10, 10, 9), block(10, 10, 10)
     scenes = [
@@ -237,15 +237,18 @@ def test_every_prism_of_a_real_district_pays_looks_alike_and_faces_outward() -> 
     draws at least 30 % fewer triangles than its LoD2; the prisms enclose their volume with
     outward faces, as the buildings do (viewers light and cull them by their winding)."""
     from lodconvert.bake import get_backend
+    from lodconvert.bakery import iter_chains
     from lodconvert.city.prisms import MIN_PRISM_F
+    from lodconvert.context import RunContext
     from lodconvert.io import read_scene
-    from lodconvert.pipeline import iter_chains
 
     from .test_citygml import sample
 
     chains = list(
         iter_chains(
-            read_scene(sample("tum_munich_lod2_v2.zip")), ChainOptions(), get_backend("numpy")
+            read_scene(sample("tum_munich_lod2_v2.zip")),
+            ChainOptions(),
+            RunContext.here(get_backend("numpy")),
         )
     )
     assert len(chains) == 290

@@ -19,14 +19,15 @@ from scipy.spatial import cKDTree
 import lodconvert
 from lodconvert import convert
 from lodconvert.bake import get_backend
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.hlod import HlodOptions
+from lodconvert.context import RunContext
 from lodconvert.errors import LodConvertError
 from lodconvert.io import own_format, read_chains, read_scene
 from lodconvert.io.frame import ROTATION
 from lodconvert.io.x3d.viewpoint import PITCH_DEG
 from lodconvert.model import Node, Surface
-from lodconvert.pipeline import iter_chains
 from lodconvert.validate import validate_file
 from lodconvert.viewer.config import page_config
 
@@ -228,7 +229,7 @@ def _placed_balls(folder: Path) -> Path:
 @pytest.mark.parametrize("suffix", [".glb", ".x3d"])
 def test_instances_placed_by_a_matrix_follow_the_frame(tmp_path: Path, suffix: str) -> None:
     scene = read_scene(_placed_balls(tmp_path))
-    chains = list(iter_chains(scene, ChainOptions(), get_backend("numpy")))
+    chains = list(iter_chains(scene, ChainOptions(), RunContext.here(get_backend("numpy"))))
     assert len(chains) == 2 and all(chain.transform is not None for chain in chains)
     assert chains[0].levels is chains[1].levels  # one bake, two placements
     plain, framed = tmp_path / f"plain{suffix}", tmp_path / f"framed{suffix}"

@@ -10,10 +10,11 @@ from pathlib import Path
 import pytest
 
 from lodconvert.bake import get_backend
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.hlod import MIN_CELL_F, HlodOptions
+from lodconvert.context import RunContext
 from lodconvert.model import CellChain, Level
-from lodconvert.pipeline import iter_chains
 from lodconvert.plan import level_bytes
 from tests.conftest import ROOT, shared_data
 
@@ -77,7 +78,9 @@ def _full_cell(tmp_path: Path, key: tuple[int, int]) -> CellChain:
     tier_crop.write_copies(template, tier_crop.copies_reaching(template, 100, [key], 1000.0), crop)
     scene = tier_crop.in_cells(crop, [key], 1000.0)
     hlod = HlodOptions((250.0, 1000.0), "auto")
-    items = list(iter_chains(scene, ChainOptions(), get_backend("numpy"), hlod=hlod))
+    items = list(
+        iter_chains(scene, ChainOptions(), RunContext.here(get_backend("numpy")), hlod=hlod)
+    )
     (cell,) = [i for i in items if isinstance(i, CellChain) and not i.facts.get("beside")]
     assert cell.tier == 2 and len(cell.objects()) > 600
     return cell

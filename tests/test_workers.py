@@ -22,10 +22,13 @@ import trimesh
 
 from lodconvert import spool
 from lodconvert.bake import get_backend
+from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
+from lodconvert.context import RunContext
+from lodconvert.inputs import read_inputs
 from lodconvert.io import output_format
 from lodconvert.model import Node, PackedNode, Scene
-from lodconvert.pipeline import RunOptions, _output_info, convert, iter_chains, read_inputs
+from lodconvert.pipeline import RunOptions, _output_info, convert
 from lodconvert.report import chain_record
 from lodconvert.tasks import (
     INPUT_BYTES_PER_WORKER,
@@ -217,10 +220,7 @@ def _baked(scene: Scene, workers: int) -> tuple[list[Any], list[str], list[dict[
             iter_chains(
                 scene,
                 ChainOptions(),
-                backend,
-                warn=warnings.append,
-                skipped=skipped,
-                executor=executor,
+                RunContext(executor, backend, warn=warnings.append, skipped=skipped),
             )
         )
     return chains, warnings, skipped
@@ -389,7 +389,7 @@ def test_chains_whose_output_workers_made_come_back_without_their_geometry(suffi
         pieces = output_format(f"kit{suffix}").pieces(info, {}) if workers == 2 else None
         with executor:
             chains[workers] = list(
-                iter_chains(scene, ChainOptions(), backend, executor=executor, pieces=pieces)
+                iter_chains(scene, ChainOptions(), RunContext(executor, backend), pieces=pieces)
             )
     assert [chain_record(c) for c in chains[2]] == [chain_record(c) for c in chains[1]]
     assert all(lv.mesh is lv.points is None for c in chains[2] for lv in c.levels)

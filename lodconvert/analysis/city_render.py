@@ -368,7 +368,7 @@ def _centre(chain: LodChain | CellChain) -> np.ndarray:
 
 
 def city_draw(items: Iterable[LodChain | CellChain]) -> CityDraw:
-    """Flatten object chains and LOD parents (as :func:`~lodconvert.pipeline.iter_chains`
+    """Flatten object chains and LOD parents (as :func:`~lodconvert.bakery.iter_chains`
     yields them) into a :class:`CityDraw`. Raises :class:`ValueError` for a city without
     objects."""
     objects, object_cell, cells, parents = _flatten(items)

@@ -219,14 +219,18 @@ def run(args: argparse.Namespace, console: Console) -> int:
 
         page = page_path(args.output)
         if isinstance(sink, DirectorySink):  # a tileset: the page goes inside its folder
-            source = sink.staged.temp / page.with_suffix("").name
-            text = render_page(
-                Path(args.output), page, args.viewer_lib, source=source, limits=limits
+            text = sink.with_staged(
+                lambda source: render_page(
+                    Path(args.output), page, args.viewer_lib, source=source, limits=limits
+                ),
+                page.with_suffix("").name,
             )
             with sink.file(page.name) as handle:
                 handle.write(text.encode("utf-8"))
         else:
-            text = render_page(sink.path, page, args.viewer_lib, source=sink.staged.temp)
+            text = sink.with_staged(
+                lambda source: render_page(sink.path, page, args.viewer_lib, source=source)
+            )
             outputs.file(page).write_bytes(text.encode("utf-8"))
         report["page"] = str(page)
 

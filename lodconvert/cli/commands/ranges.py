@@ -6,8 +6,9 @@ from __future__ import annotations
 import argparse
 import json
 
+from ...bakery import object_ranges
+from ...inputs import read_inputs
 from ...limits import DEFAULT_LIMITS
-from ...pipeline import object_ranges, read_inputs
 from ..console import Console
 from ..options import (
     EXIT_OK,

@@ -1,4 +1,4 @@
-"""The tileset writer: LOD parents and objects (:func:`~lodconvert.pipeline.iter_chains` with
+"""The tileset writer: LOD parents and objects (:func:`~lodconvert.bakery.iter_chains` with
 cells) → a tile tree, one GLB per tile (:mod:`.content`), placed in ECEF (:mod:`.placement`).
 Each tile's GLB is a :class:`~.task.TileTask` run by the run's executor, the one that bakes (in
 its worker processes with ``--workers``, while they bake the next cells); results (each tile's
@@ -414,7 +414,7 @@ def write_tileset(
     progress: Callable[[str], None] | None = None,
 ) -> None:
     """The registry's ``write``: the tileset of ``chains`` (LOD parents and objects, as
-    :func:`~lodconvert.pipeline.iter_chains` yields them with cells) into ``sink``, each tile's
+    :func:`~lodconvert.bakery.iter_chains` yields them with cells) into ``sink``, each tile's
     GLB made by ``executor`` (an :class:`~lodconvert.tasks.Executor`; ``None``: here)."""
     if not (math.isfinite(sse) and sse > 0):
         raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
