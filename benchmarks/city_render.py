@@ -29,7 +29,7 @@ prism switching (frustum culling on in both), at 45° and 75° vertical field of
 copies of it (``benchmarks/city.py``'s ``write_district``; ``--factors``, default 1 and 100) are
 baked with
 ``iter_chains(..., hlod=HlodOptions((250, 1000), "auto"))``; the one-tier configuration (250 m
-cells) is that bake's finest tier, which :func:`lodconvert.city.hlod.bake_cell` makes from the
+cells) is that bake's finest tier, which :func:`lodconvert.city.cell_bake.bake_cell` makes from the
 cells' own members alone, as a ``(250,)`` bake would (``tests/test_city_render.py`` holds the two
 equal). Flights at each ``--altitudes`` cross the district along x through its middle,
 pitched :data:`FLIGHT_PITCH_DEG`° down, ``--flight-frames`` evenly spaced positions each, in

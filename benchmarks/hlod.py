@@ -87,7 +87,8 @@ def measure(path: Path, sizes: str, kind: str) -> tuple[list[str], list[list[str
     from lodconvert.bake import get_backend
     from lodconvert.bakery import iter_chains
     from lodconvert.chain import ChainOptions
-    from lodconvert.city.hlod import MIN_CELL_F, HlodOptions, draw_counts, parse_sizes
+    from lodconvert.city.far_choice import MIN_CELL_F
+    from lodconvert.city.hlod import HlodOptions, draw_counts, parse_sizes
     from lodconvert.context import RunContext
     from lodconvert.io import read_scene
     from lodconvert.model import CellChain

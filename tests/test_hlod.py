@@ -19,17 +19,13 @@ from lodconvert.bake.qem import simplify_within
 from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.blocks import block_proxy, blocks_of, object_footprint, shared_corners
+from lodconvert.city.cell_switch import CELL_EXPONENT
+from lodconvert.city.far_blocks import blocks_level
+from lodconvert.city.far_choice import MIN_CELL_F
+from lodconvert.city.far_mesh import SIMPLIFY_PX, finest_mesh, merge, merged_level, one_part
 from lodconvert.city.hlod import (
     AUTO_SIZES,
-    CELL_EXPONENT,
-    MIN_CELL_F,
-    SIMPLIFY_PX,
     HlodOptions,
-    _blocks_level,
-    _finest_mesh,
-    _merged,
-    _merged_level,
-    _one_part,
     auto_size,
     draw_counts,
     parse_sizes,
@@ -192,7 +188,7 @@ def test_a_merged_far_mesh_takes_finer_levels_until_it_is_faithful(tum_items: li
         chains.append(LodChain(f"h{i}", levels, [100.0], np.zeros(3), np.zeros(3), 15.0, 3.0,
                                10.0, [1.0]))  # fmt: skip
     source = Mesh([part for chain in chains for part in chain.levels[0].mesh.parts])
-    level, f, finer = _merged_level(chains, np.zeros(3), source, 300.0, ChainOptions())
+    level, f, finer = merged_level(chains, np.zeros(3), source, 300.0, ChainOptions())
     assert finer == 1 and f >= MIN_CELL_F
     assert level.count == sum(chain.levels[0].count for chain in chains)
 
@@ -248,8 +244,8 @@ def test_far_meshes_leave_out_the_floors_on_the_ground(tum_items: list[Item]) ->
 def test_a_simplified_far_mesh_is_the_same_every_time(tum_items: list[Item]) -> None:
     cell = max((c for c in _cells(tum_items) if c.tier == 1), key=_merged_vertices)
     objects = cell.objects()
-    source = _merged([_finest_mesh(chain) for chain in objects]).translated(-cell.origin)
-    merged, _, _ = _merged_level(objects, cell.origin, source, cell.cutoffs[0], ChainOptions())
+    source = merge([finest_mesh(chain) for chain in objects]).translated(-cell.origin)
+    merged, _, _ = merged_level(objects, cell.origin, source, cell.cutoffs[0], ChainOptions())
     tolerance = (
         cell.facts["simplified"]["tolerance_px"] * cell.cutoffs[0] / ChainOptions().view.focal_px
     )
@@ -317,13 +313,13 @@ def test_a_tower_keeps_its_height_in_a_band_of_its_own_and_streets_part_blocks()
     in 6 m bands it stands 40 m high out of its 10 m block, and the proxy looks more like
     the houses."""
     chains = _houses([10.0] * 4 + [40.0] + [10.0] * 5) + _houses([10.0, 10.0], 120.0)
-    prints = [object_footprint(chain, _finest_mesh(chain)) for chain in chains]
+    prints = [object_footprint(chain, finest_mesh(chain)) for chain in chains]
     found = blocks_of(prints, 0.5)
     assert sorted(len(members) for members in found.members) == [2, 10]
     one, banded = (block_proxy(found, 0.5, band) for band in (math.inf, 6.0))
     assert set(np.unique(one.vertices[:, 2])) == {0.0, 10.0}
     assert set(np.unique(banded.vertices[:, 2])) == {0.0, 10.0, 40.0}
-    source = _merged([_finest_mesh(chain) for chain in chains])
+    source = merge([finest_mesh(chain) for chain in chains])
     f = [mesh_silhouette_estimate(source, mesh, 100.0).f for mesh in (one, banded)]
     assert f[1] > 0.99 > f[0]
     # blocks take fewer vertices than the houses' own boxes
@@ -344,7 +340,7 @@ def test_shared_corners_give_a_block_a_vertex_per_corner_in_its_roof_colour() ->
     ]
     chain = LodChain("house", [Level("LOD2", "source", mesh=Mesh(pieces))], [], np.zeros(3),
                      np.zeros(3), 15.0, 3.0, 10.0, [])  # fmt: skip
-    found = blocks_of([object_footprint(chain, _finest_mesh(chain))], 0.5)
+    found = blocks_of([object_footprint(chain, finest_mesh(chain))], 0.5)
     proxy = block_proxy(found, 0.5, math.inf)
     shared = shared_corners(proxy)
     assert proxy.vertex_count == 12 and shared.vertex_count == 8
@@ -359,9 +355,9 @@ def test_shared_corners_give_a_block_a_vertex_per_corner_in_its_roof_colour() ->
 def test_block_proxies_are_the_same_every_time(tum_items: list[Item]) -> None:
     cell = next(c for c in _cells(tum_items) if c.facts["kind"] == "blocks")
     objects = cell.objects()
-    source = _merged([_finest_mesh(chain) for chain in objects]).translated(-cell.origin)
+    source = merge([finest_mesh(chain) for chain in objects]).translated(-cell.origin)
     for _ in range(2):
-        level, f, facts = _blocks_level(
+        level, f, facts = blocks_level(
             objects, cell.origin, source, cell.cutoffs[0], ChainOptions()
         )
         for name in ("vertices", "faces", "vertex_colors"):
@@ -388,7 +384,7 @@ def test_simplification_keeps_each_face_s_colour_without_bleeding() -> None:
                 parts.append(
                     Surface(piece.vertices, np.asarray(piece.faces, np.int64), base_color=color)
                 )
-    merged = _one_part(Mesh(parts))
+    merged = one_part(Mesh(parts))
     simple = simplify_within(merged, 0.05)
     assert len(merged.vertices) > 700 and len(simple.vertices) == 8 + 8 + 4
     assert np.allclose(Mesh([simple]).bounds, Mesh(parts).bounds, atol=0.05)

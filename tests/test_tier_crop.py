@@ -12,7 +12,8 @@ import pytest
 from lodconvert.bake import get_backend
 from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
-from lodconvert.city.hlod import MIN_CELL_F, HlodOptions
+from lodconvert.city.far_choice import MIN_CELL_F
+from lodconvert.city.hlod import HlodOptions
 from lodconvert.context import RunContext
 from lodconvert.model import CellChain, Level
 from lodconvert.plan import level_bytes

@@ -392,7 +392,7 @@ def test_textured_mesh_keeps_its_texture(chain: LodChain) -> None:
 def test_textured_mesh_validates_shares_its_appearance_and_is_deterministic(
     schema: etree.XMLSchema, chain: LodChain, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
 ) -> None:
-    monkeypatch.setattr(x3d.writer, "MAX_SHAPE_TRIANGLES", 5)  # the box's 12 triangles in 3 Shapes
+    monkeypatch.setattr(x3d.shapes, "MAX_SHAPE_TRIANGLES", 5)  # the box's 12 triangles in 3 Shapes
     textured = _with_mesh(chain, _textured_box())
     path = tmp_path / "box.x3d"
     path.write_bytes(_write([textured]))
@@ -429,9 +429,9 @@ def test_textured_part_with_vertex_colours_keeps_both(chain: LodChain) -> None:
 def test_large_texture_is_halved_until_its_url_fits(monkeypatch: pytest.MonkeyPatch) -> None:
     texture = np.random.default_rng(9).integers(0, 256, size=(40, 64, 4), dtype=np.uint8)
     texture[..., 3] = 255  # opaque: plain 2 × 2 averages (Pillow weighs colours by alpha)
-    full = x3d.writer.texture_url(texture)
-    monkeypatch.setattr(x3d.writer, "MAX_TEXTURE_URL", len(full) - 1)
-    url = x3d.writer.texture_url(texture)
+    full = x3d.shapes.texture_url(texture)
+    monkeypatch.setattr(x3d.shapes, "MAX_TEXTURE_URL", len(full) - 1)
+    url = x3d.shapes.texture_url(texture)
     assert len(url) < len(full)
     pixels = _texture_pixels(f'"{url}"')
     assert pixels.shape == (20, 32, 4)  # halved once: a quarter of the pixels fits
@@ -476,8 +476,8 @@ def test_levels_over_the_shape_limits_are_split(
     tmp_path: Path,
     soup: bool,
 ) -> None:
-    monkeypatch.setattr(x3d.writer, "MAX_SHAPE_VERTICES", SMALL_VERTICES)
-    monkeypatch.setattr(x3d.writer, "MAX_SHAPE_TRIANGLES", SMALL_TRIANGLES)
+    monkeypatch.setattr(x3d.shapes, "MAX_SHAPE_VERTICES", SMALL_VERTICES)
+    monkeypatch.setattr(x3d.shapes, "MAX_SHAPE_TRIANGLES", SMALL_TRIANGLES)
     surface = torus.geometry.parts[0]
     if soup:  # each face has its own three vertices: the vertex limit binds first
         faces = surface.faces
@@ -526,7 +526,7 @@ def test_dragon_validates_with_default_parser_limits(
     assert schema.validate(doc), "\n".join(str(e) for e in schema.error_log)
     assert max(len(v) for node in doc.iter() for v in node.attrib.values()) < 4_000_000
     mesh = doc.find("Scene/Transform/LOD/Group")
-    assert len(mesh.findall("Shape")) >= math.ceil(871_414 / x3d.writer.MAX_SHAPE_TRIANGLES)
+    assert len(mesh.findall("Shape")) >= math.ceil(871_414 / x3d.shapes.MAX_SHAPE_TRIANGLES)
 
 
 # --- streaming and determinism ------------------------------------------------------------------
@@ -709,7 +709,7 @@ def test_format_floats_follows_the_fixed_rule(values: list[float]) -> None:
 def test_attribute_text_is_escaped_as_lxml_escapes_it(text: str) -> None:
     """lxml refuses characters XML forbids; the writer writes them as \\uXXXX first."""
     expected = etree.tostring(etree.Element("a", v=xml_text(text)), encoding="unicode")
-    assert f'<a v="{x3d.writer._escape(text)}"/>' == expected
+    assert f'<a v="{x3d.xmltext.escape(text)}"/>' == expected
 
 
 @pytest.mark.parametrize(

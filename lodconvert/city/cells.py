@@ -26,7 +26,8 @@ from ..bake import Backend
 from ..chain import ChainOptions
 from ..limits import Limits
 from ..model import CellChain, Level, LodChain, Mesh, Surface
-from .hlod import CellPlan, Member, bake_cell
+from .cell_bake import bake_cell
+from .hlod import CellPlan, Member
 
 SHIPPED = ("bounds", "block-footprint-")
 """What a member's meshes derived that travels with a task (a few numbers each; a footprint
@@ -57,7 +58,7 @@ class CellResult:
     def items(self, members: list[Member]) -> list[Member]:
         """The cell of ``members`` (the task's, as the main process holds them) and the members
         it leaves out (gathered into the ``beside`` cell where there is one), as
-        :func:`~.hlod.bake_cell` gives them; ``members`` themselves without a cell. The
+        :func:`~.cell_bake.bake_cell` gives them; ``members`` themselves without a cell. The
         objects' finest levels keep what was derived from them there."""
         for chain, found in zip(_objects(members), self.derived, strict=False):
             _finest(chain)._derived.update(found)
@@ -72,7 +73,7 @@ class CellResult:
 
 @dataclass(frozen=True)
 class CellTask:
-    """The LOD parent of ``plan`` over its baked ``members`` (:func:`~.hlod.bake_cell`;
+    """The LOD parent of ``plan`` over its baked ``members`` (:func:`~.cell_bake.bake_cell`;
     ``top``: a coarsest cell, which gathers what it leaves out into a cell of its own)."""
 
     plan: CellPlan
@@ -132,7 +133,7 @@ class CellBaker:
     def cells(self, plans: list[CellPlan], chains: Iterator[LodChain | None]) -> Iterator[Member]:
         """The coarsest cells of ``plans`` (in order) over the objects' ``chains`` (in the
         plans' object order, ``None`` for one skipped), each followed by the members it left
-        out: what :func:`~.hlod.bake_cell` gives for each coarsest cell, its finer cells baked
+        out: what :func:`~.cell_bake.bake_cell` gives for each coarsest cell, its finer cells baked
         first."""
         if not plans:
             return

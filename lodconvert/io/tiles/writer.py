@@ -8,11 +8,11 @@ In a staging folder an interrupted run of the same inputs and options left, each
 file is whole and of the same key is kept (:mod:`.task`).
 
 Tree: the root (no content) holds one tile per coarsest cell and, beside each, the tile of the
-cell gathering the objects it left out, which no cell admitted (:func:`~.city.hlod.bake_cell`;
-objects given without a cell get tiles of their own there). A cell's tile shows its far level;
-its children are its finer cells' tiles and, for the objects among its members, one tile of
-their coarsest mesh levels whose child, a leaf, holds their finest. Refinement is ``REPLACE``
-everywhere.
+cell gathering the objects it left out, which no cell admitted
+(:func:`~lodconvert.city.cell_bake.bake_cell`; objects given without a cell get tiles of their
+own there). A cell's tile shows its far level; its children are its finer cells' tiles and, for
+the objects among its members, one tile of their coarsest mesh levels whose child, a leaf, holds
+their finest. Refinement is ``REPLACE`` everywhere.
 
 geometricError: a tile whose content switches to its children at distance d has
 GE = sse·d / focal_px (focal_px = h / (2·tan(fov/2)) of the reference view), so that CesiumJS,

@@ -1,10 +1,14 @@
-"""X3D 4.0: the writer (:mod:`.writer`), the read-back of our own files (:mod:`.reader`) and the
-structural checks (:mod:`.check`), declared as one registry entry."""
+"""X3D 4.0: the writer (:mod:`.writer`, with the document's head and metadata, DEF names, prism
+switching, geometry Shapes and XML text in modules of their own), the read-back of our own files
+(:mod:`.reader`) and the structural checks (:mod:`.check`), declared as one registry entry."""
 
 from __future__ import annotations
 
 from .. import Format, streamed
 from .check import check_x3d
+from .head import SWITCHING_MODES
+from .metadata import METADATA_SET
+from .prism import prism_boxes
 from .reader import (
     X3DLevel,
     read_back,
@@ -13,15 +17,8 @@ from .reader import (
     read_x3d_points,
     x3d_read_errors,
 )
-from .writer import (
-    METADATA_SET,
-    SWITCHING_MODES,
-    chain_texts,
-    point_properties,
-    prism_boxes,
-    vertex_colors,
-    write_x3d,
-)
+from .shapes import point_properties, vertex_colors
+from .writer import chain_texts, write_x3d
 
 FORMAT = Format(
     name="x3d",

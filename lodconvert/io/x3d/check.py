@@ -26,7 +26,7 @@ from lxml import etree
 
 from ...errors import LodConvertError
 from ..findings import Findings
-from .writer import METADATA_SET
+from .metadata import METADATA_SET
 
 MAX_SCHEMA_FINDINGS = 20
 """Schema errors listed one by one; any more are summed up in one finding."""

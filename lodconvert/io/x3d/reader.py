@@ -21,7 +21,7 @@ from ...errors import InputError
 from ...model import LodChain
 from ..declared import chain_from_facts, level_from_facts
 from ..frame import SceneFrame, frame_from_record
-from .writer import FRAME_METADATA, METADATA_SET
+from .metadata import FRAME_METADATA, METADATA_SET
 
 
 @dataclass
