@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import io
 import time
-from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +31,7 @@ from ...model import Node, PackedNode, with_geometry
 from ...semantics import Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally
-from ..spread import TASK_SECONDS, Results, Sizer, add_tally, quiet
+from ..spread import Spread, add_tally, runs
 from .document import Document
 from .members import Members, NotSplit
 from .names import MEMBERS
@@ -114,47 +113,28 @@ class ReadTask:
         return ReadResult(died=reason)
 
 
-class SpreadReading:
+class SpreadReading(Spread[list[bytes], ReadTask]):
     """The nodes of the document ``make`` gives read as :class:`ReadTask` on an executor once
-    one is given (:meth:`use`); until then, and without one, each run is read in this
-    process."""
+    one is given (:meth:`use`); until then, and without one, each run of members is read in
+    this process (:class:`~..spread.Spread`)."""
 
     def __init__(self, make: Callable[[], Document]) -> None:
+        super().__init__()
         self.make = make
         self.document = make()
-        self.progress: Callable[[str], None] = quiet
-        self.results: Results | None = None
-        self.sizer = Sizer()
         self.told = False
-
-    def use(
-        self, results: Results, progress: Callable[[str], None], seconds: float = TASK_SECONDS
-    ) -> None:
-        """Read the rest of the document by ``results`` (an executor's), in runs of about
-        ``seconds`` of reading; ``progress`` hears where runs are read in this process
-        instead."""
-        self.results, self.progress, self.sizer.seconds = results, progress, seconds
+        self.members: Members | None = None
 
     def nodes(self) -> Iterator[Node | PackedNode]:
         """The document's city objects with geometry, in document order."""
         document = self.document
         stream = open_document(document.path, document.limits)
         try:
-            members = self._members(stream)
-            runs = self._runs(members)
-            for run in runs:
-                yield from self._read_here(members.prolog, b"".join(run), members.root_end)
-                if self._settled():
-                    break
-            if self.results is None:
-                for run in runs:
-                    yield from self._read_here(members.prolog, b"".join(run), members.root_end)
-                return
-            sent: deque[ReadTask] = deque()
-            for result in self.results(self._tasks(members, runs, sent)):
-                yield from self._taken(sent.popleft(), result)
+            self.members = self._members(stream)
+            read = (member for name, member in self.members if name in _READ)
+            yield from self.spread(runs(read, len, self.sizer))
         except NotSplit:
-            raise self._one_process_error() from None
+            raise self.one_process_error() from None
         finally:
             stream.close()
 
@@ -163,83 +143,56 @@ class SpreadReading:
         try:
             replay, root = first_look(stream, self.document.limits, self.document.source)
         except etree.XMLSyntaxError:
-            raise self._one_process_error() from None
+            raise self.one_process_error() from None
         self.document.check_root(root)
         return Members(replay)
 
-    def _settled(self) -> bool:
+    def settled(self) -> bool:
         """Whether the CRS (a geographic one's frame too) is settled and reading timed."""
         crs = self.document.crs
         frame = crs is not None and (crs.geographic is None or crs.frame is not None)
         return frame and self.sizer.timed
 
-    def _runs(self, members: Members) -> Iterator[list[bytes]]:
-        """Runs of the members read, each of about the sizer's seconds of reading as measured
-        so far (of one member until then)."""
-        run: list[bytes] = []
-        size = 0
-        for name, member in members:
-            if name not in _READ:
-                continue
-            run.append(member)
-            size += len(member)
-            if size >= self.sizer.wanted():
-                yield run
-                run, size = [], 0
-        if run:
-            yield run
-
-    def _read_here(self, prolog: bytes, members: bytes, root_end: bytes) -> Iterator[Node]:
-        """The nodes of ``members``, read in this process into the document's state."""
+    def read_here(self, run: list[bytes]) -> Iterator[Node]:
+        """The nodes of the members ``run``, read in this process into the document's state."""
+        assert self.members is not None
+        members = b"".join(run)
         start = time.process_time()
-        nodes = list(self.document.read(io.BytesIO(prolog + members + root_end)))
+        whole = self.members.prolog + members + self.members.root_end
+        nodes = list(self.document.read(io.BytesIO(whole)))
         if nodes:
             self.sizer.took(time.process_time() - start, len(members))
         yield from nodes
 
-    def _tasks(
-        self, members: Members, runs: Iterator[list[bytes]], sent: deque[ReadTask]
-    ) -> Iterator[ReadTask]:
-        """A task of each run (noted in ``sent``)."""
-        document = self.document
-        assert document.crs is not None
-        for run in runs:
-            joined = b"".join(run)
-            task = ReadTask(
-                members.prolog, joined, members.root_end, document.source, document.limits,
-                document.types, document.palette, document.crs, in_main=_IMPLICIT in joined,
-            )  # fmt: skip
-            sent.append(task)
-            yield task
+    def task(self, run: list[bytes]) -> ReadTask:
+        """The task of the members ``run``."""
+        document, members = self.document, self.members
+        assert document.crs is not None and members is not None
+        joined = b"".join(run)
+        return ReadTask(
+            members.prolog, joined, members.root_end, document.source, document.limits,
+            document.types, document.palette, document.crs, in_main=_IMPLICIT in joined,
+        )  # fmt: skip
 
-    def _taken(self, task: ReadTask, result: ReadResult) -> Iterator[Node | PackedNode]:
-        """The nodes of ``task``: a worker's, merged into the document's state, where they
-        are what this process would read; else read here."""
-        document = self.document
-        if result.error is not None:
-            raise self._one_process_error(InputError(result.error))
-        if result.died is not None:
-            self.progress(f"{document.source}: {result.died}; its run is read in the main process")
-        if (
-            task.in_main
-            or result.died is not None
-            or result.collided
-            or not document.taken.isdisjoint(result.ids)
-        ):
-            if task.in_main and not self.told:
-                self.progress(f"{document.source}: implicit geometry is read in the main process")
-                self.told = True
-            yield from self._read_here(task.prolog, task.members, task.root_end)
-            return
-        if result.nodes:
-            self.sizer.took(result.seconds, len(task.members))
-        try:
-            _merge(document, result)
-        except InputError as exc:
-            raise self._one_process_error(exc) from None
-        yield from result.nodes
+    def size(self, run: list[bytes]) -> int:
+        return sum(len(member) for member in run)
 
-    def _one_process_error(self, error: InputError | None = None) -> InputError:
+    def read_instead(self, task: ReadTask, result: ReadResult) -> bool:
+        """Implicit geometry (its templates are shared across objects) and objects whose ids
+        another run took or that collide are read here, where they are what one process
+        reads."""
+        if task.in_main and not self.told:
+            self.progress(f"{self.document.source}: implicit geometry is read in the main process")
+            self.told = True
+        return task.in_main or result.collided or not self.document.taken.isdisjoint(result.ids)
+
+    def merge(self, result: ReadResult) -> None:
+        _merge(self.document, result)
+
+    def died(self, how: str) -> str:
+        return f"{self.document.source}: {how}; its run is read in the main process"
+
+    def one_process_error(self, error: InputError | None = None) -> InputError:
         """The error reading the document in one process gives (``error`` if none)."""
         try:
             for _ in self.make().nodes():

@@ -15,7 +15,6 @@ by the one-process reader, so that the error is the one it gives."""
 from __future__ import annotations
 
 import time
-from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import closing
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ from ...limits import Limits
 from ...model import Node, PackedNode, with_geometry
 from ..crs import Crs
 from ..geometry_checks import InputTally
-from ..spread import TASK_SECONDS, Results, Sizer, add_tally, quiet
+from ..spread import TASK_SECONDS, Results, Sizer, Spread, add_tally, runs
 from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_nodes, read_kept
 from .sequence import Line
@@ -94,7 +93,7 @@ def _flattened(roots: list[Node]) -> tuple[Node | PackedNode, ...]:
     return tuple(PackedNode.of(node) for node in found)
 
 
-class SequenceReading:
+class SequenceReading(Spread[Lines, LinesTask]):
     """The nodes of a CityJSONSeq file's ``lines`` (after its header) read as
     :class:`LinesTask` on an executor once one is given (:meth:`use`), until then and without
     one in this process by ``read``; ``again`` reads the whole file in one process."""
@@ -108,70 +107,24 @@ class SequenceReading:
         read: ReadLines,
         again: Callable[[], Iterator[Node]],
     ) -> None:
+        super().__init__()
         self.lines, self.header, self.ctx, self.types = lines, header, ctx, types
         self.read, self.again = read, again
-        self.results: Results | None = None
-        self.progress: Callable[[str], None] = quiet
-        self.sizer = Sizer()
 
-    def use(
-        self, results: Results, progress: Callable[[str], None], seconds: float = TASK_SECONDS
-    ) -> None:
-        """Read the rest of the file by ``results`` (an executor's), in runs of about
-        ``seconds`` of reading; a file with geometry templates is read here (``progress``
-        hears so)."""
-        if self.ctx.templates:
-            progress(f"{self.ctx.tally.source}: geometry templates are read in the main process")
-            return
-        self.results, self.progress, self.sizer.seconds = results, progress, seconds
+    def read_here_only(self) -> str | None:
+        return _templates_here(self.ctx)
 
     def nodes(self) -> Iterator[Node | PackedNode]:
         """The file's nodes, in line order."""
         with closing(self.lines):
-            runs = self._runs()
-            for run in runs:
-                yield from self._read_here(run)
-                declared = self.ctx.declared
-                settled = declared is None or declared.geographic is None or declared.frame
-                if settled and self.sizer.timed:
-                    break
-            if self.results is None:
-                for run in runs:
-                    yield from self._read_here(run)
-                return
-            sent: deque[LinesTask] = deque()
-            for result in self.results(self._tasks(runs, sent)):
-                task = sent.popleft()
-                if result.died is not None:
-                    self.progress(_died_here(self.ctx, result.died))
-                    yield from self._read_here(task.lines)
-                    continue
-                if result.error is not None:
-                    raise self._one_process_error(InputError(result.error))
-                if result.nodes:
-                    self.sizer.took(result.seconds, _size(task.lines))
-                assert result.tally is not None
-                try:
-                    add_tally(self.ctx.tally, result.tally)
-                except InputError as exc:
-                    raise self._one_process_error(exc) from None
-                yield from result.nodes
+            yield from self.spread(runs(self.lines, _line_size, self.sizer))
 
-    def _runs(self) -> Iterator[Lines]:
-        """Runs of lines of about the sizer's seconds of reading as measured so far (of one
-        line until then)."""
-        run: Lines = []
-        size = 0
-        for number, line in self.lines:
-            run.append((number, line))
-            size += len(line or b"")
-            if size >= self.sizer.wanted():
-                yield run
-                run, size = [], 0
-        if run:
-            yield run
+    def settled(self) -> bool:
+        declared = self.ctx.declared
+        frame = declared is None or declared.geographic is None or declared.frame
+        return bool(frame) and self.sizer.timed
 
-    def _read_here(self, run: Lines) -> Iterator[Node]:
+    def read_here(self, run: Lines) -> Iterator[Node]:
         """The nodes of ``run``, read in this process."""
         start = time.process_time()
         nodes = list(self.read(_each(run), self.header, self.ctx, self.types))
@@ -179,18 +132,24 @@ class SequenceReading:
             self.sizer.took(time.process_time() - start, _size(run))
         yield from nodes
 
-    def _tasks(self, runs: Iterator[Lines], sent: deque[LinesTask]) -> Iterator[LinesTask]:
-        """A task of each run (noted in ``sent``)."""
+    def task(self, run: Lines) -> LinesTask:
         tally = self.ctx.tally
-        for run in runs:
-            task = LinesTask(
-                run, self.header, self.ctx.declared, tally.source, tally.limits, self.types,
-                self.ctx.palette, self.read,
-            )  # fmt: skip
-            sent.append(task)
-            yield task
+        return LinesTask(
+            run, self.header, self.ctx.declared, tally.source, tally.limits, self.types,
+            self.ctx.palette, self.read,
+        )  # fmt: skip
 
-    def _one_process_error(self, error: InputError) -> InputError:
+    def size(self, run: Lines) -> int:
+        return _size(run)
+
+    def merge(self, result: LinesResult) -> None:
+        assert result.tally is not None
+        add_tally(self.ctx.tally, result.tally)
+
+    def died(self, how: str) -> str:
+        return _died_here(self.ctx, how)
+
+    def one_process_error(self, error: InputError) -> InputError:
         """The error reading the file in one process gives (``error`` if none)."""
         try:
             for _ in self.again():
@@ -200,6 +159,14 @@ class SequenceReading:
         return error
 
 
+def _templates_here(ctx: Context) -> str | None:
+    """Why a file is read in the main process: its geometry templates (instances share one
+    mesh per template), if it has any."""
+    if ctx.templates:
+        return f"{ctx.tally.source}: geometry templates are read in the main process"
+    return None
+
+
 def _died_here(ctx: Context, died: str) -> str:
     """What ``-v`` tells of a task read here because its workers died (``died``: how)."""
     return f"{ctx.tally.source}: {died}; its objects are read in the main process"
@@ -207,7 +174,12 @@ def _died_here(ctx: Context, died: str) -> str:
 
 def _size(lines: Lines) -> int:
     """Bytes of ``lines`` (a line too long to read: none)."""
-    return sum(len(line or b"") for _, line in lines)
+    return sum(_line_size(line) for line in lines)
+
+
+def _line_size(line: Line) -> int:
+    """Bytes of ``line`` (one too long to read: none)."""
+    return len(line[1] or b"")
 
 
 def _each(lines: Lines) -> Iterator[Line]:
@@ -271,7 +243,7 @@ def _packed(node: Node | None) -> Node | PackedNode | None:
     return PackedNode.of(node)
 
 
-class ObjectsReading:
+class ObjectsReading(Spread[list[str], ObjectsTask]):
     """The root nodes of a ``.json`` file's ``objects`` (after one ``json.loads``), read as
     :class:`ObjectsTask` on an executor when one is given (:meth:`use`, which reads them
     then), else by ``read_here`` in this process as they are first taken (:meth:`nodes`);
@@ -283,15 +255,14 @@ class ObjectsReading:
         objects: dict[str, Any],
         ctx: Context,
         types: frozenset[str] | None,
-        read_here: Callable[[], list[Node]],
+        read_all: Callable[[], list[Node]],
         check: Callable[[list[Node | PackedNode]], object],
         again: Callable[[], object],
     ) -> None:
+        super().__init__(Sizer(MIN_OBJECTS, MAX_OBJECTS))
         self.tree = Objects(objects, types)
-        self.ctx, self.read_here, self.check, self.again = ctx, read_here, check, again
+        self.ctx, self.read_all, self.check, self.again = ctx, read_all, check, again
         self.roots: list[Node | PackedNode] | None = None
-        self.progress: Callable[[str], None] = quiet
-        self.sizer = Sizer(MIN_OBJECTS, MAX_OBJECTS)
 
     def use(
         self, results: Results, progress: Callable[[str], None], seconds: float = TASK_SECONDS
@@ -299,73 +270,56 @@ class ObjectsReading:
         """Read the objects now by ``results`` (an executor's), in batches of about
         ``seconds`` of reading; a file with geometry templates is read here (``progress``
         hears so)."""
-        if self.ctx.templates:
-            progress(f"{self.ctx.tally.source}: geometry templates are read in the main process")
+        super().use(results, progress, seconds)
+        if self.results is None:
             return
-        self.progress, self.sizer.seconds = progress, seconds
-        self.roots = self._read(results)
+        found = dict(self.spread(runs(self.tree.order, lambda _: 1, self.sizer)))
+        self.roots = self.tree.roots(found.__getitem__)
         self.check(self.roots)
 
     def nodes(self) -> Iterator[Node | PackedNode]:
         """The root nodes, read here if :meth:`use` did not read them."""
         if self.roots is None:
-            self.roots = self.read_here()
+            self.roots = self.read_all()
             self.check(self.roots)
         yield from self.roots
 
-    def _read(self, results: Results) -> list[Node | PackedNode]:
-        """Every object read (the first here, to time it; the rest by ``results``, in
-        order); the roots."""
-        tree, ctx = self.tree, self.ctx
-        keys = iter(tree.order)
-        nodes: dict[str, Node | PackedNode | None] = {}
-        for key in keys:
-            start = time.process_time()
-            nodes[key] = next(checked_nodes([tree.read(key, ctx)]))
-            self.sizer.took(time.process_time() - start, 1)
-            break
-        sent: deque[list[str]] = deque()
-        for result in results(self._tasks(keys, sent)):
-            batch = sent.popleft()
-            if result.died is not None:
-                self.progress(_died_here(ctx, result.died))
-                reads = [tree.read(key, ctx) for key in batch]
-                nodes.update(zip(batch, checked_nodes(reads), strict=True))
-                continue
-            if result.error is not None:
-                raise self._one_process_error(InputError(result.error))
-            self.sizer.took(result.seconds, len(batch))
-            assert result.tally is not None
-            try:
-                add_tally(ctx.tally, result.tally)
-            except InputError as exc:
-                raise self._one_process_error(exc) from None
-            nodes.update(zip(batch, result.nodes, strict=True))
-        return tree.roots(nodes.__getitem__)
+    def read_here(self, run: list[str]) -> Iterator[tuple[str, Node | PackedNode | None]]:
+        """Each object of ``run`` with its node, read in this process."""
+        start = time.process_time()
+        reads = [self.tree.read(key, self.ctx) for key in run]
+        found = list(zip(run, checked_nodes(reads), strict=True))
+        self.sizer.took(time.process_time() - start, len(run))
+        yield from found
 
-    def _tasks(self, keys: Iterator[str], sent: deque[list[str]]) -> Iterator[ObjectsTask]:
-        """Tasks of the objects of ``keys`` (each task's keys noted in ``sent``)."""
-        batch: list[str] = []
-        for key in keys:
-            batch.append(key)
-            if len(batch) >= self.sizer.wanted():
-                sent.append(batch)
-                yield self._task(batch)
-                batch = []
-        if batch:
-            sent.append(batch)
-            yield self._task(batch)
-
-    def _task(self, keys: list[str]) -> ObjectsTask:
-        """The task of the objects ``keys``."""
+    def task(self, run: list[str]) -> ObjectsTask:
+        """The task of the objects ``run``."""
         tree, ctx, tally = self.tree, self.ctx, self.ctx.tally
-        objects = tuple((key, tree.objects[key], tree.too_deep.get(key)) for key in keys)
+        objects = tuple((key, tree.objects[key], tree.too_deep.get(key)) for key in run)
         return ObjectsTask(
-            objects, tuple(tree.alone(key) for key in keys), UsedRows.of(ctx.vertices, objects),
+            objects, tuple(tree.alone(key) for key in run), UsedRows.of(ctx.vertices, objects),
             ctx.materials, ctx.declared, tally.source, tally.limits, ctx.palette,
         )  # fmt: skip
 
-    def _one_process_error(self, error: InputError) -> InputError:
+    def size(self, run: list[str]) -> int:
+        return len(run)
+
+    def merge(self, result: ObjectsResult) -> None:
+        assert result.tally is not None
+        add_tally(self.ctx.tally, result.tally)
+
+    def given(
+        self, run: list[str], result: ObjectsResult
+    ) -> Iterator[tuple[str, Node | PackedNode | None]]:
+        yield from zip(run, result.nodes, strict=True)
+
+    def died(self, how: str) -> str:
+        return _died_here(self.ctx, how)
+
+    def read_here_only(self) -> str | None:
+        return _templates_here(self.ctx)
+
+    def one_process_error(self, error: InputError) -> InputError:
         """The error reading the file in one process gives (``error`` if none)."""
         try:
             self.again()
