@@ -36,7 +36,7 @@ from distributed.comm import registry
 from .bake import Backend, get_backend
 from .chain import Progress
 from .errors import LodConvertError, UsageError
-from .tasks import DEPTH, BakeResult, BakeTask, Executor
+from .tasks import DEPTH, Executor, Task
 
 CONNECT_SECONDS = 10.0
 """How long connecting to the scheduler may take before the run fails."""
@@ -119,10 +119,10 @@ def _backend(name: str) -> Backend:
     return made[name]
 
 
-def _run(payload: bytes, backend_name: str) -> tuple[BakeResult, tuple[str, ...]]:
+def _run(payload: bytes, backend_name: str) -> tuple[Any, tuple[str, ...]]:
     """Run the pickled task ``payload`` on a worker, with the worker thread's backend; its
     result and what it told of its progress, in order."""
-    task: BakeTask = pickle.loads(payload)
+    task: Task[Any] = pickle.loads(payload)
     heard: list[str] = []
     return task.run(_backend(backend_name), heard.append), tuple(heard)
 
@@ -192,14 +192,14 @@ class DaskExecutor(Executor):
         except OSError:
             raise LodConvertError("lost the dask scheduler", self.address) from None
 
-    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+    def results(self, tasks: Iterable[Task[Any]]) -> Iterator[Any]:
         """The result of each of ``tasks``, in order; a task the scheduler gave up on (its
         workers died) gives a result with each of its objects failed."""
         client = self._client
         assert client is not None and self.window is not None, "use DaskExecutor as a context"
         run = uuid.uuid4().hex
         pending = iter(tasks)
-        flight: deque[tuple[BakeTask, Future | None]] = deque()
+        flight: deque[tuple[Task[Any], Future | None]] = deque()
         number = 0
         try:
             while True:
@@ -215,7 +215,7 @@ class DaskExecutor(Executor):
             if flight:
                 client.cancel([future for _, future in flight if future is not None])
 
-    def _submitted(self, client: Client, task: BakeTask, key: str) -> Future | None:
+    def _submitted(self, client: Client, task: Task[Any], key: str) -> Future | None:
         """``task`` pickled and submitted under ``key``; ``None`` for a task that cannot be
         pickled (its data nested too deep), which is run here when its turn comes. A task's
         data is sent once, in its task, so dask's advice against large graphs (over 10 MB: a
@@ -228,13 +228,13 @@ class DaskExecutor(Executor):
             warnings.filterwarnings("ignore", "Sending large graph", UserWarning)
             return client.submit(_run, payload, self.backend_name, key=key)
 
-    def _run_here(self, task: BakeTask) -> BakeResult:
+    def _run_here(self, task: Task[Any]) -> Any:
         """Run ``task`` in this process (with a backend of the cluster's kind, made once)."""
         if self._backend is None:
             self._backend = get_backend(self.backend_name)
         return task.run(self._backend, self.progress)
 
-    def _result(self, task: BakeTask, future: Future) -> BakeResult:
+    def _result(self, task: Task[Any], future: Future) -> Any:
         """The result of ``task`` from ``future``: waited for while the cluster has workers,
         the task's objects failed when its workers died, an error when the scheduler is lost or
         left without workers; what the task told of its progress is told to ``progress``."""

@@ -10,11 +10,9 @@ window of tasks in flight, so memory stays bounded and the output is the same as
 worker that dies mid-task is replaced and its task run once more; when it dies again, the task's
 objects are reported as failed and the run goes on.
 
-An executor only calls a task's ``run(backend, progress)`` and ``failed(reason)``, so readers
-and writers ship tasks of their own on the same executors (:mod:`.io.spread`, the tileset's
-tiles): the pool's workers stay up once every result of one stream of tasks is taken, for the
-next (reading, then baking), and serve streams that run at once (tiles made from the results of
-baking while baking goes on).
+An executor only calls what :class:`Task` declares, so readers and writers ship tasks of their
+own on the same executors; the pool's workers stay up for the next stream of tasks (reading,
+then baking) and serve streams that run at once (tiles made while baking goes on).
 """
 
 from __future__ import annotations
@@ -32,7 +30,7 @@ from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from multiprocessing.reduction import ForkingPickler
-from typing import Any, Self
+from typing import Any, Protocol, Self, TypeVar
 
 from .bake import Backend, get_backend
 from .chain import ChainOptions, ChainPlan, Progress
@@ -52,6 +50,20 @@ INPUT_BYTES_PER_WORKER = 6 * 2**20
 """Input a worker process is started for by default: starting one costs about 0.3 CPU s (an
 interpreter, imports), and below about 12 MiB of city two of them made a run slower, not faster
 (docs/options.md)."""
+
+
+R = TypeVar("R", covariant=True)
+
+
+class Task(Protocol[R]):
+    """What an executor runs (picklable: it may run in another process): ``run`` gives its
+    result as data, ``failed`` the result of a task no worker could run (its workers died).
+    Baking (:class:`BakeTask`), reading a city (:mod:`.io.spread`), a LOD-parent cell
+    (:mod:`.city.cells`) and a tile's content (:mod:`.io.tiles.task`) are tasks."""
+
+    def run(self, backend: Backend, progress: Progress | None = None) -> R: ...
+
+    def failed(self, reason: str) -> R: ...
 
 
 Formatter = Callable[[LodChain], Any]
@@ -133,7 +145,7 @@ class Executor:
     task_seconds = TASK_SECONDS
     """Work a batch of objects is sized for, so that what running a task costs stays small."""
 
-    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+    def results(self, tasks: Iterable[Task[Any]]) -> Iterator[Any]:
         """The result of each of ``tasks``, in order (tasks are taken as they are needed)."""
         raise NotImplementedError
 
@@ -154,7 +166,7 @@ class SerialExecutor(Executor):
     backend: Backend
     progress: Progress | None = None
 
-    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+    def results(self, tasks: Iterable[Task[Any]]) -> Iterator[Any]:
         """The result of each of ``tasks``, each run as it is taken."""
         for task in tasks:
             yield task.run(self.backend, self.progress)
@@ -167,7 +179,7 @@ def _work(conn: Connection, backend_name: str) -> None:
     while the main process is busy elsewhere. Ctrl-C is the main process's to handle: it stops
     the workers."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    inbox: queue.SimpleQueue[BakeTask | None] = queue.SimpleQueue()
+    inbox: queue.SimpleQueue[Task[Any] | None] = queue.SimpleQueue()
     outbox: queue.SimpleQueue[tuple[str, Any] | None] = queue.SimpleQueue()
     threading.Thread(target=_receive, args=(conn, inbox), daemon=True).start()
     sender = threading.Thread(target=_send, args=(conn, outbox), daemon=True)
@@ -186,7 +198,7 @@ def _work(conn: Connection, backend_name: str) -> None:
     sender.join()
 
 
-def _receive(conn: Connection, inbox: queue.SimpleQueue[BakeTask | None]) -> None:
+def _receive(conn: Connection, inbox: queue.SimpleQueue[Task[Any] | None]) -> None:
     """Move tasks from ``conn`` to ``inbox`` as they arrive, then ``None`` (no more tasks, or
     the main process is gone)."""
     while True:
@@ -266,10 +278,10 @@ class PoolExecutor(Executor):
         self._workers: list[_Worker] = []
         self._backend: Backend | None = None
         self._numbers = itertools.count()
-        self._tasks: dict[int, BakeTask] = {}  # by number, until its result is taken
+        self._tasks: dict[int, Task[Any]] = {}  # by number, until its result is taken
         self._waiting: deque[int] = deque()  # tasks not sent to a worker yet
         self._tries: dict[int, int] = {}
-        self._done: dict[int, BakeResult] = {}  # results not taken yet
+        self._done: dict[int, Any] = {}  # results not taken yet
 
     def __enter__(self) -> Self:
         """Start the workers now, so that they are ready (imports done, backends made) when the
@@ -287,7 +299,7 @@ class PoolExecutor(Executor):
         theirs.close()
         return _Worker(process, ours)
 
-    def results(self, tasks: Iterable[BakeTask]) -> Iterator[BakeResult]:
+    def results(self, tasks: Iterable[Task[Any]]) -> Iterator[Any]:
         """The result of each of ``tasks``, in order; a task whose worker died twice gives a
         result with each of its objects failed. Streams may run at once (a stream's tasks
         drawn from another's results): their tasks share the workers, each task numbered
@@ -349,7 +361,7 @@ class PoolExecutor(Executor):
             else:  # if it died, _collect learns so from its sentinel
                 worker.held.append(number)
 
-    def _run_here(self, task: BakeTask) -> BakeResult:
+    def _run_here(self, task: Task[Any]) -> Any:
         """Run ``task`` in this process (with a backend of the pool's kind, made once)."""
         if self._backend is None:
             self._backend = get_backend(self.backend_name)
@@ -394,7 +406,7 @@ class PoolExecutor(Executor):
             elif first in self._tasks:
                 self._keep(first, self._tasks[first].failed(_death(worker.process.exitcode)))
 
-    def _keep(self, number: int, result: BakeResult) -> None:
+    def _keep(self, number: int, result: Any) -> None:
         """Keep ``result`` of task ``number`` for its stream, unless that stream was left."""
         if number in self._tasks:
             self._done[number] = result
