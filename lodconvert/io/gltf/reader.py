@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from ...colors import normalized, srgb_rgba
 from ...errors import InputError
 from ...model import LodChain
 from ..declared import chain_from_facts, level_from_facts
@@ -29,7 +30,6 @@ from .writer import (
     GLB_JSON,
     GLB_MAGIC,
     MSFT_LOD,
-    srgb_rgba,
 )
 
 # --- reading our own output ---------------------------------------------------------------------
@@ -227,13 +227,6 @@ def _accessor_data(obj: dict[str, Any], blob: bytes, index: int) -> np.ndarray:
     return values.reshape(count, width) if width > 1 else values
 
 
-def _normalized(values: np.ndarray) -> np.ndarray:
-    """Normalised integers (or floats) as float64 in [0, 1]."""
-    if values.dtype.kind == "f":
-        return values.astype(np.float64)
-    return values / float(np.iinfo(values.dtype).max)
-
-
 def _primitive(obj: dict[str, Any], blob: bytes, primitive: dict[str, Any]) -> dict[str, Any]:
     """Positions (float64), sRGB colours, normals and faces of one primitive (``None`` where
     absent)."""
@@ -245,7 +238,7 @@ def _primitive(obj: dict[str, Any], blob: bytes, primitive: dict[str, Any]) -> d
         "faces": None,
     }
     if "COLOR_0" in attributes:
-        linear = _normalized(_accessor_data(obj, blob, attributes["COLOR_0"]))
+        linear = normalized(_accessor_data(obj, blob, attributes["COLOR_0"]))
         if linear.shape[1] == 3:
             linear = np.column_stack([linear, np.ones(len(linear))])
         out["colors"] = srgb_rgba(linear)

@@ -41,6 +41,7 @@ from typing import IO, Any, BinaryIO
 
 import numpy as np
 
+from ...colors import linear_rgba, linear_rgba16
 from ...errors import LodConvertError
 from ...model import CellChain, Level, LodChain, PointCloud, Surface
 from ...ranges import ReferenceView, screen_coverage
@@ -92,37 +93,7 @@ def float32_positions(positions: np.ndarray) -> np.ndarray:
     return positions.astype(np.float32)
 
 
-def _srgb_table() -> np.ndarray:
-    c = np.arange(256) / 255.0
-    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
-
-
-SRGB_TO_LINEAR = _srgb_table()
-"""Linear value in [0, 1] of each sRGB byte."""
-_SRGB_MIDPOINTS = (SRGB_TO_LINEAR[1:] + SRGB_TO_LINEAR[:-1]) / 2.0
-
-
-# --- colour and geometry conversions ------------------------------------------------------------
-
-
-def linear_rgba(rgba: np.ndarray) -> np.ndarray:
-    """sRGB RGBA bytes (..., 4) → linear float64 in [0, 1] (alpha is linear already: /255)."""
-    out = SRGB_TO_LINEAR[rgba]
-    out[..., 3] = rgba[..., 3] / 255.0
-    return out
-
-
-def srgb_rgba(linear: np.ndarray) -> np.ndarray:
-    """Linear RGBA floats (..., 4) → sRGB bytes: the nearest byte, so that :func:`linear_rgba`
-    followed by any encoding finer than the byte spacing round-trips exactly."""
-    out = np.searchsorted(_SRGB_MIDPOINTS, np.clip(linear, 0.0, 1.0)).astype(np.uint8)
-    out[..., 3] = np.clip(np.rint(linear[..., 3] * 255.0), 0, 255).astype(np.uint8)
-    return out
-
-
-def _unit16(values: np.ndarray) -> np.ndarray:
-    """Floats in [0, 1] as normalised unsigned shorts."""
-    return np.rint(np.clip(values, 0.0, 1.0) * 65535.0).astype(np.uint16)
+# --- geometry conversions ------------------------------------------------------------------------
 
 
 def unit_normals(normals: np.ndarray) -> np.ndarray:
@@ -511,7 +482,7 @@ def _accessor_data(
 
 def _colors(rgba: np.ndarray) -> _AccessorData:
     """COLOR_0 accessor: VEC4 normalised unsigned shorts in linear space."""
-    return _accessor_data(_unit16(linear_rgba(rgba)), normalized=True)
+    return _accessor_data(linear_rgba16(rgba), normalized=True)
 
 
 @dataclass(frozen=True)

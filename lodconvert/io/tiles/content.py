@@ -13,13 +13,13 @@ from typing import Any
 
 import numpy as np
 
+from ...colors import linear_rgba16
 from ...model import Surface
 from ..gltf.writer import (
     GLB_BIN,
     GLB_JSON,
     GLB_MAGIC,
     float32_positions,
-    linear_rgba,
     vertex_normals,
 )
 from .metadata import Feature, property_table
@@ -95,11 +95,6 @@ class _Builder:
         )
 
 
-def _colors(rgba: np.ndarray) -> np.ndarray:
-    """COLOR_0: sRGB bytes as linear normalised unsigned shorts."""
-    return np.rint(linear_rgba(rgba) * 65535.0).astype(np.uint16)
-
-
 def _document(generator: str, primitive: dict[str, Any], material: dict[str, Any]) -> dict:
     """A glTF document of one node drawing one primitive with one material."""
     return {
@@ -146,7 +141,7 @@ def mesh_glb(
     attributes = {
         "POSITION": builder.accessor(positions),
         "NORMAL": builder.accessor(normals),
-        "COLOR_0": builder.accessor(_colors(colors), normalized=True),
+        "COLOR_0": builder.accessor(linear_rgba16(colors), normalized=True),
     }
     if feature_ids is not None:
         attributes["_FEATURE_ID_0"] = builder.accessor(feature_ids.astype(np.float32))
@@ -168,7 +163,7 @@ def points_glb(positions: np.ndarray, colors: np.ndarray, generator: str) -> byt
     builder = _Builder()
     attributes = {
         "POSITION": builder.accessor(float32_positions(positions)),
-        "COLOR_0": builder.accessor(_colors(colors), normalized=True),
+        "COLOR_0": builder.accessor(linear_rgba16(colors), normalized=True),
     }
     primitive = {"attributes": attributes, "mode": _POINTS}
     document = _document(generator, primitive, _material(colors[:, 3], unlit=True))
