@@ -8,9 +8,6 @@ from .. import Format, streamed
 from .check import check_gltf
 from .reader import GltfLevel, GltfObject, read_back, read_cells, read_frame, read_lod_gltf
 from .writer import (
-    GLB_BIN,
-    GLB_JSON,
-    GLB_MAGIC,
     MSFT_LOD,
     buffers_formatter,
     write_glb,
@@ -31,9 +28,6 @@ FORMAT = Format(
 
 __all__ = [
     "FORMAT",
-    "GLB_BIN",
-    "GLB_JSON",
-    "GLB_MAGIC",
     "MSFT_LOD",
     "GltfLevel",
     "GltfObject",

@@ -15,12 +15,9 @@ from typing import Any
 import numpy as np
 
 from ..findings import Findings
+from .binary import COMPONENT_DTYPES, COMPONENT_SIZES, TRIANGLES, WIDTHS
 from .rules import (
-    COMPONENT_DTYPES,
-    COMPONENT_SIZES,
     READ_BUDGET,
-    TRIANGLES,
-    WIDTHS,
     chain_facts,
     chain_facts_findings,
     lod_extras_findings,
@@ -186,7 +183,7 @@ class ElementChecks:
         if "bufferView" not in accessor:
             return None
         view = self.array("bufferViews")[accessor["bufferView"]]
-        dtype = np.dtype(COMPONENT_DTYPES[accessor["componentType"]])
+        dtype = COMPONENT_DTYPES[accessor["componentType"]]
         width = WIDTHS[accessor["type"]]
         start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
         stride = view.get("byteStride", dtype.itemsize * width)

@@ -33,7 +33,6 @@ import io
 import json
 import math
 import shutil
-import struct
 import tempfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
@@ -48,26 +47,21 @@ from ...ranges import ReferenceView, screen_coverage
 from ...sinks import writing_temporary
 from .. import OutputInfo, Pieces
 from ..frame import ROTATION, SceneFrame, scene_frame
+from .binary import (
+    ARRAY_BUFFER,
+    COMPONENT_TYPES,
+    ELEMENT_ARRAY_BUFFER,
+    POINTS,
+    TRIANGLES,
+    VECTOR_TYPES,
+    pack_glb,
+)
 
 MSFT_LOD = "MSFT_lod"
 UNLIT = "KHR_materials_unlit"
 COVERAGE_MEANING = "projected bounding-box diagonal / viewport height at the reference view"
-GLB_MAGIC = b"glTF"
-GLB_JSON = b"JSON"
-GLB_BIN = b"BIN\x00"
 DATA_URI = "data:application/octet-stream;base64,"
-_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
-_POINTS, _TRIANGLES = 0, 4
 _LINEAR, _LINEAR_MIPMAP_LINEAR, _REPEAT = 9729, 9987, 10497
-_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
-_WIDTHS = {name: width for width, name in _TYPES.items()}
-_COMPONENTS = {
-    np.dtype(np.float32): 5126,
-    np.dtype(np.uint8): 5121,
-    np.dtype(np.uint16): 5123,
-    np.dtype(np.uint32): 5125,
-}
-_DTYPES = {code: dtype for dtype, code in _COMPONENTS.items()}
 _SPOOL_BYTES = 1 << 20
 """How much of each temporary file (the buffer, each JSON array) stays in memory."""
 _SHARED_MATERIALS = 4096
@@ -462,17 +456,17 @@ _VIEW_HEAD = '{"bufferView":'
 
 
 def _accessor_data(
-    array: np.ndarray, target: int = _ARRAY_BUFFER, normalized: bool = False, bounds: bool = False
+    array: np.ndarray, target: int = ARRAY_BUFFER, normalized: bool = False, bounds: bool = False
 ) -> _AccessorData:
     """An accessor over ``array`` ((k,) scalars or (k, w) vectors, dtype of the buffer)."""
     data = np.ascontiguousarray(array)
     stored = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
     fields = _object(
         byteOffset=0,
-        componentType=_COMPONENTS[data.dtype],
+        componentType=COMPONENT_TYPES[data.dtype],
         normalized=True if normalized else None,
         count=len(data),
-        type=_TYPES[1 if data.ndim == 1 else data.shape[1]],
+        type=VECTOR_TYPES[1 if data.ndim == 1 else data.shape[1]],
         max=[float(v) for v in data.max(axis=0)] if bounds else None,
         min=[float(v) for v in data.min(axis=0)] if bounds else None,
     )
@@ -514,14 +508,14 @@ def _mesh_data(surface: Surface, normals: bool = True) -> _PrimitiveData:
         attributes["TEXCOORD_0"] = _accessor_data(flipped.astype(np.float32))
         png = _png(surface.texture)
     index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
-    indices = _accessor_data(surface.faces.ravel().astype(index_type), _ELEMENT_ARRAY_BUFFER)
+    indices = _accessor_data(surface.faces.ravel().astype(index_type), ELEMENT_ARRAY_BUFFER)
     alpha_mode = _alpha_mode(
         surface.material_color[3:],
         None if surface.vertex_colors is None else surface.vertex_colors[:, 3],
         surface.texture[..., 3] if textured else None,
     )
     base = [float(v) for v in linear_rgba(surface.material_color)]
-    return _PrimitiveData(attributes, _TRIANGLES, alpha_mode, base, png, indices)
+    return _PrimitiveData(attributes, TRIANGLES, alpha_mode, base, png, indices)
 
 
 def _points_data(points: PointCloud) -> _PrimitiveData:
@@ -530,7 +524,7 @@ def _points_data(points: PointCloud) -> _PrimitiveData:
         "NORMAL": _accessor_data(unit_normals(points.normals)),
         "COLOR_0": _colors(points.colors),
     }
-    return _PrimitiveData(attributes, _POINTS, _alpha_mode(points.colors[:, 3]))
+    return _PrimitiveData(attributes, POINTS, _alpha_mode(points.colors[:, 3]))
 
 
 def _level_data(level: Level) -> list[_PrimitiveData]:
@@ -853,17 +847,6 @@ def _document(
         doc.close()
 
 
-def _padded_length(length: int) -> int:
-    return length + -length % 4
-
-
-def _write_chunk(out: BinaryIO, kind: bytes, source: IO[bytes], length: int, fill: bytes) -> None:
-    """A GLB chunk of ``source``'s ``length`` bytes, padded with ``fill`` to a multiple of 4."""
-    out.write(struct.pack("<I4s", _padded_length(length), kind))
-    _copy(source, out)
-    out.write(fill * (_padded_length(length) - length))
-
-
 def write_glb(
     chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo, pieces: Pieces | None = None
 ) -> None:
@@ -876,13 +859,7 @@ def write_glb(
     ):
         with writing_temporary():
             _write_json(doc.json_value(data_uri=False), text, _COMPACT)
-        chunks = [(GLB_JSON, text, text.tell(), b" ")]
-        if doc.blob_length:
-            chunks.append((GLB_BIN, doc.blob, doc.blob_length, b"\x00"))
-        total = 12 + sum(8 + _padded_length(length) for _, _, length, _ in chunks)
-        handle.write(struct.pack("<4sII", GLB_MAGIC, 2, total))
-        for chunk in chunks:
-            _write_chunk(handle, *chunk)
+        pack_glb(handle, text, doc.blob)
 
 
 def write_gltf(
