@@ -1,18 +1,15 @@
 """glTF 2.0 (``.glb`` and self-contained ``.gltf``): the writer (:mod:`.writer`), the read-back
 of our own files (:mod:`.reader`) and the structural checks (:mod:`.check`), declared as one
-registry entry each for ``.glb`` and ``.gltf``."""
+registry entry each for ``.glb`` and ``.gltf``. The package's modules: ``docs/gltf.md``."""
 
 from __future__ import annotations
 
 from .. import Format, streamed
+from .buffers import buffers_formatter
 from .check import check_gltf
+from .lod import MSFT_LOD
 from .reader import GltfLevel, GltfObject, read_back, read_cells, read_frame, read_lod_gltf
-from .writer import (
-    MSFT_LOD,
-    buffers_formatter,
-    write_glb,
-    write_gltf,
-)
+from .writer import write_glb, write_gltf
 
 FORMAT = Format(
     name="gltf",

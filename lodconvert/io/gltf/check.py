@@ -38,6 +38,7 @@ from ..findings import Findings
 from ..frame import frame_from_record
 from .binary import glb_chunks, is_glb
 from .elements import ElementChecks
+from .lod import FRAME_MATRIX, FRAME_NODE
 from .stream import (
     LazyArray,
     NotStreamed,
@@ -48,7 +49,6 @@ from .stream import (
     utf8_error,
 )
 from .summary import SINKS, clean
-from .writer import FRAME_MATRIX, FRAME_NODE
 
 MAX_JSON_DEPTH = 64
 """Deepest nesting of JSON arrays and objects accepted (lodconvert writes fewer than 10)."""

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..findings import Findings
 from .binary import COMPONENT_DTYPES, COMPONENT_SIZES, TRIANGLES, WIDTHS
+from .lod import MSFT_LOD
 from .rules import (
     READ_BUDGET,
     chain_facts,
@@ -23,7 +24,6 @@ from .rules import (
     lod_extras_findings,
 )
 from .stream import LazyArray
-from .writer import MSFT_LOD
 
 
 def _is_uint(value: Any) -> bool:

@@ -23,7 +23,7 @@ from ...model import LodChain
 from ..declared import chain_from_facts, level_from_facts
 from ..frame import SceneFrame, frame_from_record
 from .binary import GlbError, accessor_values, is_glb, split_glb
-from .writer import MSFT_LOD
+from .lod import MSFT_LOD
 
 # --- reading our own output ---------------------------------------------------------------------
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from .binary import COMPONENT_DTYPES, COMPONENT_SIZES, FLOAT, TRIANGLES, WIDTHS
 from .extrema import extrema, groups
+from .lod import MSFT_LOD
 from .rules import (
     READ_BUDGET,
     chain_facts,
@@ -23,7 +24,6 @@ from .rules import (
     lod_extras_findings,
 )
 from .stream import LazyArray, Source
-from .writer import MSFT_LOD
 
 _BIG = 1 << 40
 """Numbers from here on are left to :class:`~.elements.ElementChecks` (so that no sum of them

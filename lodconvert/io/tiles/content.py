@@ -24,12 +24,12 @@ from ..gltf.binary import (
     VECTOR_TYPES,
     pack_glb,
 )
-from ..gltf.writer import float32_positions, vertex_normals
+from ..gltf.buffers import alpha_mode_of, float32_positions, vertex_normals
+from ..gltf.document import UNLIT
 from .metadata import Feature, property_table
 
 MESH_FEATURES = "EXT_mesh_features"
 STRUCTURAL_METADATA = "EXT_structural_metadata"
-UNLIT = "KHR_materials_unlit"
 
 
 class _Builder:
@@ -105,7 +105,7 @@ def _material(alpha: np.ndarray, unlit: bool = False) -> dict[str, Any]:
             "metallicFactor": 0.0,
             "roughnessFactor": 1.0,
         },
-        "alphaMode": "BLEND" if alpha.size and int(alpha.min()) < 255 else "OPAQUE",
+        "alphaMode": alpha_mode_of(alpha),
         "doubleSided": not unlit,
     }
     if unlit:
