@@ -1,22 +1,13 @@
-"""glTF checks (``.glb``, ``.gltf`` with an embedded buffer): GLB framing; buffer views inside
-their buffer and accessors inside their view; a primitive's attributes with equal counts, its
-indices inside them, declared ``min``/``max`` equal to the data; every reference inside its
-array; and the ``MSFT_lod`` rules lodconvert follows (DESIGN.md): ``ids`` inside ``nodes`` and
-distinct, coarser nodes neither scene roots nor children, ``extras.MSFT_screencoverage``
-strictly falling with one value more than ``ids``, the extension in ``extensionsUsed`` but not
-required, and ``extras.lodconvert`` levels and cutoffs consistent with the chain; where the asset
-records a scene frame (:mod:`lodconvert.io.frame`), the record whole and the scene's one root the
-frame node that turns it y-up. A file without any chain is an error: ``lodconvert validate``
-checks lodconvert's outputs.
+"""glTF checks (``.glb``, ``.gltf`` with an embedded buffer) for ``lodconvert validate``: GLB
+framing (:mod:`.binary`), buffer views, accessors and primitives, references, the ``MSFT_lod``
+rules lodconvert follows and the scene frame; a file without any chain is an error.
 
 This module reads the file (GLB chunks, the JSON, buffer 0) and runs the checks: first the
 summary checks (:mod:`.summary`), which decide from compact facts whether the file is clean,
 and only where they find something the checks element by element (:mod:`.elements`), which say
-what is wrong; :mod:`.rules` holds what both hold a file to.
-
-Work is bounded by the bytes present: sizes a file declares are compared, never allocated or
-iterated; JSON nesting is limited before parsing; and the accessor data that the value checks
-read is limited to a few times the buffer's size.
+what is wrong; :mod:`.rules` holds what both hold a file to. Work is bounded by the bytes
+present: declared sizes are compared, never allocated; JSON nesting is limited before parsing.
+Every rule: ``docs/gltf.md``.
 """
 
 from __future__ import annotations
