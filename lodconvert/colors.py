@@ -45,7 +45,7 @@ def normalized(values: np.ndarray) -> np.ndarray:
     return values.astype(np.float64)
 
 
-def unit_rgba(values: object | None) -> np.ndarray | None:
+def _unit_rgba(values: object | None) -> np.ndarray | None:
     """Colour values (one or many; RGB or RGBA; integers or floats 0..1) as float64 RGBA in
     [0, 1], or ``None`` when there are none."""
     if values is None:
@@ -62,7 +62,7 @@ def unit_rgba(values: object | None) -> np.ndarray | None:
 def srgb_bytes(values: object | None, linear: bool) -> np.ndarray | None:
     """Colour values as sRGB RGBA bytes (converted from linear when ``linear``), or ``None``
     when there are none."""
-    unit = unit_rgba(values)
+    unit = _unit_rgba(values)
     if unit is None:
         return None
     if not linear:
