@@ -51,7 +51,9 @@ from objects import ROOT
 from scale import Run, convert_once
 from tables import markdown_table, write_results
 
-from lodconvert.io.tiles.check import accessor, glb_parts
+from lodconvert.io.gltf.binary import accessor_values as accessor
+from lodconvert.io.gltf.binary import is_glb
+from lodconvert.io.tiles.check import glb_parts
 
 HERE = Path(__file__).resolve().parent
 DELFT = DATA / "cityjson" / "delft.city.json"
@@ -561,7 +563,7 @@ def linked(path: Path) -> bool:
     """Whether a content file's primitives carry feature ids (``_BATCHID`` or
     ``_FEATURE_ID_0``) linking their vertices to features."""
     _, glb = split_b3dm(path.read_bytes())
-    if glb[:4] != b"glTF":
+    if not is_glb(glb):
         return False
     document, _ = glb_parts(glb)
     names = {"_BATCHID", "_FEATURE_ID_0"}

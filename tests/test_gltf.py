@@ -18,9 +18,10 @@ from PIL import Image
 
 from lodconvert.bake import NumpyBackend
 from lodconvert.chain import ChainOptions
+from lodconvert.colors import SRGB_TO_LINEAR
 from lodconvert.errors import InputError
 from lodconvert.io import OutputInfo, gltf, output_format, own_format
-from lodconvert.io.gltf import FORMAT, SRGB_TO_LINEAR, read_lod_gltf, write_glb, write_gltf
+from lodconvert.io.gltf import FORMAT, read_lod_gltf, write_glb, write_gltf
 from lodconvert.model import LodChain, Node, PointCloud, Surface
 from lodconvert.plans import bake_chain
 from lodconvert.ranges import screen_coverage

@@ -34,7 +34,7 @@ from lodconvert.city.hlod import (
 from lodconvert.context import RunContext
 from lodconvert.errors import UsageError
 from lodconvert.io import read_chains, read_scene
-from lodconvert.io.gltf.rules import COMPONENT_SIZES, WIDTHS
+from lodconvert.io.gltf.binary import COMPONENT_SIZES, WIDTHS
 from lodconvert.model import CellChain, Level, LodChain, Mesh, Node, Scene, Surface
 from lodconvert.plan import POINT_COST, level_bytes, mesh_silhouette_estimate
 from lodconvert.ranges import cutoff

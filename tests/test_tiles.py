@@ -24,8 +24,9 @@ from scipy.spatial import cKDTree
 
 from lodconvert.io import read_scene
 from lodconvert.io.crs import pyproj_crs
+from lodconvert.io.gltf.binary import accessor_values as accessor
 from lodconvert.io.tiles import writer as tiles_writer
-from lodconvert.io.tiles.check import accessor, frame_points, read_glb
+from lodconvert.io.tiles.check import frame_points, read_glb
 from lodconvert.ranges import REFERENCE_VIEW
 from lodconvert.validate import validate_file
 from tests.conftest import SHARED, require, shared_data

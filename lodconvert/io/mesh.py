@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..colors import srgb_bytes
 from ..errors import InputError
 from ..limits import DEFAULT_LIMITS, Limits
 from ..model import Mesh, Node, Scene, Surface
@@ -100,34 +101,6 @@ def _free_suffix(base: str, taken: set[str]) -> int:
 # --- colours --------------------------------------------------------------------------------------
 
 
-def _unit_rgba(values: object | None) -> np.ndarray | None:
-    """Colour values (one or many; RGB or RGBA; uint8, uint16 or float 0..1) as float64 RGBA
-    in [0, 1], or None when there are none."""
-    if values is None:
-        return None
-    c = np.asarray(values)
-    if c.ndim == 0 or c.shape[-1] not in (3, 4):
-        return None
-    if c.dtype.kind in "ui":
-        c = c / float(np.iinfo(c.dtype).max)
-    c = np.clip(np.nan_to_num(c.astype(np.float64)), 0.0, 1.0)
-    if c.shape[-1] == 3:
-        c = np.concatenate([c, np.ones((*c.shape[:-1], 1))], axis=-1)
-    return c
-
-
-def _color_bytes(values: object | None, linear: bool) -> np.ndarray | None:
-    """Colour values as sRGB RGBA uint8 (converted from linear when ``linear``), or None."""
-    unit = _unit_rgba(values)
-    if unit is None:
-        return None
-    if not linear:
-        return np.rint(unit * 255.0).astype(np.uint8)
-    from .gltf import srgb_rgba  # not at the top: a city reader in a worker needs no glTF
-
-    return srgb_rgba(unit)
-
-
 def _image_rgba(image: object | None) -> np.ndarray | None:
     if image is None:
         return None
@@ -169,7 +142,7 @@ def surface_from_trimesh(
         factor = getattr(material, "baseColorFactor", None)
         if factor is None:
             factor = getattr(material, "diffuse", None)
-        surface.base_color = _color_bytes(factor, linear_colors)
+        surface.base_color = srgb_bytes(factor, linear_colors)
         image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
         uv = getattr(visual, "uv", None)
         if image is not None and uv is not None and len(uv) == len(vertices):
@@ -177,9 +150,9 @@ def surface_from_trimesh(
             surface.uv = np.asarray(uv, dtype=np.float64)
         # glTF COLOR_0 beside a material: trimesh keeps the accessor's values as they are
         attributes = getattr(visual, "vertex_attributes", None) or {}
-        _set_vertex_colors(surface, _color_bytes(attributes.get("color"), linear_colors))
+        _set_vertex_colors(surface, srgb_bytes(attributes.get("color"), linear_colors))
     elif kind in ("vertex", "face"):
-        _set_vertex_colors(surface, _color_bytes(visual.vertex_colors, linear_colors))
+        _set_vertex_colors(surface, srgb_bytes(visual.vertex_colors, linear_colors))
     return surface
 
 

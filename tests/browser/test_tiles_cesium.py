@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from lodconvert.io.tiles.check import accessor, frame_points, read_glb
+from lodconvert.io.gltf.binary import accessor_values as accessor
+from lodconvert.io.tiles.check import frame_points, read_glb
 from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.viewer import write_page
 

@@ -1,24 +1,15 @@
 """glTF 2.0 (``.glb`` and self-contained ``.gltf``): the writer (:mod:`.writer`), the read-back
 of our own files (:mod:`.reader`) and the structural checks (:mod:`.check`), declared as one
-registry entry each for ``.glb`` and ``.gltf``."""
+registry entry each for ``.glb`` and ``.gltf``. The package's modules: ``docs/gltf.md``."""
 
 from __future__ import annotations
 
 from .. import Format, streamed
+from .buffers import buffers_formatter
 from .check import check_gltf
+from .lod import MSFT_LOD
 from .reader import GltfLevel, GltfObject, read_back, read_cells, read_frame, read_lod_gltf
-from .writer import (
-    GLB_BIN,
-    GLB_JSON,
-    GLB_MAGIC,
-    MSFT_LOD,
-    SRGB_TO_LINEAR,
-    buffers_formatter,
-    linear_rgba,
-    srgb_rgba,
-    write_glb,
-    write_gltf,
-)
+from .writer import write_glb, write_gltf
 
 FORMAT = Format(
     name="gltf",
@@ -34,19 +25,13 @@ FORMAT = Format(
 
 __all__ = [
     "FORMAT",
-    "GLB_BIN",
-    "GLB_JSON",
-    "GLB_MAGIC",
     "MSFT_LOD",
-    "SRGB_TO_LINEAR",
     "GltfLevel",
     "GltfObject",
-    "linear_rgba",
     "read_back",
     "read_cells",
     "read_frame",
     "read_lod_gltf",
-    "srgb_rgba",
     "write_glb",
     "write_gltf",
 ]

@@ -1,22 +1,13 @@
-"""glTF checks (``.glb``, ``.gltf`` with an embedded buffer): GLB framing; buffer views inside
-their buffer and accessors inside their view; a primitive's attributes with equal counts, its
-indices inside them, declared ``min``/``max`` equal to the data; every reference inside its
-array; and the ``MSFT_lod`` rules lodconvert follows (DESIGN.md): ``ids`` inside ``nodes`` and
-distinct, coarser nodes neither scene roots nor children, ``extras.MSFT_screencoverage``
-strictly falling with one value more than ``ids``, the extension in ``extensionsUsed`` but not
-required, and ``extras.lodconvert`` levels and cutoffs consistent with the chain; where the asset
-records a scene frame (:mod:`lodconvert.io.frame`), the record whole and the scene's one root the
-frame node that turns it y-up. A file without any chain is an error: ``lodconvert validate``
-checks lodconvert's outputs.
+"""glTF checks (``.glb``, ``.gltf`` with an embedded buffer) for ``lodconvert validate``: GLB
+framing (:mod:`.binary`), buffer views, accessors and primitives, references, the ``MSFT_lod``
+rules lodconvert follows and the scene frame; a file without any chain is an error.
 
 This module reads the file (GLB chunks, the JSON, buffer 0) and runs the checks: first the
 summary checks (:mod:`.summary`), which decide from compact facts whether the file is clean,
 and only where they find something the checks element by element (:mod:`.elements`), which say
-what is wrong; :mod:`.rules` holds what both hold a file to.
-
-Work is bounded by the bytes present: sizes a file declares are compared, never allocated or
-iterated; JSON nesting is limited before parsing; and the accessor data that the value checks
-read is limited to a few times the buffer's size.
+what is wrong; :mod:`.rules` holds what both hold a file to. Work is bounded by the bytes
+present: declared sizes are compared, never allocated; JSON nesting is limited before parsing.
+Every rule: ``docs/gltf.md``.
 """
 
 from __future__ import annotations
@@ -28,7 +19,6 @@ import contextlib
 import json
 import mmap
 import os
-import struct
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -37,7 +27,9 @@ from lxml import etree
 
 from ..findings import Findings
 from ..frame import frame_from_record
+from .binary import glb_chunks, is_glb
 from .elements import ElementChecks
+from .lod import FRAME_MATRIX, FRAME_NODE
 from .stream import (
     LazyArray,
     NotStreamed,
@@ -48,10 +40,7 @@ from .stream import (
     utf8_error,
 )
 from .summary import SINKS, clean
-from .writer import FRAME_MATRIX, FRAME_NODE, GLB_BIN, GLB_JSON, GLB_MAGIC
 
-GLB_HEADER_SIZE = 12
-GLB_CHUNK_HEADER_SIZE = 8
 MAX_JSON_DEPTH = 64
 """Deepest nesting of JSON arrays and objects accepted (lodconvert writes fewer than 10)."""
 IN_MEMORY = 1 << 26
@@ -102,106 +91,12 @@ def _load_json(source: Source, what: str, findings: Findings) -> dict[str, Any] 
     return doc
 
 
-def _chunk_name(kind: bytes) -> str:
-    return {GLB_JSON: "JSON", GLB_BIN: "BIN"}.get(kind, repr(kind))
-
-
-Span = tuple[int, int]
-"""Where a chunk's data is in the file: (offset, length)."""
-
-
-def _glb_chunks(data: memoryview, findings: Findings) -> tuple[Span, Span | None] | None:
-    """The JSON chunk and BIN chunk (``None`` when absent) of GLB ``data``, checked against the
-    framing of glTF 2.0 (section 4.4); ``None`` when no JSON chunk can be read. Each broken rule
-    is its own finding."""
-    if data[:4] != GLB_MAGIC:
-        start = bytes(data[:64]).lstrip()[:1]
-        hint = " (it looks like glTF JSON: name it .gltf)" if start == b"{" else ""
-        findings.error(
-            "GLB_MAGIC",
-            f"not a GLB file: the first 4 bytes are {bytes(data[:4])!r}, not 'glTF'{hint}",
-        )
-        return None
-    if len(data) < GLB_HEADER_SIZE:
-        findings.error(
-            "GLB_HEADER", f"truncated GLB: {len(data)} bytes, less than the 12-byte header"
-        )
-        return None
-    _, version, length = struct.unpack_from("<4sII", data)
-    if version != 2:
-        findings.error("GLB_VERSION", f"GLB version {version}; glTF 2.0 files are version 2")
-        return None
-    if length > len(data):
-        findings.error(
-            "GLB_LENGTH",
-            f"truncated GLB: declared length {length} but the file has {len(data)} bytes",
-        )
-        return None
-    if length < len(data):
-        findings.error(
-            "GLB_LENGTH",
-            f"declared length {length} but the file has {len(data)} bytes "
-            f"({len(data) - length} after the declared end)",
-        )
-    if length <= GLB_HEADER_SIZE:
-        findings.error("GLB_JSON_CHUNK", "the GLB has no chunks; its first must be JSON")
-        return None
-    json_chunk: Span | None = None
-    bin_chunk: Span | None = None
-    offset, index = GLB_HEADER_SIZE, 0
-    while offset < length:
-        where = f"chunk {index} at byte {offset}"
-        if length - offset < GLB_CHUNK_HEADER_SIZE:
-            findings.error(
-                "GLB_CHUNK_HEADER",
-                f"{where}: {length - offset} bytes left, less than a chunk header (8)",
-            )
-            break
-        size, kind = struct.unpack_from("<I4s", data, offset)
-        start = offset + GLB_CHUNK_HEADER_SIZE
-        where = f"chunk {index} ({_chunk_name(kind)}) at byte {offset}"
-        if size > length - start:
-            findings.error(
-                "GLB_CHUNK_LENGTH",
-                f"{where} declares {size} bytes but {length - start} are left",
-            )
-            break
-        if size % 4:
-            findings.error("GLB_CHUNK_ALIGNMENT", f"{where} has {size} bytes, not a multiple of 4")
-        body = (start, size)
-        if index == 0 and kind != GLB_JSON:
-            findings.error("GLB_JSON_CHUNK", f"the first chunk is {_chunk_name(kind)}, not JSON")
-        elif index == 0:
-            json_chunk = body
-        elif kind == GLB_JSON:
-            findings.error("GLB_CHUNK_ORDER", f"{where}: only the first chunk may be JSON")
-        elif kind == GLB_BIN and index == 1:
-            bin_chunk = body
-        elif kind == GLB_BIN:
-            findings.error("GLB_CHUNK_ORDER", f"{where}: only the second chunk may be BIN")
-        offset, index = start + size, index + 1
-    return None if json_chunk is None else (json_chunk, bin_chunk)
-
-
 def _first_buffer(doc: dict[str, Any]) -> dict[str, Any] | None:
     """``buffers[0]`` when it is an object (a malformed ``buffers`` is reported later)."""
     buffers = doc.get("buffers")
     if isinstance(buffers, list) and buffers and isinstance(buffers[0], dict):
         return buffers[0]
     return None
-
-
-def _stripped_length(data: memoryview, start: int, size: int) -> int:
-    """Length of ``data[start : start + size]`` without its trailing zero bytes (read from
-    the end, a block at a time)."""
-    end = start + size
-    while end > start:
-        block = bytes(data[max(start, end - 4096) : end])
-        kept = len(block.rstrip(b"\x00"))
-        if kept:
-            return end - len(block) + kept - start
-        end -= len(block)
-    return 0
 
 
 Parsed = tuple[dict[str, Any], memoryview | bytes, Source]
@@ -211,16 +106,10 @@ and buffer 0 as a :class:`Source` (read without mapping it)."""
 
 def _read_glb(data: memoryview, findings: Findings, fd: int | None) -> Parsed | None:
     """The JSON object and buffer 0 of a GLB; ``None`` when the JSON cannot be read."""
-    chunks = _glb_chunks(data, findings)
+    chunks = glb_chunks(data, findings.error)
     if chunks is None:
         return None
-    (start, size), blob = chunks
-    length = _stripped_length(data, start, size)
-    if length < size:
-        findings.error(
-            "GLB_JSON_PADDING",
-            f"the JSON chunk ends in {size - length} zero bytes; its padding must be spaces (0x20)",
-        )
+    (start, length), blob = chunks
     doc = _load_json(Source(data, start, length, fd), "the GLB JSON chunk", findings)
     if doc is None:
         return None
@@ -237,7 +126,7 @@ def _read_glb(data: memoryview, findings: Findings, fd: int | None) -> Parsed | 
 def _read_gltf(data: memoryview, findings: Findings, fd: int | None) -> Parsed | None:
     """The JSON object and buffer 0 (a base64 data URI) of a ``.gltf``; ``None`` when the JSON
     cannot be read."""
-    if data[:4] == GLB_MAGIC:
+    if is_glb(data):
         findings.error("GLTF_JSON_SYNTAX", "the file is binary glTF (GLB), not JSON: name it .glb")
         return None
     doc = _load_json(Source(data, 0, len(data), fd), "the glTF file", findings)
@@ -322,7 +211,7 @@ def _check_data(data: memoryview, suffix: str, findings: Findings, fd: int | Non
     """Check the file's bytes ``data`` (``fd``: the open file, read from without mapping
     where that is enough): first the summary checks of :func:`clean`, and only where they
     find something every check of :class:`ElementChecks`, for its findings."""
-    binary = suffix == ".glb" if suffix in (".glb", ".gltf") else data[:4] == GLB_MAGIC
+    binary = suffix == ".glb" if suffix in (".glb", ".gltf") else is_glb(data)
     parsed = _read_glb(data, findings, fd) if binary else _read_gltf(data, findings, fd)
     if parsed is None:
         return

@@ -15,18 +15,15 @@ from typing import Any
 import numpy as np
 
 from ..findings import Findings
+from .binary import COMPONENT_DTYPES, COMPONENT_SIZES, TRIANGLES, WIDTHS
+from .lod import MSFT_LOD
 from .rules import (
-    COMPONENT_DTYPES,
-    COMPONENT_SIZES,
     READ_BUDGET,
-    TRIANGLES,
-    WIDTHS,
     chain_facts,
     chain_facts_findings,
     lod_extras_findings,
 )
 from .stream import LazyArray
-from .writer import MSFT_LOD
 
 
 def _is_uint(value: Any) -> bool:
@@ -186,7 +183,7 @@ class ElementChecks:
         if "bufferView" not in accessor:
             return None
         view = self.array("bufferViews")[accessor["bufferView"]]
-        dtype = np.dtype(COMPONENT_DTYPES[accessor["componentType"]])
+        dtype = COMPONENT_DTYPES[accessor["componentType"]]
         width = WIDTHS[accessor["type"]]
         start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
         stride = view.get("byteStride", dtype.itemsize * width)

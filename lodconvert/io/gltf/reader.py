@@ -10,7 +10,6 @@ import base64
 import binascii
 import contextlib
 import json
-import struct
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,19 +17,13 @@ from typing import Any
 
 import numpy as np
 
+from ...colors import normalized, srgb_rgba
 from ...errors import InputError
 from ...model import LodChain
 from ..declared import chain_from_facts, level_from_facts
 from ..frame import SceneFrame, frame_from_record
-from .writer import (
-    _DTYPES,
-    _WIDTHS,
-    GLB_BIN,
-    GLB_JSON,
-    GLB_MAGIC,
-    MSFT_LOD,
-    srgb_rgba,
-)
+from .binary import GlbError, accessor_values, is_glb, split_glb
+from .lod import MSFT_LOD
 
 # --- reading our own output ---------------------------------------------------------------------
 
@@ -114,9 +107,9 @@ def _read_errors(path: str | Path) -> Iterator[None]:
     """Turn what reading a glTF file can raise into an :class:`InputError` naming ``path``."""
     try:
         yield
-    except InputError as exc:
+    except (InputError, GlbError) as exc:
         raise InputError(str(exc), str(path)) from None
-    except (ValueError, KeyError, IndexError, TypeError, AttributeError, struct.error) as exc:
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
         raise InputError(f"malformed glTF ({type(exc).__name__}: {exc})", str(path)) from None
     except RecursionError:  # JSON, or LOD parents, nested past Python's recursion limit
         raise InputError("malformed glTF (nested too deeply)", str(path)) from None
@@ -181,7 +174,7 @@ def _cell_nears(nodes: list[dict[str, Any]], indices: list[int]) -> Iterator[int
 
 def _parse(data: bytes) -> tuple[dict[str, Any], bytes]:
     """JSON object and binary buffer of GLB or glTF-with-data-URI bytes."""
-    if data[:4] != GLB_MAGIC:
+    if not is_glb(data):
         obj = json.loads(data.decode("utf-8"))
         buffers = obj.get("buffers", [])
         if not buffers:
@@ -193,45 +186,8 @@ def _parse(data: bytes) -> tuple[dict[str, Any], bytes]:
             return obj, base64.b64decode(uri.split(",", 1)[1], validate=True)
         except binascii.Error as exc:
             raise InputError(f"bad base64 buffer ({exc})") from None
-    if len(data) < 20:
-        raise InputError(f"truncated GLB ({len(data)} bytes)")
-    _, version, total = struct.unpack_from("<4sII", data)
-    if version != 2:
-        raise InputError(f"GLB version {version}, expected 2")
-    if total != len(data):
-        raise InputError(f"truncated GLB (header says {total} bytes, file has {len(data)})")
-    chunks: dict[bytes, bytes] = {}
-    offset = 12
-    while offset < total:
-        length, kind = struct.unpack_from("<I4s", data, offset)
-        if offset + 8 + length > total:
-            raise InputError(f"truncated GLB chunk {kind!r}")
-        chunks.setdefault(kind, data[offset + 8 : offset + 8 + length])
-        offset += 8 + length
-    if GLB_JSON not in chunks:
-        raise InputError("GLB has no JSON chunk")
-    return json.loads(chunks[GLB_JSON].decode("utf-8")), chunks.get(GLB_BIN, b"")
-
-
-def _accessor_data(obj: dict[str, Any], blob: bytes, index: int) -> np.ndarray:
-    """Accessor values as an array of the buffer's dtype, (count,) or (count, width)."""
-    accessor = obj["accessors"][index]
-    view = obj["bufferViews"][accessor["bufferView"]]
-    dtype = np.dtype(_DTYPES[accessor["componentType"]]).newbyteorder("<")
-    width = _WIDTHS[accessor["type"]]
-    if view.get("byteStride", dtype.itemsize * width) != dtype.itemsize * width:
-        raise InputError("interleaved buffer views are not supported")
-    start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
-    count = accessor["count"]
-    values = np.frombuffer(blob, dtype=dtype, count=count * width, offset=start)
-    return values.reshape(count, width) if width > 1 else values
-
-
-def _normalized(values: np.ndarray) -> np.ndarray:
-    """Normalised integers (or floats) as float64 in [0, 1]."""
-    if values.dtype.kind == "f":
-        return values.astype(np.float64)
-    return values / float(np.iinfo(values.dtype).max)
+    text, blob = split_glb(data)
+    return json.loads(bytes(text).decode("utf-8")), bytes(blob)
 
 
 def _primitive(obj: dict[str, Any], blob: bytes, primitive: dict[str, Any]) -> dict[str, Any]:
@@ -239,20 +195,20 @@ def _primitive(obj: dict[str, Any], blob: bytes, primitive: dict[str, Any]) -> d
     absent)."""
     attributes = primitive["attributes"]
     out: dict[str, Any] = {
-        "positions": _accessor_data(obj, blob, attributes["POSITION"]).astype(np.float64),
+        "positions": accessor_values(obj, blob, attributes["POSITION"]).astype(np.float64),
         "colors": None,
         "normals": None,
         "faces": None,
     }
     if "COLOR_0" in attributes:
-        linear = _normalized(_accessor_data(obj, blob, attributes["COLOR_0"]))
+        linear = normalized(accessor_values(obj, blob, attributes["COLOR_0"]))
         if linear.shape[1] == 3:
             linear = np.column_stack([linear, np.ones(len(linear))])
         out["colors"] = srgb_rgba(linear)
     if "NORMAL" in attributes:
-        out["normals"] = _accessor_data(obj, blob, attributes["NORMAL"]).copy()
+        out["normals"] = accessor_values(obj, blob, attributes["NORMAL"]).copy()
     if "indices" in primitive:
-        indices = _accessor_data(obj, blob, primitive["indices"])
+        indices = accessor_values(obj, blob, primitive["indices"])
         out["faces"] = indices.astype(np.int64).reshape(-1, 3)
     return out
 

@@ -1,7 +1,7 @@
 """What the glTF checks hold a file to, shared by the checks element by element
-(:mod:`.elements`) and the summary checks (:mod:`.summary`): accessors' component types and
-widths, how much accessor data the value checks read, and the rules of a LOD chain's ``extras``
-(``MSFT_screencoverage``, and the ``lodconvert`` levels and cutoffs).
+(:mod:`.elements`) and the summary checks (:mod:`.summary`): how much accessor data the value
+checks read, and the rules of a LOD chain's ``extras`` (``MSFT_screencoverage``, and the
+``lodconvert`` levels and cutoffs).
 """
 
 from __future__ import annotations
@@ -11,14 +11,6 @@ import math
 from collections.abc import Iterable, Iterator
 from typing import Any
 
-COMPONENT_SIZES = {5120: 1, 5121: 1, 5122: 2, 5123: 2, 5125: 4, 5126: 4}
-"""Bytes of each accessor componentType."""
-COMPONENT_DTYPES = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
-"""numpy dtype of each accessor componentType."""
-WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-"""Components of each accessor type."""
-TRIANGLES = 4
-"""The primitive mode of triangles (the default)."""
 READ_BUDGET = 4
 """Accessor data the value checks read, in multiples of buffer 0's size: accessors that share
 their bytes many times over are not all read."""

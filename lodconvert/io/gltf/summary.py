@@ -14,19 +14,16 @@ from typing import Any
 
 import numpy as np
 
+from .binary import COMPONENT_DTYPES, COMPONENT_SIZES, FLOAT, TRIANGLES, WIDTHS
 from .extrema import extrema, groups
+from .lod import MSFT_LOD
 from .rules import (
-    COMPONENT_DTYPES,
-    COMPONENT_SIZES,
     READ_BUDGET,
-    TRIANGLES,
-    WIDTHS,
     chain_facts,
     chain_facts_findings,
     lod_extras_findings,
 )
 from .stream import LazyArray, Source
-from .writer import MSFT_LOD
 
 _BIG = 1 << 40
 """Numbers from here on are left to :class:`~.elements.ElementChecks` (so that no sum of them
@@ -374,13 +371,13 @@ def clean(doc: dict[str, Any], blob: Source) -> bool:
         return False
     positions = np.unique(mesh["position"][read_position])
     index_accessors = np.unique(mesh["indices"][read_indices])
-    if (acc["bounds"][positions] < 0).any() or (acc["ctype"][index_accessors] == 5126).any():
+    if (acc["bounds"][positions] < 0).any() or (acc["ctype"][index_accessors] == FLOAT).any():
         return False
     declared = np.frombuffer(accessor_facts.declared, np.float64)
     largest = np.zeros(len(count), np.int64)
     wanted = np.union1d(positions, index_accessors)
     for (ctype, width), members in groups(wanted, acc["ctype"], acc["width"]):
-        dtype = np.dtype(COMPONENT_DTYPES[ctype])
+        dtype = COMPONENT_DTYPES[ctype]
         low, high = extrema(members, start, count, stride, dtype, width, blob)
         bounded = np.isin(members, positions)
         at = acc["bounds"][members[bounded]][:, None] + np.arange(width)

@@ -17,7 +17,6 @@ promises.
 from __future__ import annotations
 
 import json
-import struct
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,15 +25,13 @@ import numpy as np
 
 from ...limits import DEFAULT_LIMITS, Limits
 from ..findings import Findings
+from ..gltf.binary import accessor_values, split_glb
 from ..gltf.stream import Source, too_deep
 from .tree import MAX_DEPTH, Problem, Tile, walk
 
 TOLERANCE = 1e-3
 """Metres a position or a child's corner may lie outside a box (float rounding)."""
 _GLTF_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-_DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
-           5126: np.float32}  # fmt: skip
-_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 _BYTES = {"INT8": 1, "UINT8": 1, "INT16": 2, "UINT16": 2, "INT32": 4, "UINT32": 4, "INT64": 8,
           "UINT64": 8, "FLOAT32": 4, "FLOAT64": 8}  # fmt: skip
 
@@ -158,7 +155,7 @@ class _Checker:
         try:
             document, blob = read_glb(path)
             return self._content(document, blob, where)
-        except (ValueError, KeyError, IndexError, TypeError, struct.error) as exc:
+        except (ValueError, KeyError, IndexError, TypeError) as exc:
             self.findings.error("CONTENT", f"{where}: {path.name} cannot be read ({exc})")
             return None
 
@@ -168,11 +165,11 @@ class _Checker:
         tables = document.get("extensions", {}).get("EXT_structural_metadata", {})
         for mesh in document.get("meshes", []):
             for primitive in mesh["primitives"]:
-                found.append(accessor(document, blob, primitive["attributes"]["POSITION"]))
+                found.append(accessor_values(document, blob, primitive["attributes"]["POSITION"]))
                 features = primitive.get("extensions", {}).get("EXT_mesh_features", {})
                 for ids in features.get("featureIds", []):
                     name = f"_FEATURE_ID_{ids['attribute']}"
-                    values = accessor(document, blob, primitive["attributes"][name])
+                    values = accessor_values(document, blob, primitive["attributes"][name])
                     if len(values) and values.max() >= ids["featureCount"]:
                         self.findings.error(
                             "FEATURE_ID", f"{where}: feature id {values.max():g} ≥ featureCount"
@@ -259,34 +256,14 @@ def read_glb(path: Path) -> tuple[dict, bytes]:
 
 
 def glb_parts(data: bytes) -> tuple[dict, bytes]:
-    """The JSON document and binary chunk of GLB ``data`` (``ValueError`` if it is not one)."""
-    magic, _, total = struct.unpack_from("<4sII", data)
-    if magic != b"glTF" or total != len(data):
-        raise ValueError("not a GLB")
-    length, _ = struct.unpack_from("<I4s", data, 12)
-    text = data[20 : 20 + length]
+    """The JSON document and binary chunk of GLB ``data`` (``ValueError`` if it is not one,
+    or if its JSON nests deeper than :data:`.tree.MAX_DEPTH`)."""
+    text, blob = split_glb(data)
     deep = ValueError(f"its JSON nests arrays and objects over {MAX_DEPTH} deep")
     if too_deep(Source(text, 0, len(text), None), MAX_DEPTH):
         raise deep
     try:
-        document = json.loads(text)
+        document = json.loads(bytes(text))
     except RecursionError:  # an encoding other than UTF-8 can hide brackets from too_deep
         raise deep from None
-    rest = 20 + length
-    blob = b""
-    if rest < len(data):
-        size, _ = struct.unpack_from("<I4s", data, rest)
-        blob = data[rest + 8 : rest + 8 + size]
-    return document, blob
-
-
-def accessor(document: dict, blob: bytes, index: int) -> np.ndarray:
-    """The values of accessor ``index`` ((count,) or (count, width))."""
-    accessor = document["accessors"][index]
-    view = document["bufferViews"][accessor["bufferView"]]
-    dtype = np.dtype(_DTYPES[accessor["componentType"]])
-    width = _WIDTHS[accessor["type"]]
-    start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
-    count = accessor["count"]
-    values = np.frombuffer(blob, dtype=dtype, count=count * width, offset=start)
-    return values.reshape(count, width) if width > 1 else values
+    return document, bytes(blob)

@@ -6,32 +6,30 @@ with ``COLOR_0``."""
 
 from __future__ import annotations
 
+import io
 import json
-import struct
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
+from ...colors import linear_rgba16
 from ...model import Surface
-from ..gltf.writer import (
-    GLB_BIN,
-    GLB_JSON,
-    GLB_MAGIC,
-    float32_positions,
-    linear_rgba,
-    vertex_normals,
+from ..gltf.binary import (
+    ARRAY_BUFFER,
+    COMPONENT_TYPES,
+    ELEMENT_ARRAY_BUFFER,
+    POINTS,
+    TRIANGLES,
+    VECTOR_TYPES,
+    pack_glb,
 )
+from ..gltf.buffers import alpha_mode_of, float32_positions, vertex_normals
+from ..gltf.document import UNLIT
 from .metadata import Feature, property_table
 
 MESH_FEATURES = "EXT_mesh_features"
 STRUCTURAL_METADATA = "EXT_structural_metadata"
-UNLIT = "KHR_materials_unlit"
-_FLOAT, _UINT16, _UINT32 = 5126, 5123, 5125
-_TRIANGLES, _POINTS = 4, 0
-_ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
-_COMPONENTS = {np.float32: _FLOAT, np.uint16: _UINT16, np.uint32: _UINT32}
-_TYPES = {1: "SCALAR", 3: "VEC3", 4: "VEC4"}
 
 
 class _Builder:
@@ -53,20 +51,20 @@ class _Builder:
         return len(self.views) - 1
 
     def accessor(
-        self, array: np.ndarray, target: int = _ARRAY_BUFFER, normalized: bool = False
+        self, array: np.ndarray, target: int = ARRAY_BUFFER, normalized: bool = False
     ) -> int:
         """An accessor of ``array`` ((n,) or (n, k)); positions get their bounds."""
         array = np.ascontiguousarray(array)
         width = 1 if array.ndim == 1 else array.shape[1]
         accessor: dict[str, Any] = {
             "bufferView": self.view(array.tobytes(), target),
-            "componentType": _COMPONENTS[array.dtype.type],
+            "componentType": COMPONENT_TYPES[array.dtype],
             "count": len(array),
-            "type": _TYPES[width],
+            "type": VECTOR_TYPES[width],
         }
         if normalized:
             accessor["normalized"] = True
-        if width == 3 and array.dtype == np.float32 and target == _ARRAY_BUFFER:
+        if width == 3 and array.dtype == np.float32 and target == ARRAY_BUFFER:
             accessor["min"] = [float(v) for v in array.min(axis=0)]
             accessor["max"] = [float(v) for v in array.max(axis=0)]
         self.accessors.append(accessor)
@@ -82,22 +80,9 @@ class _Builder:
             "buffers": [{"byteLength": len(self.blob)}],
         }
         text = json.dumps(document, separators=(",", ":"), ensure_ascii=False).encode()
-        text += b" " * (-len(text) % 4)
-        total = 12 + 8 + len(text) + 8 + len(self.blob)
-        return b"".join(
-            [
-                GLB_MAGIC + struct.pack("<II", 2, total),
-                struct.pack("<I", len(text)) + GLB_JSON,
-                text,
-                struct.pack("<I", len(self.blob)) + GLB_BIN,
-                bytes(self.blob),
-            ]
-        )
-
-
-def _colors(rgba: np.ndarray) -> np.ndarray:
-    """COLOR_0: sRGB bytes as linear normalised unsigned shorts."""
-    return np.rint(linear_rgba(rgba) * 65535.0).astype(np.uint16)
+        out = io.BytesIO()
+        pack_glb(out, text, bytes(self.blob))
+        return out.getvalue()
 
 
 def _document(generator: str, primitive: dict[str, Any], material: dict[str, Any]) -> dict:
@@ -120,7 +105,7 @@ def _material(alpha: np.ndarray, unlit: bool = False) -> dict[str, Any]:
             "metallicFactor": 0.0,
             "roughnessFactor": 1.0,
         },
-        "alphaMode": "BLEND" if alpha.size and int(alpha.min()) < 255 else "OPAQUE",
+        "alphaMode": alpha_mode_of(alpha),
         "doubleSided": not unlit,
     }
     if unlit:
@@ -146,12 +131,12 @@ def mesh_glb(
     attributes = {
         "POSITION": builder.accessor(positions),
         "NORMAL": builder.accessor(normals),
-        "COLOR_0": builder.accessor(_colors(colors), normalized=True),
+        "COLOR_0": builder.accessor(linear_rgba16(colors), normalized=True),
     }
     if feature_ids is not None:
         attributes["_FEATURE_ID_0"] = builder.accessor(feature_ids.astype(np.float32))
-    indices = builder.accessor(faces.ravel().astype(index_type), target=_ELEMENT_ARRAY_BUFFER)
-    primitive: dict[str, Any] = {"attributes": attributes, "indices": indices, "mode": _TRIANGLES}
+    indices = builder.accessor(faces.ravel().astype(index_type), target=ELEMENT_ARRAY_BUFFER)
+    primitive: dict[str, Any] = {"attributes": attributes, "indices": indices, "mode": TRIANGLES}
     if feature_ids is not None:
         ids = {"featureCount": len(features), "attribute": 0, "propertyTable": 0}
         primitive["extensions"] = {MESH_FEATURES: {"featureIds": [ids]}}
@@ -168,9 +153,9 @@ def points_glb(positions: np.ndarray, colors: np.ndarray, generator: str) -> byt
     builder = _Builder()
     attributes = {
         "POSITION": builder.accessor(float32_positions(positions)),
-        "COLOR_0": builder.accessor(_colors(colors), normalized=True),
+        "COLOR_0": builder.accessor(linear_rgba16(colors), normalized=True),
     }
-    primitive = {"attributes": attributes, "mode": _POINTS}
+    primitive = {"attributes": attributes, "mode": POINTS}
     document = _document(generator, primitive, _material(colors[:, 3], unlit=True))
     document["extensionsUsed"] = [UNLIT]
     return builder.glb(document)

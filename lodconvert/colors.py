@@ -1,0 +1,70 @@
+"""Colour conversions, format-free. A :class:`~lodconvert.model.Surface` and a point level hold
+sRGB RGBA bytes; glTF stores linear values (``baseColorFactor``, ``COLOR_0``), so writers and
+readers convert here: sRGB bytes ↔ linear floats, and colour values of any type → bytes."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _srgb_table() -> np.ndarray:
+    c = np.arange(256) / 255.0
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+SRGB_TO_LINEAR = _srgb_table()
+"""Linear value in [0, 1] of each sRGB byte."""
+_SRGB_MIDPOINTS = (SRGB_TO_LINEAR[1:] + SRGB_TO_LINEAR[:-1]) / 2.0
+
+
+def linear_rgba(rgba: np.ndarray) -> np.ndarray:
+    """sRGB RGBA bytes (..., 4) → linear float64 in [0, 1] (alpha is linear already: /255)."""
+    out = SRGB_TO_LINEAR[rgba]
+    out[..., 3] = rgba[..., 3] / 255.0
+    return out
+
+
+def linear_rgba16(rgba: np.ndarray) -> np.ndarray:
+    """sRGB RGBA bytes (..., 4) → linear values as normalised unsigned shorts (glTF's
+    ``COLOR_0`` as lodconvert writes it)."""
+    return np.rint(np.clip(linear_rgba(rgba), 0.0, 1.0) * 65535.0).astype(np.uint16)
+
+
+def srgb_rgba(linear: np.ndarray) -> np.ndarray:
+    """Linear RGBA floats (..., 4) → sRGB bytes: the nearest byte, so that :func:`linear_rgba`
+    followed by any encoding finer than the byte spacing round-trips exactly."""
+    out = np.searchsorted(_SRGB_MIDPOINTS, np.clip(linear, 0.0, 1.0)).astype(np.uint8)
+    out[..., 3] = np.clip(np.rint(linear[..., 3] * 255.0), 0, 255).astype(np.uint8)
+    return out
+
+
+def normalized(values: np.ndarray) -> np.ndarray:
+    """Normalised integers (divided by their type's largest value) or floats as float64."""
+    if values.dtype.kind in "ui":
+        return values / float(np.iinfo(values.dtype).max)
+    return values.astype(np.float64)
+
+
+def _unit_rgba(values: object | None) -> np.ndarray | None:
+    """Colour values (one or many; RGB or RGBA; integers or floats 0..1) as float64 RGBA in
+    [0, 1], or ``None`` when there are none."""
+    if values is None:
+        return None
+    c = np.asarray(values)
+    if c.ndim == 0 or c.shape[-1] not in (3, 4):
+        return None
+    c = np.clip(np.nan_to_num(normalized(c)), 0.0, 1.0)
+    if c.shape[-1] == 3:
+        c = np.concatenate([c, np.ones((*c.shape[:-1], 1))], axis=-1)
+    return c
+
+
+def srgb_bytes(values: object | None, linear: bool) -> np.ndarray | None:
+    """Colour values as sRGB RGBA bytes (converted from linear when ``linear``), or ``None``
+    when there are none."""
+    unit = _unit_rgba(values)
+    if unit is None:
+        return None
+    if not linear:
+        return np.rint(unit * 255.0).astype(np.uint8)
+    return srgb_rgba(unit)

@@ -1,0 +1,191 @@
+"""A chain's glTF buffers, made where the chain is baked (a worker, :func:`chain_buffers`): each
+level's geometry as the accessor data of its primitives (float32 positions, unit normals,
+linear ``COLOR_0`` shorts, flipped texture coordinates, PNG textures, indices), with the compact
+JSON text of each accessor, so that the writer only appends them to the document."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ...colors import linear_rgba, linear_rgba16
+from ...errors import LodConvertError
+from ...model import Level, LodChain, PointCloud, Surface
+from .. import OutputInfo
+from .binary import (
+    ARRAY_BUFFER,
+    COMPONENT_TYPES,
+    ELEMENT_ARRAY_BUFFER,
+    POINTS,
+    TRIANGLES,
+    VECTOR_TYPES,
+)
+from .json_text import COMPACT, json_object
+
+
+def float32_positions(positions: np.ndarray) -> np.ndarray:
+    """``positions`` as float32, or :class:`LodConvertError` where a coordinate is beyond the
+    float32 range (it would be written as infinity)."""
+    largest = float(np.abs(positions).max(initial=0.0))
+    if not largest <= np.finfo(np.float32).max:
+        raise LodConvertError(
+            f"a level coordinate of magnitude {largest:.3g} is beyond the float32 range of glTF"
+        )
+    return positions.astype(np.float32)
+
+
+def unit_normals(normals: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit length as float32; zero or non-finite rows become (0, 0, 1)."""
+    n = np.asarray(normals, dtype=np.float64)
+    length = np.sqrt(np.add.reduce(n * n, axis=1))  # as np.linalg.norm(n, axis=1)
+    ok = np.isfinite(length) & (length > 0)
+    out = np.zeros((len(n), 3))
+    out[:, 2] = 1.0
+    out[ok] = n[ok] / length[ok, None]
+    return out.astype(np.float32)
+
+
+def vertex_normals(surface: Surface) -> np.ndarray:
+    """Area-weighted unit vertex normals (n, 3) float32; unused vertices get (0, 0, 1)."""
+    tri = surface.vertices[surface.faces]
+    a, b = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    corners = surface.faces.ravel()
+    n = len(surface.vertices)
+    summed = np.empty((n, 3))
+    for k, (i, j) in enumerate(((1, 2), (2, 0), (0, 1))):  # the cross product: 2 · area long
+        face_n = a[:, i] * b[:, j] - a[:, j] * b[:, i]
+        summed[:, k] = np.bincount(corners, np.repeat(face_n, 3), minlength=n)
+    return unit_normals(summed)
+
+
+def alpha_mode_of(*alphas: np.ndarray | None) -> str:
+    """``BLEND`` when any given alpha byte is below 255, else ``OPAQUE``."""
+    blend = any(a is not None and a.size and int(a.min()) < 255 for a in alphas)
+    return "BLEND" if blend else "OPAQUE"
+
+
+def _png(rgba: np.ndarray) -> bytes:
+    """Deterministic PNG bytes of an RGBA uint8 image (no timestamps or text chunks)."""
+    from PIL import Image as PILImage  # only for textures: a worker baking none never loads it
+
+    out = io.BytesIO()
+    PILImage.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8), "RGBA").save(out, format="PNG")
+    return out.getvalue()
+
+
+@dataclass(frozen=True)
+class AccessorData:
+    """An accessor's bytes (little-endian), its buffer view's target and its other fields, with
+    their compact JSON text (what follows its ``bufferView`` number in a GLB)."""
+
+    data: bytes
+    target: int
+    fields: dict[str, Any]
+    compact_tail: str
+
+
+VIEW_HEAD = '{"bufferView":'
+
+
+def _accessor_data(
+    array: np.ndarray, target: int = ARRAY_BUFFER, normalized: bool = False, bounds: bool = False
+) -> AccessorData:
+    """An accessor over ``array`` ((k,) scalars or (k, w) vectors, dtype of the buffer)."""
+    data = np.ascontiguousarray(array)
+    stored = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
+    fields = json_object(
+        byteOffset=0,
+        componentType=COMPONENT_TYPES[data.dtype],
+        normalized=True if normalized else None,
+        count=len(data),
+        type=VECTOR_TYPES[1 if data.ndim == 1 else data.shape[1]],
+        max=[float(v) for v in data.max(axis=0)] if bounds else None,
+        min=[float(v) for v in data.min(axis=0)] if bounds else None,
+    )
+    compact = COMPACT.text({"bufferView": 0, **fields}, 2)
+    return AccessorData(stored.tobytes(), target, fields, compact[len(VIEW_HEAD) + 1 :])
+
+
+def _colors(rgba: np.ndarray) -> AccessorData:
+    """COLOR_0 accessor: VEC4 normalised unsigned shorts in linear space."""
+    return _accessor_data(linear_rgba16(rgba), normalized=True)
+
+
+@dataclass(frozen=True)
+class PrimitiveData:
+    """What a primitive's JSON needs of its geometry: its accessors' data in the order they
+    are added to the buffer (``POSITION``, ``NORMAL``, ``COLOR_0``, ``TEXCOORD_0``), its
+    texture (PNG bytes, added next) and indices (last); for a mesh, the linear base colour of
+    its material (``None``: a point level's shared unlit one) and the alpha mode."""
+
+    attributes: dict[str, AccessorData]
+    mode: int
+    alpha_mode: str
+    base: list[float] | None = None
+    png: bytes | None = None
+    indices: AccessorData | None = None
+
+
+def _mesh_data(surface: Surface, normals: bool = True) -> PrimitiveData:
+    attributes = {"POSITION": _accessor_data(float32_positions(surface.vertices), bounds=True)}
+    if normals:
+        attributes["NORMAL"] = _accessor_data(vertex_normals(surface))
+    if surface.vertex_colors is not None:
+        attributes["COLOR_0"] = _colors(surface.vertex_colors)
+    textured = surface.texture is not None and surface.uv is not None
+    png = None
+    if textured:
+        # Surface.uv has its origin at the image's bottom-left, glTF at the top-left.
+        flipped = np.column_stack([surface.uv[:, 0], 1.0 - surface.uv[:, 1]])
+        attributes["TEXCOORD_0"] = _accessor_data(flipped.astype(np.float32))
+        png = _png(surface.texture)
+    index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
+    indices = _accessor_data(surface.faces.ravel().astype(index_type), ELEMENT_ARRAY_BUFFER)
+    alpha_mode = alpha_mode_of(
+        surface.material_color[3:],
+        None if surface.vertex_colors is None else surface.vertex_colors[:, 3],
+        surface.texture[..., 3] if textured else None,
+    )
+    base = [float(v) for v in linear_rgba(surface.material_color)]
+    return PrimitiveData(attributes, TRIANGLES, alpha_mode, base, png, indices)
+
+
+def _points_data(points: PointCloud) -> PrimitiveData:
+    attributes = {
+        "POSITION": _accessor_data(float32_positions(points.positions), bounds=True),
+        "NORMAL": _accessor_data(unit_normals(points.normals)),
+        "COLOR_0": _colors(points.colors),
+    }
+    return PrimitiveData(attributes, POINTS, alpha_mode_of(points.colors[:, 3]))
+
+
+def level_data(level: Level) -> list[PrimitiveData]:
+    """The primitives of one (non-empty) level. A LOD parent's merged far mesh has no normals:
+    its corners are welded (:func:`~lodconvert.bake.qem.simplify_within`), where normals per
+    vertex would round every building's edges, and glTF clients shade a primitive without
+    normals flat (three.js from screen-space derivatives, with no vertex split)."""
+    if level.mesh is None:
+        return [_points_data(level.points)]
+    flat = level.kind == "merged"
+    return [_mesh_data(part, not flat) for part in level.mesh.parts]
+
+
+ChainBuffers = tuple["list[PrimitiveData] | None", ...]
+"""A chain's buffers made by a worker: each level's primitives (``None`` for an empty one)."""
+
+
+def chain_buffers(chain: LodChain) -> ChainBuffers | None:
+    """The glTF formats' chain formatter (:mod:`lodconvert.io`): the buffers of a chain that
+    is not an instance of shared geometry (whose levels are written once, by the first)."""
+    if chain.transform is not None:
+        return None
+    return tuple(level_data(level) if level.count else None for level in chain.levels)
+
+
+def buffers_formatter(info: OutputInfo) -> Callable[[LodChain], ChainBuffers | None]:
+    """The glTF formats' ``formatter`` (:mod:`lodconvert.io`)."""
+    return chain_buffers
