@@ -179,7 +179,7 @@ def _work(conn: Connection, backend_name: str) -> None:
     while the main process is busy elsewhere. Ctrl-C is the main process's to handle: it stops
     the workers."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    inbox: queue.SimpleQueue[Task[Any] | None] = queue.SimpleQueue()
+    inbox: queue.SimpleQueue[Task[Any] | _Unreadable | None] = queue.SimpleQueue()
     outbox: queue.SimpleQueue[tuple[str, Any] | None] = queue.SimpleQueue()
     threading.Thread(target=_receive, args=(conn, inbox), daemon=True).start()
     sender = threading.Thread(target=_send, args=(conn, outbox), daemon=True)
@@ -190,6 +190,9 @@ def _work(conn: Connection, backend_name: str) -> None:
         outbox.put(("progress", text))
 
     while (task := inbox.get()) is not None:
+        if isinstance(task, _Unreadable):  # the main process runs it
+            outbox.put(("unsendable", task.reason))
+            continue
         try:
             outbox.put(("result", task.run(backend, progress)))
         except Exception as exc:  # a bug, not bad input: the main process raises it
@@ -198,14 +201,25 @@ def _work(conn: Connection, backend_name: str) -> None:
     sender.join()
 
 
-def _receive(conn: Connection, inbox: queue.SimpleQueue[Task[Any] | None]) -> None:
+@dataclass(frozen=True)
+class _Unreadable:
+    """A task this worker could not unpickle (a module changed under it, say), and why."""
+
+    reason: str
+
+
+def _receive(conn: Connection, inbox: queue.SimpleQueue[Task[Any] | _Unreadable | None]) -> None:
     """Move tasks from ``conn`` to ``inbox`` as they arrive, then ``None`` (no more tasks, or
-    the main process is gone)."""
+    the main process is gone); a task that cannot be unpickled here goes as
+    :class:`_Unreadable`, for the main process to run."""
     while True:
+        task: Task[Any] | _Unreadable | None
         try:
             task = conn.recv()
         except (EOFError, OSError):
             task = None
+        except Exception as exc:
+            task = _Unreadable(f"{type(exc).__name__}: {exc}")
         inbox.put(task)
         if task is None:
             return
@@ -214,7 +228,7 @@ def _receive(conn: Connection, inbox: queue.SimpleQueue[Task[Any] | None]) -> No
 def _send(conn: Connection, outbox: queue.SimpleQueue[tuple[str, Any] | None]) -> None:
     """Send what arrives in ``outbox`` through ``conn`` until ``None`` (or the main process is
     gone); a result that cannot be pickled (nested too deep, say) is sent as ``unsendable``:
-    the main process runs its task itself."""
+    the main process runs its task itself, as it does a task the worker could not unpickle."""
     while (message := outbox.get()) is not None:
         try:
             conn.send(message)

@@ -13,6 +13,7 @@ import re
 import signal
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -245,6 +246,35 @@ def test_a_batch_whose_worker_is_killed_twice_is_reported_and_the_rest_convert()
     assert [entry["id"] for entry in skipped] == ["obj0"]
     assert "died twice (signal SIGKILL)" in skipped[0]["reason"]
     assert any("obj0" in w and "skipped" in w for w in warnings)
+
+
+def _rebuilt(made_in: int, number: int) -> _Numbered:
+    """A :class:`_Numbered` task unpickled: only in the process that made it (a worker whose
+    modules changed under it fails here alike)."""
+    if os.getpid() != made_in:
+        raise AttributeError("module 'lodconvert' has no attribute 'moved'")
+    return _Numbered(number)
+
+
+@dataclass(frozen=True)
+class _Numbered:
+    """A task that gives back its number, and that no worker can unpickle."""
+
+    number: int
+
+    def __reduce__(self) -> tuple[Any, tuple[int, int]]:
+        return _rebuilt, (os.getpid(), self.number)
+
+    def run(self, backend: Any = None, progress: Any = None) -> int:
+        return self.number
+
+    def failed(self, reason: str) -> int:
+        return -1
+
+
+def test_a_task_a_worker_cannot_unpickle_is_run_here_not_waited_for_forever() -> None:
+    with PoolExecutor(2, "numpy") as executor:
+        assert list(executor.results(_Numbered(i) for i in range(6))) == list(range(6))
 
 
 def _children_of(pid: int) -> list[int]:
