@@ -226,7 +226,8 @@ def grid_view(
     frustum_culling: bool = True,
 ) -> GridView:
     """Lay out N = ``count`` instances of ``chain`` ``spacing · α`` apart, with LOD centres
-    ``lift`` above the ground, and select their levels from the camera (module docstring)."""
+    ``lift`` above the ground, and select their levels from the camera
+    (``docs/render-bench.md``)."""
     alpha = chain.alpha
     ground = grid_points(count, spacing * alpha)
     centers = np.column_stack([ground, np.full(len(ground), lift)])
@@ -376,7 +377,7 @@ class GridRenderer(OffscreenRenderer):
         budget_s: float,
     ) -> Timing:
         """Time ``frames`` frames of the placed ``drawables`` after drawing each once and
-        ``warmup`` untimed frames (see the module docstring)."""
+        ``warmup`` untimed frames (``docs/render-bench.md``, timing)."""
         self.program["view_proj"].write(view.view_proj.T.astype(np.float32).tobytes())
         self.program["eye"].value = tuple(float(v) for v in view.eye)
         self.program["max_point_size"].value = self.max_point_size
@@ -454,7 +455,7 @@ class BenchRow:
 
 @dataclass
 class BenchSettings:
-    """What a benchmark run draws and how it times it (defaults as the module docstring)."""
+    """What a benchmark run draws and how it times it (the defaults: ``docs/render-bench.md``)."""
 
     instances: tuple[int, ...] = PAPER_INSTANCES
     frames: int = DEFAULT_FRAMES

@@ -100,7 +100,7 @@ def _open_cells(
 
 def select(city: CityDraw, camera: Camera, mode: Mode, scale: float = 1.0) -> Selection:
     """The draw parts of one frame seen by ``camera`` in ``mode``, cutoffs times ``scale``
-    (module docstring)."""
+    (the rules: ``docs/render-bench.md``, selection)."""
     eye = np.asarray(camera.eye, dtype=np.float64)
     planes = frustum_planes(camera.view_proj(city.far_plane(eye))) if mode.culling else None
     opened, far_shown = _open_cells(city, eye, planes, mode, scale)
