@@ -5,10 +5,11 @@ switching, and Lee, Kim & Kim's LOD parent with its line-of-sight LOD scale.
     python benchmarks/city_render.py --quick      # 3 short walks, the 1× and 10× districts
     python benchmarks/city_render.py --factors 1,10 --flight-frames 20 --only parent
 
-Counting and drawing are :mod:`lodconvert.analysis.city_render`'s: per frame the vertices +
-points and draw calls (one per level part) each mode submits — machine-independent, from the
-camera positions alone — and, where an EGL context can be made, the frame time of drawing them
-on a 1920×1080 framebuffer with moderngl; nothing is extrapolated.
+Counting is :mod:`lodconvert.analysis.city_select`'s and drawing
+:mod:`lodconvert.analysis.city_render`'s: per frame the vertices + points and draw calls (one
+per level part) each mode submits — machine-independent, from the camera positions alone —
+and, where an EGL context can be made, the frame time of drawing them on a 1920×1080
+framebuffer with moderngl; nothing is extrapolated.
 
 **ProxyPrismLOD** (Polys, Singh & Sforza 2016, Tables I–II). A 20×20 grid of square plots
 (:data:`PLOT_SIDE` m) holds 100 each of four buildings, assigned to plots and turned by
@@ -34,7 +35,7 @@ cells' own members alone, as a ``(250,)`` bake would (``tests/test_city_render.p
 equal). Flights at each ``--altitudes`` cross the district along x through its middle,
 pitched :data:`FLIGHT_PITCH_DEG`° down, ``--flight-frames`` evenly spaced positions each, in
 the modes of :data:`PARENT_MODES`, with and without the LOD scale ``s`` (every cutoff times
-``s``, :func:`~lodconvert.analysis.city_render.lod_scale`).
+``s``, :func:`~lodconvert.analysis.line_of_sight.lod_scale`).
 """
 
 from __future__ import annotations
@@ -59,29 +60,25 @@ from city import DATA, TUM, Template, factor_list, tum_document, write_district
 from objects import ROOT, cpu_model, source_state, versions
 from tables import markdown_table, write_results
 
-from lodconvert.analysis.city_render import (
+from lodconvert.analysis.city_cameras import flight_cameras, random_walks, walk_cameras
+from lodconvert.analysis.city_draw import CityDraw, city_draw
+from lodconvert.analysis.city_render import CityRenderer, PathStats, walk
+from lodconvert.analysis.city_select import Mode
+from lodconvert.analysis.line_of_sight import (
     REFERENCE_ALTITUDE,
     REFERENCE_FOV_DEG,
     REFERENCE_LOS,
     REFERENCE_PITCH_DEG,
-    CityDraw,
-    CityRenderer,
-    Mode,
-    PathStats,
-    city_draw,
-    flight_cameras,
     lod_scale,
     los_average,
-    random_walks,
-    walk,
-    walk_cameras,
 )
 from lodconvert.bake import get_backend
 from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.city.hlod import HlodOptions
-from lodconvert.context import RunContext, merged
+from lodconvert.context import RunContext
 from lodconvert.errors import LodConvertError
+from lodconvert.inputs import merged
 from lodconvert.io import read_scene
 from lodconvert.model import CellChain, LodChain, Mesh, Node, Surface
 from lodconvert.plans import bake_chain
@@ -587,7 +584,7 @@ def parent_text(districts: list[District], timed: bool, altitudes: Sequence[floa
         " own levels and culling); outside the frustum (bounding sphere) it is culled whole."
         " *scaled*: every cutoff, buildings' and cells', times the LOD scale s.",
         "",
-        "**LOD scale** (`lodconvert.analysis.city_render.lod_scale`): s = mean line of sight /"
+        "**LOD scale** (`lodconvert.analysis.line_of_sight.lod_scale`): s = mean line of sight /"
         f" reference, the mean over the vertical field of view of the ray's distance to the"
         f" ground (h / sin φ, rays beyond 20 km or above the horizon counted as 20 km); the"
         f" reference is the mean line of sight at {REFERENCE_ALTITUDE:g} m, pitched"

@@ -1,17 +1,9 @@
 """Tasks run on a dask.distributed cluster (``--scheduler ADDRESS``): :class:`DaskExecutor`
 submits each task to the scheduler, with a bounded window of tasks in flight, and gives the
-results back in submission order, as :class:`~.tasks.PoolExecutor` does.
-
-A task travels as data (a batch's nodes and options, or a run of a city's members as bytes,
-pickled here: the scheduler passes the bytes on without reading them), so workers on other
-machines need no shared file system. Each worker thread makes its backend once, at its first
-task (a GL context only inside the worker). The scheduler re-runs a task whose worker died
-(dask's ``distributed.scheduler.allowed-failures`` times); once it gives up, the task fails as
-the task says (a batch's objects reported, a run of members read in the main process) and the
-run goes on. What a task tells of its progress comes back with its result, and is told here
-when that result is taken: no message of its own crosses the cluster. No wait on the
-scheduler is unbounded (:data:`REQUEST_SECONDS`): one that never answers ends the run as one
-that cannot be reached does.
+results back in submission order, as :class:`~.tasks.PoolExecutor` does. A task travels as
+data, pickled here, so workers need no shared file system; a task whose workers died past the
+scheduler's retries fails as the task says; progress comes back with each result; no wait on
+the scheduler is unbounded (:data:`REQUEST_SECONDS`). What runs where: ``docs/cluster.md``.
 
 Needs the ``dask`` extra (``pip install '.[dask]'`` in a clone); :mod:`.tasks` does not.
 """

@@ -1,21 +1,12 @@
 """Which levels an object gets: a coarser level only where it is cheaper to draw than the level
 before it and still looks like the object where it first shows.
 
-**Cheaper.** A level's draw cost is counted in mesh-vertex units: a mesh level costs its vertex
-count, a point level :data:`POINT_COST` per point. On an H100, point levels drew 1.6–3.2× faster
-than mesh levels with the same vertex count (``DESIGN.md`` §5), so a point costs at most
-1 / 1.6 of a mesh vertex; the bound is the conservative end.
-
-**Looks like the object.** At its switch-in distance in the reference view (1080 px, 45°), the
-level's silhouette precision and recall against the source must both be at least
-:data:`MIN_SILHOUETTE`. Planning runs without GL: :func:`silhouette_estimate` rasterises the
-source and the level along the three axes with the CPU baker's axis rays at the pixel size of
-that distance (orthographic: at the switch-in distances, ≥ 6 object diagonals away, perspective
-changes a silhouette by a few per cent) and draws every point as the square the viewer draws.
-``tests/test_plan.py`` holds the estimate against GL renders of the evaluation code.
-
-When no coarser representation passes, the object keeps fewer levels: the finer level stays on
-to the next cutoff (or to the cull distance).
+**Cheaper**: draw cost in mesh-vertex units, a point costing :data:`POINT_COST` of a vertex.
+**Looks like the object**: at its switch-in distance in the reference view, the level's
+silhouette precision and recall against the source both reach :data:`MIN_SILHOUETTE`, as
+:func:`silhouette_estimate` rasterises them without GL along the three axes
+(``tests/test_plan.py`` holds it against GL renders). When no coarser representation passes,
+the finer level stays on to the next cutoff. The rule, and its evidence: ``docs/levels.md``.
 """
 
 from __future__ import annotations

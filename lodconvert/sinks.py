@@ -1,22 +1,12 @@
 """Where outputs go: a file or a directory, staged beside its target and committed together.
 
 One run's outputs (the model file, ``--report``, ``--html``, files written beside them, or a
-directory of tiles) form one :class:`Outputs`. Each target is checked before any work is done
-(its folder exists and is writable, it is not a directory, not an input of the run, not claimed
-twice). Everything is written to temporary names in the target folders; :meth:`Outputs.commit`
-renames them all into place, and puts back what it replaced if a rename fails. A run that fails
-at any step, or is interrupted, leaves no new file and every existing output untouched.
-
-A run holds an exclusive ``flock`` on each file or directory it stages until it has committed
-or discarded it. A run killed before that (SIGKILL, the out-of-memory killer, a power cut) leaves
-its staged names behind, unlocked, since the kernel drops a dead process's locks: the next run
-to the same target removes those, and never a staged name whose lock a live run holds.
-
-A directory staged with a ``resume`` key (a hash of the run's inputs and options) has a name
-of its own, ``.name.KEY8.tmp``: a run killed before its commit leaves it, and the next run with
-the same key takes it over as it is (:attr:`DirectorySink.resumed`) so that its writer can keep
-what is already there; one of another key is removed like any dead run's. Its key sits in
-:data:`RESUME` inside it, which the commit removes with everything else a writer kept there.
+directory of tiles) form one :class:`Outputs`. Each target is checked before any work is done;
+everything is written to temporary names in the target folders, and :meth:`Outputs.commit`
+renames them all into place, putting back what it replaced if a rename fails: a run that fails
+or is interrupted leaves no new file. A run holds an exclusive ``flock`` on what it stages; the
+next run to a target removes what a killed run left, and takes over a staged directory of its
+own ``resume`` key (:attr:`DirectorySink.resumed`). In full: ``docs/outputs.md``.
 """
 
 from __future__ import annotations

@@ -1,18 +1,11 @@
 """Baking as pure work: a :class:`BakeTask` (a batch of objects, each with its options resolved)
 gives a :class:`BakeResult` (each object's chain, or why it was skipped, and its warnings, as
 data), and an :class:`Executor` runs tasks and gives their results back in the order the tasks
-were submitted.
-
-Two executors: :class:`SerialExecutor` runs each task in this process when its result is asked
-for; :class:`PoolExecutor` runs them in worker processes started with ``spawn`` (a forked child
-of a process holding a GL context deadlocks; each worker makes its own backend), with a bounded
-window of tasks in flight, so memory stays bounded and the output is the same as serial. A
-worker that dies mid-task is replaced and its task run once more; when it dies again, the task's
-objects are reported as failed and the run goes on.
-
-An executor only calls what :class:`Task` declares, so readers and writers ship tasks of their
-own on the same executors; the pool's workers stay up for the next stream of tasks (reading,
-then baking) and serve streams that run at once (tiles made while baking goes on).
+were submitted: :class:`SerialExecutor` in this process, :class:`PoolExecutor` in worker
+processes started with ``spawn``, a bounded window in flight, a dead worker's task run once
+more. An executor only calls what :class:`Task` declares, ``run(backend, progress)`` and
+``failed(reason)``, so readers and writers ship tasks of their own on it. See
+``docs/cluster.md`` (tasks and executors) and ``docs/architecture.md`` (the task contract).
 """
 
 from __future__ import annotations

@@ -10,25 +10,22 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from lodconvert.analysis.city_render import (
+from lodconvert.analysis.city_cameras import (
+    Camera,
+    flight_cameras,
+    forward_vector,
+    random_walks,
+    walk_cameras,
+)
+from lodconvert.analysis.city_draw import CityDraw, city_draw
+from lodconvert.analysis.city_render import CityRenderer, walk
+from lodconvert.analysis.city_select import Mode, prism_levels, range_levels, select
+from lodconvert.analysis.line_of_sight import (
     REFERENCE_ALTITUDE,
     REFERENCE_FOV_DEG,
     REFERENCE_PITCH_DEG,
-    Camera,
-    CityDraw,
-    CityRenderer,
-    Mode,
-    city_draw,
-    flight_cameras,
-    forward_vector,
     lod_scale,
     los_average,
-    prism_levels,
-    random_walks,
-    range_levels,
-    select,
-    walk,
-    walk_cameras,
 )
 from lodconvert.bake import get_backend
 from lodconvert.bakery import iter_chains

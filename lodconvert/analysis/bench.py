@@ -1,41 +1,10 @@
-"""Render benchmark: a grid of instances each drawing the level its distance selects, against
-the same grid drawing the original mesh — the shape of the PCD paper's Tables 4–7.
-
-**Grid.** N = k² instances of one object on a square lattice in the ground plane (world z up),
-``spacing · α`` apart (α the object's bounding-box diagonal, default spacing 1.5): columns
-centred on x = 0, rows at y = 0, s·α, 2·s·α, … going away from the camera. Each instance's LOD
-centre (the bounding-box centre) sits above its lattice point so that the object's lowest point
-touches the ground. Models are taken as y-up (glTF's convention, and the Stanford scans') and
-turned z-up (``up="z"`` leaves them as they are; any of x, y, z, -x, -y, -z as ``convert --up``).
-
-**Camera.** Fixed, in units of α, whatever N: the eye at :data:`EYE` (5 α in front of the first
-row, 1.5 α above the ground), looking at :data:`TARGET` (12 α down the middle of the grid, on
-the ground); 45° vertical field of view on a 1920×1080 framebuffer — the reference view the
-files' point sizes refer to, so points are drawn exactly as wide as declared. With the default
-chain (cutoffs 6.4 α, 13.7 α, 30 α) the middle of the first row draws LOD4, the second row
-(at least 6.6 α away) LOD3 already, and from N = 441 on the far rows LOD1: every level is
-exercised, and from N = 4 on the LOD grid submits less than the original.
-
-**Selection and culling.** Each instance draws level ``i`` when its LOD centre is nearer the eye
-than ``cutoffs[i]`` and not nearer than ``cutoffs[i-1]`` (X3D ``LOD`` semantics); beyond the
-last cutoff of a culled chain it draws nothing. Instances whose bounding sphere (radius α/2)
-lies wholly outside the view frustum are skipped in both grids (per-instance frustum culling;
-``frustum_culling=False`` submits them all). The original grid draws the reference mesh at every
-instance, with no cull distance.
-
-**Drawing.** Every level is uploaded once (vertex buffer, index buffer for meshes, RGBA colours)
-and drawn instanced, one instance buffer of LOD-centre positions per level; depth test on, no
-face culling, unlit vertex colours. Points get ``gl_PointSize = point_size · design_distance /
-r`` (``r`` the eye-to-point distance), clamped to [1, the GL maximum] — the size the files
-declare (see :func:`~.render.point_pixel_size`). Both grids use the same program and
-rules; only the geometry differs. Draw calls submit at most :data:`CHUNK_VERTICES` vertices
-each, so a frame that runs past its time budget is stopped between two of them.
-
-**Timing.** Each geometry is first drawn once (one instance), then ``warmup`` untimed frames,
-then ``frames`` timed frames, each clocked from a finished pipeline (``ctx.finish()``) through
-its clear and draws to ``ctx.finish()``; the median is reported. A frame longer than
-``budget_s`` is stopped and its grid reported "over budget"; larger N of that grid are then
-"skipped". "Submitted" counts vertices (mesh levels) plus points (point levels) per frame.
+"""Render benchmark (``lodconvert bench``): a grid of instances each drawing the level its
+distance selects, against the same grid drawing the original mesh — the shape of the PCD
+paper's Tables 4–7. N = k² instances stand on a square lattice seen from a fixed camera
+(:data:`EYE`, :data:`TARGET`, in object diagonals) on a 1920×1080 framebuffer, the reference
+view; levels switch as X3D ``LOD`` does, with per-instance frustum culling; every level is drawn
+instanced by :class:`GridRenderer`, and the median of the timed frames is reported. The grid,
+camera, drawing and timing rules: ``docs/render-bench.md``.
 """
 
 from __future__ import annotations
@@ -257,7 +226,8 @@ def grid_view(
     frustum_culling: bool = True,
 ) -> GridView:
     """Lay out N = ``count`` instances of ``chain`` ``spacing · α`` apart, with LOD centres
-    ``lift`` above the ground, and select their levels from the camera (module docstring)."""
+    ``lift`` above the ground, and select their levels from the camera
+    (``docs/render-bench.md``)."""
     alpha = chain.alpha
     ground = grid_points(count, spacing * alpha)
     centers = np.column_stack([ground, np.full(len(ground), lift)])
@@ -407,7 +377,7 @@ class GridRenderer(OffscreenRenderer):
         budget_s: float,
     ) -> Timing:
         """Time ``frames`` frames of the placed ``drawables`` after drawing each once and
-        ``warmup`` untimed frames (see the module docstring)."""
+        ``warmup`` untimed frames (``docs/render-bench.md``, timing)."""
         self.program["view_proj"].write(view.view_proj.T.astype(np.float32).tobytes())
         self.program["eye"].value = tuple(float(v) for v in view.eye)
         self.program["max_point_size"].value = self.max_point_size
@@ -485,7 +455,7 @@ class BenchRow:
 
 @dataclass
 class BenchSettings:
-    """What a benchmark run draws and how it times it (defaults as the module docstring)."""
+    """What a benchmark run draws and how it times it (the defaults: ``docs/render-bench.md``)."""
 
     instances: tuple[int, ...] = PAPER_INSTANCES
     frames: int = DEFAULT_FRAMES

@@ -1,29 +1,9 @@
-"""Fidelity of LOD levels against their source mesh: silhouettes, geometric error, counts.
-
-**Silhouettes** (the PCD paper's F-measure). The source mesh and each level are drawn as coverage
-masks by a :class:`~.silhouette.SilhouetteRenderer` from cameras on a sphere around the
-object's centre (:func:`~.render.fibonacci_directions`), with a perspective camera of 45°
-vertical field of view. Per pixel and summed over all views, TP = covered by both, FP = by the
-level only, FN = by the reference only; precision = TP / (TP + FP), recall = TP / (TP + FN) and
-F = 2PR / (P + R) (:func:`silhouette_scores`). Each level is scored at fixed multiples of the
-bounding-box diagonal α (the protocol: 4, 8 and 16 α) and within its own range
-(:func:`level_window`): where it first shows and in the middle of its range, with its declared
-point size and with 1-pixel points.
-
-Point levels are drawn at the size the output files declare, scaled to the render
-(:meth:`~.silhouette.SilhouetteRenderer.declared_pixel_size`). The X3D ``pointSizeMaxValue`` is
-not applied: it is the size at the nearest distance the level is shown from, so it never binds
-within the level's range (where the in-range scores are exactly what a viewer draws), and
-applying it on the fixed protocol, which looks at coarse levels from nearer than they ever
-show, would measure the cap instead of the level; glTF declares no cap.
-
-**Geometric error** (:func:`geometric_errors`): symmetric Chamfer and Hausdorff distance
-between dense area-weighted samples of the source surface and the level (its points, or
-samples of its mesh), as fractions of α, with scipy's cKDTree.
-
-**Files read back** (:func:`~lodconvert.io.read_chains`): the chains of a file lodconvert
-wrote, with the parameters the file declares; :func:`match_references` pairs them with the
-objects of the source and checks that their bounds agree.
+"""Fidelity of LOD levels against their source mesh (``lodconvert evaluate``): silhouette
+precision, recall and F of each level against the source on a protocol of views and within the
+level's own range (:func:`silhouette_scores`, :func:`level_window`), points drawn at their
+declared size; Chamfer and Hausdorff distance between dense surface samples
+(:func:`geometric_errors`); the chains of a file lodconvert wrote paired with the source's
+objects (:func:`match_references`). How each is measured: ``docs/fidelity.md``.
 """
 
 from __future__ import annotations

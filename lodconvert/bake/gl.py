@@ -1,30 +1,11 @@
 """GL backend: the paper's FBO slab rendering, with moderngl through headless EGL.
 
-For each axis and each slab of the level grid the mesh is drawn with an orthographic camera
-looking along the axis, near/far planes clipping the slab and no face culling, into an image of
-``grid.image_shape(axis)`` pixels (pixel ``(iu, iv)`` is column ``iu``, row ``iv`` from the
-bottom, so the image covers ``cells[u]·pitch × cells[v]·pitch`` from ``lo``). The depth test
-keeps the nearest surface per pixel: ``<`` for the view from the low side (sign +1), ``>=``
-after clearing the depth to 0 for the view from the high side (sign -1). Two colour attachments
-receive the hit depth (R32F, world coordinate along the axis) and the face (R32I,
-``gl_PrimitiveID`` + 1, 0 = empty).
-
-The depth is not read from the depth buffer, nor interpolated from the vertices: the
-rasteriser snaps vertices to a sub-pixel grid (1/256 pixel on llvmpipe), which moves the
-interpolated depth of a face seen almost edge-on by a good part of a slab. A geometry shader
-hands each triangle's depth plane to the fragment shader, which evaluates it at the exact pixel
-centre, keeps the fragment only when that depth lies in the slab (as :meth:`Grid.slab_of`
-assigns it: the outer slabs are open) and writes it as the fragment depth. The clip planes lie
-half a slab outside the slab so that no fragment is lost to snapping. Hits then match the numpy
-backend's to float32 precision.
-
-Work per slab stays small: each slab draws only the faces that reach it (one IBO entry per
-face and slab, sorted by slab; faces spanning very many slabs are drawn together for every slab
-any of them reaches), faces that cover no pixel centre and slabs that no face reaches are
-skipped. Slabs are rendered as tiles of one tall framebuffer per axis, a batch of tiles at a
-time; then a compute shader (OpenGL 4.3) lists the covered pixels, so that only they are read
-back instead of whole, mostly empty images (on software renderers, or without 4.3, the images
-are read back and scanned).
+For each axis and slab of the level grid the mesh is drawn orthographically along the axis,
+clipped to the slab, from both sides; two colour attachments receive the hit depth and face.
+A geometry shader hands each triangle's depth plane to the fragment shader, which evaluates it
+at the exact pixel centre (vertex snapping would move it), so hits match the numpy backend's to
+float32 precision. Each slab draws only the faces that reach it, and a compute shader lists the
+covered pixels so that only they are read back. How and why: ``docs/baking.md``.
 
 Contexts are made when a :class:`GLBackend` is created, never at import: on Mesa llvmpipe a
 process forked after its parent made a context (even a released one) deadlocks in GL calls.

@@ -1,19 +1,9 @@
-"""Backend-independent steps of PCD baking: hole filling, merging, de-duplication, colours.
-
-A backend rasterises the 6 directions into :class:`SlabHits`; this module turns them into one
-point cloud on the level's grid:
-
-1. hole filling per slab image (:mod:`.filters`);
-2. all directions merged; each hit becomes a point at its pixel centre and hit depth;
-3. thin-feature rescue: surface samples (face centroids, and points along each face's longest
-   edge at most a pitch apart) whose cell has no ray hit in it or next to it — a part thinner
-   than the pitch, missed by every pixel centre — are added; they lie on the surface;
-4. one point per occupied cell: the hit nearest the cell centre (so points stay on the surface);
-5. colour from the source surface at the point, normal of the face it lies on.
-
-Memory follows the cells the surface occupies, not the faces: directions are folded into the
-one-point-per-cell result one at a time, and the thin-feature samples a chunk at a time (each
-chunk a share of the working-memory budget).
+"""Backend-independent steps of PCD baking: a backend's :class:`SlabHits` of the 6 directions
+become one point cloud on the level's grid — holes filled per slab image (:mod:`.filters`),
+directions merged, parts thinner than the pitch rescued by surface samples, one point per
+occupied cell (the hit nearest its centre), colours from the source surface and normals of the
+faces. Memory follows the occupied cells, not the faces: directions are folded in one at a
+time, samples a chunk at a time. The steps: ``docs/baking.md``.
 """
 
 from __future__ import annotations

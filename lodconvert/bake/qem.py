@@ -1,19 +1,7 @@
 """Quadric edge-collapse decimation (``fast-simplification``): to a vertex count, as a level
-kind, or within a distance, for LOD parents' far meshes.
-
-A ``qem`` level is the source mesh decimated to a target vertex count: a mesh level, drawn as
-triangles, where a ``pcd`` level would be drawn as points. ``fast-simplification`` targets a
-face count; the vertex count that comes out is checked and the face target lowered until it
-is at most the vertex target. Colours (vertex colours or texture, modulated by the base colour)
-are sampled from the source surface at each new vertex, on a face of a source vertex that
-collapsed into it; the texture itself is not kept.
-
-:func:`simplify_within` bounds the error instead of the count. Its quadrics are those of
-Garland & Heckbert: a vertex's error is the sum of its squared distances to the planes of the
-source faces it stands for, so an error below t² keeps it within t of each of those planes.
-``fast-simplification`` collapses, in pass i of its :data:`PASSES`, the edges whose error is
-below :data:`THRESHOLD_SCALE`·(i + 3)^agg; with no face target it runs every pass, and agg is
-chosen so that the last pass's threshold is the tolerance squared.
+kind (``qem``: the source decimated, colours sampled from the source surface at each new
+vertex), or within a distance (:func:`simplify_within`, Garland & Heckbert's quadrics bounding
+the error), for LOD parents' far meshes. How the targets are met: ``docs/baking.md``.
 """
 
 from __future__ import annotations

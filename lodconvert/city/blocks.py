@@ -1,21 +1,12 @@
 """Block proxies: a LOD parent's far level as a few prisms standing for whole blocks.
 
-Each object of a cell gives its **footprint** — its outline seen from above as
-:mod:`.prisms` derives it, the heights its prism would stand between (its roof's
-:data:`ROOF_PERCENTILE` th percentile on top), its roof and wall colours — found once and kept
-with its finest level, so that every tier reuses it. A cell unions its objects' footprints with
-shapely into connected **blocks**, closing gaps narrower than ``closing`` (a pixel where it
-switches in). A block is cut into **height bands** so that a tower does not vanish into the
-block around it: its objects, tallest first, join a band while their tops lie within ``band``
-metres of the band's tallest; a band is one prism from the block's lowest base up to the
-:data:`BAND_PERCENTILE` th percentile of its objects' tops (over their footprint areas), its
-outline the union of its own and every taller band's footprints, so a lower band stands under
-the taller ones rather than around them. Outlines are simplified (topology kept) within
-``tolerance``, polygons and holes smaller than a ``tolerance`` square dropped, ear-clipped and
-extruded without floors; a band's roof and walls take the area-weighted mean of its objects'
-roof and wall colours. All blocks are one part with vertex colours: one draw call. Objects that
-do not stand on the ground (:data:`~.lods.GROUND_COVERS`) or have no footprint with area and
-height have no block. Coordinates are z-up.
+Each object's **footprint** (outline, base and top, roof and wall colours, as :mod:`.prisms`
+derives them) is found once and kept with its finest level. A cell unions its objects'
+footprints into connected **blocks**, cuts each into **height bands** so that a tower does not
+vanish into the block around it, simplifies the outlines within a tolerance and extrudes them
+without floors: one part with vertex colours, one draw call. Objects that do not stand on the
+ground (:data:`~lodconvert.model.lods.GROUND_COVERS`) have no block. Coordinates are z-up.
+The rules in full: *Block proxies* in ``docs/cities.md``.
 """
 
 from __future__ import annotations

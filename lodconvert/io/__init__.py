@@ -1,38 +1,12 @@
 """File formats: one module (or package) per format, each declaring one :class:`Format` entry.
 
 An entry says everything the rest of lodconvert may know of a format: its suffixes, and
-whichever of these it offers —
-
-- ``read(path, **options) -> Scene``: an input (nodes may be yielded lazily);
-- ``write(chains, sink, info, **options)``: an output, streamed from an iterable of
-  :class:`~lodconvert.model.LodChain` into a :class:`~lodconvert.sinks.FileSink`;
-- ``read_back(path, geometry=True) -> list[LodChain]``: our own files, with their chains,
-  ranges, point sizes and bake parameters (used by evaluate, bench and the viewer page, which
-  needs no geometry);
-- ``read_cells(path) -> list[dict]``: the LOD parents (cells) of our own files, coarsest first
-  in document order (none: an empty list), each with the facts the writer declared
-  (``cell_id``, ``tier``, ``size``, ``key``, ``alpha``, ``beta``, ``gamma``, ``xs``,
-  ``cutoffs``, ``culled``, ``members``: object or finer cell ids, ``facts``: what the planner
-  measured), its ``center`` in scene coordinates, ``far``: its far level's declared facts, and
-  under the format's name where its nodes lie in the file (used by the viewer page);
-- ``read_frame(path) -> SceneFrame | None``: the scene frame of our own files (where a CRS
-  turned them y-up about a scene origin, :mod:`lodconvert.io.frame`), or ``None``; read-back
-  origins and centres are in the source's coordinates, the file's scene in the frame's;
-- ``check(path, findings, options)``: the structural checks ``validate`` runs, and every
-  conversion runs on its staged output before committing it;
-- ``output_folder(path) -> Path``: for a format written as a folder of files (3D Tiles), the
-  folder that the output path names, checked to be one the run may replace; the writer's sink
-  is then that folder (:class:`~lodconvert.sinks.DirectorySink`), and the run groups objects
-  into LOD parents (``--hlod auto`` unless given);
-- ``georeferenced``: whether the output places the scene on the globe by its CRS (3D Tiles),
-  so that an input that declares no CRS cannot join one that does;
-- ``formatter(info, **write options)``: for a format whose text of a chain needs nothing of
-  the rest of the document, a picklable callable that worker processes call on each chain they
-  bake (``formatter(chain)`` → that chain's piece of the output, or ``None``); ``write`` then
-  takes the pieces (``pieces``, a :class:`Pieces`) instead of formatting those chains itself.
-
-``read_options`` and ``write_options`` name the keyword options the format takes; the others
-are not passed to it. No other module parses our files or looks at suffixes.
+whichever of ``read`` (an input), ``write`` (an output, streamed into a sink), ``read_back``,
+``read_cells`` and ``read_frame`` (our own files), ``check`` (what ``validate`` and every
+conversion run), ``output_folder`` (a format written as a folder), ``georeferenced`` and
+``formatter`` (a chain's piece of the output, made in the workers) it offers, with the
+``read_options`` and ``write_options`` it takes. No other module parses our files or looks at
+suffixes. Each field in full: ``docs/format-registry.md``.
 """
 
 from __future__ import annotations
@@ -90,7 +64,7 @@ class OutputInfo:
 
 @dataclass(frozen=True)
 class Format:
-    """One format's registry entry (see the module docstring)."""
+    """One format's registry entry (``docs/format-registry.md``)."""
 
     name: str
     suffixes: tuple[str, ...]

@@ -1,20 +1,11 @@
 """Mesh reader: OBJ, PLY, STL, OFF, GLB, glTF (and ``.gz`` of each) through trimesh.
 
-Each object of the file becomes one :class:`Node`: an OBJ object (``o``), or group (``g``) in a
-file without objects; a glTF node (its primitives are the parts of one mesh); the whole file for
-PLY, STL and OFF. A geometry placed once has its placement applied (world coordinates, float64,
-``transform`` None); one that the scene graph places several times is read once, and its nodes
-share that :class:`Mesh` (in the geometry's own frame), each with its world ``transform``.
-
-Vertex colours, material base colours and textures (with UVs, via Pillow) are kept, as the sRGB
-bytes a :class:`Surface` holds: glTF's linear ``baseColorFactor`` and ``COLOR_0`` are converted;
-OBJ, PLY and OFF colours and all textures are sRGB already.
-
-A file whose content is not of its suffix's format is an :class:`InputError` saying so
-(``cannot be read as STL: ...``), before trimesh gets to guess at it. So is a ``.gz`` that
-inflates past ``limits.decompressed_bytes`` (inflation stops there), and a PLY or OFF file whose
-header declares more elements than its data holds or than the limits allow (checked before
-anything is allocated for them). What trimesh read then passes :mod:`.geometry_checks`.
+Each object of the file (an OBJ object or group, a glTF node, the whole of a PLY, STL or OFF
+file) becomes one :class:`Node`; a geometry the scene graph places several times is read once
+and shared, each node with its world ``transform``. Colours and textures are kept as sRGB. A
+file whose content is not of its suffix's format, a ``.gz`` inflating past its limit, and a
+header declaring more than its data holds or the limits allow are an :class:`InputError`; what
+trimesh read then passes :mod:`.geometry_checks`. In full: ``docs/readers.md`` (meshes).
 """
 
 from __future__ import annotations

@@ -2,21 +2,12 @@
 
 Input files carry text that an XML document cannot hold or that no parser would read back.
 :func:`object_text` bounds an object's id and attributes (its parts' included) before anything
-is written or parked on disk:
-
-- characters XML 1.0 cannot hold (controls other than tab, line feed and carriage return;
-  U+FFFE, U+FFFF) and lone surrogates (which UTF-8 cannot encode) are written as the six
-  characters ``\\uXXXX`` of their code point;
-- a string (a key, a value, the id) longer than :data:`MAX_TEXT_CHARS` is cut to it;
-- a list or mapping nested more than :data:`MAX_DEPTH` levels deep is written as its JSON text
-  (a string, bounded like any other);
-- the object's attributes are kept up to :data:`MAX_OBJECT_CHARS` characters of text; what
-  follows is left out.
-
-Each kind of cut is noted in one line (the report lists them per object, ``cut``). With these
-bounds an object's attributes, written as one X3D attribute value with every character escaped
-(at most 9 bytes each, :data:`MAX_OBJECT_CHARS`), stay far below the 10 MB that libxml2 reads
-by default (``XML_MAX_TEXT_LENGTH``).
+is written or parked on disk: characters XML 1.0 cannot hold and lone surrogates are written as
+``\\uXXXX``, strings cut at :data:`MAX_TEXT_CHARS`, lists and mappings nested deeper than
+:data:`MAX_DEPTH` written as their JSON text, and an object's attributes kept up to
+:data:`MAX_OBJECT_CHARS` characters — far below the 10 MB that libxml2 reads of one X3D
+attribute value, even with every character escaped. Each kind of cut is noted in one line (the
+report's ``cut``). See *Ids and attributes* in ``docs/cities.md``.
 """
 
 from __future__ import annotations

@@ -1,31 +1,13 @@
 """The viewer page: one HTML file beside an output that shows it switching levels at our cutoffs.
 
 The page holds its own script and the configuration read from the output
-(:func:`~.config.page_config`) and loads two things: the output itself (by a relative URL) and
-one viewer library — three.js for glTF (the levels of each ``MSFT_lod`` chain put in a
-``THREE.LOD`` at the cutoffs, points drawn at our point size) or X_ITE for X3D (its own ``LOD``
-and ``PointProperties``). The library comes from a public CDN unless a URL or a local copy of the
-npm package is given; when it (or the output) cannot be loaded, a box over the view names the URL
-that failed and, for the library, how to give the page a local copy (``--viewer-lib``). An
-on-screen readout (in a panel that folds to its heading) shows each object's active level and
-distance and, for a file with LOD parents, each cell's state (open, merged: showing its far
-level, culled, or hidden inside a coarser cell that is not open) and how many are merged; a LOD
-scale (the page's field, or ``?lodscale=`` in its URL) multiplies every cutoff the page switches
-at. Clicking an object shows its id and attributes (``chain.metadata`` as read back: a city
-object's type, name, function, measured height, address, generic attributes…) and highlights
-its levels, clicking empty space (or the attributes' close button) clears both;
-``window.lodconvertViewer`` exposes the same state (``objects``, ``cells``, ``merged``,
-``lodScale``), ``setDistance(d)``, ``setLodScale(s)`` and ``screenPoint([x, y, z])`` (where a
-world point shows on the page).
-
-A 3D Tiles tileset (``DIR/tileset.json``) gets a CesiumJS page inside its folder instead
-(:mod:`.tileset`, ``tiles.js``): the tiles selected, the tile under the pointer, click-to-inspect
-a building's feature.
-
-Browsers do not let a page opened from a file fetch its neighbours, so the page must be served:
-:func:`serve` (``lodconvert view OUT --serve``) serves a folder on 127.0.0.1. A local library
-folder must therefore lie inside the page's folder, or be served beside it under
-:data:`LIBRARY_MOUNT` (a page written with ``served=True``, see :func:`library_mounts`).
+(:func:`~.config.page_config`) and loads the output (by a relative URL) and one viewer library:
+three.js for glTF or X_ITE for X3D, from a public CDN unless a URL or a local copy of the npm
+package is given (``--viewer-lib``). A 3D Tiles tileset gets a CesiumJS page inside its folder
+instead (:mod:`.tileset`). Browsers do not let a page opened from a file fetch its neighbours,
+so :func:`serve` (``lodconvert view OUT --serve``) serves it on 127.0.0.1, with a library
+folder outside the page's under :data:`LIBRARY_MOUNT`. What the page shows and exposes to
+scripts (``window.lodconvertViewer``): ``docs/viewer.md``.
 """
 
 from __future__ import annotations

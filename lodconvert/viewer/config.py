@@ -1,18 +1,10 @@
 """What the viewer page needs to know about an output, read back by the output's own format
 (:func:`lodconvert.io.read_chains`, without geometry, and the format's ``read_cells``): per
-object its id, attributes (what the page shows of a clicked object), centre, diagonal α,
-cutoffs, level names and point sizes, the LOD parent (cell) holding it and, for glTF, the level
-nodes; for X3D the ``LOD`` node and the chain's ``Transform`` (after which prism switching
-names its ``Switch`` es and sensors). Per cell its id, tier, centre, cutoffs, culling, member
-ids, the kind of its far level and that level's point size, the cell holding it and, for glTF,
-its near and far nodes; for X3D its ``LOD`` node.
-
-Centres are in the file's scene coordinates, where the page draws: a georeferenced file's
-scene frame (:mod:`lodconvert.io.frame`) turns them y-up about its origin, and ``rotation``
-holds its rotation (row-major; the identity for a file in source coordinates), which turns a level's
-geometry (in its object's source axes) into the scene. ``view.direction`` is where the page's
-viewer stands from the middle of the objects: along +z, tilted :data:`PITCH_DEG` up for a
-y-up city, so that it looks 3-D.
+object its id, attributes, centre, diagonal, cutoffs, levels and point sizes, its cell and the
+nodes the page drives; per cell its tier, centre, cutoffs, members and far level. Centres are
+in the file's scene coordinates, where the page draws (:mod:`lodconvert.io.frame`), and the
+first view stands along +z, tilted :data:`PITCH_DEG` up for a y-up city. Each field:
+``docs/viewer.md``.
 
 Raises :class:`~lodconvert.errors.InputError` for files lodconvert did not write.
 """

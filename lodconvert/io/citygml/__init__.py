@@ -1,46 +1,14 @@
 """CityGML reader: CityGML 1.0, 2.0 and 3.0 (``.gml``, ``.xml``, and a ``.gz`` or ``.zip``
 holding one such file), streamed one city object at a time.
 
-Every top-level city object (a ``Building``, ``Bridge``, ``Road``, ``LandUse``, ``WaterBody``,
-``PlantCover``, ``GenericCityObject``, ``ReliefFeature``… typed by its element's local name)
-becomes one :class:`Node`. Each LoD the object carries (``lodNSolid``, ``lodNMultiSurface``,
-``lodNGeometry``, ``lod0FootPrint``/``lod0RoofEdge``, and the same properties of its thematic
-surfaces, openings and installations) is read into ``node.lods`` as ``"lod0"`` … ``"lod4"``, one
-:class:`Surface` per semantic type (``RoofSurface``, ``WallSurface``, ``Window``…) coloured by
-:mod:`lodconvert.semantics`; ``node.geometry`` is the highest LoD above 0 with faces (LoD 0 when
-there is no other). A polygon that a solid refers to (``xlink:href``) and a thematic surface
-holds is read once, with its semantics. Building (bridge, tunnel) parts are children of their
-object: each keeps its own attributes and LoDs, and their geometry is part of the object's (one
-surface per LoD and colour), so that a building is one object of the output however many parts
-it has. Its interior (rooms,
-furniture, interior installations: ``interiorRoom``, 3.0 ``buildingRoom``…) is read the same
-way, as parts, in the LoD it is given at (LoD4 in 1.0 and 2.0). Terrain is read from its
-``TINRelief`` components (their ``tin`` triangles, at the component's ``lod``; a ``Tin`` of
-control points alone is triangulated in plan); mass points, break lines and raster reliefs
-hold no surfaces. Implicit geometry (``lodNImplicitRepresentation``: a tree's or a lamp's
-relative geometry, given inline or linked from an object read before) is placed by its
-``ImplicitGeometry``'s matrix and reference point (:mod:`.implicit`).
-
-Geometry stays in the file's coordinates (float64) when its CRS is projected; a geographic CRS
-(latitude, longitude, height: EPSG:6697, 4326, 4979) is projected onto a transverse Mercator
-centred on the data (:class:`LocalFrame`), whose PROJ definition becomes the scene's CRS.
-
-The parse is hardened: no DTD is loaded, no entity resolved, no network used, and a document
-with a DOCTYPE is refused before its content is read; every text of the document is held to
-the run's :class:`~lodconvert.limits.Limits` as its bytes stream in (:mod:`.text_limit`), each
-city object's nesting depth before it is walked, and what a ``.gz`` or ``.zip`` inflates to.
-Nothing is walked by recursion deeper than :data:`~.geometry.MAX_PART_DEPTH` parts. Only the
-root's children reach Python as the document streams; city objects are read
-:data:`~.document.BATCH` at a time and their elements freed once converted, so memory follows
-the batch, not the file. With workers, runs of members are read in worker processes, as one
-process reads them (:mod:`.parallel`).
-
-What a reader must check passes :mod:`..geometry_checks`: a polygon whose ring is degenerate
-(fewer than three distinct points, no area) is dropped and counted with the object's dropped
-faces; an object with no element in it is only counted by type (``"empty"`` of the
-scene's ``citygml`` attribute); an object left with nothing, or whose coordinates cannot be
-read (a word that is not a number, a ring of partial points, a coordinate that is not finite
-or beyond 1e15), or whose parts nest too deep, is recorded as skipped.
+Every top-level city object becomes one :class:`Node` with each LoD it carries in
+``node.lods`` (``"lod0"`` … ``"lod4"``, one :class:`Surface` per semantic type); its parts and
+interior join its geometry, implicit geometry is placed (:mod:`.implicit`), and a geographic
+CRS is projected onto a local transverse Mercator (:class:`LocalFrame`). The parse is
+hardened (no DTD, entity or network; every text held to the limits as it streams,
+:mod:`.text_limit`); members are read :data:`~.document.BATCH` at a time, or in worker
+processes (:mod:`.parallel`), and pass :mod:`..geometry_checks`. In full:
+``docs/readers.md`` (CityGML).
 """
 
 from __future__ import annotations

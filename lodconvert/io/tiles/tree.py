@@ -1,22 +1,12 @@
 """A tileset's tree as ``lodconvert validate`` and ``lodconvert view`` read it, whoever wrote it:
-each tileset JSON read within the run's limits, its tiles walked without recursion, its content
-URIs held to its folder, its external tilesets read each once.
-
-- A tileset JSON must be a regular file of at most ``limits.tileset_json_bytes`` bytes (refused
-  before it is read: a 1 GB file of white space costs nothing), UTF-8, and nest arrays and
-  objects at most :data:`MAX_DEPTH` deep (counted on its bytes before it is parsed, so that
-  Python's parser never recurses past its limit).
-- A content URI must be a relative path (no scheme, host, query, fragment or backslash; ``%``
-  escapes decoded as a browser decodes them) naming a regular file inside the tileset's folder
-  once ``..`` and symbolic links are resolved: a link that points out of the folder is
-  reported, never followed to read what it points at.
-- External tilesets are read one at a time, after the file that refers to them (so that one
-  file's document is held at a time, however deep they nest); one that leads back to a file
-  above it (a cycle), or that a second tile refers to, is reported and not read again.
+each tileset JSON read within the run's limits (size, then nesting depth counted on its bytes,
+:data:`MAX_DEPTH`), its tiles walked without recursion, its content URIs held to its folder
+(relative, never followed out through ``..`` or a link), its external tilesets read each once,
+one at a time (a cycle, or a second reference, reported and not read again).
 
 :func:`walk` yields every tile, parents before children, and hands each problem to its caller
 as a :class:`Problem`: ``validate`` records them as findings, ``view`` refuses the tileset at
-the first.
+the first. Every case: *Hostile tilesets* in ``docs/3d-tiles.md``.
 """
 
 from __future__ import annotations

@@ -1,22 +1,13 @@
 """The tileset writer: LOD parents and objects (:func:`~lodconvert.bakery.iter_chains` with
 cells) → a tile tree, one GLB per tile (:mod:`.content`), placed in ECEF (:mod:`.placement`).
-Each tile's GLB is a :class:`~.task.TileTask` run by the run's executor, the one that bakes (in
-its worker processes with ``--workers``, while they bake the next cells); results (each tile's
-GLB, frame and box) come back in order and are written here, so the tree is the same for any
-worker count and no worker needs the staging folder.
-In a staging folder an interrupted run of the same inputs and options left, each tile whose
-file is whole and of the same key is kept (:mod:`.task`).
-
-Tree: the root (no content) holds one tile per coarsest cell and, beside each, the tile of the
-cell gathering the objects it left out, which no cell admitted
-(:func:`~lodconvert.city.cell_bake.bake_cell`; objects given without a cell get tiles of their
-own there). A cell's tile shows its far level; its children are its finer cells' tiles and, for
-the objects among its members, one tile of their coarsest mesh levels whose child, a leaf, holds
-their finest. Refinement is ``REPLACE`` everywhere.
-
-geometricError: a tile whose content switches to its children at distance d has
-GE = sse·d / focal_px (focal_px = h / (2·tan(fov/2)) of the reference view), so that CesiumJS,
-refining where GE·focal/distance exceeds its maximumScreenSpaceError (= sse), refines at d.
+Each tile's GLB is a :class:`~.task.TileTask` run by the run's executor, the one that bakes;
+results come back in order and are written here, so the tree is the same for any worker count
+and no worker needs the staging folder. Tiles that an interrupted run of the same key left
+whole are kept (:mod:`.task`). The root holds a tile per coarsest cell and, beside each, one
+for the objects no cell admitted; a cell's tile shows its far level, its children its finer
+cells' tiles and its objects' coarsest then finest levels, ``REPLACE`` everywhere. A tile that
+switches to its children at distance d has geometricError sse·d / focal_px. The tree, the
+geometricError and resuming: ``docs/3d-tiles.md``.
 """
 
 from __future__ import annotations
