@@ -21,6 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..heap import return_freed_heap
 from ..model import GREY, Mesh, Surface
 from .lods import source_levels
 
@@ -39,6 +40,9 @@ the most prisms at silhouette F ≥ :data:`MIN_PRISM_F` on TUM Munich, and the l
 (``benchmarks/results/city_levels.md``)."""
 _POLYGON = 3
 """Shapely's type id of a polygon."""
+TRIM_PARTS = 1 << 12
+"""Footprint polygons from which, once they are found, the heap their shapely geometries took
+is handed back (:func:`~lodconvert.heap.return_freed_heap`)."""
 FOOTPRINT_TOLERANCE_PX = 0.5
 """The footprint's simplification tolerance, in pixels of the reference view where the prism
 switches in."""
@@ -511,6 +515,8 @@ def prism(
     if not top > base:
         return None
     parts = simplified(footprint(lods, finest), tolerance)
+    if len(parts) >= TRIM_PARTS:
+        return_freed_heap()  # what shapely took for them, freed
     if not parts:
         return None
     solids = [extruded(part, base, top) for part in parts]
