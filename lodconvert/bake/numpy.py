@@ -26,6 +26,8 @@ from .grid import Grid, SlabHits, distinct_triangles
 CANDIDATE_BYTES = 160
 """Working memory per candidate (face, pixel) pair tested at once."""
 MIN_CHUNK = 1 << 16
+PROJECTED = 1 << 16
+"""Faces projected at a time by :func:`_projections`."""
 EPS = 1e-9
 PLANE_U, PLANE_V = np.array([1, 2, 0]), np.array([2, 0, 1])
 """The image plane's (u, v) axes seen along x, y and z (:meth:`Grid.plane_axes`)."""
@@ -106,14 +108,27 @@ def _not_edge_on(area: np.ndarray, surface: Mesh) -> np.ndarray:
 def _projections(surface: Mesh) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The corners of ``surface``'s faces not seen edge-on along x, then along y, then along
     z, projected: u and v ((3, m) each: corner, face) relative to ``centre``, the bounding
-    box's centre (returned last), and the axis each face is seen along (m,)."""
+    box's centre (returned last), and the axis each face is seen along (m,). Found
+    :data:`PROJECTED` faces at a time, so that what it takes besides them is bounded."""
     centre = surface.bounds.mean(axis=0)
-    tri = surface.triangles - centre
-    side, other = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
-    area = side[:, PLANE_U] * other[:, PLANE_V] - side[:, PLANE_V] * other[:, PLANE_U]
-    axis, face = np.nonzero(_not_edge_on(area, surface).T)
-    corners = tri.transpose(1, 2, 0)  # corner, coordinate, face
-    return corners[:, PLANE_U[axis], face], corners[:, PLANE_V[axis], face], axis, centre
+    found: list[list[tuple[np.ndarray, np.ndarray]]] = [[], [], []]  # per axis
+    for start in range(0, len(surface.faces), PROJECTED):
+        tri = surface.vertices[surface.faces[start : start + PROJECTED]] - centre
+        side, other = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        area = side[:, PLANE_U] * other[:, PLANE_V] - side[:, PLANE_V] * other[:, PLANE_U]
+        seen = _not_edge_on(area, surface)
+        corners = tri.transpose(1, 2, 0)  # corner, coordinate, face
+        for axis in range(3):
+            face = np.flatnonzero(seen[:, axis])
+            found[axis].append((corners[:, PLANE_U[axis], face], corners[:, PLANE_V[axis], face]))
+    pieces = [piece for each in found for piece in each]
+    axes = np.repeat(np.arange(3), [sum(u.shape[1] for u, _ in each) for each in found])
+    return (
+        np.concatenate([u for u, _ in pieces], axis=1),
+        np.concatenate([v for _, v in pieces], axis=1),
+        axes,
+        centre,
+    )
 
 
 def _pixel_range(lo: np.ndarray, hi: np.ndarray, origin: float, pitch: float, n: int):
@@ -259,33 +274,12 @@ def overlap_counts(one: np.ndarray, other: np.ndarray) -> tuple[int, int, int]:
     return int(np.count_nonzero(one)), int(np.count_nonzero(other)), both
 
 
-def _filled(
-    surfaces: Sequence[Mesh], grid: Grid, memory_bytes: int
-) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
-    """The silhouettes of :func:`silhouettes` laid out one after another in one flat array,
-    each image's rows a column wider (that column never filled), and where each image starts
-    in it with its rows and width, per surface along x, y and z."""
-    projected = [s.derived("numpy-projections", lambda s=s: _projections(s)) for s in surfaces]
-    pu = np.concatenate([p[0] for p in projected], axis=1)
-    pv = np.concatenate([p[1] for p in projected], axis=1)
-    view = np.concatenate([3 * i + p[2] for i, p in enumerate(projected)])  # surface, axis
-    shapes = [grid.image_shape(axis) for axis in range(3)]
-    layout, at = [], 0
-    for _ in surfaces:
-        for rows, cols in shapes:
-            layout.append((at, rows, cols + 1))  # a column more, where spans that reach the
-            at += rows * (cols + 1)  # last one end
-    start, rows_of, width = np.array(layout, dtype=np.int64).T
-    lo_u, lo_v = grid.lo[PLANE_U], grid.lo[PLANE_V]
-    origin = np.array([[lo_u - p[3][PLANE_U], lo_v - p[3][PLANE_V]] for p in projected])
-    origin_u, origin_v = origin[view // 3, 0, view % 3], origin[view // 3, 1, view % 3]
-    iv0, nv = _pixel_range(pv.min(axis=0), pv.max(axis=0), origin_v, grid.pitch, rows_of[view])
-    live = np.flatnonzero(nv)
-    count = nv[live]
-    # Per face and edge (edge k runs from corner k to the next): its lowest and highest v, its
-    # start, its rise in v (1 where it has none) and its run in u.
+def _edges(pu: np.ndarray, pv: np.ndarray) -> np.ndarray:
+    """Per edge (edge k of a face runs from its corner k to the next) of the faces whose
+    projected corners are ``pu`` and ``pv`` ((3, m) each): its lowest and highest v, its start,
+    its rise in v (1 where it has none) and its run in u ((6, 3, m))."""
     after_v, after_u = pv[NEXT], pu[NEXT]
-    edges_of = np.stack(
+    return np.stack(
         [
             np.minimum(pv, after_v),
             np.maximum(pv, after_v),
@@ -295,25 +289,52 @@ def _filled(
             after_u - pu,
         ]
     )
+
+
+def _filled(
+    surfaces: Sequence[Mesh], grid: Grid, memory_bytes: int
+) -> tuple[np.ndarray, list[tuple[int, int, int]]]:
+    """The silhouettes of :func:`silhouettes` laid out one after another in one flat array,
+    each image's rows a column wider (that column never filled), and where each image starts
+    in it with its rows and width, per surface along x, y and z."""
+    projected = [s.derived("numpy-projections", lambda s=s: _projections(s)) for s in surfaces]
+    shapes = [grid.image_shape(axis) for axis in range(3)]
+    layout, at = [], 0
+    for _ in surfaces:
+        for rows, cols in shapes:
+            layout.append((at, rows, cols + 1))  # a column more, where spans that reach the
+            at += rows * (cols + 1)  # last one end
+    start, rows_of, width = np.array(layout, dtype=np.int64).T
     chunk = max(MIN_CHUNK, memory_bytes // (4 * CANDIDATE_BYTES))
     edges = np.zeros(at, dtype=np.int64)
-    for part in _chunks(count, chunk):
-        c = count[part]
-        faces = np.repeat(live[part], c)
-        iv = iv0[faces] + np.arange(len(faces)) - np.repeat(np.cumsum(c) - c, c)
-        y = origin_v[faces] + (iv + 0.5) * grid.pitch
-        low_v, high_v, ay, rise, ax, run = np.take(edges_of, faces, axis=2)
-        crosses = (low_v <= y) & (y <= high_v)
-        x = ax + (y - ay) / rise * run  # (y - ay) / rise lies in [0, 1] where the edge crosses
-        low = np.where(crosses, x, np.inf).min(axis=0)
-        high = np.where(crosses, x, -np.inf).max(axis=0)
-        found = low <= high
-        faces, iv = faces[found], iv[found]
-        cols = width[view[faces]]
-        first, n = _pixel_range(low[found], high[found], origin_u[faces], grid.pitch, cols - 1)
-        spans = n > 0
-        begins = (start[view[faces]] + iv * cols + first)[spans]
-        edges += np.bincount(begins, minlength=at)
-        edges -= np.bincount(begins + n[spans], minlength=at)
+    for index, (pu, pv, axis, centre) in enumerate(projected):  # a surface at a time
+        origin_u, origin_v = grid.lo[PLANE_U] - centre[PLANE_U], grid.lo[PLANE_V] - centre[PLANE_V]
+        images = 3 * index + axis  # each face's image
+        iv0, nv = _pixel_range(
+            pv.min(axis=0), pv.max(axis=0), origin_v[axis], grid.pitch, rows_of[images]
+        )
+        live = np.flatnonzero(nv)
+        count = nv[live]
+        for part in _chunks(count, chunk):
+            c, faces = count[part], live[part]
+            local = np.repeat(np.arange(len(c)), c)
+            iv = iv0[faces][local] + np.arange(len(local)) - np.repeat(np.cumsum(c) - c, c)
+            seen = axis[faces][local]
+            y = origin_v[seen] + (iv + 0.5) * grid.pitch
+            low_v, high_v, ay, rise, ax, run = np.take(
+                _edges(pu[:, faces], pv[:, faces]), local, axis=2
+            )
+            crosses = (low_v <= y) & (y <= high_v)
+            x = ax + (y - ay) / rise * run  # (y - ay) / rise lies in [0, 1] where it crosses
+            low = np.where(crosses, x, np.inf).min(axis=0)
+            high = np.where(crosses, x, -np.inf).max(axis=0)
+            found = low <= high
+            iv, seen = iv[found], seen[found]
+            cols = width[3 * index + seen]
+            first, n = _pixel_range(low[found], high[found], origin_u[seen], grid.pitch, cols - 1)
+            spans = n > 0
+            begins = (start[3 * index + seen] + iv * cols + first)[spans]
+            edges += np.bincount(begins, minlength=at)
+            edges -= np.bincount(begins + n[spans], minlength=at)
     # Every span ends in its own row, so each row sums to nothing: one running sum fills all.
     return edges.cumsum() > 0, layout

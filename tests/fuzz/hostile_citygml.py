@@ -188,6 +188,29 @@ def many_parts(count: int) -> bytes:
     return document(building(inner))
 
 
+def grid_of_parts(count: int, ids: bool = True) -> bytes:
+    """A building of ``count`` parts, each a one-metre cube (with an id, or without), on a
+    square grid two metres apart."""
+    side = int(count**0.5) + 1
+    part = (
+        "<bldg:consistsOfBuildingPart><bldg:BuildingPart{}>{}</bldg:BuildingPart>"
+        "</bldg:consistsOfBuildingPart>"
+    )
+    pieces = []
+    for i in range(count):
+        rings = [_moved(ring, 2.0 * (i % side), 2.0 * (i // side)) for ring in cube()]
+        pieces.append(part.format(f' gml:id="P{i}"' if ids else "", surfaces(rings)))
+    return document(building("".join(pieces)))
+
+
+def _moved(pos_list: str, x: float, y: float) -> str:
+    """A posList moved by ``x`` and ``y``."""
+    values = [float(v) for v in pos_list.split()]
+    return " ".join(
+        f"{v + (x if k % 3 == 0 else y if k % 3 == 1 else 0):g}" for k, v in enumerate(values)
+    )
+
+
 def scaled_tree(scale: str, gml_id: str = "tree") -> str:
     """A tree member: a square placed by an implicit geometry whose matrix scales it by
     ``scale``."""

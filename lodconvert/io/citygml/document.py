@@ -15,6 +15,7 @@ import numpy as np
 from lxml import etree
 
 from ...errors import InputError
+from ...heap import return_freed_heap
 from ...limits import Limits
 from ...model import Mesh, Node, Surface
 from ...model.lods import finest
@@ -46,6 +47,9 @@ from .source import Stream, first_look, open_document, parser_options
 
 BATCH = 64
 """City objects triangulated together (their coordinates are held until then)."""
+TRIM_FACES = 1 << 18
+"""Triangles read between two hand-backs of the heap that freed XML elements leave
+(:func:`~lodconvert.heap.return_freed_heap`)."""
 _ROOT_CHILDREN = tuple(f"{{*}}{name}" for name in sorted(MEMBERS | {"boundedBy"}))
 """Tags of the root's children that reach Python (any namespace; nested ones are passed)."""
 
@@ -64,6 +68,8 @@ class Document:
     gml: str = GML_NAMESPACES[0]
     crs: Crs | None = None
     taken: set[str] = field(default_factory=set)
+    trimmed: int = 0
+    """Triangles read when the heap was last handed back (:data:`TRIM_FACES`)."""
     templates: Templates = field(default_factory=Templates)
     """Relative geometries of implicit geometry, for links from later objects."""
     stats: dict[str, dict[str, int]] = field(
@@ -105,9 +111,9 @@ class Document:
                     continue  # not a child of the root
                 for collected in self._member(element):
                     batch.append(collected)
+                    del collected  # held by the batch alone, freed with it
                     if len(batch) >= BATCH:
                         yield from self._finished(batch)
-                        batch = []
                 if not batch:
                     _free(element)
             yield from self._finished(batch)
@@ -191,8 +197,10 @@ class Document:
         return node
 
     def _finished(self, batch: list[tuple[Node, Holder]]) -> Iterator[Node]:
-        """Triangulate a batch of collected objects; their nodes with geometry (those left
-        with nothing, or unreadable, are recorded as skipped)."""
+        """Triangulate a batch of collected objects (emptying ``batch``); their nodes with
+        geometry (those left with nothing, or unreadable, are recorded as skipped), made
+        before the first is given, so that what their reading took is freed by then (and,
+        every :data:`TRIM_FACES` triangles, handed back)."""
         if not batch:
             return
         assert self.crs is not None
@@ -205,13 +213,24 @@ class Document:
                 self.tally,
             )
         )
-        for node, top in batch:
-            if id(top) in broken:
-                self._skip(node.id, broken[id(top)])
-                continue
-            finished = self._with_geometry(node, top)
-            if finished is not None:
-                yield finished
+        nodes = [
+            finished
+            for node, top in batch
+            if (finished := self._node_of(node, top, broken.get(id(top)))) is not None
+        ]
+        batch.clear()  # the holders, and the elements they keep
+        if self.tally.faces - self.trimmed >= TRIM_FACES:
+            return_freed_heap()
+            self.trimmed = self.tally.faces
+        yield from nodes
+
+    def _node_of(self, node: Node, top: Holder, broken: str | None) -> Node | None:
+        """``node`` with its geometry (:meth:`_with_geometry`), or None where the object is
+        ``broken`` (recorded as skipped, with the reason) or left with nothing."""
+        if broken is not None:
+            self._skip(node.id, broken)
+            return None
+        return self._with_geometry(node, top)
 
     def _with_geometry(self, node: Node, top: Holder) -> Node | None:
         """``node`` with its LoDs (its own surfaces and its parts') and geometry; None when

@@ -32,6 +32,7 @@ import numpy as np
 from lxml import etree
 
 from ...errors import InputError
+from ...heap import return_freed_heap
 from ...model import Surface
 from ...polygons import Triangles, points_surface, triangulate_many
 from ...semantics import Palette
@@ -64,6 +65,9 @@ PARSER_DEPTH = 2048
 MAX_PART_DEPTH = 32
 """Parts nested in parts below a top-level object (a building's parts' parts…) read; an object
 whose parts nest deeper is skipped."""
+TRIM_RINGS = 1 << 16
+"""Rings of one object read between two hand-backs of the heap its freed elements leave
+(:func:`~lodconvert.heap.return_freed_heap`)."""
 TRIANGULATED = 4096
 """Polygons triangulated together at most, but for one holder's (a batch's per-polygon
 arrays cost some 1 KB a polygon; thousands together already run as array operations)."""
@@ -125,7 +129,8 @@ class Holder:
     """A city object or one of its parts: its element and id, its parts, the polygons found in
     it, what was wrong with them, and (after :func:`triangulate_batch`) its surfaces by LoD."""
 
-    element: etree._Element
+    element: etree._Element | None
+    """Its element, until a part read lets go of it (:meth:`release`)."""
     kind: str
     gml_id: str
     parts: list[Holder]
@@ -150,6 +155,22 @@ class Holder:
         yield self
         for part in self.parts:
             yield from part.walk()
+
+    def release(self) -> None:
+        """Free a part's elements once it is read: emptied, then taken out of the tree (with
+        the property holding it, once that holds nothing else) and let go of, so that none of
+        it stays (an emptied part kept, with its property, pins the heap pages around them)."""
+        element, self.element = self.element, None
+        if element is None:
+            return
+        element.clear(keep_tail=False)
+        prop = element.getparent()
+        if prop is None:
+            return
+        prop.remove(element)
+        feature = prop.getparent()
+        if feature is not None and not len(prop):
+            feature.remove(prop)
 
     def forget_walk(self) -> None:
         """Let go of what :func:`gather` remembered of the elements walked."""
@@ -430,20 +451,25 @@ def gather(top: Holder, gml: str, templates: Templates | None = None) -> None:
 
 
 def _gathered(holder: Holder, root: etree._Element, gml: str, rings: _Rings, read: _Read) -> None:
-    """Collect and read ``holder``'s parts (each freed), then ``holder`` itself, its elements
-    freed once read (an object without links; ``root``: its element)."""
+    """Collect and read ``holder``'s parts (each freed: :meth:`Holder.release`), then
+    ``holder`` itself (an object without links; ``root``: its element); the heap the parts
+    took is handed back every :data:`TRIM_RINGS` rings."""
     for part in holder.parts:
         _gathered(part, root, gml, rings, read)
+        part.release()
     _collect(holder, root, gml, None)
     holder.forget_walk()
     _read_holder(holder, rings, read)
-    holder.element.clear(keep_tail=False)
+    if len(rings.counts) >= rings.trimmed + TRIM_RINGS:
+        return_freed_heap()
+        rings.trimmed = len(rings.counts)
 
 
 def _collect(top: Holder, root: etree._Element, gml: str, templates: Templates | None) -> None:
     """Find the polygons below holder ``top`` (``root``: its top-level object's element), as
     :func:`gather` says."""
-    walker = _Walker(top, {holder.element: holder for holder in top.walk()}, root)
+    holders = {holder.element: holder for holder in top.walk() if holder.element is not None}
+    walker = _Walker(top, holders, root)
     items = _ITEMS[gml](top.element)
     polygon_ids: dict[str, etree._Element] | None = None  # found when a link needs them
     for item in items:
@@ -490,6 +516,8 @@ class _Rings:
     values: list[np.ndarray] = field(default_factory=list)
     counts: list[int] = field(default_factory=list)
     widths: list[int] = field(default_factory=list)
+    trimmed: int = 0
+    """Rings read when the heap was last handed back."""
 
 
 def _ring_values(ring: etree._Element, rings: _Rings) -> None:
@@ -592,7 +620,8 @@ def _broken(top: Holder, reason: str) -> None:
     top.broken = reason
     for holder in reversed(list(top.walk())):  # parts before what holds them
         holder.polygons = []
-        holder.element.clear(keep_tail=False)
+        if holder.element is not None:
+            holder.element.clear(keep_tail=False)
 
 
 def _finish(top: Holder, rings: _Rings, read: _Read) -> None:
@@ -635,7 +664,7 @@ def _holder_rings(holder: Holder, rings: _Rings, read: _Read) -> None:
     _read_holder(holder, rings, read)
     for part in holder.parts:
         _holder_rings(part, rings, read)
-        part.element.clear(keep_tail=False)
+        part.release()
 
 
 def _read_holder(holder: Holder, rings: _Rings, read: _Read) -> None:
