@@ -64,6 +64,9 @@ class RunOptions:
     limits: Limits = DEFAULT_LIMITS
     strict: bool = False
     hlod: HlodOptions | None = None
+    hlod_kind: str = "auto"
+    """The far-level kind of the LOD parents an output format has without ``hlod`` (3D
+    Tiles')."""
     progress: Message = quiet
     warn: Message = quiet
     step: Step = no_step
@@ -101,7 +104,7 @@ def convert(
     for path in (output_path, run.report_path):
         _without_link_loop(path)
     folder = target.output_folder(Path(output_path)) if target.output_folder else None
-    run = _resolved(run, inputs, folder)
+    run = _resolved(run, inputs, target)
     clock = Clock(*STAGES)
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = _sink(outputs, output_path, folder, inputs, run)
@@ -150,12 +153,16 @@ def _without_link_loop(path: str | Path | None) -> None:
             ) from None
 
 
-def _resolved(run: RunOptions, inputs: Sequence[str | Path], folder: Path | None) -> RunOptions:
-    """``run`` with what it leaves open decided: LOD parents for a folder output (``folder``),
-    and where it gives no ``workers``, as many as the size of ``inputs`` pays for
-    (:func:`~.tasks.default_workers`; 1 with a scheduler)."""
-    if folder is not None and run.hlod is None:
-        run = replace(run, hlod=HlodOptions())
+def _resolved(run: RunOptions, inputs: Sequence[str | Path], target: Format) -> RunOptions:
+    """``run`` with what it leaves open decided, once: LOD parents for a format that always
+    has them (:attr:`~.io.Format.lod_parents`: 3D Tiles), of ``run.hlod_kind``; and where it
+    gives no ``workers``, as many as the size of ``inputs`` pays for
+    (:func:`~.tasks.default_workers`; 1 with a scheduler). :class:`UsageError` for a far-level
+    kind without LOD parents."""
+    if run.hlod is None and target.lod_parents:
+        run = replace(run, hlod=HlodOptions(kind=run.hlod_kind))
+    if run.hlod is None and run.hlod_kind != "auto":
+        raise UsageError("is for the cells that --hlod makes", "hlod_kind")
     if run.workers is None:
         size = sum(inflated_size(Path(path)) for path in inputs)
         run = replace(run, workers=1 if run.scheduler else default_workers(size))

@@ -76,9 +76,17 @@ class Format:
     check: Callable[..., None] | None = None
     output_folder: Callable[[Path], Path] | None = None
     georeferenced: bool = False
+    checked_as_streamed: bool = False
+    viewer: str | None = None
     formatter: Callable[..., Callable[[LodChain], Any]] | None = None
     read_options: tuple[str, ...] = ()
     write_options: tuple[str, ...] = ()
+
+    @property
+    def lod_parents(self) -> bool:
+        """Whether its outputs always have LOD parents: a format written as a folder (3D
+        Tiles, whose tile tree is the LoD hierarchy)."""
+        return self.output_folder is not None
 
     def read_file(self, path: str | Path, **options: Any) -> Scene:
         """``read`` with the options this format takes."""

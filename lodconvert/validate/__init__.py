@@ -65,18 +65,15 @@ def check_written(written: Path, target: str | Path) -> None:
     _fail_on_errors(validate_file(written, kind=Path(target).suffix), target)
 
 
-STREAMED = frozenset({".x3d"})
-"""The formats whose check reads the file once, from its start, as a stream."""
-
-
 def streamed_check(target: str | Path) -> bool:
-    """Whether ``target``'s format is checked reading its file as a stream
-    (:func:`check_stream`)."""
-    return Path(target).suffix.lower() in STREAMED
+    """Whether ``target``'s format is checked reading its file once, from its start, as a
+    stream (:func:`check_stream`; its registry entry's ``checked_as_streamed``)."""
+    return own_format(Path(target), role="check").checked_as_streamed
 
 
 def check_stream(stream: BinaryIO, target: str | Path) -> None:
-    """:func:`check_written` of a file of a :data:`STREAMED` format read from ``stream``."""
+    """:func:`check_written` of a file whose format is checked as a stream
+    (:func:`streamed_check`), read from ``stream``."""
     findings = Findings(Path(target))
     own_format(Path(target), role="check").check(stream, findings, None)
     _fail_on_errors(findings.items, target)

@@ -30,6 +30,7 @@ from typing import Any, ClassVar
 
 from .. import manifest
 from ..errors import UsageError
+from ..io import output_format
 from ..limits import DEFAULT_LIMITS, Limits
 from ..sinks import Outputs
 from ..version import __version__
@@ -67,7 +68,6 @@ SCRIPTS = {
     "tiles": ("panel.js", "tiles.js"),
 }
 """The parts of each kind's page script, in order."""
-FORMATS = {".glb": "gltf", ".gltf": "gltf", ".x3d": "x3d", ".json": "tiles"}
 CONTROLS = """\
   <label>distance <input id="distance" type="range" min="0" max="1000" step="1" value="0"></label>
   <label title="A factor on every cutoff: the levels switch at this many times their distances">\
@@ -148,11 +148,19 @@ def library_mounts(library: str | None, page_dir: Path) -> dict[str, Path]:
     return {} if folder is None else {LIBRARY_MOUNT: folder}
 
 
+def _viewer_of(asset: str | Path) -> str | None:
+    """The page kind of ``asset``'s format (its registry entry's ``viewer``), if any."""
+    try:
+        return output_format(asset).viewer
+    except UsageError:
+        return None
+
+
 def check_library(asset: str | Path, library: str | None, page: str | Path | None = None) -> None:
     """Raise :class:`~lodconvert.errors.UsageError` unless the page of ``asset`` (which need
     not exist yet), written to be opened from any server of its folder, can use ``library``;
     see :func:`library_base`."""
-    kind = FORMATS.get(Path(asset).suffix.lower())
+    kind = _viewer_of(asset)
     if kind is None:
         raise UsageError(f"no viewer page for {Path(asset).suffix or 'files without suffix'}")
     library_base(kind, library, Path(page or page_path(asset)).parent)
@@ -178,7 +186,7 @@ def render_page(
     """The HTML of the page at ``page`` showing ``asset`` (``served``: see
     :func:`library_base`); the configuration is read from ``source`` (default ``asset``: a
     staged copy while the run has not committed it), a tileset's within ``limits``."""
-    tiles = FORMATS.get(asset.suffix.lower()) == "tiles"
+    tiles = _viewer_of(asset) == "tiles"
     config = tileset_config(source or asset, limits) if tiles else page_config(source or asset)
     config["asset"] = _url(asset, page.parent)
     kind = config["format"]
@@ -220,7 +228,7 @@ def write_page(
     data = render_page(asset, page, library, served, limits=limits).encode("utf-8")
     with Outputs(inputs=[asset]) as outputs:
         outputs.file(page).write_bytes(data)
-        if page.parent == asset.parent and FORMATS.get(asset.suffix.lower()) == "tiles":
+        if page.parent == asset.parent and _viewer_of(asset) == "tiles":
             listed = manifest.adding(asset.parent, page.name, data, f"lodconvert {__version__}")
             if listed is not None:  # the tileset's list of its files names the page too
                 outputs.file(asset.parent / manifest.NAME).write_bytes(listed)

@@ -155,8 +155,7 @@ def _check_switching(args: argparse.Namespace) -> None:
 def _check_tiles(args: argparse.Namespace) -> None:
     """:class:`UsageError` for ``--sse`` with an output other than a tileset, or an ``--sse``
     that is not a positive number, before any work."""
-    tiles = output_format(args.output).output_folder is not None
-    if args.sse is not None and not tiles:
+    if args.sse is not None and "sse" not in output_format(args.output).write_options:
         raise UsageError(f"--sse is for 3D Tiles; write DIR/tileset.json, not {args.output}")
     if args.sse is not None and not (math.isfinite(args.sse) and args.sse > 0):
         raise UsageError(f"--sse must be a positive number of pixels, got {args.sse:g}")
@@ -198,12 +197,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
     _check_switching(args)
     _check_tiles(args)
     options = chain_options(args)
-    tiles = output_format(args.output).output_folder is not None  # always with LOD parents
-    hlod = None
-    if args.hlod or tiles:
-        hlod = HlodOptions(parse_sizes(args.hlod or "auto"), args.hlod_kind)
-    if args.hlod_kind != "auto" and hlod is None:
-        raise UsageError("--hlod-kind is for the cells that --hlod makes")
+    hlod = HlodOptions(parse_sizes(args.hlod), args.hlod_kind) if args.hlod else None
     limits = DEFAULT_LIMITS.with_text(args.limit)
     if args.viewer_lib and not args.html:
         raise UsageError("--viewer-lib is for the page that --html writes")
@@ -246,6 +240,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         read_options={**read_options(args), "up": args.up},
         strict=args.strict,
         hlod=hlod,
+        hlod_kind=args.hlod_kind,
         write_options={"switching": args.switching, "sse": args.sse},
         also=stage_page if args.html else None,
         limits=limits,

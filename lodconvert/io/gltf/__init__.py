@@ -19,6 +19,7 @@ FORMAT = Format(
     read_cells=read_cells,
     read_frame=read_frame,
     check=check_gltf,
+    viewer="gltf",
     formatter=buffers_formatter,
     write_options=("pieces",),
 )

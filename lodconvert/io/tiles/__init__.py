@@ -102,6 +102,7 @@ FORMAT = Format(
     check=check_tileset,
     write_options=("sse", "executor", "progress"),
     output_folder=output_folder,
+    viewer="tiles",
     georeferenced=True,
 )
 

@@ -28,6 +28,8 @@ FORMAT = Format(
     read_cells=read_cells,
     read_frame=read_frame,
     check=check_x3d,
+    checked_as_streamed=True,
+    viewer="x3d",
     formatter=chain_texts,
     write_options=("switching", "pieces"),
 )
