@@ -121,10 +121,7 @@ def convert(
         items = iter_chains(scene, run.chain, context, run.hlod, pieces, assembly.first_at)
         with clock("write"):
             chains = clock.iterate("assemble", assembly.recorded(items))
-            target.write_chains(
-                chains, sink, assembly.info, executor=executor, progress=run.progress,
-                pieces=pieces, **run.write_options,
-            )  # fmt: skip
+            target.write_chains(chains, sink, assembly.info, context, pieces, **run.write_options)
         tally = _finished(scene, assembly.records, context.skipped, run, named)
         with clock("validate"):
             _checked(sink, output_path, run.step, along)

@@ -15,12 +15,15 @@ import importlib
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError, UsageError
 from ..model import LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
 from .archive import member_name
+
+if TYPE_CHECKING:
+    from ..context import RunContext
 
 FORMAT_MODULES = (
     "lodconvert.io.cityjson",
@@ -94,11 +97,19 @@ class Format:
         return self.read(Path(path), **_taken(options, self.read_options))
 
     def write_chains(
-        self, chains: Iterable[LodChain], sink: Any, info: OutputInfo, **options: Any
+        self,
+        chains: Iterable[LodChain],
+        sink: Any,
+        info: OutputInfo,
+        context: RunContext | None = None,
+        pieces: Pieces | None = None,
+        **options: Any,
     ) -> None:
-        """``write`` with the options this format takes."""
+        """``write`` with the run's ``context`` (its executor, where the format has tasks of
+        its own: ``None`` runs them here), the ``pieces`` workers made and the options this
+        format takes."""
         assert self.write is not None
-        self.write(chains, sink, info, **_taken(options, self.write_options))
+        self.write(chains, sink, info, context, pieces, **_taken(options, self.write_options))
 
     def pieces(self, info: OutputInfo, options: dict[str, Any]) -> Pieces | None:
         """Where the pieces its ``formatter`` (with the write options this format takes) makes
@@ -138,9 +149,16 @@ def streamed(writers: dict[str, StreamWriter]) -> Callable[..., None]:
     """A ``write`` for formats written as one stream: the writer for the sink's suffix, into
     the sink's file, with the format's write options."""
 
-    def write(chains: Iterable[LodChain], sink: Any, info: OutputInfo, **options: Any) -> None:
+    def write(
+        chains: Iterable[LodChain],
+        sink: Any,
+        info: OutputInfo,
+        context: RunContext | None,
+        pieces: Pieces | None,
+        **options: Any,
+    ) -> None:
         with sink.open() as handle:
-            writers[sink.path.suffix.lower()](chains, handle, info, **options)
+            writers[sink.path.suffix.lower()](chains, handle, info, pieces=pieces, **options)
 
     return write
 

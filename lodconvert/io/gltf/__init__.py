@@ -21,7 +21,6 @@ FORMAT = Format(
     check=check_gltf,
     viewer="gltf",
     formatter=buffers_formatter,
-    write_options=("pieces",),
 )
 
 __all__ = [

@@ -18,15 +18,19 @@ import math
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ...errors import LodConvertError, UsageError
 from ...model import CellChain, LodChain, Mesh
-from .. import OutputInfo
+from .. import OutputInfo, Pieces
 from .metadata import Feature
 from .placement import Placement, world_to_frame
+
+if TYPE_CHECKING:
+    from ...context import RunContext
+
 from .task import TILES, TileResult, TileTask, Where
 
 DEFAULT_SSE = 16.0
@@ -400,13 +404,15 @@ def write_tileset(
     chains: Iterable[LodChain | CellChain],
     sink: Any,
     info: OutputInfo,
+    context: RunContext | None = None,
+    pieces: Pieces | None = None,
     sse: float = DEFAULT_SSE,
-    executor: Any = None,
-    progress: Callable[[str], None] | None = None,
 ) -> None:
     """The registry's ``write``: the tileset of ``chains`` (LOD parents and objects, as
     :func:`~lodconvert.bakery.iter_chains` yields them with cells) into ``sink``, each tile's
-    GLB made by ``executor`` (an :class:`~lodconvert.tasks.Executor`; ``None``: here)."""
+    GLB made by the executor of the run's ``context`` (``None``: here); a tileset takes no
+    ``pieces``."""
     if not (math.isfinite(sse) and sse > 0):
         raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
+    executor, progress = (context.executor, context.progress) if context else (None, None)
     TilesetWriter(sink, info, sse, executor, progress).write(chains, "tileset.json")

@@ -31,7 +31,7 @@ FORMAT = Format(
     checked_as_streamed=True,
     viewer="x3d",
     formatter=chain_texts,
-    write_options=("switching", "pieces"),
+    write_options=("switching",),
 )
 
 __all__ = [
