@@ -8,7 +8,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from .context import Message, quiet
+from .context import Message, RunContext, quiet
 from .errors import InputError, UsageError
 from .io import Format, input_format
 from .io.crs import checked_crs_option
@@ -26,19 +26,20 @@ def read_inputs(
     sources: Sequence[Any] | None = None,
     warn: Message = quiet,
     georeferenced: bool = False,
+    context: RunContext | None = None,
 ) -> tuple[Scene, dict[str, Any]]:
     """The scene of ``inputs`` (one, or several in one CRS and merged: :func:`merged`), each
-    read by its format (in ``sources`` where the caller found them) with the options it takes,
-    and the report's ``crs`` (:func:`~.reproject.in_one_crs`; ``georeferenced``: for an
-    output placed on the globe by its CRS, an input without one beside one with one is an
-    error)."""
+    read by its format (in ``sources`` where the caller found them) with the options it takes
+    (on the executor of ``context``, where given and the format reads on workers), and the
+    report's ``crs`` (:func:`~.reproject.in_one_crs`; ``georeferenced``: for an output placed
+    on the globe by its CRS, an input without one beside one with one is an error)."""
     if (read_options or {}).get("crs") is not None:
         checked_crs_option(read_options["crs"])
     sources = sources or [input_format(path) for path in inputs]
     if (read_options or {}).get("up") is not None:
         _check_up(inputs, sources)
     scenes = [
-        source.read_file(path, limits=limits, **(read_options or {}))
+        source.read_file(path, context, limits=limits, **(read_options or {}))
         for source, path in zip(sources, inputs, strict=True)
     ]
     for scene in scenes if (read_options or {}).get("crs") is not None else ():

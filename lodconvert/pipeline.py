@@ -109,14 +109,12 @@ def convert(
     with contextlib.ExitStack() as stack, Outputs(inputs=inputs) as outputs:
         sink = _sink(outputs, output_path, folder, inputs, run)
         report_sink = outputs.file(run.report_path) if run.report_path is not None else None
-        scene, crs_record, baker, executor = _read_stage(
+        scene, crs_record, context = _read_stage(
             inputs, sources, run, clock, stack, target.georeferenced
         )
+        executor = context.executor
         assembly = Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         pieces = _pieces(target, assembly.info, run, executor)
-        context = RunContext(
-            executor, baker, run.progress, run.warn, run.step, clock, run.limits, run.strict
-        )
         along = stack.enter_context(_check_along(sink, output_path, executor))
         items = iter_chains(scene, run.chain, context, run.hlod, pieces, assembly.first_at)
         with clock("write"):
@@ -126,8 +124,8 @@ def convert(
         with clock("validate"):
             _checked(sink, output_path, run.step, along)
         report = assembly.report(
-            named, output_path, baker, run.chain, run.read_options.get("up"), context.skipped,
-            clock, tally, crs_record,
+            named, output_path, context.backend, run.chain, run.read_options.get("up"),
+            context.skipped, clock, tally, crs_record,
         )  # fmt: skip
         if run.also is not None:
             run.also(outputs, sink, report)
@@ -182,32 +180,40 @@ def _sink(
 
 def _read_stage(
     inputs: Sequence[str | Path],
-    sources: Sequence[Any],
+    sources: Sequence[Format],
     run: RunOptions,
     clock: Clock,
     stack: contextlib.ExitStack,
     georeferenced: bool = False,
-) -> tuple[Scene, dict[str, Any], Backend, Executor]:
+) -> tuple[Scene, dict[str, Any], RunContext]:
     """The ``read`` stage: the scene of ``inputs`` and the report's ``crs`` (``georeferenced``:
-    for an output placed on the globe by its CRS, :func:`read_inputs`), the baker and the
-    executor, entered on ``stack`` (which reads too, where the reader spreads its work)."""
+    for an output placed on the globe by its CRS, :func:`read_inputs`), and the run's context
+    with its executor, entered on ``stack``; a city read through by a format that reads on
+    workers is read by that executor's workers."""
     others = run.workers > 1 or run.scheduler is not None  # processes other than this one
-    spread = {"spread": others and len(inputs) == 1 and _read_through(run)}
+    spread = others and len(inputs) == 1 and _read_through(run) and sources[0].reads_on_workers
     baker = get_backend(run.backend)
+
+    def context_of(executor: Executor) -> RunContext:
+        return RunContext(
+            executor, baker, run.progress, run.warn, run.step, clock, run.limits, run.strict
+        )
+
     # a cluster is reached first: an unreachable scheduler fails the run before any reading;
     # workers that will read are started first, so that they start while this process reads
-    early = run.scheduler or (spread["spread"] and "spread" in sources[0].read_options)
-    executor = stack.enter_context(_executor(run, baker, None)) if early else None
+    early = None
+    if run.scheduler or spread:
+        early = context_of(stack.enter_context(_executor(run, baker, None)))
     with clock("read"):
         scene, crs_record = read_inputs(
-            inputs, {**run.read_options, **spread}, run.limits, sources, run.warn, georeferenced
-        )
+            inputs, dict(run.read_options), run.limits, sources, run.warn, georeferenced,
+            early if spread else None,
+        )  # fmt: skip
     stack.enter_context(_input_kept_out_of_gc())
-    executor = executor or stack.enter_context(_executor(run, baker, object_count(scene)))
-    if scene.spread is not None:  # reading (its rest, or all of it) by the executor
-        with clock("read"):
-            scene.spread(executor.results, run.progress, executor.task_seconds)
-    return scene, crs_record, baker, executor
+    if early is not None:
+        return scene, crs_record, early
+    executor = stack.enter_context(_executor(run, baker, object_count(scene)))
+    return scene, crs_record, context_of(executor)
 
 
 def _pieces(target: Format, info: OutputInfo, run: RunOptions, executor: Executor) -> Pieces | None:

@@ -12,12 +12,15 @@ import pickle
 import signal
 import time
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
 from lxml import etree
 
+from lodconvert.bake import get_backend
+from lodconvert.context import RunContext
 from lodconvert.errors import InputError
 from lodconvert.io import read_scene, spread
 from lodconvert.io.citygml import members as members_module
@@ -152,23 +155,42 @@ def _read(
     processes), each member a task (``killer``: that task kills the workers that take it)
     under ``limits``; the facts of its nodes, the workers' results and what was told of
     reading in this process."""
-    scene = read_scene(path, spread=spread, limits=limits)
     results: list[Any] = []
     told: list[str] = []
     if not spread:
+        scene = read_scene(path, limits=limits)
         return scene, _parked_facts(scene), results, told
     with workers() as executor:
-
-        def kept(tasks: Iterable[Any]) -> Iterator[Any]:
-            sent = (_Kills(task) if i == killer else task for i, task in enumerate(tasks))
-            for result in executor.results(sent):
-                results.append(result)
-                yield result
-
-        assert scene.spread is not None
-        scene.spread(kept, told.append, TASK_SECONDS)
+        watched = _Watched(executor, killer, results)
+        context = RunContext(watched, get_backend("numpy"), progress=told.append)  # type: ignore[arg-type]
+        scene = read_scene(path, context=context, limits=limits)
         facts = _parked_facts(scene)
     return scene, facts, results, told
+
+
+@dataclass
+class _Here:
+    """An executor whose results are ``results``' and whose tasks are sized for ``task_seconds``."""
+
+    results: Callable[[Iterable[Any]], Iterator[Any]]
+    task_seconds: float
+
+
+@dataclass
+class _Watched:
+    """``executor``'s results, each kept in ``kept`` (task ``killer`` made to kill the
+    workers that take it)."""
+
+    executor: Executor
+    killer: int | None
+    kept: list[Any]
+    task_seconds: float = TASK_SECONDS
+
+    def results(self, tasks: Iterable[Any]) -> Iterator[Any]:
+        sent = (_Kills(task) if i == self.killer else task for i, task in enumerate(tasks))
+        for result in self.executor.results(sent):
+            self.kept.append(result)
+            yield result
 
 
 @pytest.fixture
@@ -509,10 +531,9 @@ def test_a_city_is_read_in_tasks_of_the_work_its_executor_is_sized_for(
     monkeypatch.setattr(spread.Sizer, "took", lambda self, seconds, size: None)
     counts, read = [], []
     for seconds in (0.1, 0.3):
-        scene = read_scene(path, spread=True)
         tasks: list[Any] = []
-        assert scene.spread is not None
-        scene.spread(functools.partial(_run_here, tasks), print, seconds)
+        here = _Here(functools.partial(_run_here, tasks), seconds)
+        scene = read_scene(path, context=RunContext(here, get_backend("numpy"), progress=print))  # type: ignore[arg-type]
         read.append(_parked_facts(scene))
         counts.append(len(tasks))
     assert read[0] == read[1]

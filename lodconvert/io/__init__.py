@@ -79,6 +79,7 @@ class Format:
     check: Callable[..., None] | None = None
     output_folder: Callable[[Path], Path] | None = None
     georeferenced: bool = False
+    reads_on_workers: bool = False
     checked_as_streamed: bool = False
     viewer: str | None = None
     formatter: Callable[..., Callable[[LodChain], Any]] | None = None
@@ -91,10 +92,16 @@ class Format:
         Tiles, whose tile tree is the LoD hierarchy)."""
         return self.output_folder is not None
 
-    def read_file(self, path: str | Path, **options: Any) -> Scene:
-        """``read`` with the options this format takes."""
+    def read_file(
+        self, path: str | Path, context: RunContext | None = None, **options: Any
+    ) -> Scene:
+        """``read`` with the options this format takes; a format that reads on workers
+        (``reads_on_workers``) reads on the executor of ``context``, where one is given."""
         assert self.read is not None
-        return self.read(Path(path), **_taken(options, self.read_options))
+        taken = _taken(options, self.read_options)
+        if self.reads_on_workers and context is not None:
+            return self.read(Path(path), context=context, **taken)
+        return self.read(Path(path), **taken)
 
     def write_chains(
         self,

@@ -11,7 +11,7 @@ parent's frame. Readers may yield nodes lazily; nothing here knows a file format
 from __future__ import annotations
 
 import pickle
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -192,12 +192,6 @@ def unpacked(node: Node | PackedNode) -> Node:
     return node.node() if isinstance(node, PackedNode) else node
 
 
-Spread = Callable[[Callable[[Iterable[Any]], Iterator[Any]], Callable[[str], None], float], None]
-"""``spread(results, progress, seconds)``: a reader told to read the rest of its nodes as tasks
-of about ``seconds`` of reading each by an executor's ``results``, telling ``progress`` what it
-reads itself instead."""
-
-
 @dataclass
 class Scene:
     """What a reader produced: its nodes (a list, or an iterator consumed once) and scene-wide
@@ -214,8 +208,6 @@ class Scene:
     city: bool = False
     """Whether a city model's reader made it: its objects are city objects, with their own
     LoDs and plots, in the CRS the file declares (or none)."""
-    spread: Spread | None = None
-    """How the reader can read the rest of its nodes in workers (None: it cannot)."""
 
     def __iter__(self) -> Iterator[Node | PackedNode]:
         return iter(self.nodes)

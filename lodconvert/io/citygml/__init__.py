@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from itertools import chain
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ...errors import InputError
 from ...limits import DEFAULT_LIMITS, Limits
@@ -28,6 +28,9 @@ from .document import Document
 from .names import CITYGML_NAMESPACE
 from .parallel import SpreadReading
 
+if TYPE_CHECKING:
+    from ...context import RunContext
+
 __all__ = ["CITYGML_NAMESPACE", "FORMAT", "LocalFrame", "read_citygml"]
 
 
@@ -37,7 +40,7 @@ def read_citygml(
     types: frozenset[str] | None = None,
     colors: Palette = DEFAULT_PALETTE,
     crs: str | None = None,
-    spread: bool = False,
+    context: RunContext | None = None,
 ) -> Scene:
     """Read a CityGML file (``.gml``/``.xml``, or a ``.gz``/``.zip`` of one) into a Scene whose
     nodes are streamed; raise :class:`InputError` with a one-line reason. ``crs`` (an EPSG
@@ -48,8 +51,8 @@ def read_citygml(
     before this returns (so that the scene's CRS is known); the rest as the nodes are taken.
     The scene's attributes hold the CityGML version, the vertical CRS, the local frame of a
     geographic CRS, and counts (links not resolved, degenerate polygons, features not read).
-    With ``spread``, the scene's :attr:`~.model.Scene.spread` lets an executor read the rest
-    of the document in workers (:mod:`.parallel`).
+    With ``context``, the rest of the document is read by the workers of its executor
+    (:mod:`.parallel`).
     """
     path = Path(path)
     source = str(path)
@@ -65,7 +68,10 @@ def read_citygml(
         document.crs = Crs.of(crs, source) if crs is not None else None
         return document
 
-    reading = SpreadReading(make) if spread else None
+    reading = None
+    if context is not None:
+        reading = SpreadReading(make)
+        reading.use(context.executor.results, context.progress, context.executor.task_seconds)
     document = reading.document if reading is not None else make()
     tally = document.tally
     nodes = reading.nodes() if reading is not None else document.nodes()
@@ -87,7 +93,6 @@ def read_citygml(
         crs=declared.scene_crs,
         attributes=attributes,
         city=True,
-        spread=reading.use if reading is not None else None,
     )
     return attach_tally(scene, tally)
 
@@ -96,5 +101,6 @@ FORMAT = Format(
     name="citygml",
     suffixes=(".gml", ".xml", ".zip"),
     read=read_citygml,
-    read_options=("limits", "types", "colors", "crs", "spread"),
+    read_options=("limits", "types", "colors", "crs"),
+    reads_on_workers=True,
 )

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ...errors import InputError
 from ...limits import DEFAULT_LIMITS, Limits
@@ -23,6 +24,9 @@ from ...semantics import DEFAULT_PALETTE, Palette
 from .. import Format
 from ..archive import member_name
 from .document import read_document, read_sequence
+
+if TYPE_CHECKING:
+    from ...context import RunContext
 
 __all__ = ["FORMAT", "read_cityjson"]
 
@@ -37,14 +41,14 @@ def read_cityjson(
     types: Iterable[str] | None = None,
     colors: Palette = DEFAULT_PALETTE,
     crs: str | None = None,
-    spread: bool = False,
+    context: RunContext | None = None,
 ) -> Scene:
     """Read a CityJSON (``.json``) or CityJSONSeq (``.jsonl``) file, plain, ``.gz`` or in a
     ``.zip``, into a Scene (see the module docstring); :class:`InputError` with a one-line
     reason when it cannot be. ``types``: keep only CityObjects of these types (and their
     descendants); ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`);
-    ``crs`` replaces the CRS the file declares; with ``spread``, the objects can be read by
-    workers (:attr:`~.model.Scene.spread`).
+    ``crs`` replaces the CRS the file declares; with ``context``, the objects are read by the
+    workers of its executor.
     The scene carries an :class:`~..geometry_checks.InputTally` of dropped faces and skipped
     objects."""
     path = Path(path)
@@ -55,13 +59,14 @@ def read_cityjson(
     name = (member_name(path) if path.name.lower().endswith(".zip") else path.name).lower()
     name = name.removesuffix(".gz")
     if name.endswith(".jsonl"):
-        return read_sequence(path, limits, _types(types), colors, crs, spread)
-    return read_document(path, limits, _types(types), colors, crs, spread)
+        return read_sequence(path, limits, _types(types), colors, crs, context)
+    return read_document(path, limits, _types(types), colors, crs, context)
 
 
 FORMAT = Format(
     name="cityjson",
     suffixes=(".json", ".jsonl", ".zip"),
     read=read_cityjson,
-    read_options=("limits", "types", "colors", "crs", "spread"),
+    read_options=("limits", "types", "colors", "crs"),
+    reads_on_workers=True,
 )

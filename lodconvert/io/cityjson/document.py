@@ -4,12 +4,12 @@ in batches of :data:`BATCH` objects, their nodes yielded lazily."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from contextlib import closing
 from dataclasses import dataclass
 from itertools import chain
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ...errors import InputError
 from ...limits import Limits
@@ -17,7 +17,6 @@ from ...model import Node, PackedNode, Scene, with_geometry
 from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
-from ..spread import Results
 from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_node, checked_nodes
 from .parallel import ObjectsReading, SequenceReading
@@ -34,6 +33,9 @@ from .source import (
 )
 from .triangulation import triangulate_batch
 from .vertices import vertices_of
+
+if TYPE_CHECKING:
+    from ...context import RunContext
 
 BATCH = 64
 """City objects whose polygons are triangulated together (a CityJSONSeq reader holds the
@@ -59,11 +61,10 @@ def read_document(
     types: frozenset[str] | None,
     palette: Palette,
     crs: str | None,
-    spread: bool = False,
+    context: RunContext | None = None,
 ) -> Scene:
     """A ``.json`` CityJSON file: every node built before the scene is returned (with
-    ``spread``, when the scene's :attr:`~.model.Scene.spread` is given an executor, or when
-    its nodes are first taken: :mod:`.parallel`)."""
+    ``context``, by the workers of its executor: :mod:`.parallel`)."""
     tally = InputTally(str(path), limits)
     data = load_document(path, limits, tally)
     ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs, str(path)), palette)
@@ -79,19 +80,16 @@ def read_document(
             raise InputError(f"has no CityObject {which}with surfaces", str(path))
         return size
 
-    if spread and _any_surface(objects, types):
+    if context is not None and _any_surface(objects, types):
         reading = ObjectsReading(
             objects, ctx, types, lambda: _object_nodes(objects, ctx, types), checked,
             lambda: read_document(path, limits, types, palette, crs),
         )  # fmt: skip
-
-        def read_by(results: Results, progress: Callable[[str], None], seconds: float) -> None:
-            reading.use(results, progress, seconds)
-            if reading.roots is not None:
-                scene.size = checked(reading.roots)
-
+        executor = context.executor
+        reading.use(executor.results, context.progress, executor.task_seconds)
         scene = Scene(source=str(path), nodes=reading.nodes(), crs=ctx.crs, city=True)
-        scene.spread = read_by
+        if reading.roots is not None:
+            scene.size = checked(reading.roots)
     else:
         nodes = _object_nodes(objects, ctx, types)
         scene = Scene(str(path), nodes, crs=ctx.crs, size=checked(nodes), city=True)
@@ -213,11 +211,10 @@ def read_sequence(
     types: frozenset[str] | None,
     palette: Palette,
     crs: str | None,
-    spread: bool = False,
+    context: RunContext | None = None,
 ) -> Scene:
     """A CityJSONSeq file: the header read now, the features' nodes yielded lazily (with
-    ``spread``, by workers once the scene's :attr:`~.model.Scene.spread` is given an
-    executor: :mod:`.parallel`)."""
+    ``context``, by the workers of its executor: :mod:`.parallel`)."""
     lines = sequence_lines(path, limits)
     try:
         number, first = next(lines, (1, b""))
@@ -236,12 +233,14 @@ def read_sequence(
         lines.close()
         raise
     reading = None
-    if spread:
+    if context is not None:
 
         def again() -> Iterator[Node]:
             return iter(read_sequence(path, limits, types, palette, crs).nodes)
 
         reading = SequenceReading(lines, header, ctx, types, _feature_nodes, again)
+        executor = context.executor
+        reading.use(executor.results, context.progress, executor.task_seconds)
     nodes = reading.nodes() if reading is not None else _feature_nodes(lines, header, ctx, types)
     first_node = next(nodes, None)  # its vertices centre a geographic CRS's local frame
     scene = Scene(
@@ -249,7 +248,6 @@ def read_sequence(
         nodes=chain(() if first_node is None else (first_node,), nodes),
         crs=ctx.crs,
         city=True,
-        spread=reading.use if reading is not None else None,
     )
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))
