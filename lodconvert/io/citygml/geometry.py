@@ -45,6 +45,7 @@ from ..geometry_checks import (
 from ..numbers import parse_floats
 from .implicit import Templates, placed, placement
 from .names import (
+    GML_IDS,
     GML_NAMESPACES,
     HOLDING_PROPERTIES,
     LOD_PROPERTY,
@@ -74,7 +75,6 @@ arrays cost some 1 KB a polygon; thousands together already run as array operati
 _DEDUP_DECIMALS = 6
 """A polygon whose exterior ring repeats another's of the same LoD to this many decimals is
 read once (a solid's copy of a thematic surface's polygon)."""
-_GML_IDS = tuple(f"{{{ns}}}id" for ns in GML_NAMESPACES)
 _ITEMS = {
     gml: etree.XPath(
         " | ".join(
@@ -255,7 +255,7 @@ def holders_of(element: etree._Element, depth: int = 0) -> Holder:
 
 def gml_id_of(element: etree._Element) -> str:
     """The element's ``gml:id`` (any GML version), or ``""``."""
-    return next((element.get(key) for key in _GML_IDS if element.get(key)), "")
+    return next((element.get(key) for key in GML_IDS if element.get(key)), "")
 
 
 class _Place(NamedTuple):
@@ -499,7 +499,7 @@ def _polygon_ids(items: list[etree._Element]) -> dict[str, etree._Element]:
     """The ``items`` that link nowhere (polygons), by their ``gml:id``s."""
     ids = {}
     for item in items:
-        for key in _GML_IDS:
+        for key in GML_IDS:
             if (value := item.get(key)) is not None and item.get(XLINK_HREF) is None:
                 ids[value] = item
     return ids
