@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import functools
 from collections import Counter
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -440,14 +440,7 @@ def gather(top: Holder, gml: str, templates: Templates | None = None) -> None:
         _collect(top, top.element, gml, templates)
         read_coordinates(top)
         return
-    rings = _Rings()
-    read = _Read(top, [], [], np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
-    try:
-        _gathered(top, top.element, gml, rings, read)
-    except BrokenObject as exc:
-        _broken(top, str(exc))
-        return
-    _finish(top, rings, read)
+    _read_object(top, functools.partial(_gathered, top, top.element, gml))
 
 
 def _gathered(holder: Holder, root: etree._Element, gml: str, rings: _Rings, read: _Read) -> None:
@@ -605,10 +598,17 @@ def read_coordinates(top: Holder) -> None:
     never holds its whole tree and all its coordinates at once."""
     for holder in top.walk():
         holder.forget_walk()
+    _read_object(top, functools.partial(_holder_rings, top))
+
+
+def _read_object(top: Holder, read_rings: Callable[[_Rings, _Read], None]) -> None:
+    """Read the coordinates of ``top``'s polygons, which ``read_rings`` adds to the rings and
+    the read it is given (:class:`BrokenObject` when one cannot be read), into
+    :attr:`Holder.read`, or why they cannot be read into :attr:`Holder.broken`."""
     rings = _Rings()
     read = _Read(top, [], [], np.zeros((0, 3)), np.zeros(0, dtype=np.int64))
     try:
-        _holder_rings(top, rings, read)
+        read_rings(rings, read)
     except BrokenObject as exc:
         _broken(top, str(exc))
         return
