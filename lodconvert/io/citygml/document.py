@@ -24,15 +24,7 @@ from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
 from ..mesh import object_id
 from .attributes import attributes_of
-from .geometry import (
-    BrokenObject,
-    Holder,
-    check_depth,
-    gather,
-    gml_id_of,
-    holders_of,
-    triangulate_batch,
-)
+from .holders import BrokenObject, Holder, gml_id_of, holders_of
 from .implicit import Templates
 from .names import (
     CITYGML_NAMESPACE,
@@ -44,6 +36,8 @@ from .names import (
     namespace,
 )
 from .source import Stream, first_look, open_document, parser_options
+from .triangulation import triangulate_batch
+from .walk import check_depth, gather
 
 BATCH = 64
 """City objects triangulated together (their coordinates are held until then)."""

@@ -20,14 +20,13 @@ import copy
 import numpy as np
 from lxml import etree
 
-from .names import GML_NAMESPACES, local
+from .names import GML_IDS, local
 
 MAX_TEMPLATES = 1024
 """Relative geometries kept for later objects' links (a document's distinct tree and furniture
 models; links to geometries past this many are left unresolved)."""
 RELATIVE_GEOMETRIES = frozenset({"relativeGMLGeometry", "relativeGeometry"})
 """Properties of an ``ImplicitGeometry`` that hold (or link to) its geometry."""
-_GML_IDS = tuple(f"{{{ns}}}id" for ns in GML_NAMESPACES)
 
 
 class Templates:
@@ -46,7 +45,7 @@ class Templates:
                 if local(prop) not in RELATIVE_GEOMETRIES:
                     continue
                 for geometry in prop:
-                    gml_id = next((geometry.get(k) for k in _GML_IDS if geometry.get(k)), None)
+                    gml_id = next((geometry.get(k) for k in GML_IDS if geometry.get(k)), None)
                     if gml_id is None or gml_id in self.geometries:
                         continue
                     if len(self.geometries) < self.limit:

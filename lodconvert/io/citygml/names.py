@@ -10,6 +10,8 @@ from lxml import etree
 CITYGML_NAMESPACE = re.compile(r"http://www\.opengis\.net/citygml/(1\.0|2\.0|3\.0)")
 """The core namespace of each CityGML version (the root ``CityModel``'s)."""
 GML_NAMESPACES = ("http://www.opengis.net/gml", "http://www.opengis.net/gml/3.2")
+GML_IDS = tuple(f"{{{ns}}}id" for ns in GML_NAMESPACES)
+"""The ``gml:id`` attribute's name in each GML version."""
 XLINK_HREF = "{http://www.w3.org/1999/xlink}href"
 LOD_PROPERTY = re.compile(
     r"lod([0-4])(Solid|MultiSolid|MultiSurface|CompositeSurface|Surface|Geometry|FootPrint|RoofEdge"
