@@ -533,9 +533,9 @@ def test_billion_laughs_is_refused_fast(tmp_path: Path, out_dir: Path) -> None:
     )
     path = tmp_path / "laughs.gml"
     path.write_text(document("<gml:name>&a9;</gml:name>", prolog=f"<!DOCTYPE x [{entities}]>"))
-    start = time.perf_counter()
+    start = time.process_time()  # CPU, not wall: a loaded machine slows the clock, not the work
     refused(path, out_dir, "DOCTYPE")
-    assert time.perf_counter() - start < 5.0
+    assert time.process_time() - start < 5.0
 
 
 def test_zip_with_a_parent_path_is_refused(tmp_path: Path, out_dir: Path) -> None:

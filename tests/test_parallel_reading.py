@@ -499,9 +499,9 @@ def test_a_long_member_is_scanned_in_time_linear_in_its_bytes(
     monkeypatch.setattr(members_module, "CHUNK", 4096)
     long = inside.format("x" * (16 << 20))
     text = _city(f"<cityObjectMember><a>{long}</a></cityObjectMember>").encode()
-    start = time.perf_counter()
+    start = time.process_time()  # CPU, not wall: a loaded machine slows the clock, not the work
     assert [len(member) for _, member in Members(io.BytesIO(text))][1] > 16 << 20
-    assert time.perf_counter() - start < 3.0
+    assert time.process_time() - start < 3.0
 
 
 def _run_here(kept: list[Any], tasks: Iterable[Any]) -> Iterator[Any]:
