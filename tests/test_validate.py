@@ -707,8 +707,8 @@ def test_converter_refuses_an_invalid_output(
     out.write_bytes(b"previous output")
     real = gltf.write_glb
 
-    def truncating(chains, handle, info) -> None:
-        real(chains, handle, info)
+    def truncating(chains, handle, info, **options) -> None:
+        real(chains, handle, info, **options)
         handle.truncate(handle.tell() - 8)
 
     writer = streamed({".glb": truncating})

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError, UsageError
+from ..limits import DEFAULT_LIMITS, Limits
 from ..model import LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
 from .archive import member_name
@@ -34,6 +35,15 @@ FORMAT_MODULES = (
     "lodconvert.io.tiles",
 )
 """Modules that declare a ``FORMAT`` (or ``FORMATS``), in lookup order."""
+
+
+@dataclass(frozen=True)
+class CheckOptions:
+    """What a format's ``check`` may use: an X3D schema to validate against too (a file, or a
+    folder holding ``x3d-4.0.xsd``), and the limits of what it reads."""
+
+    x3d_schema: str | Path | None = None
+    limits: Limits = DEFAULT_LIMITS
 
 
 @dataclass

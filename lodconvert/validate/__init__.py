@@ -14,9 +14,8 @@ from pathlib import Path
 from typing import BinaryIO
 
 from ..errors import InputError, LodConvertError
-from ..io import own_format
+from ..io import CheckOptions, own_format
 from ..io.findings import ERROR, WARNING, Finding, Findings
-from ..io.x3d.check import load_x3d_schema
 from ..limits import DEFAULT_LIMITS, Limits
 
 
@@ -49,8 +48,7 @@ def validate_file(
     elif path.stat().st_size == 0:
         findings.error("EMPTY", "the file is empty")
     else:
-        schema = load_x3d_schema(x3d_schema) if x3d_schema is not None and kind == ".x3d" else None
-        check(path, findings, limits if kind == ".json" else schema)
+        check(path, findings, CheckOptions(x3d_schema, limits))
     return findings.items
 
 
@@ -98,7 +96,6 @@ __all__ = [
     "check_stream",
     "check_written",
     "errors_of",
-    "load_x3d_schema",
     "streamed_check",
     "validate_file",
 ]

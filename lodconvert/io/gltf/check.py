@@ -21,9 +21,7 @@ import mmap
 import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, BinaryIO
-
-from lxml import etree
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 from ..findings import Findings
 from ..frame import frame_from_record
@@ -40,6 +38,9 @@ from .stream import (
     utf8_error,
 )
 from .summary import SINKS, clean
+
+if TYPE_CHECKING:
+    from .. import CheckOptions
 
 MAX_JSON_DEPTH = 64
 """Deepest nesting of JSON arrays and objects accepted (lodconvert writes fewer than 10)."""
@@ -156,7 +157,7 @@ def _data_uri(doc: dict[str, Any], findings: Findings) -> bytes:
         return b""
 
 
-def check_gltf(path: Path, findings: Findings, _: etree.XMLSchema | None) -> None:
+def check_gltf(path: Path, findings: Findings, _: CheckOptions | None) -> None:
     """Read the GLB or ``.gltf`` (with an embedded buffer) and run every check; a malformed file
     gives findings, never an exception.
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from ..gltf.binary import accessor_values, split_glb
 from ..gltf.stream import Source, too_deep
 from .tree import MAX_DEPTH, Problem, Tile, walk
 
+if TYPE_CHECKING:
+    from .. import CheckOptions
+
 TOLERANCE = 1e-3
 """Metres a position or a child's corner may lie outside a box (float rounding)."""
 _GLTF_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -36,11 +39,10 @@ _BYTES = {"INT8": 1, "UINT8": 1, "INT16": 2, "UINT16": 2, "INT32": 4, "UINT32": 
           "UINT64": 8, "FLOAT32": 4, "FLOAT64": 8}  # fmt: skip
 
 
-def check_tileset(path: Path, findings: Findings, options: Any = None) -> None:
-    """Check the tileset ``path`` (its external tilesets and contents too) into ``findings``;
-    ``options`` the run's :class:`~lodconvert.limits.Limits` (default: the defaults; anything
-    else, such as an X3D schema, is ignored)."""
-    limits = options if isinstance(options, Limits) else DEFAULT_LIMITS
+def check_tileset(path: Path, findings: Findings, options: CheckOptions | None = None) -> None:
+    """Check the tileset ``path`` (its external tilesets and contents too) into ``findings``,
+    reading within the limits of ``options`` (default: the defaults)."""
+    limits = options.limits if options is not None else DEFAULT_LIMITS
     try:
         _Checker(findings).run(path, limits)
     except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:

@@ -19,7 +19,7 @@ import functools
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 import numpy as np
 from lxml import etree
@@ -27,6 +27,9 @@ from lxml import etree
 from ...errors import LodConvertError
 from ..findings import Findings
 from .metadata import METADATA_SET
+
+if TYPE_CHECKING:
+    from .. import CheckOptions
 
 MAX_SCHEMA_FINDINGS = 20
 """Schema errors listed one by one; any more are summed up in one finding."""
@@ -253,8 +256,9 @@ def _check_route(route: etree._Element, defined: set[str], findings: Findings) -
             )
 
 
-def check_x3d(path: Path | BinaryIO, findings: Findings, schema: etree.XMLSchema | None) -> None:
-    """Stream the document (a file, or a binary stream read once: then without ``schema``),
+def check_x3d(path: Path | BinaryIO, findings: Findings, options: CheckOptions | None) -> None:
+    """Stream the document (a file, or a binary stream read once: then without the schema of
+    ``options``; :class:`LodConvertError` where that schema cannot be loaded),
     checking nodes as they close; ``Shape`` s are cleared once checked and each object's
     top-level ``Transform`` once it closes, so that memory stays small for large files and
     many objects."""
@@ -305,8 +309,8 @@ def check_x3d(path: Path | BinaryIO, findings: Findings, schema: etree.XMLSchema
             f"MetadataSet name='{METADATA_SET}'",
         )
     _check_components(root, used, findings)
-    if schema is not None and isinstance(path, Path):
-        _check_schema(path, schema, findings)
+    if options is not None and options.x3d_schema is not None and isinstance(path, Path):
+        _check_schema(path, load_x3d_schema(options.x3d_schema), findings)
 
 
 def _top_level(element: etree._Element) -> bool:
