@@ -507,8 +507,13 @@ def _dask_command(*args: object) -> Iterator[subprocess.Popen[bytes]]:
             process.kill()
 
 
-def test_a_scheduler_lost_mid_run_ends_it_with_one_line(tmp_path: Path) -> None:
-    scheduler_file = tmp_path / "scheduler.json"
+@contextlib.contextmanager
+def _baking_on_a_cluster(
+    tmp_path: Path, scheduler_file: Path
+) -> Iterator[tuple[subprocess.Popen[bytes], subprocess.Popen[str], Path]]:
+    """A scheduler and one worker on 127.0.0.1 (their address in ``scheduler_file``) and a
+    run baking slow spheres on them, once it bakes: the scheduler's process, the run's and
+    its output."""
     with (
         _dask_command("scheduler", "--host", "127.0.0.1", "--port", 0, "--no-dashboard",
                       "--scheduler-file", scheduler_file) as scheduler,
@@ -520,10 +525,16 @@ def test_a_scheduler_lost_mid_run_ends_it_with_one_line(tmp_path: Path) -> None:
         command, out = _slow_spheres(tmp_path, str(scheduler_file))
         with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=ROOT) as run:
             _until_baking(client, run)
-            scheduler.kill()
-            assert run.stderr is not None
-            stderr = run.stderr.read()
-            assert run.wait(60) == 1, stderr
+            yield scheduler, run, out
+
+
+def test_a_scheduler_lost_mid_run_ends_it_with_one_line(tmp_path: Path) -> None:
+    scheduler_file = tmp_path / "scheduler.json"
+    with _baking_on_a_cluster(tmp_path, scheduler_file) as (scheduler, run, out):
+        scheduler.kill()
+        assert run.stderr is not None
+        stderr = run.stderr.read()
+        assert run.wait(60) == 1, stderr
     address = json.loads(scheduler_file.read_text())["address"]
     assert stderr.splitlines() == [f"lodconvert: error: {address}: lost the dask scheduler"]
     assert list(out.parent.iterdir()) == []
@@ -534,23 +545,13 @@ def test_a_scheduler_that_stops_answering_mid_run_ends_it_with_one_line(tmp_path
     run waits for its batches: each look whether the cluster still has workers is bounded
     (it waited forever)."""
     scheduler_file = tmp_path / "scheduler.json"
-    with (
-        _dask_command("scheduler", "--host", "127.0.0.1", "--port", 0, "--no-dashboard",
-                      "--scheduler-file", scheduler_file) as scheduler,
-        _dask_command("worker", "--scheduler-file", scheduler_file, "--nthreads", 1,
-                      "--no-dashboard"),
-        distributed.Client(scheduler_file=str(scheduler_file), timeout=30) as client,
-    ):  # fmt: skip
-        client.wait_for_workers(1, timeout=30)
-        command, out = _slow_spheres(tmp_path, str(scheduler_file))
-        with subprocess.Popen(command, stderr=subprocess.PIPE, text=True, cwd=ROOT) as run:
-            _until_baking(client, run)
-            scheduler.send_signal(signal.SIGSTOP)
-            try:
-                _, stderr = run.communicate(timeout=300)  # a safety net
-            finally:
-                run.kill()
-                scheduler.send_signal(signal.SIGCONT)
+    with _baking_on_a_cluster(tmp_path, scheduler_file) as (scheduler, run, out):
+        scheduler.send_signal(signal.SIGSTOP)
+        try:
+            _, stderr = run.communicate(timeout=300)  # a safety net
+        finally:
+            run.kill()
+            scheduler.send_signal(signal.SIGCONT)
     address = json.loads(scheduler_file.read_text())["address"]
     says = f"lodconvert: error: {address}: the dask scheduler stopped answering (nothing in 20 s)"
     assert run.returncode == 1 and stderr.splitlines() == [says], stderr
