@@ -224,16 +224,22 @@ def test_a_town_read_by_workers_is_the_town_read_in_one_process(
     assert told == [f"{path}: implicit geometry is read in the main process"]
 
 
-@pytest.mark.usefixtures("one_member_a_task")
-def test_a_document_broken_in_a_late_member_fails_as_in_one_process(tmp_path: Path) -> None:
-    text = _city(*(building(f"b{i}", box(20.0 * i)) for i in range(5)))
-    path = tmp_path / "broken.gml"
-    path.write_text(text.replace('<bldg:Building gml:id="b3">', '<bldg:Building gml:id="b3"<'))
+def _errors_read_both_ways(path: Path) -> list[str]:
+    """The error reading ``path`` gives in one process, then with workers."""
     errors = []
     for workers in (False, True):
         with pytest.raises(InputError) as caught:
             _read(path, workers)
         errors.append(str(caught.value))
+    return errors
+
+
+@pytest.mark.usefixtures("one_member_a_task")
+def test_a_document_broken_in_a_late_member_fails_as_in_one_process(tmp_path: Path) -> None:
+    text = _city(*(building(f"b{i}", box(20.0 * i)) for i in range(5)))
+    path = tmp_path / "broken.gml"
+    path.write_text(text.replace('<bldg:Building gml:id="b3">', '<bldg:Building gml:id="b3"<'))
+    errors = _errors_read_both_ways(path)
     assert errors[0] == errors[1]
     assert "is not well-formed XML (attributes construct error, line 2, column" in errors[0]
 
@@ -263,11 +269,7 @@ def test_a_gz_whose_trailer_lies_fails_as_in_one_process(
         source = ten_lines(tmp_path) if make == "lines" else ten_objects(tmp_path)
     path = source.with_name(source.name + ".gz")
     path.write_bytes(_lying_gz(source.read_bytes(), trailer))
-    errors = []
-    for workers in (False, True):
-        with pytest.raises(InputError) as caught:
-            _read(path, workers)
-        errors.append(str(caught.value))
+    errors = _errors_read_both_ways(path)
     assert errors[0] == errors[1]
     assert errors[0].startswith(f"{path}: cannot be read (")
 
