@@ -5,8 +5,10 @@ before it and still looks like the object where it first shows.
 **Looks like the object**: at its switch-in distance in the reference view, the level's
 silhouette precision and recall against the source both reach :data:`MIN_SILHOUETTE`, as
 :func:`silhouette_estimate` rasterises them without GL along the three axes
-(``tests/test_plan.py`` holds it against GL renders). When no coarser representation passes,
-the finer level stays on to the next cutoff. The rule, and its evidence: ``docs/levels.md``.
+(``tests/test_plan.py`` holds it against GL renders); a city object's derived levels are
+judged over the upper hemisphere instead (:func:`view_estimate`). When no coarser
+representation passes, the finer level stays on to the next cutoff. The rule, and its
+evidence: ``docs/levels.md``.
 """
 
 from __future__ import annotations
@@ -16,10 +18,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bake import spans
 from .bake.grid import Grid
-from .bake.numpy import overlap_counts, silhouette_counts, silhouettes
+from .bake.numpy import silhouettes
 from .model import Level, Mesh, PointCloud
 from .ranges import REFERENCE_VIEW, ReferenceView
+from .views import GUARD_BASES
 
 POINT_COST = 1 / 1.6
 """Draw cost of one point in mesh-vertex units (the slowest measured speed-up of points)."""
@@ -146,14 +150,12 @@ def silhouette_estimate(
     point_px: float,
     distance: float,
     view: ReferenceView = REFERENCE_VIEW,
-    keep: bool = False,
 ) -> SilhouetteEstimate:
     """Silhouette precision and recall of ``cloud`` (points ``point_px`` wide) against ``mesh``
-    seen from ``distance`` in ``view``, both in the same frame; the worst over the axis views.
-    With ``keep``, ``mesh``'s silhouettes are kept with it for the next estimate (a source
-    compared with several candidates)."""
+    seen from ``distance`` in ``view``, both in the same frame; the worst over the axis views
+    (a model's point levels, whatever way up it is)."""
     pixel = distance / view.focal_px
-    grid, masks = _source_masks(mesh, pixel, keep=keep)
+    grid, masks = _source_masks(mesh, pixel)
     pad = math.ceil(max(point_px, 1.0))
     if not any(mask.any() for mask in masks):  # thinner than a pixel: nothing to look like
         return SilhouetteEstimate(precision=0.0, recall=0.0)
@@ -173,31 +175,48 @@ def silhouette_estimate(
     return SilhouetteEstimate(precision=precision, recall=recall)
 
 
-def mesh_silhouette_estimate(
-    mesh: Mesh,
-    other: Mesh,
+def view_estimate(
+    source: Mesh,
+    other: Mesh | PointCloud,
     distance: float,
     view: ReferenceView = REFERENCE_VIEW,
-    keep: bool = False,
+    point_px: float = 1.0,
 ) -> SilhouetteEstimate:
-    """Silhouette precision and recall of mesh ``other`` against ``mesh`` seen from
-    ``distance`` in ``view`` (both in the same frame): the worst over the axis views, both
-    rasterised on one grid as :func:`silhouette_estimate` rasterises the source (with
-    ``keep``, ``mesh``'s kept with it for the next estimate over the same grid)."""
-    pixel = distance / view.focal_px
-    both = np.stack([mesh.bounds, other.bounds])
-    bounds = np.stack([both[:, 0].min(axis=0), both[:, 1].max(axis=0)])
-    if keep:
-        grid, source = _source_masks(mesh, pixel, bounds, keep)
-        (drawn,) = silhouettes([other], grid)
-        counts = [overlap_counts(want, got) for want, got in zip(source, drawn, strict=True)]
-    else:  # both in one pass
-        counts = silhouette_counts(mesh, other, _grid(pixel, bounds))
-    precision = recall = 1.0
-    for wanted, drawn_count, tp in counts:
-        if not wanted and not drawn_count:
+    """Silhouette precision and recall of ``other`` (a mesh, or points ``point_px`` wide)
+    against ``source`` seen from ``distance`` in ``view`` (both in the same frame, z up), over
+    the guard's views of the upper hemisphere (:mod:`.views`): those of the view where F is
+    least. Both are drawn on one pixel grid per view (:func:`~.bake.spans.overlap_counts`)."""
+    if isinstance(other, PointCloud):
+        positions, faces, size = other.positions, np.zeros((0, 3), np.int64), max(point_px, 1.0)
+    else:
+        positions, faces, size = other.vertices, other.faces, 0.0
+    counts = spans.overlap_counts(
+        _floats(source.vertices),
+        _indices(source.faces),
+        _floats(positions),
+        _indices(faces),
+        size,
+        GUARD_BASES,
+        distance,
+        view.focal_px,
+    )
+    worst = SilhouetteEstimate(precision=1.0, recall=1.0)
+    for wanted, drawn, tp in counts.tolist():
+        if not wanted and not drawn:
             continue
-        fp, fn = drawn_count - tp, wanted - tp
-        precision = min(precision, tp / (tp + fp) if tp + fp else 0.0)
-        recall = min(recall, tp / (tp + fn) if tp + fn else 1.0)
-    return SilhouetteEstimate(precision=precision, recall=recall)
+        here = SilhouetteEstimate(
+            precision=tp / drawn if drawn else 0.0, recall=tp / wanted if wanted else 1.0
+        )
+        if here.f < worst.f:
+            worst = here
+    return worst
+
+
+def _floats(array: np.ndarray) -> np.ndarray:
+    """``array`` as contiguous float64 (what the compiled loops are compiled for)."""
+    return np.ascontiguousarray(array, dtype=np.float64)
+
+
+def _indices(array: np.ndarray) -> np.ndarray:
+    """``array`` as contiguous int64 (what the compiled loops are compiled for)."""
+    return np.ascontiguousarray(array, dtype=np.int64)

@@ -36,7 +36,7 @@ from lodconvert.errors import UsageError
 from lodconvert.io import read_chains, read_scene
 from lodconvert.io.gltf.binary import COMPONENT_SIZES, WIDTHS
 from lodconvert.model import CellChain, Level, LodChain, Mesh, Node, Scene, Surface
-from lodconvert.plan import POINT_COST, level_bytes, mesh_silhouette_estimate
+from lodconvert.plan import POINT_COST, level_bytes, view_estimate
 from lodconvert.ranges import cutoff
 from tests.conftest import ROOT
 from tests.test_citygml import sample
@@ -320,7 +320,7 @@ def test_a_tower_keeps_its_height_in_a_band_of_its_own_and_streets_part_blocks()
     assert set(np.unique(one.vertices[:, 2])) == {0.0, 10.0}
     assert set(np.unique(banded.vertices[:, 2])) == {0.0, 10.0, 40.0}
     source = merge([finest_mesh(chain) for chain in chains])
-    f = [mesh_silhouette_estimate(source, mesh, 100.0).f for mesh in (one, banded)]
+    f = [view_estimate(source, mesh, 100.0).f for mesh in (one, banded)]
     assert f[1] > 0.99 > f[0]
     # blocks take fewer vertices than the houses' own boxes
     assert banded.vertex_count < sum(chain.levels[0].count for chain in chains) / 2

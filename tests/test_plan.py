@@ -167,29 +167,3 @@ def test_the_estimate_agrees_with_rendered_silhouettes() -> None:
     finally:
         renderer.release()
     assert same >= 0.75 * cases, f"{same} of {cases} decisions agree"
-
-
-def test_a_mesh_against_a_mesh_scores_alike_with_the_source_kept_or_not() -> None:
-    """A level mesh (a box to the eaves) against a gabled house at several distances: the
-    estimate counted in one pass (a chain's prism) is the one from the source's silhouettes
-    kept for the next candidate (LOD parents), and both are the pixel counts of the three
-    axis images."""
-    from lodconvert.bake.numpy import silhouettes
-    from lodconvert.plan import _grid, mesh_silhouette_estimate
-    from lodconvert.ranges import REFERENCE_VIEW
-
-    house = centred(gabled_house(10, 8, 6, 10))
-    box = Mesh.of(surface_of(trimesh.creation.box((10, 8, 8.5))))
-    for distance in (50.0, 200.0, 800.0, 3000.0):
-        one_pass = mesh_silhouette_estimate(house, box, distance)
-        kept = mesh_silhouette_estimate(house, box, distance, keep=True)
-        assert (one_pass.precision, one_pass.recall) == (kept.precision, kept.recall)
-        both = np.stack([house.bounds, box.bounds])
-        bounds = np.stack([both[:, 0].min(axis=0), both[:, 1].max(axis=0)])
-        grid = _grid(distance / REFERENCE_VIEW.focal_px, bounds)
-        source, drawn = silhouettes([house, box], grid)
-        tp = [int((s & d).sum()) for s, d in zip(source, drawn, strict=True)]
-        precision = min(t / int(d.sum()) for t, d in zip(tp, drawn, strict=True))
-        recall = min(t / int(s.sum()) for t, s in zip(tp, source, strict=True))
-        assert 0.5 < one_pass.f < 1.0
-        assert (one_pass.precision, one_pass.recall) == (precision, recall)

@@ -256,24 +256,6 @@ def silhouettes(
     return [images[i : i + 3] for i in range(0, len(images), 3)]
 
 
-def silhouette_counts(
-    first: Mesh, second: Mesh, grid: Grid, memory_bytes: int = DEFAULT_LIMITS.memory_bytes
-) -> list[tuple[int, int, int]]:
-    """Along x, y and z: the pixels of ``first``'s silhouette, of ``second``'s and of both
-    (:func:`silhouettes`), counted without laying out the images."""
-    filled, layout = _filled([first, second], grid, memory_bytes)
-    return [
-        overlap_counts(filled[s : s + rows * w], filled[t : t + rows * w])
-        for (s, rows, w), (t, _, _) in zip(layout[:3], layout[3:], strict=True)
-    ]
-
-
-def overlap_counts(one: np.ndarray, other: np.ndarray) -> tuple[int, int, int]:
-    """The pixels of silhouette ``one``, of ``other`` (of the same shape) and of both."""
-    both = int(np.count_nonzero(one & other))
-    return int(np.count_nonzero(one)), int(np.count_nonzero(other)), both
-
-
 def _edges(pu: np.ndarray, pv: np.ndarray) -> np.ndarray:
     """Per edge (edge k of a face runs from its corner k to the next) of the faces whose
     projected corners are ``pu`` and ``pv`` ((3, m) each): its lowest and highest v, its start,

@@ -10,7 +10,7 @@ from typing import Any
 
 from ..chain import ChainOptions
 from ..model import Level, Mesh
-from ..plan import level_bytes, level_cost, mesh_silhouette_estimate, silhouette_estimate
+from ..plan import level_bytes, level_cost, view_estimate
 
 MIN_CELL_F = 0.95
 """Least silhouette F of a far level against its members where it switches in."""
@@ -20,15 +20,13 @@ Made = tuple[Level, float, dict[str, Any]]
 
 
 def silhouette_f(source: Mesh, level: Level, distance: float, options: ChainOptions) -> float:
-    """Silhouette F of ``level`` against ``source`` seen from ``distance`` (``source``'s
-    silhouettes kept with it: a cell compares every candidate with the same)."""
+    """Silhouette F of ``level`` against ``source`` seen from ``distance`` over the guard's
+    views (:func:`~lodconvert.plan.view_estimate`)."""
     if level.points is not None:
         size = level.params.point_size if level.params is not None else 1.0
-        estimate = silhouette_estimate(source, level.points, size, distance, options.view, True)
-    else:
-        assert level.mesh is not None
-        estimate = mesh_silhouette_estimate(source, level.mesh, distance, options.view, True)
-    return estimate.f
+        return view_estimate(source, level.points, distance, options.view, size).f
+    assert level.mesh is not None
+    return view_estimate(source, level.mesh, distance, options.view).f
 
 
 def lighter(one: Made | None, other: Made | None) -> Made | None:

@@ -19,7 +19,7 @@ from ..chain import (
 )
 from ..model import Level, Mesh, Node
 from ..model.lods import GROUND_COVERS, SLOTS, lod_name, unused_levels
-from ..plan import mesh_silhouette_estimate
+from ..plan import view_estimate
 from ..ranges import cutoff
 from .prisms import FOOTPRINT_TOLERANCE_PX, LOW_F, MIN_PRISM_F, MORE_TRIANGLES, prism
 
@@ -90,7 +90,7 @@ def _prism_level(
             f"triangles, {previous.name} {previous.mesh.face_count:,}"
         )
     mesh = shape.translated(-origin)
-    f = mesh_silhouette_estimate(surface, mesh, distance, opts.view).f
+    f = view_estimate(surface, mesh, distance, opts.view).f
     if f < MIN_PRISM_F:
         return f"{LOW_F} {f:.3f} where it switches in, below {MIN_PRISM_F}"
     return Level(name="LOD1", kind="prism", mesh=mesh, silhouette_f=f)
