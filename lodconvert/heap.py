@@ -1,5 +1,6 @@
-"""Handing freed heap memory back to the system after work that made and freed many small C
-objects: a large city object's XML elements, the shapely geometries of its footprint."""
+"""The C heap of a conversion's processes: how glibc's allocator is tuned for a run
+(:func:`tune_heap`), and handing freed memory back after work that made and freed many small C
+objects (a large city object's XML elements, the shapely geometries of its footprint)."""
 
 from __future__ import annotations
 
@@ -8,23 +9,47 @@ import functools
 import sys
 from typing import Any
 
+M_TRIM_THRESHOLD, M_TOP_PAD, M_MMAP_THRESHOLD = -1, -2, -3
+"""glibc ``mallopt`` parameters."""
+MAPPED_BYTES = 32 << 20
+"""Blocks from this size up get mappings of their own (:func:`tune_heap`)."""
+TRIM_BYTES = 64 << 20
+"""The heap is trimmed when this much is free at its top."""
+TOP_PAD_BYTES = 16 << 20
+"""The heap grows by this much more than a request needs."""
+
+
+def tune_heap() -> None:
+    """Tune glibc's allocator for a conversion, in the main process and in every worker: a
+    conversion makes and frees numpy arrays of every size object after object; glibc's
+    defaults map and unmap each one above 128 KiB, or, once it raised that bar, keep what it
+    freed. Here arrays below :data:`MAPPED_BYTES` come from the heap and go back to it for the
+    next, which is trimmed once :data:`TRIM_BYTES` lie free at its top, so that the heap
+    neither faults its pages in anew for every object nor grows with the city
+    (``benchmarks/results/per_core.md``). Other C libraries are left as they are."""
+    mallopt = _libc_function("mallopt")
+    if mallopt is not None:
+        mallopt(M_MMAP_THRESHOLD, MAPPED_BYTES)
+        mallopt(M_TRIM_THRESHOLD, TRIM_BYTES)
+        mallopt(M_TOP_PAD, TOP_PAD_BYTES)
+
 
 def return_freed_heap() -> None:
     """Hand the pages of the heap that freed memory leaves back to the system: glibc gives
     back only the heap's top by itself, and the arrays made later are mapped apart (see
     ``lodconvert.cli``), so what such work freed would stay resident for the rest of the run.
     Nothing where the C library is not glibc."""
-    trim = _malloc_trim()
+    trim = _libc_function("malloc_trim")
     if trim is not None:
         trim(0)
 
 
 @functools.cache
-def _malloc_trim() -> Any:
-    """glibc's ``malloc_trim``, or None."""
+def _libc_function(name: str) -> Any:
+    """glibc's function ``name``, or None."""
     if not sys.platform.startswith("linux"):
         return None
     try:
-        return ctypes.CDLL("libc.so.6").malloc_trim
+        return getattr(ctypes.CDLL("libc.so.6"), name)
     except (OSError, AttributeError):
         return None

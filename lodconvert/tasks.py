@@ -28,6 +28,7 @@ from typing import Any, Protocol, Self, TypeVar
 from .bake import Backend, get_backend
 from .chain import ChainOptions, ChainPlan, Progress
 from .errors import InputError, ended
+from .heap import tune_heap
 from .limits import DEFAULT_LIMITS, Limits
 from .model import LodChain, Node, PackedNode, unpacked
 from .plans import bake_chain, plan_chain
@@ -172,6 +173,7 @@ def _work(conn: Connection, backend_name: str) -> None:
     while the main process is busy elsewhere. Ctrl-C is the main process's to handle: it stops
     the workers."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    tune_heap()
     inbox: queue.SimpleQueue[Task[Any] | _Unreadable | None] = queue.SimpleQueue()
     outbox: queue.SimpleQueue[tuple[str, Any] | None] = queue.SimpleQueue()
     threading.Thread(target=_receive, args=(conn, inbox), daemon=True).start()

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import ctypes
 import importlib
 import multiprocessing
 import signal
@@ -26,6 +25,7 @@ from multiprocessing import resource_tracker
 from types import FrameType
 
 from ..errors import LodConvertError, UsageError
+from ..heap import tune_heap
 from .commands import COMMANDS, MAIN_COMMAND
 from .console import Console
 from .options import (
@@ -121,33 +121,10 @@ def run_command(name: str, argv: Sequence[str]) -> int:
     return _guarded(args, console, lambda: module.run(args, console))
 
 
-M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
-"""glibc ``mallopt`` parameters."""
-HEAP_RETURN_BYTES = 64 * 1024
-"""Freed blocks from this size up go back to the system at once (see
-:func:`_return_freed_memory`)."""
-
-
-def _return_freed_memory() -> None:
-    """Ask glibc's allocator to hand freed memory back to the system at once: blocks of
-    :data:`HEAP_RETURN_BYTES` or more get mappings of their own, and the heap is trimmed when
-    that much is free at its top. A conversion allocates and frees arrays of every size object
-    after object; with the defaults the holes this leaves in the heap keep the peak growing with
-    the city (``benchmarks/results/city.md``). Other C libraries are left as they are."""
-    if not sys.platform.startswith("linux"):
-        return
-    try:
-        mallopt = ctypes.CDLL("libc.so.6").mallopt
-    except (OSError, AttributeError):
-        return
-    mallopt(M_MMAP_THRESHOLD, HEAP_RETURN_BYTES)
-    mallopt(M_TRIM_THRESHOLD, HEAP_RETURN_BYTES)
-
-
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lodconvert`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    _return_freed_memory()
+    tune_heap()
     # multiprocessing starts its resource tracker again where it died, and warns that
     # resources might leak: lodconvert gives it none to look after
     warnings.filterwarnings("ignore", "resource_tracker: process died", UserWarning)
