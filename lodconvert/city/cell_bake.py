@@ -1,10 +1,12 @@
 """One LOD parent baked (:func:`bake_cell`): the members it admits (:mod:`.cell_switch`), where
-it stands and switches, every far level its kind asks for (points baked from all its objects,
-block proxies, a merged mesh, blocks mixed with members' own content), the one kept by
-silhouette fidelity (:mod:`.far_choice`) and the facts that say why."""
+it stands and switches, every far level its kind asks for (block proxies, a merged mesh,
+blocks mixed with members' own content, and points baked from all its objects — with ``auto``
+only where none of the others reaches silhouette F 0.95), the one kept by silhouette fidelity
+(:mod:`.far_choice`) and the facts that say why."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -89,14 +91,20 @@ def bake_cell(
         assert gathered is not None
         drawn_beside = [gathered]
     site = _site(admitted, gamma, options)
-    points = None
-    if kind in ("points", "auto"):
+    # a cell of finer cells, or of scattered members: blocks of each member apart
+    apart = gathering or any(isinstance(m, CellChain) for m in admitted)
+    far = _far_levels(site, kind, apart, options)
+    if kind == "points" or (kind == "auto" and math.isinf(faithful_cost(far.candidates))):
         points = point_level_at(
             site.source, "FAR", site.switch, options, backend, plan.cell_id, warn, limits
         )
-    # a cell of finer cells, or of scattered members: blocks of each member apart
-    apart = gathering or any(isinstance(m, CellChain) for m in admitted)
-    far = _far_levels(site, kind, apart, options, points)
+        if points is not None:
+            far.candidates["points"] = (
+                points,
+                silhouette_f(site.source, points, site.switch, options),
+            )
+    if not far.candidates:  # nothing else could be made
+        _add_mesh(far, site, options)
     return _cell(plan, site, far, kind, options, gathering, left_out), drawn_beside
 
 
@@ -115,24 +123,16 @@ def _site(members: list[Member], gamma: float, options: ChainOptions) -> CellSit
     )
 
 
-def _far_levels(
-    site: CellSite, kind: str, apart: bool, options: ChainOptions, points: Level | None
-) -> FarLevels:
-    """The far levels ``kind`` asks for (``auto``: all): the ``points`` baked for the cell,
-    block proxies (:func:`_blocks`), the merged mesh (also when nothing else could be made),
-    and, where the blocks of a cell of members apart lose the silhouette, blocks mixed with
-    members' own content when that is lighter."""
+def _far_levels(site: CellSite, kind: str, apart: bool, options: ChainOptions) -> FarLevels:
+    """The far levels but points that ``kind`` asks for (``auto``: both): block proxies
+    (:func:`_blocks`), the merged mesh, and, where the blocks of a cell of members apart lose
+    the silhouette, blocks mixed with members' own content when that is lighter."""
     far = FarLevels()
-    if points is not None:
-        far.candidates["points"] = (points, silhouette_f(site.source, points, site.switch, options))
     found = _blocks(site, apart, options) if kind in ("blocks", "auto") else None
     if found is not None:
         far.candidates["blocks"] = found[:2]
-    if kind in ("mesh", "auto") or not far.candidates:
-        level, f, far.mesh_facts = mesh_level(
-            site.members, site.objects, site.origin, site.source, site.switch, options
-        )
-        far.candidates["mesh"] = (level, f)
+    if kind in ("mesh", "auto"):
+        _add_mesh(far, site, options)
     if found is not None and found[1] < MIN_CELL_F and apart:
         cost = faithful_cost(far.candidates)
         mixed = mixed_level(site.members, site.origin, site.source, site.switch, options, cost)
@@ -140,6 +140,14 @@ def _far_levels(
         far.candidates["blocks"] = found[:2]
     far.blocks = found[2] if found is not None else None
     return far
+
+
+def _add_mesh(far: FarLevels, site: CellSite, options: ChainOptions) -> None:
+    """Add the cell's merged mesh (:func:`~.far_mesh.mesh_level`) to ``far``."""
+    level, f, far.mesh_facts = mesh_level(
+        site.members, site.objects, site.origin, site.source, site.switch, options
+    )
+    far.candidates["mesh"] = (level, f)
 
 
 def _blocks(site: CellSite, apart: bool, options: ChainOptions) -> Made | None:
