@@ -26,6 +26,7 @@ from .io.frame import SceneFrame, scene_frame
 from .io.geometry_checks import tally_of
 from .model import CellChain, LodChain, Scene
 from .version import __version__
+from .views import guard_record
 
 if TYPE_CHECKING:
     from .bake import Backend
@@ -248,6 +249,8 @@ class Assembly:
         )
         report["crs"] = crs_record
         report["up"] = "z" if self.info.city else up or "y"
+        if self.info.city:
+            report["guard"] = guard_record()  # the views derived city levels are judged over
         report["frame"] = self.frame.record() if self.frame is not None else None
         if self.hlod is not None:
             report["hlod"] = {"kind": self.hlod.kind, "cells": self.cells, "draw": self.draw}

@@ -35,5 +35,16 @@ def guard_views() -> list[tuple[int, int]]:
     return [(a, e) for e in ELEVATIONS_DEG for a in AZIMUTHS_DEG]
 
 
+def guard_record() -> dict[str, object]:
+    """The guard's views as a run's report states them."""
+    return {
+        "azimuths_deg": list(AZIMUTHS_DEG),
+        "elevations_deg": list(ELEVATIONS_DEG),
+        "views": len(guard_views()),
+        "camera": "perspective, the reference view's, looking at the level's centre from "
+        "where it switches in; F is the least over the views",
+    }
+
+
 GUARD_BASES = np.ascontiguousarray(np.stack([view_basis(a, e) for a, e in guard_views()]))
 """The bases ((views, 3, 3)) of the guard's views (:func:`view_basis`)."""

