@@ -68,3 +68,28 @@ def srgb_bytes(values: object | None, linear: bool) -> np.ndarray | None:
     if not linear:
         return np.rint(unit * 255.0).astype(np.uint8)
     return srgb_rgba(unit)
+
+
+D65_WHITE = np.array([0.95047, 1.0, 1.08883])
+"""CIE XYZ of the D65 white point (sRGB's), Y = 1."""
+_SRGB_TO_XYZ = np.array(
+    [[0.4124564, 0.3575761, 0.1804375], [0.2126729, 0.7151522, 0.0721750],
+     [0.0193339, 0.1191920, 0.9503041]]
+)  # fmt: skip
+
+
+def lab(rgba: np.ndarray) -> np.ndarray:
+    """sRGB bytes (..., 3 or 4; alpha ignored) → CIE L*a*b* (D65) float64 (..., 3)."""
+    xyz = SRGB_TO_LINEAR[rgba[..., :3]] @ _SRGB_TO_XYZ.T / D65_WHITE
+    eps, kappa = 216 / 24389, 24389 / 27
+    f = np.where(xyz > eps, np.cbrt(xyz), (kappa * xyz + 16) / 116)
+    return np.stack(
+        [116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])],
+        axis=-1,
+    )
+
+
+def delta_e(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """CIE76 colour difference of sRGB bytes ``a`` and ``b`` (..., 3 or 4): the Euclidean
+    distance of their :func:`lab` values."""
+    return np.linalg.norm(lab(a) - lab(b), axis=-1)

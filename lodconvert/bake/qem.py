@@ -23,6 +23,8 @@ PASSES = 100
 """Collapse passes of ``fast-simplification`` (its ``Simplify.h``)."""
 THRESHOLD_SCALE = 1e-9
 """Factor of its pass thresholds (squared metres for a mesh in metres)."""
+NEAREST = 64
+"""Faces (nearest by centre) among which a point's face is found."""
 ONE_AT_A_TIME = threading.Lock()
 """Held around each use of ``fast-simplification``: it keeps the mesh it works on in module
 state between calls, so threads baking at once would mix their meshes."""
@@ -99,10 +101,12 @@ def simplify_within(surface: Mesh, tolerance: float) -> Surface:
     ``tolerance`` of the planes of the source faces it stands for: vertices at one position are
     welded first (so that separate polygons of one solid collapse together), faces of no area
     left out. Open borders stay as they are: the quadrics hold a vertex to its faces' planes,
-    not to a border's line, along which it would slide. Each face keeps the colour of the
-    source face it was (at that face's centre), as vertex colours on a white base; a vertex
-    where faces of different colours meet is one per colour, so that no colour runs across an
-    edge."""
+    not to a border's line, along which it would slide. Each face takes the colour (at its
+    centre) of the source face facing most nearly its way of those within ``tolerance`` of the
+    nearest to its centre (:func:`_most_facing`), so that a wall's
+    face collapsed into a roof's place takes the roof's colour and a wall keeps its own up to
+    the eaves; as vertex colours on a white base, a vertex where faces of different colours
+    meet one per colour, so that no colour runs across an edge."""
     fs = _simplifier("a simplified far mesh")
     points, corners = np.unique(surface.vertices, axis=0, return_inverse=True)
     welded = corners.reshape(-1)[surface.faces]
@@ -113,28 +117,49 @@ def simplify_within(surface: Mesh, tolerance: float) -> Surface:
         return Surface(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64))
     agg = max(0.0, math.log(tolerance**2 / THRESHOLD_SCALE) / math.log(PASSES + 2))
     with ONE_AT_A_TIME:
-        out_points, out_faces, collapses = fs.simplify(
-            points, welded, target_count=0, agg=agg, return_collapses=True, preserve_border=True
+        out_points, out_faces = fs.simplify(
+            points, welded, target_count=0, agg=agg, preserve_border=True
         )
     out_faces = out_faces.astype(np.int64)
-    moved = _new_vertex_of(fs, points, welded, collapses)[welded]
-    source = kept[_same_faces(moved, out_faces)]
+    normals = Surface(out_points, out_faces).face_normals(np.arange(len(out_faces)))
+    centres = out_points[out_faces].mean(axis=1)
+    near = _most_facing(surface.triangles[kept], surface.face_normals(kept), centres, normals,
+                       tolerance)  # fmt: skip
+    source = kept[near]
     colors = surface.colors_at(source, surface.triangles[source].mean(axis=1))
     return _split_by_colour(out_points, out_faces, colors)
 
 
-def _same_faces(moved: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """For each of ``faces``, the first of the source faces ``moved`` (their corners moved to
-    the new vertices they collapsed into) with the same corners: the face it was."""
-    triples, ids = np.unique(
-        np.sort(np.concatenate([moved, faces]), axis=1), axis=0, return_inverse=True
-    )
-    ids = ids.reshape(-1)
-    first = np.full(len(triples), -1, dtype=np.int64)
-    first[ids[: len(moved)][::-1]] = np.arange(len(moved))[::-1]
-    found = first[ids[len(moved) :]]
-    assert (found >= 0).all(), "a simplified face that no source face became"
-    return found
+def _most_facing(
+    triangles: np.ndarray,
+    normals: np.ndarray,
+    points: np.ndarray,
+    directions: np.ndarray,
+    within: float,
+) -> np.ndarray:
+    """For each of ``points`` (unit normals ``directions``), the face of ``triangles`` (unit
+    ``normals``) facing most nearly its way of those no more than ``within`` farther from it
+    than the nearest, among the :data:`NEAREST` nearest by centre."""
+    near, distance = _near(triangles, points)
+    close = distance <= distance.min(axis=1, keepdims=True) + within
+    cosine = np.einsum("nkj,nj->nk", normals[near], directions)
+    best = np.where(close, cosine, -np.inf).argmax(axis=1)
+    return near[np.arange(len(points)), best]
+
+
+def _near(triangles: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each of ``points``, the :data:`NEAREST` faces of ``triangles`` nearest by centre
+    and the distance from it to each."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    k = min(NEAREST, len(triangles))
+    _, near = cKDTree(triangles.mean(axis=1)).query(points, k=k)
+    near = np.asarray(near).reshape(len(points), k)
+    closest = trimesh.triangles.closest_point(
+        triangles[near.ravel()], np.repeat(points, k, axis=0)
+    ).reshape(len(points), k, 3)
+    return near, np.linalg.norm(closest - points[:, None], axis=2)
 
 
 def _split_by_colour(points: np.ndarray, faces: np.ndarray, colors: np.ndarray) -> Surface:

@@ -165,20 +165,15 @@ def block_proxy(blocks: Blocks, tolerance: float, band: float) -> Mesh | None:
 
 
 def shared_corners(proxy: Mesh) -> Mesh:
-    """``proxy`` (one part with vertex colours) with one vertex per corner position: a corner of
-    a roof (a face looking up) takes that roof's colour, the others keep their wall's, so walls
-    shade from their roof's colour at the eaves to their own at the ground. A third fewer
-    vertices than a vertex per colour, for a far level seen where a wall is a few pixels high."""
+    """``proxy`` (one part with vertex colours) with one vertex per corner position and colour:
+    faces of one colour (a block's walls, its roof) share their corners, and a roof's corner is
+    a vertex apart from its walls', so that each keeps its own colour."""
     (part,) = proxy.parts
     assert part.vertex_colors is not None
-    points, corners = np.unique(part.vertices, axis=0, return_inverse=True)
+    keys = np.column_stack([part.vertices, part.vertex_colors.view(np.uint32).astype(np.float64)])
+    _, first, corners = np.unique(keys, axis=0, return_index=True, return_inverse=True)
     faces = corners.reshape(-1)[part.faces]
-    colors = np.zeros((len(points), 4), dtype=np.uint8)
-    face_colors = part.vertex_colors[part.faces[:, 0]]
-    up = part.face_normals(np.arange(len(part.faces)))[:, 2] > 0.5
-    for chosen in (~up, up):  # walls first, then roofs over them
-        colors[faces[chosen].ravel()] = np.repeat(face_colors[chosen], 3, axis=0)
-    return Mesh([Surface(points, faces, vertex_colors=colors)])
+    return Mesh([Surface(part.vertices[first], faces, vertex_colors=part.vertex_colors[first])])
 
 
 def _bands(order: np.ndarray, tops: np.ndarray, depth: float) -> list[list[int]]:
