@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import trimesh
 
 from lodconvert.bake import NumpyBackend, spans
 from lodconvert.chain import ChainOptions
@@ -19,18 +20,26 @@ from lodconvert.ranges import REFERENCE_VIEW
 from lodconvert.views import guard_views, towards_camera, view_basis
 
 from .conftest import require
-from .test_lods import block
 from .test_plan import gabled_house
 from .test_prisms import house_of
 
 
 def diagonal_house() -> Mesh:
-    """A 20 × 20 m hall 5 m high with five 4 m square towers 20 m high along its diagonal: a
-    sixth of its roof stands at 20 m, so its prism is a 20 m box. Seen along x or y, some
-    tower stands in every column, and from above the box covers the hall: only a camera at 45°
-    to the axes sees the towers' row end on and the box spill far beyond it."""
-    towers = [block(4, 4, 20, 2 + 4 * k, 2 + 4 * k).parts for k in range(5)]
-    return Mesh([*block(20, 20, 5, 10, 10).parts, *(p for t in towers for p in t)])
+    """A 20 m high wall 6 m thick along the diagonal of a 20 m square, and a 5 m high hall
+    filling the triangle on one side of it: half its roof stands at 20 m, so its prism is a
+    20 m block over both. Seen along x or y the wall stands in every column, and from above the
+    block covers what they cover: only a camera at 45° to the axes sees the wall end on and the
+    block spill far beyond it."""
+    from shapely.geometry import Polygon
+
+    wall = Polygon([(-2.1, 2.1), (2.1, -2.1), (22.1, 17.9), (17.9, 22.1)])
+    hall = Polygon([(2.0, 0.0), (20.0, 0.0), (20.0, 18.0)])
+    return Mesh(
+        [
+            house_of(trimesh.creation.extrude_polygon(p, h)).single
+            for p, h in ((wall, 20.0), (hall, 5.0))
+        ]
+    )
 
 
 def _view_f(source: Mesh, level: Mesh, distance: float, basis: np.ndarray) -> float:
