@@ -9,9 +9,9 @@ image has its centre at whole pixels plus a half from where the origin lands, as
 of an even number of pixels looking at the origin; every level of an object, in the same frame,
 falls on the same pixels. A face covers, in each pixel row its projection crosses,
 the span of pixel centres between its edges there (edges inclusive, faces seen edge-on left
-out); a point covers the pixel centres in the square of its size around it. The images of one
-view are drawn into one byte each (the first silhouette's bit 1, the second's bit 2) and
-counted, a view at a time, so that memory is one image."""
+out); a point covers the pixel centres in the square of its size around it. Each silhouette is
+drawn a bit a pixel, 64 pixels a word (a span sets a mask in a word or two), and the two are
+counted word by word, a view at a time, so that memory is two images of one view."""
 
 from __future__ import annotations
 
@@ -41,23 +41,18 @@ def _project(
     return u, v
 
 
+ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
+"""A word of 64 pixels, all set."""
+
+
 @numba.njit(cache=True, nogil=True)
-def _fill_faces(
-    image: np.ndarray,
-    u: np.ndarray,
-    v: np.ndarray,
-    faces: np.ndarray,
-    c0: int,
-    r0: int,
-    bit: np.uint8,
-    counts: np.ndarray,
-) -> None:
-    """Set ``bit`` in the pixels of ``image`` (its pixel (0, 0) at whole pixels (c0, r0)) that
-    the faces cover, counting (:func:`_set`) the pixels it is new in."""
-    rows, cols = image.shape
+def _fill_faces(bits: np.ndarray, u: np.ndarray, v: np.ndarray, faces: np.ndarray) -> None:
+    """Set the pixels of ``bits`` (rows of 64-pixel words) that the faces cover (``u``, ``v``:
+    pixel coordinates from the image's corner)."""
+    rows, cols = bits.shape[0], bits.shape[1] * 64
     for f in range(faces.shape[0]):
         i, j, k = faces[f, 0], faces[f, 1], faces[f, 2]
-        x0, y0, x1, y1, x2, y2 = u[i] - c0, v[i] - r0, u[j] - c0, v[j] - r0, u[k] - c0, v[k] - r0
+        x0, y0, x1, y1, x2, y2 = u[i], v[i], u[j], v[j], u[k], v[k]
         if (x1 - x0) * (y2 - y0) == (x2 - x0) * (y1 - y0):
             continue  # seen edge-on
         if y1 < y0:
@@ -81,52 +76,44 @@ def _fill_faces(
                 a, b = x0, x1
             first = max(math.ceil(min(a, b) - 0.5), 0)
             last = min(math.floor(max(a, b) - 0.5), cols - 1)
-            _set(image, r, first, last, bit, counts)
+            _span(bits, r, first, last)
 
 
 @numba.njit(cache=True, nogil=True)
-def _fill_points(
-    image: np.ndarray,
-    u: np.ndarray,
-    v: np.ndarray,
-    size: float,
-    c0: int,
-    r0: int,
-    bit: np.uint8,
-    counts: np.ndarray,
-) -> None:
-    """Set ``bit`` in the pixels of ``image`` whose centres lie in the squares of side ``size``
-    pixels (at least one) around the points, counting as :func:`_fill_faces` does."""
-    rows, cols = image.shape
+def _fill_points(bits: np.ndarray, u: np.ndarray, v: np.ndarray, size: float) -> None:
+    """Set the pixels of ``bits`` whose centres lie in the squares of side ``size`` pixels (at
+    least one) around the points."""
+    rows, cols = bits.shape[0], bits.shape[1] * 64
     half = max(size, 1.0) / 2.0
     for i in range(u.shape[0]):
-        x, y = u[i] - c0 - 0.5, v[i] - r0 - 0.5  # in pixel centres
+        x, y = u[i] - 0.5, v[i] - 0.5  # in pixel centres
         first = max(math.ceil(x - half - 1e-9), 0)
         last = min(math.floor(x + half + 1e-9), cols - 1)
-        low = max(math.ceil(y - half - 1e-9), 0)
-        high = min(math.floor(y + half + 1e-9), rows - 1)
-        for r in range(low, high + 1):
-            _set(image, r, first, last, bit, counts)
+        for r in range(
+            max(math.ceil(y - half - 1e-9), 0), min(math.floor(y + half + 1e-9), rows - 1) + 1
+        ):
+            _span(bits, r, first, last)
 
 
 @numba.njit(cache=True, nogil=True)
-def _set(
-    image: np.ndarray, r: int, first: int, last: int, bit: np.uint8, counts: np.ndarray
-) -> None:
-    """Set ``bit`` in pixels ``first`` to ``last`` of row ``r``."""
-    for c in range(first, last + 1):
-        image[r, c] |= bit
+def _span(bits: np.ndarray, r: int, first: int, last: int) -> None:
+    """Set pixels ``first`` to ``last`` of row ``r`` (none where ``last`` is before ``first``):
+    a mask a word."""
+    if last < first:
+        return
+    for w in range(first >> 6, (last >> 6) + 1):
+        low = max(first - (w << 6), 0)
+        high = min(last - (w << 6), 63)
+        bits[r, w] |= (ALL >> np.uint64(63 - high + low)) << np.uint64(low)
 
 
 @numba.njit(cache=True, nogil=True)
-def _count(image: np.ndarray, counts: np.ndarray) -> None:
-    """Count the pixels with bit 1, with bit 2 and with both into ``counts``."""
-    first = second = both = 0
-    for value in image.ravel():
-        first += value & 1
-        second += value >> 1
-        both += value >> 1 & value
-    counts[0], counts[1], counts[2] = first, second, both
+def _ones(x: np.uint64) -> int:
+    """How many bits of ``x`` are set."""
+    x = x - ((x >> np.uint64(1)) & np.uint64(0x5555555555555555))
+    x = (x & np.uint64(0x3333333333333333)) + ((x >> np.uint64(2)) & np.uint64(0x3333333333333333))
+    x = (x + (x >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    return int((x * np.uint64(0x0101010101010101)) >> np.uint64(56))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -145,7 +132,6 @@ def overlap_counts(
     mesh with ``other_faces``, or, with ``point_px`` above 0, points that many pixels wide."""
     counts = np.zeros((bases.shape[0], 3), dtype=np.int64)
     pad = math.ceil(max(point_px, 1.0) / 2.0) + 1
-    buffer = np.zeros(0, dtype=np.uint8)
     for view in range(bases.shape[0]):
         u, v = _project(positions, bases[view], distance, focal)
         ou, ov = _project(other, bases[view], distance, focal)
@@ -157,17 +143,21 @@ def overlap_counts(
                 lo_u, hi_u = min(lo_u, us.min()), max(hi_u, us.max())
                 lo_v, hi_v = min(lo_v, vs.min()), max(hi_v, vs.max())
         c0, r0 = math.floor(lo_u) - pad, math.floor(lo_v) - pad
-        cols = math.floor(hi_u) + pad + 1 - c0
+        words = (math.floor(hi_u) + pad + 1 - c0 + 63) // 64
         rows = math.floor(hi_v) + pad + 1 - r0
-        if buffer.shape[0] < rows * cols:
-            buffer = np.zeros(rows * cols, dtype=np.uint8)
-        else:
-            buffer[: rows * cols] = 0
-        image = buffer[: rows * cols].reshape(rows, cols)
-        _fill_faces(image, u, v, faces, c0, r0, np.uint8(1), counts[view])
+        for us, vs in ((u, v), (ou, ov)):  # from the image's corner, on whole pixels
+            us -= c0
+            vs -= r0
+        first = np.zeros((rows, words), dtype=np.uint64)
+        second = np.zeros((rows, words), dtype=np.uint64)
+        _fill_faces(first, u, v, faces)
         if point_px > 0.0:
-            _fill_points(image, ou, ov, point_px, c0, r0, np.uint8(2), counts[view])
+            _fill_points(second, ou, ov, point_px)
         else:
-            _fill_faces(image, ou, ov, other_faces, c0, r0, np.uint8(2), counts[view])
-        _count(image, counts[view])
+            _fill_faces(second, ou, ov, other_faces)
+        for r in range(rows):
+            for w in range(words):
+                counts[view, 0] += _ones(first[r, w])
+                counts[view, 1] += _ones(second[r, w])
+                counts[view, 2] += _ones(first[r, w] & second[r, w])
     return counts
