@@ -52,7 +52,7 @@ class Run:
 def convert(tree: Path, source: Path, fmt: str, folder: Path) -> Run:
     """Convert ``source`` to ``fmt`` with the code of ``tree`` on core 0, one worker."""
     out = folder / f"out_{os.getpid()}_{time.monotonic_ns()}"
-    target = out if fmt == "tiles" else out.with_suffix(f".{fmt}")
+    target = out / "tileset.json" if fmt == "tiles" else out.with_suffix(f".{fmt}")
     command = ["taskset", "-c", "0", sys.executable, "-m", "lodconvert", str(source)]
     command += ["-o", str(target), "--workers", "1", "-q"]
     env = {**os.environ, "PYTHONPATH": str(tree)}
@@ -63,7 +63,7 @@ def convert(tree: Path, source: Path, fmt: str, folder: Path) -> Run:
     child.returncode = os.waitstatus_to_exitcode(status)
     if child.returncode:
         raise SystemExit(f"{' '.join(command)} failed ({child.returncode})")
-    subprocess.run(["rm", "-rf", str(target)], check=True)
+    subprocess.run(["rm", "-rf", str(out if fmt == "tiles" else target)], check=True)
     return Run(usage.ru_utime + usage.ru_stime, wall, usage.ru_maxrss / 1024)
 
 
