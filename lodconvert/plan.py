@@ -18,7 +18,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bake import spans
 from .bake.grid import Grid
 from .bake.numpy import silhouettes
 from .model import Level, Mesh, PointCloud
@@ -185,7 +184,10 @@ def view_estimate(
     """Silhouette precision and recall of ``other`` (a mesh, or points ``point_px`` wide)
     against ``source`` seen from ``distance`` in ``view`` (both in the same frame, z up), over
     the guard's views of the upper hemisphere (:mod:`.views`): those of the view where F is
-    least. Both are drawn on one pixel grid per view (:func:`~.bake.spans.overlap_counts`)."""
+    least. Both are drawn on one pixel grid per view (:func:`~.bake.spans.overlap_counts`;
+    numba loaded here, where a run first judges a derived level)."""
+    from .bake import spans
+
     if isinstance(other, PointCloud):
         positions, faces, size = other.positions, np.zeros((0, 3), np.int64), max(point_px, 1.0)
     else:

@@ -23,7 +23,7 @@ PASSES = 100
 """Collapse passes of ``fast-simplification`` (its ``Simplify.h``)."""
 THRESHOLD_SCALE = 1e-9
 """Factor of its pass thresholds (squared metres for a mesh in metres)."""
-NEAREST = 64
+NEAREST = 16
 """Faces (nearest by centre) among which a point's face is found."""
 ONE_AT_A_TIME = threading.Lock()
 """Held around each use of ``fast-simplification``: it keeps the mesh it works on in module
