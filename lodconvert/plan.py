@@ -174,34 +174,44 @@ def silhouette_estimate(
     return SilhouetteEstimate(precision=precision, recall=recall)
 
 
+GUARD_MARGIN = 0.25
+"""How much of its size a source's image in a guard view has on every side beyond it, for the
+levels drawn against it (:func:`view_estimate`)."""
+
+
 def view_estimate(
     source: Mesh,
     other: Mesh | PointCloud,
     distance: float,
     view: ReferenceView = REFERENCE_VIEW,
     point_px: float = 1.0,
+    keep: bool = False,
 ) -> SilhouetteEstimate:
     """Silhouette precision and recall of ``other`` (a mesh, or points ``point_px`` wide)
     against ``source`` seen from ``distance`` in ``view`` (both in the same frame, z up), over
     the guard's views of the upper hemisphere (:mod:`.views`): those of the view where F is
-    least. Both are drawn on one pixel grid per view (:func:`~.bake.spans.overlap_counts`;
-    numba loaded here, where a run first judges a derived level)."""
+    least. Both are drawn on one pixel grid per view (:mod:`.bake.spans`; numba loaded here,
+    where a run first judges a derived level); with ``keep``, ``source``'s silhouettes are kept
+    with it for the next estimate at that distance (a cell's candidates)."""
     from .bake import spans
 
     if isinstance(other, PointCloud):
         positions, faces, size = other.positions, np.zeros((0, 3), np.int64), max(point_px, 1.0)
     else:
         positions, faces, size = other.vertices, other.faces, 0.0
-    counts = spans.overlap_counts(
-        _floats(source.vertices),
-        _indices(source.faces),
-        _floats(positions),
-        _indices(faces),
-        size,
-        GUARD_BASES,
-        distance,
-        view.focal_px,
-    )
+    args = (_floats(positions), _indices(faces), size)
+    seen = (distance, view.focal_px)
+    mesh = (_floats(source.vertices), _indices(source.faces))
+    if not keep:
+        counts = spans.overlap_counts(*mesh, *args, GUARD_BASES, *seen)
+    else:
+        frames, bits = source.derived(
+            f"guard-{seen!r}", lambda: spans.silhouettes(*mesh, GUARD_BASES, *seen, GUARD_MARGIN)
+        )
+        counts = spans.counts_against(frames, bits, *args, GUARD_BASES, *seen)
+        apart = np.flatnonzero(counts[:, 0] < 0)
+        if len(apart):  # ``other`` reaches beyond the source's images there
+            counts[apart] = spans.overlap_counts(*mesh, *args, GUARD_BASES[apart], *seen)
     worst = SilhouetteEstimate(precision=1.0, recall=1.0)
     for wanted, drawn, tp in counts.tolist():
         if not wanted and not drawn:

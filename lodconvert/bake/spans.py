@@ -117,6 +117,86 @@ def _ones(x: np.uint64) -> int:
 
 
 @numba.njit(cache=True, nogil=True)
+def silhouettes(
+    positions: np.ndarray,
+    faces: np.ndarray,
+    bases: np.ndarray,
+    distance: float,
+    focal: float,
+    margin: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The silhouettes of mesh (``positions``, ``faces``) in each view of ``bases``
+    ((views, 3, 3), :func:`_project`): where each view's image lies (its corner's whole pixels,
+    rows and words: (views, 4)) and its bits ((views, rows, words), uint64), each image the
+    mesh's bounds with ``margin`` of its size more on every side (at least 2 pixels), so that
+    another level drawn against it mostly falls inside (:func:`counts_against`)."""
+    views = bases.shape[0]
+    frames = np.zeros((views, 4), dtype=np.int64)
+    for view in range(views):
+        u, v = _project(positions, bases[view], distance, focal)
+        if u.shape[0] == 0:
+            continue
+        pad = math.ceil(margin * max(u.max() - u.min(), v.max() - v.min())) + 2
+        frames[view, 0] = math.floor(u.min()) - pad
+        frames[view, 1] = math.floor(v.min()) - pad
+        frames[view, 2] = math.floor(v.max()) + pad + 1 - frames[view, 1]
+        frames[view, 3] = (math.floor(u.max()) + pad + 1 - frames[view, 0] + 63) // 64
+    bits = np.zeros((views, frames[:, 2].max(), frames[:, 3].max()), dtype=np.uint64)
+    for view in range(views):
+        if frames[view, 2]:
+            u, v = _project(positions, bases[view], distance, focal)
+            u -= frames[view, 0]
+            v -= frames[view, 1]
+            _fill_faces(bits[view, : frames[view, 2], : frames[view, 3]], u, v, faces)
+    return frames, bits
+
+
+@numba.njit(cache=True, nogil=True)
+def counts_against(
+    frames: np.ndarray,
+    bits: np.ndarray,
+    other: np.ndarray,
+    other_faces: np.ndarray,
+    point_px: float,
+    bases: np.ndarray,
+    distance: float,
+    focal: float,
+) -> np.ndarray:
+    """Per view, the pixels of the silhouette (``frames``, ``bits``: :func:`silhouettes`), of
+    ``other`` and of both (:data:`Counts`): ``other`` is a mesh with ``other_faces``, or, with
+    ``point_px`` above 0, points that many pixels wide. -1 in a view whose image ``other`` does
+    not fit in (to be drawn apart, :func:`overlap_counts`)."""
+    views = bases.shape[0]
+    counts = np.zeros((views, 3), dtype=np.int64)
+    half = max(point_px, 1.0) / 2.0 + 1.0 if point_px > 0.0 else 0.0
+    for view in range(views):
+        c0, r0, rows, words = frames[view, 0], frames[view, 1], frames[view, 2], frames[view, 3]
+        ou, ov = _project(other, bases[view], distance, focal)
+        if ou.shape[0] and (
+            ou.min() - half < c0
+            or ov.min() - half < r0
+            or ou.max() + half >= c0 + words * 64
+            or ov.max() + half >= r0 + rows
+        ):
+            counts[view, 0] = -1
+            continue
+        ou -= c0
+        ov -= r0
+        second = np.zeros((rows, words), dtype=np.uint64)
+        if point_px > 0.0:
+            _fill_points(second, ou, ov, point_px)
+        else:
+            _fill_faces(second, ou, ov, other_faces)
+        first = bits[view]
+        for r in range(rows):
+            for w in range(words):
+                counts[view, 0] += _ones(first[r, w])
+                counts[view, 1] += _ones(second[r, w])
+                counts[view, 2] += _ones(first[r, w] & second[r, w])
+    return counts
+
+
+@numba.njit(cache=True, nogil=True)
 def overlap_counts(
     positions: np.ndarray,
     faces: np.ndarray,

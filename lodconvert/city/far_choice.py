@@ -21,12 +21,13 @@ Made = tuple[Level, float, dict[str, Any]]
 
 def silhouette_f(source: Mesh, level: Level, distance: float, options: ChainOptions) -> float:
     """Silhouette F of ``level`` against ``source`` seen from ``distance`` over the guard's
-    views (:func:`~lodconvert.plan.view_estimate`)."""
+    views (:func:`~lodconvert.plan.view_estimate`; ``source``'s silhouettes kept with it: a
+    cell compares every candidate with the same)."""
     if level.points is not None:
         size = level.params.point_size if level.params is not None else 1.0
-        return view_estimate(source, level.points, distance, options.view, size).f
+        return view_estimate(source, level.points, distance, options.view, size, True).f
     assert level.mesh is not None
-    return view_estimate(source, level.mesh, distance, options.view).f
+    return view_estimate(source, level.mesh, distance, options.view, keep=True).f
 
 
 def lighter(one: Made | None, other: Made | None) -> Made | None:
