@@ -108,6 +108,27 @@ def test_a_city_converts_without_loading_scipy(tmp_path) -> None:
     assert (tmp_path / "kit.x3d").stat().st_size > 0
 
 
+def test_a_city_with_its_own_lod1_converts_without_loading_numba(tmp_path) -> None:
+    """Delft's buildings have LoD 1 of their own: no prism is judged, so numba, which takes
+    a few tenths of a second to import, is never loaded."""
+    from .conftest import SHARED, shared_data
+
+    source = shared_data(SHARED / "data" / "cityjson" / "delft.city.json")
+    code = (
+        "import sys\nfrom lodconvert.cli import main\n"
+        f"status = main([{str(source)!r}, '-o', {str(tmp_path / 'delft.x3d')!r}, '-q'])\n"
+        "assert status == 0, status\n"
+        "print('numba' in sys.modules)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    run = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.strip().splitlines()[-1] == "False"
+    assert (tmp_path / "delft.x3d").stat().st_size > 0
+
+
 def test_a_worker_converting_a_city_into_x3d_loads_no_gltf_format_and_no_pillow(
     monkeypatch, tmp_path
 ) -> None:
