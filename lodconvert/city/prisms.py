@@ -333,7 +333,7 @@ def standing_height(
     roof's ``percentile`` taken only where ``finest`` is ``solid`` (LoD 1 or finer)."""
     low, high = float(finest.bounds[0, 2]), float(finest.bounds[1, 2])
     if solid:
-        roof = _roofs(finest)
+        roof = _slopes(finest).roofs
         if roof.any():
             tri = finest.triangles[roof]
             top = _percentile(tri[:, :, 2], np.abs(_doubled_areas(tri)), percentile / 100)
@@ -349,28 +349,31 @@ def standing_height(
     return low, high
 
 
-def _normals(mesh: Mesh) -> np.ndarray:
-    """The faces' normals (m, 3), as long as twice their areas; all turned over where the faces
-    enclose a negative volume (wound inward), so that roofs face up."""
+class _Slopes(NamedTuple):
+    """Which faces of a mesh are ``roofs`` (facing up, less steep than :data:`STEEP` allows)
+    and which ``walls`` (steeper), and the faces' ``areas``, doubled."""
 
-    def compute() -> np.ndarray:
-        tri = mesh.triangles - mesh.bounds.mean(axis=0)
-        across = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        return -across if float(np.einsum("ij,ij->", tri[:, 0], across)) < 0 else across
-
-    return mesh.derived("outward-normals", compute)
+    roofs: np.ndarray
+    walls: np.ndarray
+    areas: np.ndarray
 
 
-def _roofs(mesh: Mesh) -> np.ndarray:
-    """Which faces of ``mesh`` are roofs: facing up, less steep than :data:`STEEP` allows."""
-    normals = _normals(mesh)
-    return normals[:, 2] > STEEP * np.linalg.norm(normals, axis=1)
+def _slopes(mesh: Mesh) -> _Slopes:
+    """The roofs, walls and doubled areas of ``mesh``'s faces, found once per mesh; faces face
+    outward, all turned over where they enclose a negative volume (wound inward)."""
 
+    def compute() -> _Slopes:
+        tri = mesh.triangles - (mesh.bounds[0] + mesh.bounds[1]) / 2
+        side, other = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        across = np.empty((len(tri), 3))  # the faces' normals, as long as twice their areas
+        across[:, 0] = side[:, 1] * other[:, 2] - side[:, 2] * other[:, 1]
+        across[:, 1] = side[:, 2] * other[:, 0] - side[:, 0] * other[:, 2]
+        across[:, 2] = side[:, 0] * other[:, 1] - side[:, 1] * other[:, 0]
+        up = -across[:, 2] if float(np.einsum("ij,ij->", tri[:, 0], across)) < 0 else across[:, 2]
+        areas = np.linalg.norm(across, axis=1)
+        return _Slopes(up > STEEP * areas, np.abs(up) < STEEP * areas, areas)
 
-def _walls(mesh: Mesh) -> np.ndarray:
-    """Which faces of ``mesh`` are walls: steeper than :data:`STEEP` allows."""
-    normals = _normals(mesh)
-    return np.abs(normals[:, 2]) < STEEP * np.linalg.norm(normals, axis=1)
+    return mesh.derived("roofs-walls", compute)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -436,16 +439,14 @@ def _percentile(heights: np.ndarray, weights: np.ndarray, share: float) -> float
 def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
     """The prism's roof and wall colours (RGBA): the mean colour of ``finest``'s roofs and of
     its walls, over their areas (grey where it has none)."""
-    everything = np.arange(finest.face_count)
-    centres = finest.triangles.mean(axis=1)
-    areas = np.linalg.norm(_normals(finest), axis=1)
+    slopes = _slopes(finest)
     colors = []
-    for faces in (everything[_roofs(finest)], everything[_walls(finest)]):
-        weights = areas[faces]
+    for faces in (np.flatnonzero(slopes.roofs), np.flatnonzero(slopes.walls)):
+        weights = slopes.areas[faces]
         if weights.sum() <= 0:
             colors.append(GREY.copy())
             continue
-        seen = finest.colors_at(faces, centres[faces]).astype(np.float64)
+        seen = finest.colors_at(faces, finest.triangles[faces].mean(axis=1)).astype(np.float64)
         colors.append(np.rint(weights @ seen / weights.sum()).astype(np.uint8))
     return colors[0], colors[1]
 
