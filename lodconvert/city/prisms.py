@@ -127,26 +127,28 @@ def _merged(
     exactly once (their edges add up to its boundary), so it is their union."""
     import shapely
 
-    edges: set[tuple[int, int]] = set()
-    for a, b, c in corners.tolist():
-        for edge in ((a, b), (b, c), (c, a)):
-            if edge in edges:
-                return None  # two triangles on one side of an edge: they overlap
-            edges.add(edge)
-    following: dict[int, int] = {}
-    for a, b in edges:
-        if (b, a) not in edges:
-            if a in following:
-                return None  # rings that meet at a point
-            following[a] = b
+    n = len(points)
+    first, second = corners, np.roll(corners, -1, axis=1)  # each triangle's edges, in turn
+    edges = np.sort((first * n + second).ravel())
+    if (edges[1:] == edges[:-1]).any():
+        return None  # two triangles on one side of an edge: they overlap
+    start, end = first.ravel(), second.ravel()
+    reverse = end * n + start
+    at = np.minimum(np.searchsorted(edges, reverse), len(edges) - 1)
+    outer = edges[at] != reverse  # edges no other triangle shares
+    start, end = start[outer], end[outer]
+    following = np.full(n, -1)
+    following[start] = end
+    if len(np.unique(start)) < len(start):
+        return None  # rings that meet at a point
+    ahead = following.tolist()
     loops = []
-    for first in sorted(following):
-        if first in following:
-            loop, point = [first], following.pop(first)
-            while point != first:
-                loop.append(point)
-                point = following.pop(point)
-            loops.append(loop)
+    for point in np.sort(start).tolist():  # each loop from its least corner, followed round
+        if ahead[point] >= 0:
+            loops.append([])
+            while ahead[point] >= 0:
+                loops[-1].append(point)
+                ahead[point], point = -1, ahead[point]  # this corner done, on to the next
     rings = [points[loop] for loop in loops]
     if len(rings) > 1:  # a single loop bounds what clockwise triangles cover: it runs clockwise
         areas = np.array([_doubled_area(ring - points[0]) for ring in rings])
@@ -483,10 +485,19 @@ def simplified_polygons(outline: Any, tolerance: float) -> list[Any]:
 
     least = tolerance * tolerance
     return [
-        shapely.Polygon(polygon.exterior, [h for h in polygon.interiors if _area(h) >= least])
+        _without_holes(polygon, least)
         for polygon in _simplified_apart(shapely.get_parts(outline), tolerance)
         if isinstance(polygon, shapely.Polygon) and polygon.area >= least
     ]
+
+
+def _without_holes(polygon: Any, least: float) -> Any:
+    """Shapely ``polygon`` without its holes of area less than ``least``."""
+    import shapely
+
+    if not shapely.get_num_interior_rings(polygon):
+        return polygon
+    return shapely.Polygon(polygon.exterior, [h for h in polygon.interiors if _area(h) >= least])
 
 
 def _simplified_apart(polygons: np.ndarray, tolerance: float) -> list[Any]:
@@ -499,7 +510,7 @@ def _simplified_apart(polygons: np.ndarray, tolerance: float) -> list[Any]:
 
     if not len(polygons):
         return []
-    groups = _apart(polygons)
+    groups = _apart(polygons) if len(polygons) > 1 else [polygons]
     alone = [group[0] for group in groups if len(group) == 1]
     simple = iter(
         shapely.simplify(np.array(alone, dtype=object), tolerance, preserve_topology=True)
