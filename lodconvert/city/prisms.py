@@ -67,6 +67,15 @@ class FootprintPart(NamedTuple):
     rings: list[np.ndarray]
 
 
+class Outline(NamedTuple):
+    """A footprint before it is ear-clipped: its shapely ``polygons`` (exterior rings clockwise,
+    holes counter-clockwise), and where triangles were traced into it (:func:`_merged`), the
+    one ``traced`` part they make, which needs no ear-clipping."""
+
+    polygons: list[Any]
+    traced: FootprintPart | None = None
+
+
 def _extent(mesh: Mesh) -> float:
     """The longer side of ``mesh``'s bounding rectangle seen from above (1 where it has none)."""
     return float((mesh.bounds[1, :2] - mesh.bounds[0, :2]).max()) or 1.0
@@ -167,7 +176,7 @@ def _doubled_area(ring: np.ndarray) -> float:
 
 def _traced(
     points: np.ndarray, corners: np.ndarray, rings: list[np.ndarray], polygon: Any, extent: float
-) -> list[FootprintPart]:
+) -> Outline:
     """The footprint of triangles ``corners`` (indices into ``points``) that :func:`_merged`
     traced into ``rings`` and ``polygon``; simplified as a union of triangles is
     (:func:`polygons`) where corners of its outline lie within :data:`SEAM_TOLERANCE` of a
@@ -176,8 +185,8 @@ def _traced(
 
     simple = shapely.simplify(polygon, SEAM_TOLERANCE * extent)
     if shapely.get_num_coordinates(simple) < shapely.get_num_coordinates(polygon):
-        return polygons(simple)
-    return [FootprintPart(points, corners, rings)]
+        return Outline(_oriented(simple))
+    return Outline([polygon], FootprintPart(points, corners, rings))
 
 
 def _used(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -196,7 +205,7 @@ def _closed(tri: np.ndarray) -> Any:
 
 def _without_slivers(
     steep: np.ndarray, tri: np.ndarray, points: np.ndarray, corners: np.ndarray, extent: float
-) -> list[FootprintPart] | None:
+) -> Outline | None:
     """The union of triangles ``tri`` (``corners`` into ``points`` as :func:`_merged` takes
     them) where the slivers of the ``steep`` ones keep them from merging; ``None`` unless the
     others merge. A sliver inside their polygon adds nothing; those outside merge with it where
@@ -222,38 +231,46 @@ def _without_slivers(
     return _outline(_union(np.array([rest[1], *_closed(tri[slivers[outside]])])), extent)
 
 
-def _outline(union: Any, extent: float) -> list[FootprintPart]:
+def _outline(union: Any, extent: float) -> Outline:
     """The polygons of a shapely ``union`` of triangles, made valid where it is not, without
     the collinear seams of the union (:data:`SEAM_TOLERANCE`)."""
     import shapely
 
     valid = union if union.is_valid else shapely.make_valid(union).buffer(0)
-    return polygons(shapely.simplify(valid, SEAM_TOLERANCE * extent))
+    return Outline(_oriented(shapely.simplify(valid, SEAM_TOLERANCE * extent)))
+
+
+def _oriented(outline: Any) -> list[Any]:
+    """The polygons with area of shapely geometry ``outline``, exterior rings clockwise."""
+    import shapely
+
+    outline = shapely.orient_polygons(outline, exterior_cw=True)
+    return [
+        polygon
+        for polygon in getattr(outline, "geoms", [outline])
+        if isinstance(polygon, shapely.Polygon) and not polygon.is_empty and polygon.area > 0
+    ]
+
+
+def _ear_clipped(polygon: Any) -> FootprintPart:
+    """Shapely ``polygon`` (exterior ring clockwise) ear-clipped into triangles."""
+    import mapbox_earcut
+
+    rings = [np.asarray(polygon.exterior.coords)[:-1]]
+    rings += [np.asarray(ring.coords)[:-1] for ring in polygon.interiors]
+    points = np.concatenate(rings)
+    ends = np.cumsum([len(ring) for ring in rings]).astype(np.uint32)
+    corners = mapbox_earcut.triangulate_float64(points - points[0], ends)
+    corners = corners.astype(np.int64).reshape(-1, 3)
+    return FootprintPart(points, _clockwise(corners, _doubled_areas(points[corners])), rings)
 
 
 def polygons(outline: Any) -> list[FootprintPart]:
     """The polygons with area of shapely geometry ``outline``, ear-clipped into triangles."""
-    import mapbox_earcut
-    import shapely
-
-    outline = shapely.orient_polygons(outline, exterior_cw=True)
-    parts = []
-    for polygon in getattr(outline, "geoms", [outline]):
-        if not isinstance(polygon, shapely.Polygon) or polygon.is_empty or polygon.area <= 0:
-            continue
-        rings = [np.asarray(polygon.exterior.coords)[:-1]]
-        rings += [np.asarray(ring.coords)[:-1] for ring in polygon.interiors]
-        points = np.concatenate(rings)
-        ends = np.cumsum([len(ring) for ring in rings]).astype(np.uint32)
-        corners = mapbox_earcut.triangulate_float64(points - points[0], ends)
-        corners = corners.astype(np.int64).reshape(-1, 3)
-        parts.append(
-            FootprintPart(points, _clockwise(corners, _doubled_areas(points[corners])), rings)
-        )
-    return parts
+    return [_ear_clipped(polygon) for polygon in _oriented(outline)]
 
 
-def footprint(lods: dict[str, Mesh], finest: Mesh) -> list[FootprintPart]:
+def footprint(lods: dict[str, Mesh], finest: Mesh) -> Outline:
     """The object's footprint as polygons to extrude: the union of its lod0 surfaces if it has
     any, else of its finest geometry, seen from above. Triangles that merge into one polygon
     (slivers of walls aside) are traced along their outer edges; shapely joins the others."""
@@ -262,7 +279,7 @@ def footprint(lods: dict[str, Mesh], finest: Mesh) -> list[FootprintPart]:
     extent = _extent(base)
     seen, tri, twice = _seen(base, extent)
     if len(tri) == 0:
-        return []
+        return Outline([])
     points, corners = _indexed(tri, twice)
     merged = _merged(points, corners, extent)
     if merged is not None:
@@ -453,34 +470,26 @@ def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
     return colors[0], colors[1]
 
 
-def simplified(parts: list[FootprintPart], tolerance: float) -> list[FootprintPart]:
-    """The footprint ``parts`` simplified within ``tolerance`` (shapely, topology kept),
-    without the polygons and holes smaller than a ``tolerance`` square; ``parts`` themselves
-    where that removes no corner."""
+def simplified(outline: Outline, tolerance: float) -> list[FootprintPart]:
+    """The footprint ``outline`` simplified within ``tolerance`` (shapely, topology kept),
+    without the polygons and holes smaller than a ``tolerance`` square, as polygons to extrude;
+    ``outline``'s own where that removes no corner."""
     import shapely
 
-    if tolerance <= 0 or not parts:
-        return parts
-    outline = shapes(parts)
-    kept = simplified_polygons(outline, tolerance)
-    if not kept:
-        return parts
-    result = shapely.MultiPolygon(kept)
-    if shapely.get_num_coordinates(result) >= shapely.get_num_coordinates(outline):
-        return parts
-    return polygons(result)
-
-
-def shapes(parts: list[FootprintPart]) -> Any:
-    """Footprint ``parts`` as one shapely multipolygon."""
-    import shapely
-
-    return shapely.MultiPolygon([shapely.Polygon(p.rings[0], p.rings[1:]) for p in parts])
+    if tolerance > 0 and outline.polygons:
+        kept = simplified_polygons(outline.polygons, tolerance)
+        fewer = shapely.get_num_coordinates(kept).sum()
+        if kept and fewer < shapely.get_num_coordinates(outline.polygons).sum():
+            return polygons(shapely.MultiPolygon(kept))
+    if outline.traced is not None:
+        return [outline.traced]
+    return [_ear_clipped(polygon) for polygon in outline.polygons]
 
 
 def simplified_polygons(outline: Any, tolerance: float) -> list[Any]:
-    """The polygons of shapely geometry ``outline`` simplified within ``tolerance`` (topology
-    kept), without the polygons and holes smaller than a ``tolerance`` square."""
+    """The polygons of shapely geometry ``outline`` (or of a list of them) simplified within
+    ``tolerance`` (topology kept), without the polygons and holes smaller than a ``tolerance``
+    square."""
     import shapely
 
     least = tolerance * tolerance
