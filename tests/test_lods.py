@@ -165,8 +165,8 @@ def test_a_footprint_with_a_courtyard_keeps_it() -> None:
     points, faces = triangulate([np.array(square, float), np.array(yard, float)])
     ground = Mesh([Surface(points, faces)])
     house = block(10, 10, 5, 5, 5)
-    (part,) = footprint({"lod0": ground, "lod2": house}, house)
-    assert len(part.rings) == 2  # the yard is a hole
+    (polygon,) = footprint({"lod0": ground, "lod2": house}, house).polygons
+    assert len(polygon.interiors) == 1  # the yard is a hole
     shape = prism({"lod0": ground, "lod2": house}, house, {})
     assert shape is not None and closed_and_wound_alike(with_floor(shape))
     assert surfaces_area(shape, 1.0) == pytest.approx(91.0)

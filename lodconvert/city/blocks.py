@@ -25,7 +25,6 @@ from .prisms import (
     footprint,
     polygons,
     prism_colors,
-    shapes,
     simplified_polygons,
     standing_height,
 )
@@ -66,11 +65,13 @@ def _footprint(chain: LodChain, finest: Mesh) -> Footprint | None:
     """:func:`object_footprint`, found anew."""
     if chain.metadata.get("type") in GROUND_COVERS:
         return None
+    import shapely
+
     base, top = standing_height(finest, chain.metadata, percentile=ROOF_PERCENTILE)
-    parts = footprint({}, finest) if top > base else []
-    if not parts:
+    found = footprint({}, finest).polygons if top > base else []
+    if not found:
         return None
-    outline = shapes(parts)
+    outline = shapely.MultiPolygon(found)
     roof, wall = prism_colors(finest)
     return Footprint(outline, base, top, roof, wall, float(outline.area))
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from typing import Any, NamedTuple
 
+import numba
 import numpy as np
 
 from ..heap import return_freed_heap
@@ -64,6 +65,15 @@ class FootprintPart(NamedTuple):
     points: np.ndarray
     triangles: np.ndarray
     rings: list[np.ndarray]
+
+
+class Outline(NamedTuple):
+    """A footprint before it is ear-clipped: its shapely ``polygons`` (exterior rings clockwise,
+    holes counter-clockwise), and where triangles were traced into it (:func:`_merged`), the
+    one ``traced`` part they make, which needs no ear-clipping."""
+
+    polygons: list[Any]
+    traced: FootprintPart | None = None
 
 
 def _extent(mesh: Mesh) -> float:
@@ -126,26 +136,28 @@ def _merged(
     exactly once (their edges add up to its boundary), so it is their union."""
     import shapely
 
-    edges: set[tuple[int, int]] = set()
-    for a, b, c in corners.tolist():
-        for edge in ((a, b), (b, c), (c, a)):
-            if edge in edges:
-                return None  # two triangles on one side of an edge: they overlap
-            edges.add(edge)
-    following: dict[int, int] = {}
-    for a, b in edges:
-        if (b, a) not in edges:
-            if a in following:
-                return None  # rings that meet at a point
-            following[a] = b
+    n = len(points)
+    first, second = corners, np.roll(corners, -1, axis=1)  # each triangle's edges, in turn
+    edges = np.sort((first * n + second).ravel())
+    if (edges[1:] == edges[:-1]).any():
+        return None  # two triangles on one side of an edge: they overlap
+    start, end = first.ravel(), second.ravel()
+    reverse = end * n + start
+    at = np.minimum(np.searchsorted(edges, reverse), len(edges) - 1)
+    outer = edges[at] != reverse  # edges no other triangle shares
+    start, end = start[outer], end[outer]
+    following = np.full(n, -1)
+    following[start] = end
+    if len(np.unique(start)) < len(start):
+        return None  # rings that meet at a point
+    ahead = following.tolist()
     loops = []
-    for first in sorted(following):
-        if first in following:
-            loop, point = [first], following.pop(first)
-            while point != first:
-                loop.append(point)
-                point = following.pop(point)
-            loops.append(loop)
+    for point in np.sort(start).tolist():  # each loop from its least corner, followed round
+        if ahead[point] >= 0:
+            loops.append([])
+            while ahead[point] >= 0:
+                loops[-1].append(point)
+                ahead[point], point = -1, ahead[point]  # this corner done, on to the next
     rings = [points[loop] for loop in loops]
     if len(rings) > 1:  # a single loop bounds what clockwise triangles cover: it runs clockwise
         areas = np.array([_doubled_area(ring - points[0]) for ring in rings])
@@ -164,7 +176,7 @@ def _doubled_area(ring: np.ndarray) -> float:
 
 def _traced(
     points: np.ndarray, corners: np.ndarray, rings: list[np.ndarray], polygon: Any, extent: float
-) -> list[FootprintPart]:
+) -> Outline:
     """The footprint of triangles ``corners`` (indices into ``points``) that :func:`_merged`
     traced into ``rings`` and ``polygon``; simplified as a union of triangles is
     (:func:`polygons`) where corners of its outline lie within :data:`SEAM_TOLERANCE` of a
@@ -173,8 +185,8 @@ def _traced(
 
     simple = shapely.simplify(polygon, SEAM_TOLERANCE * extent)
     if shapely.get_num_coordinates(simple) < shapely.get_num_coordinates(polygon):
-        return polygons(simple)
-    return [FootprintPart(points, corners, rings)]
+        return Outline(_oriented(simple))
+    return Outline([polygon], FootprintPart(points, corners, rings))
 
 
 def _used(points: np.ndarray, corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -193,7 +205,7 @@ def _closed(tri: np.ndarray) -> Any:
 
 def _without_slivers(
     steep: np.ndarray, tri: np.ndarray, points: np.ndarray, corners: np.ndarray, extent: float
-) -> list[FootprintPart] | None:
+) -> Outline | None:
     """The union of triangles ``tri`` (``corners`` into ``points`` as :func:`_merged` takes
     them) where the slivers of the ``steep`` ones keep them from merging; ``None`` unless the
     others merge. A sliver inside their polygon adds nothing; those outside merge with it where
@@ -219,38 +231,46 @@ def _without_slivers(
     return _outline(_union(np.array([rest[1], *_closed(tri[slivers[outside]])])), extent)
 
 
-def _outline(union: Any, extent: float) -> list[FootprintPart]:
+def _outline(union: Any, extent: float) -> Outline:
     """The polygons of a shapely ``union`` of triangles, made valid where it is not, without
     the collinear seams of the union (:data:`SEAM_TOLERANCE`)."""
     import shapely
 
     valid = union if union.is_valid else shapely.make_valid(union).buffer(0)
-    return polygons(shapely.simplify(valid, SEAM_TOLERANCE * extent))
+    return Outline(_oriented(shapely.simplify(valid, SEAM_TOLERANCE * extent)))
+
+
+def _oriented(outline: Any) -> list[Any]:
+    """The polygons with area of shapely geometry ``outline``, exterior rings clockwise."""
+    import shapely
+
+    outline = shapely.orient_polygons(outline, exterior_cw=True)
+    return [
+        polygon
+        for polygon in getattr(outline, "geoms", [outline])
+        if isinstance(polygon, shapely.Polygon) and not polygon.is_empty and polygon.area > 0
+    ]
+
+
+def _ear_clipped(polygon: Any) -> FootprintPart:
+    """Shapely ``polygon`` (exterior ring clockwise) ear-clipped into triangles."""
+    import mapbox_earcut
+
+    rings = [np.asarray(polygon.exterior.coords)[:-1]]
+    rings += [np.asarray(ring.coords)[:-1] for ring in polygon.interiors]
+    points = np.concatenate(rings)
+    ends = np.cumsum([len(ring) for ring in rings]).astype(np.uint32)
+    corners = mapbox_earcut.triangulate_float64(points - points[0], ends)
+    corners = corners.astype(np.int64).reshape(-1, 3)
+    return FootprintPart(points, _clockwise(corners, _doubled_areas(points[corners])), rings)
 
 
 def polygons(outline: Any) -> list[FootprintPart]:
     """The polygons with area of shapely geometry ``outline``, ear-clipped into triangles."""
-    import mapbox_earcut
-    import shapely
-
-    outline = shapely.orient_polygons(outline, exterior_cw=True)
-    parts = []
-    for polygon in getattr(outline, "geoms", [outline]):
-        if not isinstance(polygon, shapely.Polygon) or polygon.is_empty or polygon.area <= 0:
-            continue
-        rings = [np.asarray(polygon.exterior.coords)[:-1]]
-        rings += [np.asarray(ring.coords)[:-1] for ring in polygon.interiors]
-        points = np.concatenate(rings)
-        ends = np.cumsum([len(ring) for ring in rings]).astype(np.uint32)
-        corners = mapbox_earcut.triangulate_float64(points - points[0], ends)
-        corners = corners.astype(np.int64).reshape(-1, 3)
-        parts.append(
-            FootprintPart(points, _clockwise(corners, _doubled_areas(points[corners])), rings)
-        )
-    return parts
+    return [_ear_clipped(polygon) for polygon in _oriented(outline)]
 
 
-def footprint(lods: dict[str, Mesh], finest: Mesh) -> list[FootprintPart]:
+def footprint(lods: dict[str, Mesh], finest: Mesh) -> Outline:
     """The object's footprint as polygons to extrude: the union of its lod0 surfaces if it has
     any, else of its finest geometry, seen from above. Triangles that merge into one polygon
     (slivers of walls aside) are traced along their outer edges; shapely joins the others."""
@@ -259,7 +279,7 @@ def footprint(lods: dict[str, Mesh], finest: Mesh) -> list[FootprintPart]:
     extent = _extent(base)
     seen, tri, twice = _seen(base, extent)
     if len(tri) == 0:
-        return []
+        return Outline([])
     points, corners = _indexed(tri, twice)
     merged = _merged(points, corners, extent)
     if merged is not None:
@@ -332,7 +352,7 @@ def standing_height(
     roof's ``percentile`` taken only where ``finest`` is ``solid`` (LoD 1 or finer)."""
     low, high = float(finest.bounds[0, 2]), float(finest.bounds[1, 2])
     if solid:
-        roof = _roofs(finest)
+        roof = _slopes(finest).roofs
         if roof.any():
             tri = finest.triangles[roof]
             top = _percentile(tri[:, :, 2], np.abs(_doubled_areas(tri)), percentile / 100)
@@ -348,110 +368,145 @@ def standing_height(
     return low, high
 
 
-def _normals(mesh: Mesh) -> np.ndarray:
-    """The faces' normals (m, 3), as long as twice their areas; all turned over where the faces
-    enclose a negative volume (wound inward), so that roofs face up."""
+class _Slopes(NamedTuple):
+    """Which faces of a mesh are ``roofs`` (facing up, less steep than :data:`STEEP` allows)
+    and which ``walls`` (steeper), and the faces' ``areas``, doubled."""
 
-    def compute() -> np.ndarray:
-        tri = mesh.triangles - mesh.bounds.mean(axis=0)
-        across = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        return -across if float(np.einsum("ij,ij->", tri[:, 0], across)) < 0 else across
-
-    return mesh.derived("outward-normals", compute)
+    roofs: np.ndarray
+    walls: np.ndarray
+    areas: np.ndarray
 
 
-def _roofs(mesh: Mesh) -> np.ndarray:
-    """Which faces of ``mesh`` are roofs: facing up, less steep than :data:`STEEP` allows."""
-    normals = _normals(mesh)
-    return normals[:, 2] > STEEP * np.linalg.norm(normals, axis=1)
+def _slopes(mesh: Mesh) -> _Slopes:
+    """The roofs, walls and doubled areas of ``mesh``'s faces, found once per mesh; faces face
+    outward, all turned over where they enclose a negative volume (wound inward)."""
+
+    def compute() -> _Slopes:
+        tri = mesh.triangles - (mesh.bounds[0] + mesh.bounds[1]) / 2
+        side, other = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        across = np.empty((len(tri), 3))  # the faces' normals, as long as twice their areas
+        across[:, 0] = side[:, 1] * other[:, 2] - side[:, 2] * other[:, 1]
+        across[:, 1] = side[:, 2] * other[:, 0] - side[:, 0] * other[:, 2]
+        across[:, 2] = side[:, 0] * other[:, 1] - side[:, 1] * other[:, 0]
+        up = -across[:, 2] if float(np.einsum("ij,ij->", tri[:, 0], across)) < 0 else across[:, 2]
+        areas = np.linalg.norm(across, axis=1)
+        return _Slopes(up > STEEP * areas, np.abs(up) < STEEP * areas, areas)
+
+    return mesh.derived("roofs-walls", compute)
 
 
-def _walls(mesh: Mesh) -> np.ndarray:
-    """Which faces of ``mesh`` are walls: steeper than :data:`STEEP` allows."""
-    normals = _normals(mesh)
-    return np.abs(normals[:, 2]) < STEEP * np.linalg.norm(normals, axis=1)
+@numba.njit(cache=True, nogil=True)
+def _share_below(a: np.ndarray, b: np.ndarray, c: np.ndarray, w: np.ndarray, t: float) -> float:
+    """The area, of triangles with ordered corner heights ``a`` ≤ ``b`` ≤ ``c`` and areas ``w``,
+    that lies at or below height ``t``."""
+    area = 0.0
+    for i in range(a.shape[0]):
+        if t >= c[i]:
+            area += w[i]
+        elif t <= a[i]:
+            continue
+        elif t <= b[i]:
+            area += w[i] * (t - a[i]) ** 2 / ((b[i] - a[i]) * (c[i] - a[i]))
+        else:
+            area += w[i] * (1 - (c[i] - t) ** 2 / ((c[i] - a[i]) * (c[i] - b[i])))
+    return area
 
 
-_PROBES = np.arange(1.0, 65.0)
-"""The steps to the heights :func:`_percentile` probes between the ends of its bracket."""
-
-
+@numba.njit(cache=True, nogil=True)
 def _percentile(heights: np.ndarray, weights: np.ndarray, share: float) -> float:
-    """The height below which ``share`` of the area of triangles with corner ``heights``
-    ((m, 3)) and areas ``weights`` lies, heights varying linearly across each triangle: the
-    bracket around it narrowed by 64 probes at a time, to 65⁻⁴ of the heights' range."""
-    low, high = np.minimum(heights[:, 0], heights[:, 1]), np.maximum(heights[:, 0], heights[:, 1])
-    a, c = np.minimum(low, heights[:, 2]), np.maximum(high, heights[:, 2])
-    b = np.maximum(low, np.minimum(high, heights[:, 2]))  # each triangle's heights in order
-    lo, hi = float(a.min()), float(c.max())
-    total = float(weights.sum())
-    if total <= 0 or hi <= lo:
-        return hi
-    below, above = (b - a) * (c - a), (c - a) * (c - b)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for _ in range(4):
-            t = (_PROBES * ((hi - lo) / 65) + lo)[:, None]  # 64 between lo and hi, 65 steps
-            rising = (t - a) ** 2 / below
-            falling = 1 - (c - t) ** 2 / above
-            part = np.where(t >= c, 1.0, np.where(t <= a, 0.0, np.where(t <= b, rising, falling)))
-            i = int(np.searchsorted(part @ weights / total, share))
-            lo, hi = (float(t[i - 1, 0]) if i else lo), (float(t[i, 0]) if i < len(t) else hi)
-    return hi
+    """The least height below which ``share`` of the area of triangles with corner ``heights``
+    ((m, 3)) and areas ``weights`` lies, heights varying linearly across each triangle. That
+    area is quadratic in the height between consecutive corner heights: the interval that
+    brackets ``share`` is searched for among them, and the quadratic solved there."""
+    m = heights.shape[0]
+    a, b, c = np.empty(m), np.empty(m), np.empty(m)  # each triangle's heights in order
+    for i in range(m):
+        x, y, z = heights[i, 0], heights[i, 1], heights[i, 2]
+        a[i], c[i] = min(x, y, z), max(x, y, z)
+        b[i] = max(min(x, y), min(max(x, y), z))
+    ends = np.sort(np.concatenate((a, b, c)))
+    total = weights.sum()
+    if total <= 0 or ends[-1] <= ends[0]:
+        return ends[-1]
+    target = share * total
+    first, last = 0, len(ends) - 1  # the least corner height with target below it
+    while first < last:
+        middle = (first + last) // 2
+        if _share_below(a, b, c, weights, ends[middle]) >= target:
+            last = middle
+        else:
+            first = middle + 1
+    if first == 0:
+        return ends[0]
+    low, high = ends[first - 1], ends[first]
+    rest = target - _share_below(a, b, c, weights, low)
+    square, linear = 0.0, 0.0  # the area below low + s, less that below low: square s² + linear s
+    for i in range(m):
+        if a[i] <= low < b[i]:
+            square += weights[i] / ((b[i] - a[i]) * (c[i] - a[i]))
+            linear += 2 * weights[i] * (low - a[i]) / ((b[i] - a[i]) * (c[i] - a[i]))
+        elif b[i] <= low < c[i]:
+            square -= weights[i] / ((c[i] - a[i]) * (c[i] - b[i]))
+            linear += 2 * weights[i] * (c[i] - low) / ((c[i] - a[i]) * (c[i] - b[i]))
+    reach = linear * linear + 4 * square * rest
+    if reach < 0:
+        return high  # the area steps up at high
+    root = linear + math.sqrt(reach)
+    return min(low + 2 * rest / root, high) if root > 0 else high
 
 
 def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
     """The prism's roof and wall colours (RGBA): the mean colour of ``finest``'s roofs and of
     its walls, over their areas (grey where it has none)."""
-    everything = np.arange(finest.face_count)
-    centres = finest.triangles.mean(axis=1)
-    areas = np.linalg.norm(_normals(finest), axis=1)
+    slopes = _slopes(finest)
     colors = []
-    for faces in (everything[_roofs(finest)], everything[_walls(finest)]):
-        weights = areas[faces]
+    for faces in (np.flatnonzero(slopes.roofs), np.flatnonzero(slopes.walls)):
+        weights = slopes.areas[faces]
         if weights.sum() <= 0:
             colors.append(GREY.copy())
             continue
-        seen = finest.colors_at(faces, centres[faces]).astype(np.float64)
+        seen = finest.colors_at(faces, finest.triangles[faces].mean(axis=1)).astype(np.float64)
         colors.append(np.rint(weights @ seen / weights.sum()).astype(np.uint8))
     return colors[0], colors[1]
 
 
-def simplified(parts: list[FootprintPart], tolerance: float) -> list[FootprintPart]:
-    """The footprint ``parts`` simplified within ``tolerance`` (shapely, topology kept),
-    without the polygons and holes smaller than a ``tolerance`` square; ``parts`` themselves
-    where that removes no corner."""
+def simplified(outline: Outline, tolerance: float) -> list[FootprintPart]:
+    """The footprint ``outline`` simplified within ``tolerance`` (shapely, topology kept),
+    without the polygons and holes smaller than a ``tolerance`` square, as polygons to extrude;
+    ``outline``'s own where that removes no corner."""
     import shapely
 
-    if tolerance <= 0 or not parts:
-        return parts
-    outline = shapes(parts)
-    kept = simplified_polygons(outline, tolerance)
-    if not kept:
-        return parts
-    result = shapely.MultiPolygon(kept)
-    if shapely.get_num_coordinates(result) >= shapely.get_num_coordinates(outline):
-        return parts
-    return polygons(result)
-
-
-def shapes(parts: list[FootprintPart]) -> Any:
-    """Footprint ``parts`` as one shapely multipolygon."""
-    import shapely
-
-    return shapely.MultiPolygon([shapely.Polygon(p.rings[0], p.rings[1:]) for p in parts])
+    if tolerance > 0 and outline.polygons:
+        kept = simplified_polygons(outline.polygons, tolerance)
+        fewer = shapely.get_num_coordinates(kept).sum()
+        if kept and fewer < shapely.get_num_coordinates(outline.polygons).sum():
+            return polygons(shapely.MultiPolygon(kept))
+    if outline.traced is not None:
+        return [outline.traced]
+    return [_ear_clipped(polygon) for polygon in outline.polygons]
 
 
 def simplified_polygons(outline: Any, tolerance: float) -> list[Any]:
-    """The polygons of shapely geometry ``outline`` simplified within ``tolerance`` (topology
-    kept), without the polygons and holes smaller than a ``tolerance`` square."""
+    """The polygons of shapely geometry ``outline`` (or of a list of them) simplified within
+    ``tolerance`` (topology kept), without the polygons and holes smaller than a ``tolerance``
+    square."""
     import shapely
 
     least = tolerance * tolerance
     return [
-        shapely.Polygon(polygon.exterior, [h for h in polygon.interiors if _area(h) >= least])
+        _without_holes(polygon, least)
         for polygon in _simplified_apart(shapely.get_parts(outline), tolerance)
         if isinstance(polygon, shapely.Polygon) and polygon.area >= least
     ]
+
+
+def _without_holes(polygon: Any, least: float) -> Any:
+    """Shapely ``polygon`` without its holes of area less than ``least``."""
+    import shapely
+
+    if not shapely.get_num_interior_rings(polygon):
+        return polygon
+    return shapely.Polygon(polygon.exterior, [h for h in polygon.interiors if _area(h) >= least])
 
 
 def _simplified_apart(polygons: np.ndarray, tolerance: float) -> list[Any]:
@@ -464,7 +519,7 @@ def _simplified_apart(polygons: np.ndarray, tolerance: float) -> list[Any]:
 
     if not len(polygons):
         return []
-    groups = _apart(polygons)
+    groups = _apart(polygons) if len(polygons) > 1 else [polygons]
     alone = [group[0] for group in groups if len(group) == 1]
     simple = iter(
         shapely.simplify(np.array(alone, dtype=object), tolerance, preserve_topology=True)
