@@ -23,7 +23,7 @@ PASSES = 100
 """Collapse passes of ``fast-simplification`` (its ``Simplify.h``)."""
 THRESHOLD_SCALE = 1e-9
 """Factor of its pass thresholds (squared metres for a mesh in metres)."""
-NEAREST = 16
+NEAREST = 32
 """Faces (nearest by centre) among which a point's face is found."""
 ONE_AT_A_TIME = threading.Lock()
 """Held around each use of ``fast-simplification``: it keeps the mesh it works on in module
@@ -96,17 +96,18 @@ def _new_vertex_of(
     return mapping
 
 
-def simplify_within(surface: Mesh, tolerance: float) -> Surface:
+def simplify_within(surface: Mesh, tolerance: float, colours: Mesh | None = None) -> Surface:
     """``surface`` (all its parts as one) simplified while each vertex stays within
     ``tolerance`` of the planes of the source faces it stands for: vertices at one position are
     welded first (so that separate polygons of one solid collapse together), faces of no area
     left out. Open borders stay as they are: the quadrics hold a vertex to its faces' planes,
     not to a border's line, along which it would slide. Each face takes the colour (at its
     centre) of the source face facing most nearly its way of those within ``tolerance`` of the
-    nearest to its centre (:func:`_most_facing`), so that a wall's
-    face collapsed into a roof's place takes the roof's colour and a wall keeps its own up to
-    the eaves; as vertex colours on a white base, a vertex where faces of different colours
-    meet one per colour, so that no colour runs across an edge."""
+    nearest to its centre (:func:`_most_facing`), of ``colours`` where given (the geometry that
+    ``surface`` stands for, in the same frame, so that colours do not drift tier by tier) else
+    of ``surface``, so that a wall's face collapsed into a roof's place takes the roof's colour
+    and a wall keeps its own up to the eaves; as vertex colours on a white base, a vertex where
+    faces of different colours meet one per colour, so that no colour runs across an edge."""
     fs = _simplifier("a simplified far mesh")
     points, corners = np.unique(surface.vertices, axis=0, return_inverse=True)
     welded = corners.reshape(-1)[surface.faces]
@@ -123,10 +124,12 @@ def simplify_within(surface: Mesh, tolerance: float) -> Surface:
     out_faces = out_faces.astype(np.int64)
     normals = Surface(out_points, out_faces).face_normals(np.arange(len(out_faces)))
     centres = out_points[out_faces].mean(axis=1)
-    near = _most_facing(surface.triangles[kept], surface.face_normals(kept), centres, normals,
-                       tolerance)  # fmt: skip
-    source = kept[near]
-    colors = surface.colors_at(source, surface.triangles[source].mean(axis=1))
+    reference = colours if colours is not None else surface
+    faces = np.arange(reference.face_count) if colours is not None else kept
+    near = _most_facing(reference.triangles[faces], reference.face_normals(faces), centres,
+                        normals, tolerance)  # fmt: skip
+    source = faces[near]
+    colors = reference.colors_at(source, reference.triangles[source].mean(axis=1))
     return _split_by_colour(out_points, out_faces, colors)
 
 

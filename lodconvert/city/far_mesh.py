@@ -131,7 +131,7 @@ def _simplified(
     floor = min(MIN_CELL_F, f)
     for px in SIMPLIFY_PX:
         tolerance = px * distance / options.view.focal_px
-        mesh = Mesh([simplify_within(merged.mesh, tolerance)])
+        mesh = Mesh([simplify_within(merged.mesh, tolerance, source)])
         level = Level(name="FAR", kind="merged", mesh=mesh)
         after = silhouette_f(source, level, distance, options) if level.count else 0.0
         if after >= floor:
