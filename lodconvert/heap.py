@@ -25,8 +25,10 @@ def tune_heap() -> None:
     defaults map and unmap each one above 128 KiB, or, once it raised that bar, keep what it
     freed. Here arrays below :data:`MAPPED_BYTES` come from the heap and go back to it for the
     next, which is trimmed once :data:`TRIM_BYTES` lie free at its top, so that the heap
-    neither faults its pages in anew for every object nor grows with the city
-    (``benchmarks/results/per_core.md``). Other C libraries are left as they are."""
+    neither faults its pages in anew for every object nor grows with the city (10× TUM Munich
+    to a tileset on one core: 17.5 CPU s, 57,000 minor page faults and 344 MiB at the peak,
+    against 22.8 s, 100,000 and 400 MiB with every array over 64 KiB mapped apart; to X3D about
+    4 % less CPU). Other C libraries are left as they are."""
     mallopt = _libc_function("mallopt")
     if mallopt is not None:
         mallopt(M_MMAP_THRESHOLD, MAPPED_BYTES)
