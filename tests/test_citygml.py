@@ -237,7 +237,10 @@ def test_terrain_and_ground_covers_get_no_prism(tmp_path: Path) -> None:
     house, terrain = report["objects"]
     assert house["gamma"] == terrain["gamma"] == 10.0
     assert [lv["kind"] for lv in house["levels"]] == ["source"]
-    assert house["dropped"]["LOD1"].startswith("silhouette F 0.8")
+    assert (
+        house["dropped"]["LOD1"].startswith("silhouette F 0.9")
+        and "below 0.95" in house["dropped"]["LOD1"]
+    )
     assert [lv["kind"] for lv in terrain["levels"]] == ["source"]
     assert "covers the ground: no prism" in terrain["dropped"]["LOD1"]
     assert errors_of(validate_file(tmp_path / "house.x3d")) == []

@@ -597,14 +597,15 @@ def _drawn(path: Path) -> int:
 
 
 @pytest.mark.slow
-def test_far_tiers_are_a_third_of_their_children_and_buildings_beside_cells_have_one(
+def test_far_tiers_are_lighter_than_their_children_and_buildings_beside_cells_have_one(
     tmp_path: Path,
 ) -> None:
     """Parents that pay, on TUM Munich in 250 m and 1000 m cells: per tier, the far tiles hold
-    at most a third of the vertices and bytes of the tiles they refine into, every cell at
-    silhouette F ≥ 0.95; the buildings no cell admitted hang below a far tile of their own,
-    lighter than the LOD1 blocks it refines into; the official validator finds no error or
-    warning and ours none."""
+    at most half (250 m) and three quarters (1000 m: judged from above the horizon too, blocks
+    need members' own far meshes mixed in) of the vertices and bytes of the tiles they refine
+    into, every cell at silhouette F ≥ 0.95; the buildings no cell admitted hang below a far
+    tile of their own, lighter than the LOD1 blocks it refines into; the official validator
+    finds no error or warning and ours none."""
     report_path, tileset = tmp_path / "report.json", tmp_path / "tum" / "tileset.json"
     flags = ("--hlod", "250,1000", "--workers", "1", "-q", "--report", report_path)
     result = run(*inputs("tum"), "-o", tileset, *flags)  # all levels, as benchmarks/tiles.py
@@ -628,8 +629,9 @@ def test_far_tiers_are_a_third_of_their_children_and_buildings_beside_cells_have
         sums = tiers.setdefault(str(tile["extras"]["tier"]), [0, 0, 0, 0])
         sums[:] = [a + b for a, b in zip(sums, counts, strict=True)]
     assert set(tiers) == {"1", "2"}
-    for far_vertices, vertices, far_bytes, size in tiers.values():
-        assert far_vertices <= vertices / 3 and far_bytes <= size / 3
+    for tier, (far_vertices, vertices, far_bytes, size) in tiers.items():
+        share = {"1": 1 / 2, "2": 3 / 4}[tier]
+        assert far_vertices <= vertices * share and far_bytes <= size * share
     assert beside
     for tile, cell in beside:
         assert cell["id"].endswith("_beside") and cell["beside"] and cell["left_out"] == []
