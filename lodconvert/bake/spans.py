@@ -17,14 +17,15 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
+
+from ..compiled import compiled
 
 Counts = np.ndarray
 """Per view: the pixels of the first silhouette, of the second and of both ((views, 3) int64)."""
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def _project(
     positions: np.ndarray, basis: np.ndarray, distance: float, focal: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -45,7 +46,7 @@ ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 """A word of 64 pixels, all set."""
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def _fill_faces(bits: np.ndarray, u: np.ndarray, v: np.ndarray, faces: np.ndarray) -> None:
     """Set the pixels of ``bits`` (rows of 64-pixel words) that the faces cover (``u``, ``v``:
     pixel coordinates from the image's corner)."""
@@ -79,7 +80,7 @@ def _fill_faces(bits: np.ndarray, u: np.ndarray, v: np.ndarray, faces: np.ndarra
             _span(bits, r, first, last)
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def _fill_points(bits: np.ndarray, u: np.ndarray, v: np.ndarray, size: float) -> None:
     """Set the pixels of ``bits`` whose centres lie in the squares of side ``size`` pixels (at
     least one) around the points."""
@@ -95,7 +96,7 @@ def _fill_points(bits: np.ndarray, u: np.ndarray, v: np.ndarray, size: float) ->
             _span(bits, r, first, last)
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def _span(bits: np.ndarray, r: int, first: int, last: int) -> None:
     """Set pixels ``first`` to ``last`` of row ``r`` (none where ``last`` is before ``first``):
     a mask a word."""
@@ -107,7 +108,7 @@ def _span(bits: np.ndarray, r: int, first: int, last: int) -> None:
         bits[r, w] |= (ALL >> np.uint64(63 - high + low)) << np.uint64(low)
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def _ones(x: np.uint64) -> int:
     """How many bits of ``x`` are set."""
     x = x - ((x >> np.uint64(1)) & np.uint64(0x5555555555555555))
@@ -116,7 +117,7 @@ def _ones(x: np.uint64) -> int:
     return int((x * np.uint64(0x0101010101010101)) >> np.uint64(56))
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def silhouettes(
     positions: np.ndarray,
     faces: np.ndarray,
@@ -151,7 +152,7 @@ def silhouettes(
     return frames, bits
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def counts_against(
     frames: np.ndarray,
     bits: np.ndarray,
@@ -196,7 +197,7 @@ def counts_against(
     return counts
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def overlap_counts(
     positions: np.ndarray,
     faces: np.ndarray,

@@ -6,11 +6,12 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
+from ..compiled import compiled
 
-@numba.njit(cache=True, nogil=True)
+
+@compiled
 def _share_below(a: np.ndarray, b: np.ndarray, c: np.ndarray, w: np.ndarray, t: float) -> float:
     """The area, of triangles with ordered corner heights ``a`` ≤ ``b`` ≤ ``c`` and areas ``w``,
     that lies at or below height ``t``."""
@@ -27,7 +28,7 @@ def _share_below(a: np.ndarray, b: np.ndarray, c: np.ndarray, w: np.ndarray, t: 
     return area
 
 
-@numba.njit(cache=True, nogil=True)
+@compiled
 def area_percentile(heights: np.ndarray, weights: np.ndarray, share: float) -> float:
     """The least height below which ``share`` of the area of triangles with corner ``heights``
     ((m, 3)) and areas ``weights`` lies, heights varying linearly across each triangle. That
