@@ -40,20 +40,6 @@ HERE = Path(__file__).resolve().parent
 MIN_F = 0.95
 
 
-def rendered_f(renderer: SilhouetteRenderer, source: Mesh, level: Mesh, distance: float) -> float:
-    """The least F over the guard's views of ``level`` against ``source``, rendered."""
-    directions = np.stack([towards_camera(a, e) for a, e in guard_views()])
-    masks = []
-    for mesh in (source, level):
-        geometry = renderer.mesh(mesh.vertices, mesh.faces)
-        masks.append(renderer.render(geometry, np.zeros(3), distance, directions))
-        geometry.release()
-    want, got = masks
-    both = (want & got).sum(axis=(1, 2))
-    total = want.sum(axis=(1, 2)) + got.sum(axis=(1, 2))
-    return float(np.min(np.where(total > 0, 2 * both / np.maximum(total, 1), 1.0)))
-
-
 def levels(path: Path, hlod: tuple[float, ...]) -> list[tuple[str, str, Mesh, Mesh, float, float]]:
     """Every kept derived level of ``path``'s city: kind, name, source, level, the distance
     where it switches in and the F the planner states."""
@@ -101,10 +87,11 @@ def main() -> None:
     hlod = tuple(float(s) for s in args.hlod.split(","))
     found = levels(args.input, hlod)
     renderer = SilhouetteRenderer(1080)
+    directions = np.stack([towards_camera(a, e) for a, e in guard_views()])
     results: dict[str, list[tuple[str, float, float]]] = {}
     try:
         for kind, name, source, level, distance, stated in found:
-            f = rendered_f(renderer, source, level, distance)
+            f = renderer.least_f(source, level, distance, directions)
             results.setdefault(kind, []).append((name, stated, f))
     finally:
         renderer.release()

@@ -10,8 +10,8 @@ machine is shared: load falls on both alike), after one untimed conversion each:
 
 Both checkouts run with this interpreter and its packages, the baseline's code first on
 ``PYTHONPATH``. Per configuration, medians of ``--runs``: CPU seconds of the child (user +
-system, its ``wait4`` rusage), wall seconds, peak RSS (sampled every 50 ms), buildings per
-CPU second, and the ratio
+system, its ``wait4`` rusage: :func:`scale.convert_once`), wall seconds, peak RSS (sampled
+every 50 ms), buildings per CPU second, and the ratio
 of the CPU seconds (this checkout over the baseline) against the target (:data:`TARGETS`). The
 floor is what reading alone costs on the same file, in this process: lxml's ``iterparse`` over
 its members, and that with every ``posList``/``pos`` turned into floats; its share is the
@@ -21,68 +21,37 @@ floor's CPU over this checkout's.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
+import shutil
 import statistics
 import subprocess
-import sys
 import tempfile
-import threading
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import psutil
 from city import Template, tum_document, write_district
-from scale import DELFT, write_delft_district
+from scale import DELFT, Run, convert_once, write_delft_district
 from tables import machine_line, markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
+PINNED = ("taskset", "-c", "0")
+"""Every conversion runs on core 0."""
 ROOT = HERE.parent
 TARGETS = {("TUM", "x3d"): 1 / 3, ("TUM", "glb"): 1 / 3, ("TUM", "tiles"): 1 / 4}
 """The CPU per building aimed at, as a share of cfac5c1's (the commit measured against);
 Delft: 1/2."""
 
 
-@dataclass
-class Run:
-    """One conversion's CPU seconds, wall seconds and peak RSS (MiB)."""
-
-    cpu: float
-    wall: float
-    rss: float
-
-
 def convert(tree: Path, source: Path, fmt: str, folder: Path) -> Run:
     """Convert ``source`` to ``fmt`` with the code of ``tree`` on core 0, one worker."""
     out = folder / f"out_{os.getpid()}_{time.monotonic_ns()}"
     target = out / "tileset.json" if fmt == "tiles" else out.with_suffix(f".{fmt}")
-    command = ["taskset", "-c", "0", sys.executable, "-m", "lodconvert", str(source)]
-    command += ["-o", str(target), "--workers", "1", "-q"]
-    env = {**os.environ, "PYTHONPATH": str(tree)}
-    start = time.perf_counter()
-    child = subprocess.Popen(command, env=env)
-    peak = [0]
-    done = threading.Event()
-
-    def sample() -> None:  # wait4's maxrss counts the forked copy of this process too
-        with contextlib.suppress(psutil.NoSuchProcess):
-            process = psutil.Process(child.pid)
-            while not done.wait(0.05):
-                peak[0] = max(peak[0], process.memory_info().rss)
-
-    sampler = threading.Thread(target=sample, daemon=True)
-    sampler.start()
-    _, status, usage = os.wait4(child.pid, 0)
-    wall = time.perf_counter() - start
-    done.set()
-    sampler.join()
-    child.returncode = os.waitstatus_to_exitcode(status)
-    if child.returncode:
-        raise SystemExit(f"{' '.join(command)} failed ({child.returncode})")
-    subprocess.run(["rm", "-rf", str(out if fmt == "tiles" else target)], check=True)
-    return Run(usage.ru_utime + usage.ru_stime, wall, peak[0] / (1 << 20))
+    report = folder / "report.json"
+    run = convert_once(source, target, "1", root=tree, report=report, prefix=PINNED)
+    shutil.rmtree(out, ignore_errors=True)
+    target.unlink(missing_ok=True)
+    return run
 
 
 def floors(source: Path) -> tuple[float, float]:
@@ -143,7 +112,7 @@ def main() -> None:
         buildings = inputs[name][1]
         cpu = {k: statistics.median(r.cpu for r in runs[name, fmt, k]) for k in trees}
         wall = {k: statistics.median(r.wall for r in runs[name, fmt, k]) for k in trees}
-        rss = {k: statistics.median(r.rss for r in runs[name, fmt, k]) for k in trees}
+        rss = {k: statistics.median(r.peak_mib for r in runs[name, fmt, k]) for k in trees}
         target = TARGETS.get((name, fmt), 1 / 2)
         ratio = cpu["this"] / cpu["baseline"]
         floor = f"{parsed / cpu['this']:.0%}" if name == "TUM" else ""

@@ -193,11 +193,13 @@ def convert_once(
     root: Path = ROOT,
     options: tuple[str, ...] = (),
     report: Path | None = None,
+    prefix: tuple[str, ...] = (),
 ) -> Run:
     """Convert ``source`` into ``output`` (a tileset: its folder removed first) in a child
     process by the lodconvert of checkout ``root``: with ``--workers setup``, its default
     (``setup`` ``default``), or on ``cluster`` (``setup`` ``cluster``), and further CLI
-    ``options``; its report is ``report`` (default: ``output`` with the suffix ``.json``)."""
+    ``options``, the command run through ``prefix`` (e.g. ``taskset -c 0``); its report is
+    ``report`` (default: ``output`` with the suffix ``.json``)."""
     if output.name == "tileset.json":
         shutil.rmtree(output.parent, ignore_errors=True)
     output.unlink(missing_ok=True)
@@ -207,7 +209,7 @@ def convert_once(
         where = ["--scheduler", cluster.address]
     else:  # "default": as many as lodconvert picks
         where = [] if setup == "default" else ["--workers", setup]
-    command = [*LODCONVERT, str(source), "-o", str(output), "-qq", *where]
+    command = [*prefix, *LODCONVERT, str(source), "-o", str(output), "-qq", *where]
     command += ["--report", str(report), *options]
     env = {
         **{k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"},
@@ -237,7 +239,7 @@ def convert_once(
     if os.waitstatus_to_exitcode(status):
         raise SystemExit(f"{' '.join(command)} failed")
     cpu = usage.ru_utime + usage.ru_stime
-    peak_mib = max(peak[0], usage.ru_maxrss * 1024) / (1 << 20)
+    peak_mib = peak[0] / (1 << 20)  # wait4's maxrss counts the forked copy of this process
     if cluster is not None and setup == "cluster":
         cpu += cluster.cpu() - before
         peak_mib += cluster.peak_mib()

@@ -9,6 +9,7 @@ import ast
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 from .conftest import ROOT
 
@@ -92,50 +93,44 @@ NUMBA_SCIPY = (
 """What of scipy numba loads by itself to run a function (its BLAS bindings)."""
 
 
-def test_a_city_converts_without_loading_scipy(tmp_path) -> None:
+def _loaded_converting(source: Path, output: Path, shown: str) -> str:
+    """What ``shown`` (an expression over ``sys.modules``) prints after converting ``source``
+    into ``output`` with one worker in a fresh interpreter."""
+    code = (
+        "import sys\nfrom lodconvert.cli import main\n"
+        f"status = main([{str(source)!r}, '-o', {str(output)!r}, '--workers', '1', '-q'])\n"
+        f"assert status == 0, status\nprint({shown})\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    run = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
+    )
+    assert run.returncode == 0, run.stderr
+    assert output.stat().st_size > 0
+    return run.stdout.strip().splitlines()[-1]
+
+
+def test_a_city_converts_without_loading_scipy(tmp_path: Path) -> None:
     """Converting a city model of buildings (plot radii, prisms from footprints that need a
     union) loads no scipy module beyond what numba loads by itself (the guard's loops): none of
     the subpackages that are slow to import in every process (spatial, sparse, ndimage)."""
     from .conftest import SHARED, shared_data
 
     source = shared_data(SHARED / "data" / "citygml" / "kit_testcases_lod2_100bldg_v3.gml")
-    code = (
-        "import sys\nfrom lodconvert.cli import main\n"
-        f"status = main([{str(source)!r}, '-o', {str(tmp_path / 'kit.x3d')!r}, '--workers', '1'])\n"
-        "assert status == 0, status\n"
-        "print(sorted(n for n in sys.modules if n.split('.')[0] == 'scipy'))\n"
-    )
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    run = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
-    )
-    assert run.returncode == 0, run.stderr
+    shown = "sorted(n for n in sys.modules if n.split('.')[0] == 'scipy')"
+    loaded = set(ast.literal_eval(_loaded_converting(source, tmp_path / "kit.x3d", shown)))
     alone = subprocess.run([sys.executable, "-c", NUMBA_SCIPY], capture_output=True, text=True)
-    loaded = set(ast.literal_eval(run.stdout.strip().splitlines()[-1]))
     assert loaded <= set(ast.literal_eval(alone.stdout.strip())), loaded
     assert not {n.split(".")[1] for n in loaded if "." in n} & {"spatial", "sparse", "ndimage"}
-    assert (tmp_path / "kit.x3d").stat().st_size > 0
 
 
-def test_a_city_with_its_own_lod1_converts_without_loading_numba(tmp_path) -> None:
+def test_a_city_with_its_own_lod1_converts_without_loading_numba(tmp_path: Path) -> None:
     """Delft's buildings have LoD 1 of their own: no prism is judged, so numba, which takes
     a few tenths of a second to import, is never loaded."""
     from .conftest import SHARED, shared_data
 
     source = shared_data(SHARED / "data" / "cityjson" / "delft.city.json")
-    code = (
-        "import sys\nfrom lodconvert.cli import main\n"
-        f"status = main([{str(source)!r}, '-o', {str(tmp_path / 'delft.x3d')!r}, '-q'])\n"
-        "assert status == 0, status\n"
-        "print('numba' in sys.modules)\n"
-    )
-    env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    run = subprocess.run(
-        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=300
-    )
-    assert run.returncode == 0, run.stderr
-    assert run.stdout.strip().splitlines()[-1] == "False"
-    assert (tmp_path / "delft.x3d").stat().st_size > 0
+    assert _loaded_converting(source, tmp_path / "delft.x3d", "'numba' in sys.modules") == "False"
 
 
 def test_a_worker_converting_a_city_into_x3d_loads_no_gltf_format_and_no_pillow(

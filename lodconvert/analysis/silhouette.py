@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..model import Level
+from ..model import Level, Mesh
 from ..ranges import REFERENCE_VIEW, ReferenceView
 from .render import OffscreenRenderer, look_at, perspective, point_pixel_size
 
@@ -151,6 +151,19 @@ class SilhouetteRenderer(OffscreenRenderer):
             view_scale=self.view_scale(view),
             max_size=self.max_point_size,
         )
+
+    def least_f(self, source: Mesh, level: Mesh, distance: float, directions: np.ndarray) -> float:
+        """The least silhouette F, over the views from ``distance`` along ``directions``
+        (looking at the origin), of mesh ``level`` against mesh ``source``, both rendered."""
+        masks = []
+        for mesh in (source, level):
+            geometry = self.mesh(mesh.vertices, mesh.faces)
+            masks.append(self.render(geometry, np.zeros(3), distance, directions))
+            geometry.release()
+        want, got = masks
+        both = (want & got).sum(axis=(1, 2))
+        total = want.sum(axis=(1, 2)) + got.sum(axis=(1, 2))
+        return float(np.min(np.where(total > 0, 2 * both / np.maximum(total, 1), 1.0)))
 
     def render(
         self,

@@ -183,17 +183,8 @@ def counts_against(
             continue
         ou -= c0
         ov -= r0
-        second = np.zeros((rows, words), dtype=np.uint64)
-        if point_px > 0.0:
-            _fill_points(second, ou, ov, point_px)
-        else:
-            _fill_faces(second, ou, ov, other_faces)
-        first = bits[view]
-        for r in range(rows):
-            for w in range(words):
-                counts[view, 0] += _ones(first[r, w])
-                counts[view, 1] += _ones(second[r, w])
-                counts[view, 2] += _ones(first[r, w] & second[r, w])
+        second = _other_drawn(rows, words, ou, ov, other_faces, point_px)
+        _count(bits[view, :rows, :words], second, counts[view])
     return counts
 
 
@@ -230,15 +221,31 @@ def overlap_counts(
             us -= c0
             vs -= r0
         first = np.zeros((rows, words), dtype=np.uint64)
-        second = np.zeros((rows, words), dtype=np.uint64)
         _fill_faces(first, u, v, faces)
-        if point_px > 0.0:
-            _fill_points(second, ou, ov, point_px)
-        else:
-            _fill_faces(second, ou, ov, other_faces)
-        for r in range(rows):
-            for w in range(words):
-                counts[view, 0] += _ones(first[r, w])
-                counts[view, 1] += _ones(second[r, w])
-                counts[view, 2] += _ones(first[r, w] & second[r, w])
+        _count(first, _other_drawn(rows, words, ou, ov, other_faces, point_px), counts[view])
     return counts
+
+
+@compiled
+def _other_drawn(
+    rows: int, words: int, u: np.ndarray, v: np.ndarray, faces: np.ndarray, point_px: float
+) -> np.ndarray:
+    """The silhouette ((rows, words) bits) of a mesh with ``faces``, or, with ``point_px``
+    above 0, of points that many pixels wide, at pixel coordinates ``u``, ``v``."""
+    bits = np.zeros((rows, words), dtype=np.uint64)
+    if point_px > 0.0:
+        _fill_points(bits, u, v, point_px)
+    else:
+        _fill_faces(bits, u, v, faces)
+    return bits
+
+
+@compiled
+def _count(first: np.ndarray, second: np.ndarray, counts: np.ndarray) -> None:
+    """Add the pixels of silhouette ``first``, of ``second`` and of both (same shape) to
+    ``counts``."""
+    for r in range(first.shape[0]):
+        for w in range(first.shape[1]):
+            counts[0] += _ones(first[r, w])
+            counts[1] += _ones(second[r, w])
+            counts[2] += _ones(first[r, w] & second[r, w])
