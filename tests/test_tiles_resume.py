@@ -5,15 +5,19 @@ a changed input start over."""
 
 from __future__ import annotations
 
+import gc
 import os
 import shutil
 import signal
 import subprocess
 import sys
+import weakref
 from pathlib import Path
+from typing import Any
 
 import pytest
 
+from lodconvert.io.tiles import task
 from tests.test_cli import run
 from tests.test_tiles import FAST, convert, inputs
 
@@ -139,3 +143,34 @@ def test_a_tile_an_interrupted_run_wrote_that_this_one_does_not_is_removed(
         journal.write("tiles/cell9_9_9.glb\n")  # as a run of another tree would have said
     resumed(source, out)
     assert files(out) == clean
+
+
+def test_a_resumed_run_holds_no_kept_tiles_geometry(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A resumed run lets go of each kept tile's content at once: by the first tile it makes,
+    none of the ten kept before it is alive (a 1000× city resumed held all of them)."""
+    [source] = inputs("multi_lod")
+    out = tmp_path / "out"
+    killed(source, out, 10, "--hlod", "20")  # ten of its 20 tiles, two per cell
+    kept_tasks: list[weakref.ref[task.TileTask]] = []
+    alive: list[int] = []
+    real_kept, real_run = task.TileTask.kept, task.TileTask.run
+
+    def kept(self: task.TileTask, sink: Any) -> task.TileResult | None:
+        found = real_kept(self, sink)
+        if found is not None:
+            kept_tasks.append(weakref.ref(self))
+        return found
+
+    def made(self: task.TileTask, *args: Any) -> task.TileResult:
+        if not alive:
+            gc.collect()
+            alive.append(sum(ref() is not None for ref in kept_tasks))
+        return real_run(self, *args)
+
+    monkeypatch.setattr(task.TileTask, "kept", kept)
+    monkeypatch.setattr(task.TileTask, "run", made)
+    said = resumed(source, out, "--hlod", "20")
+    assert "10 of 20 tiles kept from an interrupted run" in said
+    assert len(kept_tasks) == 10 and alive == [0]

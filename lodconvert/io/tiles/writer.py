@@ -12,7 +12,6 @@ geometricError and resuming: ``docs/3d-tiles.md``.
 
 from __future__ import annotations
 
-import itertools
 import json
 import math
 from collections import deque
@@ -237,18 +236,24 @@ class TilesetWriter:
 
     def _placed(self, items: Iterable[LodChain | CellChain]) -> list[Tile]:
         """The root's children (:meth:`tops`), every tile's content made by its task (or, in a
-        resumed run, kept where an interrupted run made it of the same) and written here."""
+        resumed run, kept where an interrupted run made it of the same) and written here. A
+        kept tile is placed at once, so only the tasks in flight are held."""
         children: list[Tile] = []
-        waiting: deque[tuple[Tile, TileTask, TileResult | None]] = deque()
+        waiting: deque[tuple[Tile, TileTask]] = deque()
+        made = reused = 0
 
         def tasks() -> Iterator[TileTask]:
+            nonlocal made, reused
             for top in self.tops(items):
                 children.append(top)
                 for tile, task in self._queued:
                     kept = task.kept(self.sink) if self.sink.resumed else None
-                    waiting.append((tile, task, kept))
                     if kept is None:
+                        waiting.append((tile, task))
                         yield task
+                    else:
+                        tile.frame, tile.box = kept.frame, kept.box
+                        made, reused = made + 1, reused + 1
                 self._queued.clear()
 
         results: Iterable[TileResult] = (
@@ -256,17 +261,13 @@ class TilesetWriter:
             if self.executor is not None
             else (task.run() for task in tasks())
         )
-        made = reused = 0
-        for result in itertools.chain(results, [None]):  # None: the kept tiles after the last
-            while waiting and (result is not None or waiting[0][2] is not None):
-                tile, task, kept = waiting.popleft()
-                if kept is None:
-                    assert result is not None
-                    if result.error is not None:
-                        raise LodConvertError(result.error)
-                    kept, result = task.written(self.sink, result), None
-                tile.frame, tile.box = kept.frame, kept.box
-                made, reused = made + 1, reused + kept.reused
+        for result in results:
+            tile, task = waiting.popleft()
+            if result.error is not None:
+                raise LodConvertError(result.error)
+            placed = task.written(self.sink, result)
+            tile.frame, tile.box = placed.frame, placed.box
+            made += 1
         if self.sink.resumed and self.progress is not None:
             self.progress(f"{reused} of {made} tiles kept from an interrupted run's folder")
         return children
