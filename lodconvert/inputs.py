@@ -102,6 +102,9 @@ def merged(scenes: Sequence[Scene]) -> Scene:
             for entry in part.skipped:
                 tally.add_skipped(entry["id"], entry["reason"])
             tally.unlisted += part.unlisted
+            for text in part.warnings:
+                tally.warn(text)
+            tally.unlisted_warnings += part.unlisted_warnings
         attach_tally(whole, tally)
     return whole
 
@@ -109,8 +112,12 @@ def merged(scenes: Sequence[Scene]) -> Scene:
 def reader_skipped(scene: Scene, skipped: list[dict[str, str]], warn: Message) -> InputTally | None:
     """Add the objects the reader of ``scene`` skipped to ``skipped``, each told to ``warn``
     (with nothing converted, the run's error says it), those past the listed ones in one
-    line; ``scene``'s tally."""
+    line, after the reader's warnings; ``scene``'s tally."""
     tally = tally_of(scene)
+    for text in tally.warnings if tally is not None else ():
+        warn(text)
+    if tally is not None and tally.unlisted_warnings:
+        warn(f"{scene.source}: {tally.unlisted_warnings:,} more warnings (not listed)")
     for entry in tally.skipped if tally is not None else ():
         warn(f"{scene.source}: object {entry['reason']} — skipped")
         skipped.append(entry)

@@ -34,6 +34,10 @@ class Limits:
     input."""
     sequence_line_bytes: int = 64 * MIB
     """Bytes of one line of a CityJSONSeq input (its header or one feature)."""
+    image_bytes: int = 64 * MIB
+    """Bytes of one texture image a city model's appearance names (read no further)."""
+    image_pixels: int = 1 << 26
+    """Pixels of one texture image (8,192²), checked from its header before it is decoded."""
     tileset_json_bytes: int = 16 * MIB
     """Bytes of one tileset JSON that ``validate`` and ``view`` read (the top file and each
     external tileset); a larger file is refused before it is read."""

@@ -251,6 +251,9 @@ class Assembly:
         report["up"] = "z" if self.info.city else up or "y"
         if self.info.city:
             report["guard"] = guard_record()  # the views derived city levels are judged over
+        appearance = self.scene.attributes.get("appearance")
+        if appearance is not None and appearance.met:
+            report["appearance"] = appearance.record()  # a city model's (io/images.Images)
         report["frame"] = self.frame.record() if self.frame is not None else None
         if self.hlod is not None:
             report["hlod"] = {"kind": self.hlod.kind, "cells": self.cells, "draw": self.draw}

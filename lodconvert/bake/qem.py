@@ -129,7 +129,7 @@ def simplify_within(surface: Mesh, tolerance: float, colours: Mesh | None = None
     near = _most_facing(reference.triangles[faces], reference.face_normals(faces), centres,
                         normals, tolerance)  # fmt: skip
     source = faces[near]
-    colors = reference.colors_at(source, reference.triangles[source].mean(axis=1))
+    colors = reference.face_colors(source)
     return _split_by_colour(out_points, out_faces, colors)
 
 

@@ -186,11 +186,7 @@ def merge(meshes: Sequence[Mesh]) -> Mesh:
 
 def one_part(mesh: Mesh) -> Mesh:
     """``mesh`` as one part (one draw call): parts' colours become vertex colours (on a white
-    base colour, which glTF multiplies them by); textures are left out (their material colour
-    stands in)."""
-    colors = mesh.vertex_colors
-    if colors is None:
-        colors = np.concatenate(
-            [np.repeat(p.material_color[None], len(p.vertices), axis=0) for p in mesh.parts]
-        )
+    base colour, which glTF multiplies them by); a texture is baked into its vertices' colours
+    (:meth:`~lodconvert.model.Mesh.baked_colors`)."""
+    colors = mesh.baked_colors()
     return Mesh([Surface(mesh.vertices, mesh.faces, vertex_colors=colors, base_color=WHITE.copy())])

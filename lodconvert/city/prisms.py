@@ -398,7 +398,7 @@ def _slopes(mesh: Mesh) -> _Slopes:
 
 def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
     """The prism's roof and wall colours (RGBA): the mean colour of ``finest``'s roofs and of
-    its walls, over their areas (grey where it has none)."""
+    its walls, over their areas, textures included (grey where it has none)."""
     slopes = _slopes(finest)
     colors = []
     for faces in (np.flatnonzero(slopes.roofs), np.flatnonzero(slopes.walls)):
@@ -406,7 +406,7 @@ def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
         if weights.sum() <= 0:
             colors.append(GREY.copy())
             continue
-        seen = finest.colors_at(faces, finest.triangles[faces].mean(axis=1)).astype(np.float64)
+        seen = finest.face_colors(faces).astype(np.float64)
         colors.append(np.rint(weights @ seen / weights.sum()).astype(np.uint8))
     return colors[0], colors[1]
 

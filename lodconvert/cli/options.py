@@ -64,8 +64,8 @@ def add_limit_option(
 
 
 def add_read_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup:
-    """``--limit`` and the reading options ``--merge-groups``, ``--types``, ``--colors`` and
-    ``--crs``; returns their group."""
+    """``--limit`` and the reading options ``--merge-groups``, ``--types``, ``--colors``,
+    ``--crs`` and ``--appearance-theme``; returns their group."""
     add_limit_option(parser)
     read = parser.add_argument_group("reading")
     read.add_argument(
@@ -91,6 +91,12 @@ def add_read_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGroup
         "declare (an EPSG code pyproj knows; default: each file's own, the first one's for the "
         "output, into which the others are reprojected)",
     )
+    read.add_argument(
+        "--appearance-theme",
+        metavar="NAME",
+        help="city models: the appearance theme whose textures and materials are read "
+        "(default: the file's only or first; docs/textures.md)",
+    )
     return read
 
 
@@ -101,6 +107,7 @@ def read_options(args: argparse.Namespace) -> dict[str, Any]:
         "types": frozenset(parse_list(args.types, str, "--types")) if args.types else None,
         "colors": DEFAULT_PALETTE.with_text(args.colors) if args.colors else None,
         "crs": args.crs,
+        "appearance_theme": args.appearance_theme,
     }
 
 

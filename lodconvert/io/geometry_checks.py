@@ -63,6 +63,10 @@ class InputTally:
     skipped: list[dict[str, str]] = field(default_factory=list)
     unlisted: int = 0
     """Objects skipped past the :data:`SKIPPED_LISTED` listed."""
+    warnings: list[str] = field(default_factory=list)
+    """What was read otherwise than the file says (a texture image missing), a whole line
+    each: the first :data:`SKIPPED_LISTED`, the rest counted in :attr:`unlisted_warnings`."""
+    unlisted_warnings: int = 0
 
     @property
     def skipped_count(self) -> int:
@@ -76,6 +80,13 @@ class InputTally:
             self.skipped.append({"id": object_id, "reason": reason})
         else:
             self.unlisted += 1
+
+    def warn(self, text: str) -> None:
+        """Record the warning ``text`` (listed while fewer than :data:`SKIPPED_LISTED` are)."""
+        if len(self.warnings) < SKIPPED_LISTED:
+            self.warnings.append(text)
+        else:
+            self.unlisted_warnings += 1
 
     def count(self, vertices: int, faces: int, declared: bool = False) -> None:
         """Add ``vertices`` and ``faces`` read (or, ``declared``, claimed by a header before

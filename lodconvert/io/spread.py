@@ -63,6 +63,8 @@ def add_tally(tally: InputTally, part: InputTally) -> None:
     tally.dropped_faces += part.dropped_faces
     tally.dropped_by_object.update(part.dropped_by_object)
     tally.skipped.extend(part.skipped)
+    for text in part.warnings:
+        tally.warn(text)
 
 
 class Spread(ABC, Generic[Run, Task]):

@@ -130,6 +130,49 @@ class Surface:
         rgba = rgba * (base.astype(np.float64) / 255.0)
         return np.clip(np.rint(rgba), 0, 255).astype(np.uint8)
 
+    def face_colors(self, face_ids: np.ndarray) -> np.ndarray:
+        """The mean RGBA uint8 (k, 4) of faces ``face_ids``: of a textured surface, the
+        texture's over each face (:data:`FACE_SAMPLES` points spread evenly over it); else the
+        colour at its centroid."""
+        triangles = self.vertices[self.faces[face_ids]]
+        if self.texture is None or self.uv is None or not len(face_ids):
+            return self.colors_at(face_ids, triangles.mean(axis=1))
+        points = np.einsum("sj,kjd->ksd", FACE_SAMPLES, triangles).reshape(-1, 3)
+        seen = self.colors_at(np.repeat(face_ids, len(FACE_SAMPLES)), points)
+        mean = seen.reshape(len(face_ids), len(FACE_SAMPLES), 4).mean(axis=1)
+        return np.rint(mean).astype(np.uint8)
+
+    def baked_colors(self) -> np.ndarray:
+        """RGBA uint8 (n, 4) per vertex with the texture baked in: its vertex colours, else
+        its material colour; a textured surface's vertex takes the texture's mean over a face
+        that uses it (:meth:`face_colors`)."""
+        if self.vertex_colors is not None:
+            return self.vertex_colors
+        colors = np.repeat(self.material_color[None], len(self.vertices), axis=0)
+        if self.texture is not None and self.uv is not None and len(self.faces):
+            means = self.face_colors(np.arange(len(self.faces)))
+            for corner in range(3):
+                colors[self.faces[:, corner]] = means
+        return colors
+
+
+def _face_samples(n: int) -> np.ndarray:
+    """Barycentric coordinates (n², 3) of the centroids of the n² equal triangles that
+    dividing a triangle's sides into ``n`` makes."""
+    rows = []
+    for a in range(n):
+        for b in range(n - a):
+            rows.append(((a + 1 / 3) / n, (b + 1 / 3) / n))
+            if a + b < n - 1:
+                rows.append(((a + 2 / 3) / n, (b + 2 / 3) / n))
+    ab = np.array(rows)
+    return np.column_stack([1.0 - ab.sum(axis=1), ab])
+
+
+FACE_SAMPLES = _face_samples(4)
+"""Where a face's mean texture colour is sampled: 16 points, each the centre of an equal
+share of its area."""
+
 
 def _interpolated(
     surface: Surface, face_ids: np.ndarray, points: np.ndarray, colors: np.ndarray
@@ -276,8 +319,26 @@ class Mesh:
 
     def colors_at(self, face_ids: np.ndarray, points: np.ndarray) -> np.ndarray:
         """RGBA uint8 (k, 4) at ``points`` lying on faces ``face_ids``, each from its part."""
+        return self._by_part(face_ids, points, Surface.colors_at)
+
+    def baked_colors(self) -> np.ndarray:
+        """RGBA uint8 (n, 4) per vertex of every part, textures baked in
+        (:meth:`Surface.baked_colors`)."""
+        return np.concatenate([part.baked_colors() for part in self.parts])
+
+    def face_colors(self, face_ids: np.ndarray) -> np.ndarray:
+        """The mean RGBA uint8 (k, 4) of faces ``face_ids`` (:meth:`Surface.face_colors`)."""
+        return self._by_part(face_ids, None, lambda part, faces, _: part.face_colors(faces))
+
+    def _by_part(
+        self,
+        face_ids: np.ndarray,
+        points: np.ndarray | None,
+        colors: Callable[[Surface, np.ndarray, Any], np.ndarray],
+    ) -> np.ndarray:
+        """``colors(part, faces, points)`` of each face's part, for faces ``face_ids``."""
         if self.single is not None:
-            return self.single.colors_at(face_ids, points)
+            return colors(self.single, face_ids, points)
         out = np.zeros((len(face_ids), 4), dtype=np.uint8)
         if not len(face_ids):
             return out
@@ -289,7 +350,7 @@ class Mesh:
         indices, starts = np.unique(part_of[order], return_index=True)
         for index, run in zip(indices, np.split(order, starts[1:]), strict=True):
             local = face_ids[run] - first_face[index]
-            out[run] = self.parts[index].colors_at(local, points[run])
+            out[run] = colors(self.parts[index], local, None if points is None else points[run])
         return out
 
     def translated(self, offset: np.ndarray) -> Mesh:

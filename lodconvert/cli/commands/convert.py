@@ -20,6 +20,7 @@ from ...io.x3d import SWITCHING_MODES
 from ...limits import DEFAULT_LIMITS
 from ...model.lods import lod_name
 from ...sinks import DirectorySink, FileSink, Outputs
+from ...textures import check_atlas_size
 from ..console import Console
 from ..options import (
     EXIT_OK,
@@ -133,6 +134,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "a viewer with it refines each tile at our switch distance (default 16, CesiumJS's)",
     )
     out.add_argument(
+        "--atlas-size",
+        type=int,
+        metavar="TEXELS",
+        help="3D Tiles only: the largest side of a tile's texture atlas page, a power of two "
+        "(default 4096; docs/textures.md)",
+    )
+    out.add_argument(
         "-q",
         "--quiet",
         action="count",
@@ -159,6 +167,10 @@ def _check_tiles(args: argparse.Namespace) -> None:
         raise UsageError(f"--sse is for 3D Tiles; write DIR/tileset.json, not {args.output}")
     if args.sse is not None and not (math.isfinite(args.sse) and args.sse > 0):
         raise UsageError(f"--sse must be a positive number of pixels, got {args.sse:g}")
+    if args.atlas_size is not None and "atlas_size" not in output_format(args.output).write_options:
+        raise UsageError(f"--atlas-size is for 3D Tiles; write DIR/tileset.json, not {args.output}")
+    if args.atlas_size is not None:
+        check_atlas_size(args.atlas_size)
 
 
 def _hlod_line(hlod: dict[str, Any]) -> str:
@@ -241,7 +253,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
         strict=args.strict,
         hlod=hlod,
         hlod_kind=args.hlod_kind,
-        write_options={"switching": args.switching, "sse": args.sse},
+        write_options={"switching": args.switching, "sse": args.sse, "atlas_size": args.atlas_size},
         also=stage_page if args.html else None,
         limits=limits,
     )

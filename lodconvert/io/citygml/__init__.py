@@ -24,6 +24,8 @@ from ...semantics import DEFAULT_PALETTE, Palette
 from .. import Format
 from ..crs import Crs, LocalFrame, crs_attributes
 from ..geometry_checks import InputTally, attach_tally
+from ..images import Images
+from .appearance import Appearances, document_appearances
 from .document import Document
 from .names import CITYGML_NAMESPACE
 from .parallel import SpreadReading
@@ -41,6 +43,7 @@ def read_citygml(
     colors: Palette = DEFAULT_PALETTE,
     crs: str | None = None,
     context: RunContext | None = None,
+    appearance_theme: str | None = None,
 ) -> Scene:
     """Read a CityGML file (``.gml``/``.xml``, or a ``.gz``/``.zip`` of one) into a Scene whose
     nodes are streamed; raise :class:`InputError` with a one-line reason. ``crs`` (an EPSG
@@ -52,7 +55,9 @@ def read_citygml(
     The scene's attributes hold the CityGML version, the vertical CRS, the local frame of a
     geographic CRS, and counts (links not resolved, degenerate polygons, features not read).
     With ``context``, the rest of the document is read by the workers of its executor
-    (:mod:`.parallel`).
+    (:mod:`.parallel`). Appearances are read in the theme ``appearance_theme`` (else the
+    first met; :mod:`.appearance`), their images through the scene's ``appearance``
+    attribute (:class:`~..images.Images`).
     """
     path = Path(path)
     source = str(path)
@@ -63,9 +68,16 @@ def read_citygml(
     if path.stat().st_size == 0:
         raise InputError("is empty", source)
 
+    appearances = document_appearances(path, limits, appearance_theme)
+    images: Images | None = None
+
     def make() -> Document:
+        nonlocal images
         document = Document(path, limits, types, InputTally(source, limits), colors)
         document.crs = Crs.of(crs, source) if crs is not None else None
+        if appearances is not None:
+            images = Images(path, limits, document.tally.warn)
+            document.appearances, document.images = appearances, images
         return document
 
     reading = None
@@ -86,6 +98,8 @@ def read_citygml(
         raise InputError(f"has no city objects{wanted} with surface geometry", source)
     declared = document.crs or Crs()
     attributes: dict[str, Any] = {"citygml_version": document.version, "citygml": document.stats}
+    if appearances is not None and images is not None:
+        attributes["appearance"] = _told(appearances, images, tally)
     attributes.update(crs_attributes(declared))
     scene = Scene(
         source=source,
@@ -97,10 +111,24 @@ def read_citygml(
     return attach_tally(scene, tally)
 
 
+def _told(appearances: Appearances, images: Images, tally: InputTally) -> Images:
+    """``images``, knowing the themes of ``appearances``; what was wrong with the
+    appearances, and a theme asked for that the document lacks, warned of."""
+    images.theme = appearances.theme
+    images.themes = appearances.themes  # the same list: the themes met later join it
+    for problem in dict.fromkeys(appearances.problems):
+        tally.warn(f"{tally.source}: {problem} (not read)")
+    wanted = appearances.wanted
+    if wanted is not None and appearances.themes and wanted not in appearances.themes:
+        known = ", ".join(repr(theme) for theme in appearances.themes)
+        tally.warn(f"{tally.source}: has no appearance theme {wanted!r} (it has {known})")
+    return images
+
+
 FORMAT = Format(
     name="citygml",
     suffixes=(".gml", ".xml", ".zip"),
     read=read_citygml,
-    read_options=("limits", "types", "colors", "crs"),
+    read_options=("limits", "types", "colors", "crs", "appearance_theme"),
     reads_on_workers=True,
 )

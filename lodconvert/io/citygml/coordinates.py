@@ -18,12 +18,14 @@ from ...errors import InputError
 from ..crs import Crs
 from ..geometry_checks import check_magnitude
 from ..numbers import parse_floats
+from .appearance import Look
 from .holders import BrokenObject, Holder, Polygon, Read
 from .implicit import placed, placement
 from .names import local
 
 _EXTERIOR = frozenset({"exterior", "outerBoundaryIs"})
 _INTERIOR = frozenset({"interior", "innerBoundaryIs"})
+_BOUNDARIES = _EXTERIOR | _INTERIOR
 
 
 @dataclass
@@ -86,6 +88,35 @@ def _polygon_rings(polygon: Polygon, element: etree._Element, rings: Rings) -> l
             into.append(len(rings.counts))
             _ring_values(ring, rings)
     return [len(exterior) + len(interior), *exterior[::-1], *interior]
+
+
+def _ring_elements(element: etree._Element) -> list[etree._Element]:
+    """The rings of a polygon's element, as :func:`_polygon_rings` reads them."""
+    return [ring for boundary in element if local(boundary) in _BOUNDARIES for ring in boundary]
+
+
+def _look(look: Look | None, rings: Rings, first_ring: int, first_value: int) -> Look | None:
+    """``look``, a world-to-texture (or plan-to-texel) matrix turned into texture coordinates
+    (or texels) for the rings read from number ``first_ring`` on (their coordinates as the
+    document gives them, from array ``first_value`` of :attr:`Rings.values`)."""
+    if look is None or (look.matrix is None and look.plan is None):
+        return look
+    counts, widths = rings.counts[first_ring:], rings.widths[first_ring:]
+    if not counts:
+        return Look(None, None, None, look.color)
+    flat = np.concatenate(rings.values[first_value:])
+    uv = []
+    for values, width in zip(np.split(flat, np.cumsum(counts)[:-1]), widths, strict=True):
+        points = np.zeros((len(values) // width, 4))
+        points[:, :width] = values.reshape(-1, width)
+        points[:, 3] = 1.0
+        if look.plan is not None:  # texels, from plan coordinates
+            uv.append(points[:, [0, 1, 3]] @ look.plan.T)
+            continue
+        s, t, q = (points @ look.matrix.T).T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            uv.append(np.column_stack([s / q, t / q]))
+    return Look(look.image, tuple(uv), None, look.color, texels=look.plan is not None)
 
 
 def _max_length(tin: etree._Element) -> float | None:
@@ -186,9 +217,14 @@ def read_holder(holder: Holder, rings: Rings, read: Read) -> None:
         if polygon.implicit is not None:
             polygon.placed_by = placed.setdefault(id(polygon.implicit), len(placed))
     placements: list[tuple[np.ndarray, np.ndarray] | None] = [None] * len(placed)
+    looks = read.top.looks
     for polygon in holder.polygons:
         assert polygon.element is not None  # not read before
+        start = len(rings.counts), len(rings.values)
         read.layout += _polygon_rings(polygon, polygon.element, rings)
+        if looks is not None and not polygon.tin:
+            look = looks(polygon.element, _ring_elements(polygon.element))
+            polygon.look = _look(look, rings, *start)
         if polygon.implicit is not None and polygon.placed_by is not None:
             if placements[polygon.placed_by] is None:
                 try:

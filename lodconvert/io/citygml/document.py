@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -22,7 +22,9 @@ from ...model.lods import finest
 from ...semantics import DEFAULT_PALETTE, Palette
 from ..crs import Crs
 from ..geometry_checks import InputTally, check_extent
+from ..images import Images
 from ..mesh import object_id
+from .appearance import Appearances, Look
 from .attributes import attributes_of
 from .holders import BrokenObject, Holder, gml_id_of, holders_of
 from .implicit import Templates
@@ -66,6 +68,11 @@ class Document:
     """Triangles read when the heap was last handed back (:data:`TRIM_FACES`)."""
     templates: Templates = field(default_factory=Templates)
     """Relative geometries of implicit geometry, for links from later objects."""
+    appearances: Appearances | None = None
+    """The document's appearances at its root, in the theme read; ``None`` when the
+    document holds no appearance at all (then none is looked for)."""
+    images: Images | None = None
+    """The images its appearances name (with :attr:`appearances`)."""
     stats: dict[str, dict[str, int]] = field(
         default_factory=lambda: {
             "unresolved_links": {},
@@ -169,6 +176,8 @@ class Document:
             return None
         for holder in top.walk():
             holder.attributes = attributes_of(holder.element, holder.kind, holder.gml_id)
+        if self.appearances is not None:
+            top.looks = self._looks(element, top.gml_id or kind)
         gather(top, self.gml, self.templates)
         if not top.broken and not any(holder.polygons for holder in top.walk()):
             node_id = object_id(top.gml_id or kind, self.taken)
@@ -177,6 +186,28 @@ class Document:
             self._skip(node_id, "has no surface geometry")
             return None
         return self._node(top), top
+
+    def _looks(
+        self, element: etree._Element, name: str
+    ) -> Callable[[etree._Element, list[etree._Element]], Look | None]:
+        """What the polygons of the object ``element`` (``name`` in messages) wear: its own
+        appearances (in the theme read), else the document's."""
+        shared = self.appearances
+        assert shared is not None and self.images is not None
+        own = Appearances(shared.wanted, shared.theme)
+        for appearance in element.iter("{*}Appearance"):
+            own.add(appearance)
+        shared.themes += [theme for theme in own.themes if theme not in shared.themes]
+        shared.theme = self.images.theme = shared.theme or own.theme
+        for problem in dict.fromkeys(own.problems):
+            self.tally.warn(f"{self.source}: {name}: {problem} (not read)")
+        if own.empty:
+            return shared.look
+
+        def look(polygon: etree._Element, rings: list[etree._Element]) -> Look | None:
+            return own.look(polygon, rings) or shared.look(polygon, rings)
+
+        return look
 
     def _node(self, holder: Holder) -> Node:
         """The node of a holder and, as its children, of its parts (ids taken in document
@@ -205,6 +236,7 @@ class Document:
                 self.crs,
                 self.palette,
                 self.tally,
+                self.images,
             )
         )
         nodes = [
@@ -280,11 +312,12 @@ def _free(element: etree._Element) -> None:
 def _joined(surfaces: list[Surface]) -> list[Surface]:
     """``surfaces`` (of an object and its parts, in one LoD) joined into one surface per
     colour, in the order each colour first comes: an object of many parts is a few surfaces,
-    however many parts it has."""
-    by_color: dict[bytes, list[Surface]] = {}
+    however many parts it has. Textured surfaces stay as they are."""
+    by_color: dict[bytes | int, list[Surface]] = {}
     for surface in surfaces:
         assert surface.base_color is not None  # as triangulate_batch makes them
-        by_color.setdefault(surface.base_color.tobytes(), []).append(surface)
+        key = surface.base_color.tobytes() if surface.texture is None else id(surface)
+        by_color.setdefault(key, []).append(surface)
     return [group[0] if len(group) == 1 else _one_surface(group) for group in by_color.values()]
 
 

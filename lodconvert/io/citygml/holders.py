@@ -8,7 +8,7 @@ coordinates and :mod:`.triangulation` makes each holder's surfaces of them; what
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -16,6 +16,7 @@ import numpy as np
 from lxml import etree
 
 from ...model import Surface
+from .appearance import Look
 from .implicit import Templates
 from .names import (
     GML_IDS,
@@ -58,6 +59,8 @@ class Polygon:
     """Whether it is a ``Tin`` given by its control points (triangulated in plan)."""
     max_length: float | None = None
     """Such a ``Tin``'s ``maxLength`` (longer triangles are left out), when one is given."""
+    look: Look | None = None
+    """What its appearance in the theme read gives it (:mod:`.appearance`), once read."""
 
 
 @dataclass(eq=False)
@@ -78,11 +81,16 @@ class Holder:
     dropped: int = 0
     surfaces: dict[str, list[Surface]] = field(default_factory=dict)
     attributes: dict[str, Any] = field(default_factory=dict)
+    texture_faults: list[str] = field(default_factory=list)
+    """Why some of its polygons' textures are not used (polygons counted by the reason)."""
     """Its attributes, taken before its elements are freed."""
     read: Read | None = None
     """A top-level object's coordinates, once read (:func:`~.coordinates.read_coordinates`)."""
     broken: str = ""
     """Why a top-level object's coordinates cannot be read, if they cannot."""
+    looks: Callable[[etree._Element, list[etree._Element]], Look | None] | None = None
+    """What a top-level object's polygons wear, asked of each polygon's element and rings'
+    elements as its coordinates are read; ``None`` in a document without appearances."""
     _ids: dict[str, etree._Element] | None = None
     _reached: set[tuple[str, bool, etree._Element]] = field(default_factory=set)
     """Elements walked, by LoD and whether a semantic type was given (see :meth:`reach`)."""

@@ -86,7 +86,8 @@ class ReadTask:
     palette: Palette
     crs: Crs
     in_main: bool = False
-    """Read by the main process (it holds implicit geometry): a worker returns nothing."""
+    """Read by the main process (it holds implicit geometry, or the document appearances,
+    whose images are read beside the input): a worker returns nothing."""
 
     def run(self, backend: Any = None, progress: Any = None) -> ReadResult:
         """Read the run (``backend`` and ``progress`` are not used)."""
@@ -171,7 +172,8 @@ class SpreadReading(Spread[list[bytes], ReadTask]):
         joined = b"".join(run)
         return ReadTask(
             members.prolog, joined, members.root_end, document.source, document.limits,
-            document.types, document.palette, document.crs, in_main=_IMPLICIT in joined,
+            document.types, document.palette, document.crs,
+            in_main=_IMPLICIT in joined or document.appearances is not None,
         )  # fmt: skip
 
     def size(self, run: list[bytes]) -> int:
@@ -182,7 +184,12 @@ class SpreadReading(Spread[list[bytes], ReadTask]):
         another run took or that collide are read here, where they are what one process
         reads."""
         if task.in_main and not self.told:
-            self.progress(f"{self.document.source}: implicit geometry is read in the main process")
+            what = (
+                "its appearances are"
+                if self.document.appearances is not None
+                else "implicit geometry is"
+            )
+            self.progress(f"{self.document.source}: {what} read in the main process")
             self.told = True
         return task.in_main or result.collided or not self.document.taken.isdisjoint(result.ids)
 

@@ -42,13 +42,15 @@ def read_cityjson(
     colors: Palette = DEFAULT_PALETTE,
     crs: str | None = None,
     context: RunContext | None = None,
+    appearance_theme: str | None = None,
 ) -> Scene:
     """Read a CityJSON (``.json``) or CityJSONSeq (``.jsonl``) file, plain, ``.gz`` or in a
     ``.zip``, into a Scene (see the module docstring); :class:`InputError` with a one-line
     reason when it cannot be. ``types``: keep only CityObjects of these types (and their
     descendants); ``colors``: the semantic classes' colours (:mod:`lodconvert.semantics`);
     ``crs`` replaces the CRS the file declares; with ``context``, the objects are read by the
-    workers of its executor.
+    workers of its executor; ``appearance_theme``: the theme of textures and materials read
+    (else each geometry's first).
     The scene carries an :class:`~..geometry_checks.InputTally` of dropped faces and skipped
     objects."""
     path = Path(path)
@@ -59,14 +61,14 @@ def read_cityjson(
     name = (member_name(path) if path.name.lower().endswith(".zip") else path.name).lower()
     name = name.removesuffix(".gz")
     if name.endswith(".jsonl"):
-        return read_sequence(path, limits, _types(types), colors, crs, context)
-    return read_document(path, limits, _types(types), colors, crs, context)
+        return read_sequence(path, limits, _types(types), colors, crs, context, appearance_theme)
+    return read_document(path, limits, _types(types), colors, crs, context, appearance_theme)
 
 
 FORMAT = Format(
     name="cityjson",
     suffixes=(".json", ".jsonl", ".zip"),
     read=read_cityjson,
-    read_options=("limits", "types", "colors", "crs"),
+    read_options=("limits", "types", "colors", "crs", "appearance_theme"),
     reads_on_workers=True,
 )

@@ -17,6 +17,7 @@ from ...model import Node, PackedNode, Scene, with_geometry
 from ...semantics import Palette
 from ..crs import crs_attributes
 from ..geometry_checks import InputTally, attach_tally
+from ..images import Images
 from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_node, checked_nodes
 from .parallel import ObjectsReading, SequenceReading
@@ -29,6 +30,8 @@ from .source import (
     load_document,
     materials_of,
     parsed,
+    texture_vertices_of,
+    textures_of,
     unreadable,
 )
 from .triangulation import triangulate_batch
@@ -62,12 +65,16 @@ def read_document(
     palette: Palette,
     crs: str | None,
     context: RunContext | None = None,
+    theme: str | None = None,
 ) -> Scene:
     """A ``.json`` CityJSON file: every node built before the scene is returned (with
-    ``context``, by the workers of its executor: :mod:`.parallel`)."""
+    ``context``, by the workers of its executor: :mod:`.parallel`; a file with textures is
+    read in this process, beside its images)."""
     tally = InputTally(str(path), limits)
     data = load_document(path, limits, tally)
-    ctx = context_of(data, tally, declared_crs(data.get("metadata"), crs, str(path)), palette)
+    declared = declared_crs(data.get("metadata"), crs, str(path))
+    images = Images(path, limits, tally.warn)
+    ctx = context_of(data, tally, declared, palette, images, theme)
     objects = data.get("CityObjects") or {}
 
     def checked(nodes: list[Node | PackedNode]) -> int:
@@ -80,10 +87,10 @@ def read_document(
             raise InputError(f"has no CityObject {which}with surfaces", str(path))
         return size
 
-    if context is not None and _any_surface(objects, types):
+    if context is not None and _any_surface(objects, types) and not ctx.textures:
         reading = ObjectsReading(
             objects, ctx, types, lambda: _object_nodes(objects, ctx, types), checked,
-            lambda: read_document(path, limits, types, palette, crs),
+            lambda: read_document(path, limits, types, palette, crs, theme=theme),
         )  # fmt: skip
         executor = context.executor
         reading.use(executor.results, context.progress, executor.task_seconds)
@@ -95,6 +102,8 @@ def read_document(
         scene = Scene(str(path), nodes, crs=ctx.crs, size=checked(nodes), city=True)
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(data.get("version"))
+    if ctx.textures or ctx.materials:
+        scene.attributes["appearance"] = images
     return attach_tally(scene, tally)
 
 
@@ -154,6 +163,12 @@ def _feature(
             shared=ctx.shared,
             counted=ctx.counted,
             palette=ctx.palette,
+            textures=textures_of(feature, where) or ctx.textures,
+            texture_vertices=(
+                own if len(own := texture_vertices_of(feature, where)) else ctx.texture_vertices
+            ),
+            images=ctx.images,
+            theme=ctx.theme,
         )
     except InputError as exc:
         return _Feature(where, problem=exc)
@@ -212,6 +227,7 @@ def read_sequence(
     palette: Palette,
     crs: str | None,
     context: RunContext | None = None,
+    theme: str | None = None,
 ) -> Scene:
     """A CityJSONSeq file: the header read now, the features' nodes yielded lazily (with
     ``context``, by the workers of its executor: :mod:`.parallel`)."""
@@ -226,9 +242,9 @@ def read_sequence(
             raise unreadable(path, exc) from None
         header = cityjson_object(parsed(text, str(path)), "CityJSON", str(path))
         tally = InputTally(str(path), limits)
-        ctx = context_of(
-            header, tally, declared_crs(header.get("metadata"), crs, str(path)), palette
-        )
+        declared = declared_crs(header.get("metadata"), crs, str(path))
+        images = Images(path, limits, tally.warn)
+        ctx = context_of(header, tally, declared, palette, images, theme)
     except InputError:
         lines.close()
         raise
@@ -236,7 +252,7 @@ def read_sequence(
     if context is not None:
 
         def again() -> Iterator[Node]:
-            return iter(read_sequence(path, limits, types, palette, crs).nodes)
+            return iter(read_sequence(path, limits, types, palette, crs, theme=theme).nodes)
 
         reading = SequenceReading(lines, header, ctx, types, _feature_nodes, again)
         executor = context.executor
@@ -251,4 +267,5 @@ def read_sequence(
     )
     scene.attributes.update(crs_attributes(ctx.declared))
     scene.attributes["cityjson_version"] = str(header.get("version"))
+    scene.attributes["appearance"] = images
     return attach_tally(scene, tally)

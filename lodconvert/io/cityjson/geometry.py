@@ -6,7 +6,8 @@ order."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
 from itertools import chain, repeat
 from typing import Any
 
@@ -55,12 +56,10 @@ def _values(values: Any, depth: int, count: int) -> list[Any]:
     return (flat + [None] * count)[:count]
 
 
-def _material_values(geometry: dict[str, Any], depth: int, count: int) -> list[Any]:
-    """Each surface's material index in the first theme the geometry lists (None: none)."""
-    themes = geometry.get("material")
-    if not isinstance(themes, dict) or not themes:
-        return [None] * count
-    theme = next(iter(themes.values()))
+def _material_values(geometry: dict[str, Any], depth: int, count: int, ctx: Context) -> list[Any]:
+    """Each surface's material index in the theme read (:meth:`Context.theme_of`; None:
+    none)."""
+    theme = ctx.theme_of(geometry.get("material"))
     if not isinstance(theme, dict):
         return [None] * count
     if "value" in theme:
@@ -83,10 +82,10 @@ def _classes(geometry: dict[str, Any], depth: int, count: int) -> list[int]:
     return [of[v] if isinstance(v, int) and 0 <= v < len(kinds) else other for v in values]
 
 
-def _materials(geometry: dict[str, Any], depth: int, count: int) -> list[Any]:
-    """Each surface's material index in the first theme the geometry lists, or -1; an index
-    is any ``int``, in range or not (those out of range take their class's colour)."""
-    materials = _material_values(geometry, depth, count)
+def _materials(geometry: dict[str, Any], depth: int, count: int, ctx: Context) -> list[Any]:
+    """Each surface's material index in the theme read, or -1; an index is any ``int``, in
+    range or not (those out of range take their class's colour)."""
+    materials = _material_values(geometry, depth, count, ctx)
     types = set(map(type, materials))
     if types <= {int}:
         return materials
@@ -134,10 +133,29 @@ class Lod:
     """Per polygon, its part: the rank of its (semantic class, material) in sorted order."""
     colors: list[np.ndarray]
     """Per part, its sRGB RGBA colour."""
+    textured: list[Textured] = field(default_factory=list)
+    """Its polygons that wear a texture, read apart from ``index`` (their points are their
+    own: a vertex has texture coordinates per polygon)."""
     mesh: Mesh | None = None
     """One surface per part with faces, in part order; None when no part has any."""
     dropped: int = 0
     """Degenerate polygons and triangles without area."""
+    faults: Counter[str] = field(default_factory=Counter)
+    """Textured polygons whose texture coordinates could not be used, by what is wrong."""
+
+
+@dataclass(frozen=True)
+class Textured:
+    """A polygon that wears a texture: its rings' points and texture coordinates ((k, 2),
+    the ring's points in order), its image and key (the texture's index, semantic class and
+    material: an object's polygons of one texture are one surface, whose image is cut once),
+    and its colour without the texture."""
+
+    rings: list[np.ndarray]
+    uv: list[np.ndarray]
+    image: np.ndarray
+    key: tuple[int, int, Any]
+    color: np.ndarray
 
 
 def read_lod(
@@ -149,13 +167,16 @@ def read_lod(
     kind: str,
 ) -> Lod:
     """The polygons of ``geometries`` (of one LoD) indexing ``vertices``, each in its part (one
-    per semantic class and material, coloured). Raises :class:`InputError` for bad indices or
-    boundaries."""
+    per semantic class and material, coloured), those that wear a texture apart. Raises
+    :class:`InputError` for bad indices or boundaries."""
     indices, lengths, counts, keys = [], [], [], []
+    textured: list[Textured] = []
+    faults: Counter[str] = Counter()
     for geometry in geometries:
         depth = SURFACE_DEPTH[geometry["type"]]
         try:
-            index, ring_lengths, ring_counts = _rings(_surfaces(geometry.get("boundaries"), depth))
+            surfaces = _surfaces(geometry.get("boundaries"), depth)
+            index, ring_lengths, ring_counts = _rings(surfaces)
         except (TypeError, ValueError, OverflowError) as exc:
             raise InputError(
                 f"has malformed {geometry['type']} boundaries ({exc})", where
@@ -168,8 +189,30 @@ def read_lod(
                 where,
             )
         check_used(vertices, index, where)
-        classes = _classes(geometry, depth, len(ring_counts))
-        keys += zip(classes, _materials(geometry, depth, len(ring_counts)), strict=True)
+        pairs = list(
+            zip(
+                _classes(geometry, depth, len(ring_counts)),
+                _materials(geometry, depth, len(ring_counts), ctx),
+                strict=True,
+            )
+        )
+        worn = _textures(geometry, depth, surfaces, ctx, where, faults)
+        if worn:
+            points = np.split(vertices[index], np.cumsum(ring_lengths)[:-1])
+            first = np.cumsum([0, *ring_counts])
+            plain = np.ones(len(ring_counts), dtype=bool)
+            for k, (texture, image, uv) in worn.items():
+                klass, material = pairs[k]
+                color = _color(_CLASSES[klass], material, ctx, kind)
+                rings = points[first[k] : first[k + 1]]
+                textured.append(Textured(rings, uv, image, (texture, klass, material), color))
+                plain[k] = False
+            ring_kept = plain.repeat(ring_counts)
+            index = index[ring_kept.repeat(ring_lengths)]
+            ring_lengths = [n for n, kept in zip(ring_lengths, ring_kept, strict=True) if kept]
+            ring_counts = [n for n, kept in zip(ring_counts, plain, strict=True) if kept]
+            pairs = [pair for pair, kept in zip(pairs, plain, strict=True) if kept]
+        keys += pairs
         indices.append(index)
         lengths += ring_lengths
         counts += ring_counts
@@ -183,7 +226,82 @@ def read_lod(
         ring_counts=np.array(counts, dtype=np.int64),
         part_of=np.fromiter(map(rank.__getitem__, keys), dtype=np.int64, count=len(keys)),
         colors=[_color(_CLASSES[klass], material, ctx, kind) for klass, material in parts],
+        textured=textured,
+        faults=faults,
     )
+
+
+def _textures(
+    geometry: dict[str, Any],
+    depth: int,
+    surfaces: list[Any],
+    ctx: Context,
+    where: str,
+    faults: Counter[str],
+) -> dict[int, tuple[int, np.ndarray, list[np.ndarray]]]:
+    """By surface, the texture it wears in the theme read: the texture's index, its image and
+    each ring's texture coordinates. A surface whose texture values do not fit its rings
+    (counted in ``faults``) or whose image cannot be used wears none."""
+    if ctx.images is None or not ctx.textures:
+        return {}
+    theme = ctx.theme_of(geometry.get("texture"))
+    if not isinstance(theme, dict):
+        return {}
+    values = _values(theme.get("values"), depth, len(surfaces))
+    worn: dict[int, tuple[int, np.ndarray, list[np.ndarray]]] = {}
+    for k, (rings, value) in enumerate(zip(surfaces, values, strict=True)):
+        found = _texture_of(rings, value, ctx, faults)
+        if found is None:
+            continue
+        texture, uv = found
+        entry = ctx.textures[texture]
+        uri = entry.get("image") if isinstance(entry, dict) else None
+        image = (
+            ctx.images.image(uri, f"{ctx.tally.source}: {where}") if isinstance(uri, str) else None
+        )
+        if image is None:
+            if not isinstance(uri, str):
+                faults["name a texture without an image"] += 1
+            continue
+        worn[k] = (texture, image, uv)
+    return worn
+
+
+def _texture_of(
+    rings: list[Any], value: Any, ctx: Context, faults: Counter[str]
+) -> tuple[int, list[np.ndarray]] | None:
+    """A surface's texture index and its rings' texture coordinates from its texture value
+    (per ring: the texture's index, then an index into ``vertices-texture`` per point), or
+    None where it wears none or they do not fit (counted in ``faults``)."""
+    if not isinstance(value, list) or not value or value[0] in ([None], None):
+        return None
+    if len(value) != len(rings):
+        faults["have texture values that do not match their rings"] += 1
+        return None
+    texture = value[0][0] if isinstance(value[0], list) and value[0] else None
+    if not isinstance(texture, int) or isinstance(texture, bool):
+        faults["have a texture index that is not a whole number"] += 1
+        return None
+    if not 0 <= texture < len(ctx.textures):
+        faults[f"name texture {texture}, which does not exist"] += 1
+        return None
+    uv = []
+    for ring, entry in zip(rings, value, strict=True):
+        if not isinstance(entry, list) or len(entry) != len(ring) + 1 or entry[0] != texture:
+            faults["have texture values that do not match their rings"] += 1
+            return None
+        at = entry[1:]
+        if not all(isinstance(i, int) and not isinstance(i, bool) for i in at) or not all(
+            0 <= i < len(ctx.texture_vertices) for i in at
+        ):
+            faults["refer to texture vertices that do not exist"] += 1
+            return None
+        coordinates = ctx.texture_vertices[at]
+        if not np.isfinite(coordinates).all():
+            faults["have texture coordinates that are not two finite numbers"] += 1
+            return None
+        uv.append(coordinates)
+    return texture, uv
 
 
 def _color(kind: str | None, material: Any, ctx: Context, object_type: str) -> np.ndarray:

@@ -138,6 +138,12 @@ def checked_node(read: Read) -> Node | None:
         error = InputError(f"has malformed content ({type(exc).__name__}: {exc})", key)
         tally.add_skipped(key, str(error))
         return None
+    for lod in read.lods:
+        for fault, count in lod.faults.items():
+            tally.warn(
+                f"{tally.source}: {key}: {count:,} surface(s) {fault}; they take their "
+                "material or class colour"
+            )
     tally.dropped_faces += dropped
     if dropped and node.geometry is None and not node.children:
         tally.skip(key, dropped)

@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import closing
 from dataclasses import dataclass
 from itertools import chain
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,7 @@ from ...limits import Limits
 from ...model import Node, PackedNode, with_geometry
 from ..crs import Crs
 from ..geometry_checks import InputTally
+from ..images import Images
 from ..spread import TASK_SECONDS, Results, Sizer, Spread, add_tally, runs
 from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_nodes, read_kept
@@ -66,13 +68,16 @@ class LinesTask:
     types: frozenset[str] | None
     palette: Any
     read: ReadLines
+    theme: str | None = None
+    """The appearance theme asked for (its images are read beside ``source``)."""
 
     def run(self, backend: Any = None, progress: Any = None) -> LinesResult:
         """Read the lines (``backend`` and ``progress`` are not used)."""
         start = time.process_time()
         tally = InputTally(self.source, self.limits)
+        images = Images(Path(self.source), self.limits, tally.warn)
         try:
-            ctx = context_of(self.header, tally, self.declared, self.palette)
+            ctx = context_of(self.header, tally, self.declared, self.palette, images, self.theme)
             nodes = _flattened(list(self.read(_each(self.lines), self.header, ctx, self.types)))
         except InputError as exc:
             return LinesResult(error=str(exc))
@@ -136,7 +141,7 @@ class SequenceReading(Spread[Lines, LinesTask]):
         tally = self.ctx.tally
         return LinesTask(
             run, self.header, self.ctx.declared, tally.source, tally.limits, self.types,
-            self.ctx.palette, self.read,
+            self.ctx.palette, self.read, self.ctx.theme,
         )  # fmt: skip
 
     def size(self, run: Lines) -> int:

@@ -20,6 +20,7 @@ from ...semantics import DEFAULT_PALETTE, Palette
 from ..archive import inflation_error, open_compressed
 from ..crs import Crs
 from ..geometry_checks import InputTally
+from ..images import Images
 from .jsonkind import json_kind
 from .vertices import top_level, vertices_of
 
@@ -47,6 +48,26 @@ class Context:
     already handed on, and freed, do)."""
     palette: Palette = DEFAULT_PALETTE
     """Colours of the semantic classes."""
+    textures: list[Any] = field(default_factory=list)
+    """The ``appearance.textures`` of the file (or feature)."""
+    texture_vertices: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    """Its ``appearance.vertices-texture``, (n, 2) float64 (NaN where not two numbers)."""
+    images: Images | None = None
+    """The images its textures name, with the theme read (``images.theme``)."""
+    theme: str | None = None
+    """The appearance theme asked for (``--appearance-theme``), else None: the first met."""
+
+    def theme_of(self, themes: Any) -> Any:
+        """The entry of ``themes`` (a geometry's ``texture`` or ``material`` object) in the
+        theme asked for, else its first (as the geometry lists them, whichever process reads
+        it); None where it has none of it. The themes met are noted in :attr:`images`."""
+        if not isinstance(themes, dict) or not themes:
+            return None
+        name = self.theme if self.theme is not None else next(iter(themes))
+        if self.images is not None:
+            self.images.themes += [each for each in themes if each not in self.images.themes]
+            self.images.theme = self.images.theme or name
+        return themes.get(name)
 
     @property
     def crs(self) -> str | None:
@@ -179,10 +200,16 @@ def member(data: dict[str, Any], key: str, kind: type, where: str) -> Any:
 
 
 def context_of(
-    data: dict[str, Any], tally: InputTally, declared: Crs | None, palette: Palette
+    data: dict[str, Any],
+    tally: InputTally,
+    declared: Crs | None,
+    palette: Palette,
+    images: Images | None = None,
+    theme: str | None = None,
 ) -> Context:
-    """The context of a CityJSON document: vertices (in metres), materials, templates (whose
-    vertices are offsets in metres from their reference points, never projected)."""
+    """The context of a CityJSON document: vertices (in metres), materials, textures (their
+    images read through ``images``), templates (whose vertices are offsets in metres from
+    their reference points, never projected)."""
     where = tally.source
     vertices = vertices_of(data.get("vertices"), data.get("transform"), where, declared)
     tally.count(len(vertices), 0, declared=True)
@@ -195,7 +222,37 @@ def context_of(
         templates=member(templates, "templates", list, where),
         template_vertices=vertices_of(templates.get("vertices-templates"), None, where),
         palette=palette,
+        textures=textures_of(data, where),
+        texture_vertices=texture_vertices_of(data, where),
+        images=images,
+        theme=theme,
     )
+
+
+def textures_of(data: dict[str, Any], where: str) -> list[Any]:
+    """The ``appearance.textures`` of a document or a feature (empty where it has none)."""
+    return list(member(member(data, "appearance", dict, where), "textures", list, where))
+
+
+def texture_vertices_of(data: dict[str, Any], where: str) -> np.ndarray:
+    """The ``appearance.vertices-texture`` of a document or a feature as (n, 2) float64; a
+    row that is not two finite numbers is NaN (the surfaces using it are warned of)."""
+    rows = member(member(data, "appearance", dict, where), "vertices-texture", list, where)
+    try:
+        fast = np.array(rows, dtype=np.float64)
+        if fast.ndim == 2 and fast.shape[1] == 2:
+            return fast
+    except (TypeError, ValueError, OverflowError):
+        pass
+    out = np.full((len(rows), 2), np.nan)
+    for k, row in enumerate(rows):
+        if (
+            isinstance(row, list)
+            and len(row) == 2
+            and all(isinstance(v, int | float) and not isinstance(v, bool) for v in row)
+        ):
+            out[k] = row
+    return out
 
 
 def materials_of(data: dict[str, Any], where: str) -> list[Any]:

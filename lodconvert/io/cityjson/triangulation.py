@@ -5,13 +5,16 @@ per part, of its triangles with area, and how many faces it dropped."""
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from ...model import Mesh, Surface
+from ...model import WHITE, Mesh, Surface
 from ...polygons import triangulate_many
+from ...textures import cropped, polygon_coordinates
 from ..geometry_checks import faces_with_area
 from .geometry import Lod
 
@@ -161,7 +164,53 @@ def triangulate_batch(lods: list[Lod]) -> None:
             if len(faces):
                 color = lod.colors[rank].copy()
                 surfaces.append(Surface(vertices=points, faces=faces, base_color=color))
+        surfaces += _textured_surfaces(lod)
         lod.mesh = Mesh(surfaces) if surfaces else None
+
+
+def _textured_surfaces(lod: Lod) -> list[Surface]:
+    """The surfaces of ``lod``'s textured polygons: one per texture, semantic class and
+    material, its texture cut to what it covers (those whose coordinates cannot be used take
+    their colour, and are warned of), on points of their own."""
+    if not lod.textured:
+        return []
+    triangulated = triangulate_many([polygon.rings for polygon in lod.textured])
+    groups: dict[tuple[Any, ...], list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]] = {}
+    colors: dict[tuple[Any, ...], np.ndarray] = {}
+    images: dict[tuple[Any, ...], np.ndarray] = {}
+    faults: Counter[str] = Counter()
+    for polygon, triangles in zip(lod.textured, triangulated, strict=True):
+        if triangles is None:
+            lod.dropped += 1
+            continue
+        points, faces = triangles
+        keep = faces_with_area(points, faces)
+        lod.dropped += len(faces) - int(np.count_nonzero(keep))
+        if not keep.any():
+            continue
+        uv, fault = polygon_coordinates(points, faces[keep], polygon.rings, polygon.uv)
+        if fault is not None:
+            faults[fault] += 1
+        key = (*polygon.key, polygon.color.tobytes()) if uv is None else polygon.key[:1]
+        colors[key], images[key] = polygon.color, polygon.image
+        groups.setdefault(key, []).append((points, faces[keep], uv))
+    lod.faults.update(faults)
+    surfaces = []
+    for key, pieces in groups.items():
+        starts = np.cumsum([0] + [len(points) for points, _, _ in pieces[:-1]])
+        surface = Surface(
+            np.concatenate([points for points, _, _ in pieces]),
+            np.concatenate(
+                [faces + start for (_, faces, _), start in zip(pieces, starts, strict=True)]
+            ),
+            base_color=colors[key].copy(),
+        )
+        if pieces[0][2] is not None:
+            uv = np.concatenate([uv for _, _, uv in pieces if uv is not None])
+            surface.uv, surface.texture = cropped(uv, images[key])
+            surface.base_color = WHITE.copy()  # the texture carries the colour
+        surfaces.append(surface)
+    return surfaces
 
 
 def _by_part(

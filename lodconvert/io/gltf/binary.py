@@ -48,6 +48,8 @@ VECTOR_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 """Buffer view targets: vertex attributes, indices."""
 POINTS, TRIANGLES = 0, 4
+LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT, CLAMP_TO_EDGE = 9729, 9987, 10497, 33071
+"""Sampler filters and wrap modes."""
 """Primitive modes (triangles the default)."""
 
 

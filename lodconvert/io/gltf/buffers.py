@@ -93,6 +93,19 @@ def _png(rgba: np.ndarray) -> bytes:
     return out.getvalue()
 
 
+def encoded_image(rgba: np.ndarray) -> tuple[bytes, str]:
+    """Deterministic bytes of an RGBA uint8 image and their MIME type: JPEG (quality 90, no
+    metadata) where every texel is opaque, else PNG."""
+    from PIL import Image as PILImage
+
+    if int(rgba[..., 3].min(initial=255)) < 255:
+        return _png(rgba), "image/png"
+    out = io.BytesIO()
+    rgb = PILImage.fromarray(np.ascontiguousarray(rgba[..., :3], dtype=np.uint8), "RGB")
+    rgb.save(out, format="JPEG", quality=90, optimize=False, progressive=False)
+    return out.getvalue(), "image/jpeg"
+
+
 @dataclass(frozen=True)
 class AccessorData:
     """An accessor's bytes (little-endian), its buffer view's target and its other fields, with

@@ -9,6 +9,7 @@ import tempfile
 from typing import IO, Any
 
 from ...model import Level
+from .binary import LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT
 from .buffers import VIEW_HEAD, AccessorData, PrimitiveData, level_data
 from .json_text import COMPACT, DataUri, JsonArray, Layout, json_object
 
@@ -17,7 +18,6 @@ SPOOL_BYTES = 1 << 20
 """How much of each temporary file (the buffer, each JSON array) stays in memory."""
 _SHARED_MATERIALS = 4096
 """Distinct untextured mesh materials remembered for sharing (later ones are not shared)."""
-_LINEAR, _LINEAR_MIPMAP_LINEAR, _REPEAT = 9729, 9987, 10497
 
 
 def _material(
@@ -114,10 +114,10 @@ class Document:
     def _texture(self, png: bytes) -> int:
         image = {"mimeType": "image/png", "bufferView": self._buffer_view(png)}
         sampler = {
-            "magFilter": _LINEAR,
-            "minFilter": _LINEAR_MIPMAP_LINEAR,
-            "wrapS": _REPEAT,
-            "wrapT": _REPEAT,
+            "magFilter": LINEAR,
+            "minFilter": LINEAR_MIPMAP_LINEAR,
+            "wrapS": REPEAT,
+            "wrapT": REPEAT,
         }
         return self.textures.append(
             {"sampler": self.samplers.append(sampler), "source": self.images.append(image)}

@@ -24,7 +24,8 @@ import numpy as np
 
 from ...errors import LodConvertError
 from ...sinks import RESUME, DirectorySink
-from .content import mesh_glb, points_glb
+from ...textures import ATLAS_SIZE
+from .content import TileTextures, mesh_glb, points_glb
 from .metadata import Feature
 from .placement import Placement, world_to_frame
 
@@ -79,7 +80,8 @@ class TileResult:
 class TileTask:
     """The GLB ``name`` in the tileset's ``tiles/``: a triangle mesh (``faces``; with
     ``feature_ids`` into ``features``, or none for a merged far level) or, without ``faces``,
-    points; ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes."""
+    points; ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes; the textures of
+    its textured vertices (``textures``), packed into atlas pages of ``atlas_size``."""
 
     name: str
     where: Where
@@ -89,13 +91,21 @@ class TileTask:
     feature_ids: np.ndarray | None
     features: tuple[Feature, ...]
     generator: str
+    textures: TileTextures | None = None
+    atlas_size: int = ATLAS_SIZE
 
     def key(self) -> str:
         """The hash of everything that makes this tile's file, frame and box."""
         digest = hashlib.sha256()
         head = [self.name, self.where.key, self.generator, self.features]
+        textures = self.textures
+        if textures is not None:
+            head.append(self.atlas_size)
         digest.update(json.dumps(head, sort_keys=True, default=str).encode())
-        for array in (self.vertices, self.colors, self.faces, self.feature_ids):
+        arrays = [self.vertices, self.colors, self.faces, self.feature_ids]
+        if textures is not None:
+            arrays += [textures.image_of, textures.uv, *textures.images]
+        for array in arrays:
             if array is None:
                 digest.update(b"-")
                 continue
@@ -148,8 +158,9 @@ class TileTask:
         if self.faces is None:
             return points_glb(gltf, self.colors, self.generator)
         return mesh_glb(
-            gltf, self.faces, self.colors, self.feature_ids, self.features, self.generator
-        )
+            gltf, self.faces, self.colors, self.feature_ids, self.features, self.generator,
+            self.textures, self.atlas_size,
+        )  # fmt: skip
 
     def failed(self, reason: str) -> TileResult:
         """The result of this task when it could not run, for ``reason``."""

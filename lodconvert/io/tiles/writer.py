@@ -22,7 +22,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...errors import LodConvertError, UsageError
-from ...model import CellChain, LodChain, Mesh
+from ...model import CellChain, LodChain, Mesh, Surface
+from ...textures import ATLAS_SIZE, check_atlas_size
 from .. import OutputInfo, Pieces
 from .metadata import Feature
 from .placement import Placement, world_to_frame
@@ -30,6 +31,7 @@ from .placement import Placement, world_to_frame
 if TYPE_CHECKING:
     from ...context import RunContext
 
+from .content import TileTextures
 from .task import TILES, TileResult, TileTask, Where
 
 DEFAULT_SSE = 16.0
@@ -79,15 +81,33 @@ def _mesh_levels(chain: LodChain) -> list[tuple[int, Mesh]]:
     return [(i, lv.mesh) for i, lv in enumerate(chain.levels) if lv.mesh is not None]
 
 
-def _colors(mesh: Mesh) -> np.ndarray:
-    """(n, 4) sRGB bytes per vertex: vertex colours, else each part's material colour (a
-    texture's material colour stands in for it)."""
-    own = mesh.vertex_colors
-    if own is not None:
-        return own
-    return np.concatenate(
-        [np.repeat(p.material_color[None], len(p.vertices), axis=0) for p in mesh.parts]
-    )
+def _colors(part: Surface) -> np.ndarray:
+    """(n, 4) sRGB bytes per vertex of a part of a tile's meshes: white where its texture is
+    written (it carries the colour), else its colours."""
+    if part.texture is not None and part.uv is not None:
+        return np.full((len(part.vertices), 4), 255, dtype=np.uint8)
+    return part.baked_colors()
+
+
+def _textures(meshes: list[Mesh]) -> TileTextures | None:
+    """The textures of ``meshes``' vertices (each image once), or None where none is
+    textured."""
+    images: dict[int, int] = {}
+    found: list[np.ndarray] = []
+    image_of, uv = [], []
+    for part in (part for mesh in meshes for part in mesh.parts):
+        if part.texture is None or part.uv is None:
+            image_of.append(np.full(len(part.vertices), -1, dtype=np.int64))
+            uv.append(np.zeros((len(part.vertices), 2)))
+            continue
+        if id(part.texture) not in images:
+            images[id(part.texture)] = len(found)
+            found.append(part.texture)
+        image_of.append(np.full(len(part.vertices), images[id(part.texture)], dtype=np.int64))
+        uv.append(part.uv)
+    if not found:
+        return None
+    return TileTextures(np.concatenate(image_of), np.concatenate(uv), tuple(found))
 
 
 def _feature(chain: LodChain) -> Feature:
@@ -109,8 +129,9 @@ class TilesetWriter:
         sse: float,
         executor: Any = None,
         progress: Callable[[str], None] | None = None,
+        atlas_size: int = ATLAS_SIZE,
     ) -> None:
-        self.sink, self.info, self.sse = sink, info, sse
+        self.sink, self.info, self.sse, self.atlas_size = sink, info, sse, atlas_size
         self.executor, self.progress = executor, progress
         self.placement = Placement(info.georef, info.crs, info.source)
         georef = info.georef
@@ -142,12 +163,13 @@ class TilesetWriter:
         faces: np.ndarray | None = None,
         feature_ids: np.ndarray | None = None,
         features: tuple[Feature, ...] = (),
+        textures: TileTextures | None = None,
     ) -> Tile:
         """A tile whose content ``name`` (``.glb``) is made by a task queued for the executor
         (its frame and box are filled in from the task's result); see :class:`TileTask`."""
         task = TileTask(
             f"{name}.glb", self.where, vertices, colors, faces, feature_ids, features,
-            self.info.generator,
+            self.info.generator, textures, self.atlas_size,
         )  # fmt: skip
         tile = Tile(None, None, error, task.name)
         self._queued.append((tile, task))
@@ -162,12 +184,13 @@ class TilesetWriter:
             name,
             error,
             np.concatenate([mesh.vertices for mesh in placed]),
-            np.concatenate([_colors(mesh) for mesh in placed]),
+            np.concatenate([_colors(part) for mesh in placed for part in mesh.parts]),
             np.concatenate(
                 [mesh.faces + start for mesh, start in zip(placed, starts[:-1], strict=True)]
             ),
             np.repeat(np.arange(len(placed)), np.diff(starts)),
             tuple(_feature(chain) for chain, _ in entries),
+            _textures(placed),
         )
 
     def far_tile(self, cell: CellChain, children: list[Tile]) -> Tile:
@@ -187,7 +210,7 @@ class TilesetWriter:
         else:
             assert far.mesh is not None
             tile = self._tile(
-                cell.cell_id, error, far.mesh.vertices + cell.origin, _colors(far.mesh),
+                cell.cell_id, error, far.mesh.vertices + cell.origin, far.mesh.baked_colors(),
                 far.mesh.faces,
             )  # fmt: skip
         tile.children, tile.extras = children, extras
@@ -408,12 +431,15 @@ def write_tileset(
     context: RunContext | None = None,
     pieces: Pieces | None = None,
     sse: float = DEFAULT_SSE,
+    atlas_size: int = ATLAS_SIZE,
 ) -> None:
     """The registry's ``write``: the tileset of ``chains`` (LOD parents and objects, as
     :func:`~lodconvert.bakery.iter_chains` yields them with cells) into ``sink``, each tile's
-    GLB made by the executor of the run's ``context`` (``None``: here); a tileset takes no
-    ``pieces``."""
+    GLB made by the executor of the run's ``context`` (``None``: here), its textures packed
+    into atlas pages of at most ``atlas_size`` texels a side; a tileset takes no ``pieces``."""
     if not (math.isfinite(sse) and sse > 0):
         raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
+    check_atlas_size(atlas_size)
     executor, progress = (context.executor, context.progress) if context else (None, None)
-    TilesetWriter(sink, info, sse, executor, progress).write(chains, "tileset.json")
+    writer = TilesetWriter(sink, info, sse, executor, progress, atlas_size)
+    writer.write(chains, "tileset.json")

@@ -1,0 +1,602 @@
+"""City appearances read and kept: CityGML ParameterizedTexture (TexCoordList and TexCoordGen)
+and X3DMaterial, CityJSON textures and materials, themes, images beside the input or in its
+zip, every image or coordinate that cannot be used warned of with the image and the object
+(the surface falls back to its material or class colour), and textured outputs that pass the
+official validators. docs/textures.md."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lxml import etree
+from PIL import Image
+
+from lodconvert.io import read_scene
+from lodconvert.io.tiles.check import glb_parts
+from lodconvert.model import Mesh, Surface
+from lodconvert.semantics import DEFAULT_CLASS_COLORS
+from lodconvert.textures import PADDING, packed
+
+from .conftest import SHARED
+from .test_cli import run
+from .test_gltf import _assert_valid
+from .test_tiles import official
+
+PLATEAU = SHARED / "data" / "citygml"
+ROTTERDAM = SHARED / "data" / "cityjson" / "rotterdam" / "rotterdam_subset.city.json"
+ROOF = np.array(DEFAULT_CLASS_COLORS["roof"])
+QUADRANTS = {"top_left": (220, 30, 30), "top_right": (30, 200, 30),
+             "bottom_left": (30, 30, 220), "bottom_right": (230, 220, 30)}  # fmt: skip
+"""The colours of the test image's quadrants (its top-left quadrant red…)."""
+
+MODEL = """<?xml version="1.0" encoding="UTF-8"?>
+<core:CityModel xmlns:core="http://www.opengis.net/citygml/2.0"
+ xmlns:bldg="http://www.opengis.net/citygml/building/2.0"
+ xmlns:app="http://www.opengis.net/citygml/appearance/2.0"
+ xmlns:gml="http://www.opengis.net/gml">
+<gml:boundedBy><gml:Envelope srsName="EPSG:25832" srsDimension="3">
+ <gml:lowerCorner>690000 5336000 0</gml:lowerCorner>
+ <gml:upperCorner>690010 5336010 6</gml:upperCorner></gml:Envelope></gml:boundedBy>
+<core:cityObjectMember><bldg:Building gml:id="B1">{local}
+{surfaces}
+</bldg:Building></core:cityObjectMember>
+{appearance}
+</core:CityModel>
+"""
+BOX = {
+    "roof": "0 0 6 10 0 6 10 10 6 0 10 6 0 0 6",
+    "south": "0 0 0 10 0 0 10 0 6 0 0 6 0 0 0",
+    "east": "10 0 0 10 10 0 10 10 6 10 0 6 10 0 0",
+    "north": "10 10 0 0 10 0 0 10 6 10 10 6 10 10 0",
+    "west": "0 10 0 0 0 0 0 0 6 0 10 6 0 10 0",
+}
+"""A 10 m box, 6 m high, in local metres (moved to 690000 5336000 when written)."""
+ROOF_UV = "0 0 1 0 1 1 0 1 0 0"
+
+
+def _moved(text: str) -> str:
+    values = np.array(text.split(), dtype=float).reshape(-1, 3) + np.array([690000, 5336000, 0])
+    return " ".join(f"{v:.3f}" for v in values.ravel())
+
+
+def _surface(name: str) -> str:
+    kind = "RoofSurface" if name == "roof" else "WallSurface"
+    return (
+        f"<bldg:boundedBy><bldg:{kind} gml:id='S_{name}'><bldg:lod2MultiSurface><gml:MultiSurface>"
+        f"<gml:surfaceMember><gml:Polygon gml:id='P_{name}'><gml:exterior>"
+        f"<gml:LinearRing gml:id='L_{name}'><gml:posList>{_moved(BOX[name])}</gml:posList>"
+        "</gml:LinearRing></gml:exterior></gml:Polygon></gml:surfaceMember></gml:MultiSurface>"
+        f"</bldg:lod2MultiSurface></bldg:{kind}></bldg:boundedBy>"
+    )
+
+
+def texture(uri: str, target: str = "roof", coordinates: str = ROOF_UV, theme: str = "rgb") -> str:
+    """An ``Appearance`` of ``theme`` texturing polygon ``target`` with the image ``uri``."""
+    return (
+        f"<app:Appearance><app:theme>{theme}</app:theme><app:surfaceDataMember>"
+        f"<app:ParameterizedTexture><app:imageURI>{uri}</app:imageURI>"
+        f"<app:target uri='#P_{target}'><app:TexCoordList>"
+        f"<app:textureCoordinates ring='#L_{target}'>{coordinates}</app:textureCoordinates>"
+        "</app:TexCoordList></app:target></app:ParameterizedTexture></app:surfaceDataMember>"
+        "</app:Appearance>"
+    )
+
+
+def material(rgb: str, target: str = "north", theme: str = "rgb") -> str:
+    return (
+        f"<app:Appearance><app:theme>{theme}</app:theme><app:surfaceDataMember><app:X3DMaterial>"
+        f"<app:diffuseColor>{rgb}</app:diffuseColor><app:target>#P_{target}</app:target>"
+        "</app:X3DMaterial></app:surfaceDataMember></app:Appearance>"
+    )
+
+
+def quadrants(size: int = 64) -> Image.Image:
+    """A square image whose quadrants have the :data:`QUADRANTS` colours."""
+    pixels = np.zeros((size, size, 3), dtype=np.uint8)
+    half = size // 2
+    pixels[:half, :half] = QUADRANTS["top_left"]
+    pixels[:half, half:] = QUADRANTS["top_right"]
+    pixels[half:, :half] = QUADRANTS["bottom_left"]
+    pixels[half:, half:] = QUADRANTS["bottom_right"]
+    return Image.fromarray(pixels)
+
+
+def city(
+    folder: Path, *appearances: str, local: str = "", image: str | None = "tex/roof.png"
+) -> Path:
+    """A one-building CityGML 2.0 file in ``folder`` with ``appearances`` at its root (and
+    ``local`` ones in the building), the quadrant image written at ``image``."""
+    if image is not None:
+        (folder / image).parent.mkdir(parents=True, exist_ok=True)
+        quadrants().save(folder / image)
+    members = "".join(f"<app:appearanceMember>{a}</app:appearanceMember>" for a in appearances)
+    text = MODEL.format(
+        local="".join(f"<app:appearance>{a}</app:appearance>" for a in local.split("|") if a),
+        surfaces="\n".join(_surface(name) for name in BOX),
+        appearance=members,
+    )
+    path = folder / "city.gml"
+    path.write_text(text)
+    return path
+
+
+def finest(path: Path, **options: object) -> Mesh:
+    """The finest mesh of the only object of ``path``."""
+    [node] = list(read_scene(path, **options).nodes)
+    assert node.geometry is not None
+    return node.geometry
+
+
+def textured(mesh: Mesh) -> list[Surface]:
+    return [part for part in mesh.parts if part.texture is not None]
+
+
+def roof_colour_at(mesh: Mesh, x: float, y: float) -> np.ndarray:
+    """The colour of the roof of ``mesh`` above local point (x, y)."""
+    [roof] = [part for part in mesh.parts if np.allclose(part.vertices[:, 2], 6.0)]
+    point = np.array([[x + 690000, y + 5336000, 6.0]])
+    faces = np.arange(len(roof.faces))
+    inside = [f for f in faces if _inside(roof.vertices[roof.faces[f]], point[0])]
+    return roof.colors_at(np.array(inside[:1]), point)[0, :3]
+
+
+def _inside(triangle: np.ndarray, point: np.ndarray) -> bool:
+    a, b, c = triangle[:, :2] - point[:2]
+    cross = [p[0] * q[1] - p[1] * q[0] for p, q in ((a, b), (b, c), (c, a))]
+    return all(v >= 0 for v in cross) or all(v <= 0 for v in cross)
+
+
+def warnings_of(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith("lodconvert: warning")]
+
+
+def warned(source: Path, out: Path, *flags: str) -> list[str]:
+    """The warnings of converting ``source`` into ``out``, which succeeds."""
+    result = run(source, "-o", out, *flags)
+    assert result.returncode == 0, result.stderr
+    return warnings_of(result.stderr)
+
+
+# --- CityGML ------------------------------------------------------------------------------
+
+
+def test_a_parameterized_texture_is_read_with_its_orientation(tmp_path: Path) -> None:
+    """Texture coordinates (0, 0) are the image's bottom left: the roof's south-west corner
+    shows the bottom-left quadrant, its north-east corner the top-right one."""
+    mesh = finest(city(tmp_path, texture("tex/roof.png")))
+    [roof] = textured(mesh)
+    assert roof.uv is not None and roof.texture is not None
+    assert np.array_equal(roof_colour_at(mesh, 1, 1), QUADRANTS["bottom_left"])
+    assert np.array_equal(roof_colour_at(mesh, 9, 9), QUADRANTS["top_right"])
+    assert np.array_equal(roof_colour_at(mesh, 9, 1), QUADRANTS["bottom_right"])
+    walls = [part for part in mesh.parts if part.texture is None]
+    assert walls and all(np.array_equal(w.base_color, DEFAULT_CLASS_COLORS["wall"]) for w in walls)
+
+
+def test_a_texture_is_cut_to_what_its_coordinates_cover(tmp_path: Path) -> None:
+    """A roof using the image's top-right quadrant carries that quadrant (and a few texels
+    around it), not the whole image, and still shows its colour."""
+    mesh = finest(
+        city(tmp_path, texture("tex/roof.png", coordinates="0.5 0.5 1 0.5 1 1 0.5 1 0.5 0.5"))
+    )
+    [roof] = textured(mesh)
+    assert roof.texture is not None and roof.texture.shape[0] <= 32 + 2 * 4
+    assert np.array_equal(roof_colour_at(mesh, 5, 5), QUADRANTS["top_right"])
+
+
+def test_local_appearances_texture_coordinate_generation_and_materials(tmp_path: Path) -> None:
+    """An appearance inside the building counts as one at the root; TexCoordGen's
+    world-to-texture matrix gives the coordinates; an X3DMaterial colours its target."""
+    x0, y0 = 690000, 5336000  # s = (x - x0) / 10, t = (y - y0) / 10
+    matrix = f"0.1 0 0 {-x0 / 10} 0 0.1 0 {-y0 / 10} 0 0 0 1"
+    generated = (
+        "<app:Appearance><app:theme>rgb</app:theme><app:surfaceDataMember>"
+        "<app:ParameterizedTexture><app:imageURI>tex/roof.png</app:imageURI>"
+        "<app:target uri='#P_roof'><app:TexCoordGen><app:worldToTexture>"
+        f"{matrix}</app:worldToTexture></app:TexCoordGen></app:target>"
+        "</app:ParameterizedTexture></app:surfaceDataMember></app:Appearance>"
+    )
+    mesh = finest(city(tmp_path, material("0 0.5 1"), local=generated))
+    assert np.array_equal(roof_colour_at(mesh, 1, 1), QUADRANTS["bottom_left"])
+    assert np.array_equal(roof_colour_at(mesh, 9, 9), QUADRANTS["top_right"])
+    colours = {bytes(p.base_color[:3]) for p in mesh.parts if p.texture is None}
+    assert bytes([0, 128, 255]) in colours
+
+
+def test_a_georeferenced_texture_lies_where_its_reference_point_and_orientation_say(
+    tmp_path: Path,
+) -> None:
+    """64 texels over the roof's 10 m, the reference point at the centre of the top-left
+    texel (the roof's north-west corner, half a texel in), rows going south."""
+    texel = 10 / 64
+    georeferenced = (
+        "<app:Appearance><app:theme>rgb</app:theme><app:surfaceDataMember>"
+        "<app:GeoreferencedTexture><app:imageURI>tex/roof.png</app:imageURI>"
+        "<app:referencePoint><gml:Point><gml:pos>"
+        f"{690000 + texel / 2} {5336010 - texel / 2}</gml:pos></gml:Point></app:referencePoint>"
+        f"<app:orientation>{texel} 0 0 {-texel}</app:orientation>"
+        "<app:target>#P_roof</app:target></app:GeoreferencedTexture></app:surfaceDataMember>"
+        "</app:Appearance>"
+    )
+    mesh = finest(city(tmp_path, georeferenced))
+    assert len(textured(mesh)) == 1
+    for (x, y), quadrant in {
+        (1, 1): "bottom_left",
+        (9, 9): "top_right",
+        (1, 9): "top_left",
+    }.items():
+        assert np.array_equal(roof_colour_at(mesh, x, y), QUADRANTS[quadrant])
+
+
+def test_the_theme_asked_for_is_read_and_a_missing_one_is_warned_of(tmp_path: Path) -> None:
+    source = city(
+        tmp_path, texture("tex/roof.png", theme="summer"), material("1 0 0", "roof", "winter")
+    )
+    assert textured(finest(source))  # the first theme met: summer
+    winter = finest(source, appearance_theme="winter")
+    assert not textured(winter)
+    assert any(np.array_equal(p.base_color[:3], [255, 0, 0]) for p in winter.parts)
+    said = warned(source, tmp_path / "out.x3d", "--appearance-theme", "autumn")
+    assert any("has no appearance theme 'autumn' (it has 'summer', 'winter')" in w for w in said)
+
+
+@pytest.mark.parametrize(
+    ("uri", "problem"),
+    [
+        ("tex/missing.png", "is not found in the input's folder"),
+        ("../outside.png", "lies outside the input's folder"),
+        ("/etc/passwd", "lies outside the input's folder"),
+        ("http://example.com/roof.png", "a URI is not read over a network"),
+        ("file:///etc/passwd", "a URI is not read over a network"),
+        ("tex/link.png", "is not found in the input's folder (or is a link"),
+        ("tex/garbage.png", "is not an image lodconvert can decode"),
+        ("tex/huge.png", "over the limit of 4,096 (raise it with --limit image_pixels=N)"),
+    ],
+)
+def test_an_image_that_cannot_be_used_is_warned_of_and_the_roof_keeps_its_colour(
+    tmp_path: Path, uri: str, problem: str
+) -> None:
+    (tmp_path / "outside.png").write_bytes(b"")
+    source = city(tmp_path, texture(uri))
+    os.symlink(tmp_path / "tex" / "roof.png", tmp_path / "tex" / "link.png")
+    (tmp_path / "tex" / "garbage.png").write_bytes(b"\x89PNG not really")
+    Image.new("RGB", (65, 65)).save(tmp_path / "tex" / "huge.png")
+    out = tmp_path / "out.glb"
+    result = run(source, "-o", out, "--limit", "image_pixels=4096", "--report", tmp_path / "r.json")
+    assert result.returncode == 0, result.stderr
+    [warning] = [w for w in warnings_of(result.stderr) if "texture image" in w]
+    assert f"B1: texture image {uri!r} " in warning and problem in warning
+    assert "its surfaces take their material or class colour" in warning
+    assert str(source) in warning
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["appearance"]["unusable_images"] == [uri]
+    mesh = finest(source, limits=_limits(image_pixels=4096))
+    assert not textured(mesh)
+    assert np.array_equal(roof_colour_at(mesh, 5, 5), ROOF[:3])
+
+
+def _limits(**values: int) -> object:
+    from lodconvert.limits import Limits
+
+    return Limits(**values)
+
+
+def test_an_image_over_the_byte_limit_is_not_read(tmp_path: Path) -> None:
+    source = city(tmp_path, texture("tex/roof.png"))
+    said = warned(source, tmp_path / "out.x3d", "--limit", "image_bytes=100")
+    assert any("larger than the limit of 100 bytes (raise it with --limit image_bytes=N)" in w
+               for w in said)  # fmt: skip
+
+
+def test_a_decompression_bomb_is_refused_from_its_header(tmp_path: Path) -> None:
+    """A 1 KB PNG that claims 20,000² pixels is refused before a pixel is decoded."""
+    source = city(tmp_path, texture("tex/roof.png"))
+    bomb = io.BytesIO()
+    Image.new("1", (20_000, 20_000)).save(bomb, format="PNG", optimize=True)
+    assert len(bomb.getvalue()) < 100_000
+    (tmp_path / "tex" / "roof.png").write_bytes(bomb.getvalue())
+    said = warned(source, tmp_path / "out.x3d")
+    assert any("has 20,000 × 20,000 pixels, over the limit of 67,108,864" in w for w in said)
+
+
+@pytest.mark.parametrize(
+    ("coordinates", "problem"),
+    [
+        ("0 0 1 0 1 1 0 1", "do not match their rings' points"),
+        ("0 0 1 0 NaN 1 0 1 0 0", "not finite numbers"),
+        ("0.5 0.5 0.5 0.5 0.5 0.5 0.5 0.5 0.5 0.5", "cover no area (a 0×0 footprint)"),
+        ("0 0 0.5 0.5 1 1 0.5 0.5 0 0", "cover no area (a 0×0 footprint)"),
+        ("0 0 1 0 1 1 0 1 0", "not pairs of numbers"),
+    ],
+)
+def test_texture_coordinates_that_cannot_be_used_are_warned_of(
+    tmp_path: Path, coordinates: str, problem: str
+) -> None:
+    source = city(tmp_path, texture("tex/roof.png", coordinates=coordinates))
+    assert any(problem in w for w in warned(source, tmp_path / "out.glb"))
+    assert not textured(finest(source))
+
+
+def test_a_zipped_city_reads_its_images_from_the_zip_and_never_outside_it(tmp_path: Path) -> None:
+    source = city(tmp_path, texture("tex/roof.png"), texture("../roof.png", "south"))
+    archive = tmp_path / "city.zip"
+    with zipfile.ZipFile(archive, "w") as z:
+        z.write(source, "data/city.gml")
+        z.write(tmp_path / "tex" / "roof.png", "data/tex/roof.png")
+        z.write(tmp_path / "tex" / "roof.png", "roof.png")  # beside data/, outside its folder
+    mesh = finest(archive)
+    assert len(textured(mesh)) == 1
+    assert np.array_equal(roof_colour_at(mesh, 9, 9), QUADRANTS["top_right"])
+    result = run(archive, "-o", tmp_path / "out.x3d")
+    assert any("'../roof.png' lies outside the input's folder" in w
+               for w in warnings_of(result.stderr))  # fmt: skip
+
+
+def test_the_plateau_building_keeps_its_texture_in_x3d_and_glb(
+    tmp_path: Path, schema: etree.XMLSchema, gltf_validator: object
+) -> None:
+    """The real textured PLATEAU building (CityGML 2.0 and 3.0): its LoD2 is written with its
+    texture, roofs and walls one surface on one cut of the atlas; the outputs validate."""
+    for version in ("v2", "v3"):
+        source = PLATEAU / f"plateau_53394517_bldg_lod012_{version}.gml"
+        if not source.exists():
+            pytest.skip(f"{source} is absent")
+        mesh = finest(source)
+        images = textured(mesh)
+        [surface] = images  # roofs and walls: one image, one cut of it
+        atlas = Image.open(PLATEAU / "53394517_bldg_6697_appearance/stad0158.jpg")
+        assert surface.texture is not None
+        assert surface.texture.shape[:2] <= atlas.size[::-1]
+        glb, x3d = tmp_path / f"{version}.glb", tmp_path / f"{version}.x3d"
+        for out in (glb, x3d):
+            result = run(source, "-o", out, "--report", tmp_path / f"{version}.json")
+            assert result.returncode == 0, result.stderr
+        assert schema.validate(etree.parse(str(x3d))), schema.error_log
+        assert x3d.read_text().count("<ImageTexture") == 1
+        _assert_valid(gltf_validator(glb))  # type: ignore[operator]
+        back = read_scene(glb)
+        assert sum(len(textured(n.geometry)) for n in back.nodes if n.geometry is not None) == 1
+        report = json.loads((tmp_path / f"{version}.json").read_text())
+        assert report["appearance"] == {
+            "theme": "rgbTexture",
+            "themes": ["rgbTexture"],
+            "images": ["53394517_bldg_6697_appearance/stad0158.jpg"],
+            "unusable_images": [],
+        }
+
+
+def test_the_prism_takes_its_roof_colour_from_the_texture(tmp_path: Path) -> None:
+    """A roof textured in one colour gives the LOD1 prism's roof that colour."""
+    source = city(tmp_path, texture("tex/roof.png", coordinates="0 0 0.4 0 0.4 0.4 0 0.4 0 0"))
+    from lodconvert.city.prisms import prism_colors
+
+    roof, _ = prism_colors(finest(source))
+    assert np.abs(roof[:3].astype(int) - QUADRANTS["bottom_left"]).max() <= 2
+
+
+def test_a_textured_city_converts_alike_on_any_number_of_workers(tmp_path: Path) -> None:
+    source = city(tmp_path, texture("tex/roof.png"), material("0 0.5 1"))
+    outputs = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}.glb"
+        assert run(source, "-o", out, "--workers", workers).returncode == 0
+        outputs.append(out.read_bytes())
+    assert outputs[0] == outputs[1]
+
+
+# --- CityJSON ------------------------------------------------------------------------------
+
+
+def test_rotterdam_keeps_its_one_shipped_texture_and_warns_of_the_73_missing(
+    tmp_path: Path, gltf_validator: object
+) -> None:
+    """The real Rotterdam subset ships one of its 74 images: the building that uses it is
+    textured, every missing image is warned of once with the first object using it."""
+    if not ROTTERDAM.exists():
+        pytest.skip(f"{ROTTERDAM} is absent")
+    out = tmp_path / "r.glb"
+    result = run(ROTTERDAM, "-o", out, "--report", tmp_path / "r.json")
+    assert result.returncode == 0, result.stderr
+    missing = [w for w in warnings_of(result.stderr) if "is not found in the input's folder" in w]
+    assert len(missing) == 73
+    assert all(str(ROTTERDAM) in w and "texture image 'appearances/0320_" in w for w in missing)
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["appearance"]["images"] == ["appearances/0320_4_15.jpg"]
+    assert len(report["appearance"]["unusable_images"]) == 73
+    nodes = [n for n in read_scene(ROTTERDAM).nodes if n.geometry is not None]
+    assert sum(bool(textured(n.geometry)) for n in nodes) == 1
+    _assert_valid(gltf_validator(out))  # type: ignore[operator]
+
+
+def _cityjson(folder: Path, value: list, vertices_texture: list) -> Path:
+    """A one-building CityJSON 2.0 file whose roof has the texture ``value``."""
+    quadrants().save(folder / "roof.png")
+    box = [
+        [0, 0, 0],
+        [10, 0, 0],
+        [10, 10, 0],
+        [0, 10, 0],
+        [0, 0, 6],
+        [10, 0, 6],
+        [10, 10, 6],
+        [0, 10, 6],
+    ]
+    surfaces = [[[4, 5, 6, 7]], [[0, 1, 5, 4]], [[1, 2, 6, 5]], [[2, 3, 7, 6]], [[3, 0, 4, 7]]]
+    document = {
+        "type": "CityJSON",
+        "version": "2.0",
+        "transform": {"scale": [1, 1, 1], "translate": [85000, 447000, 0]},
+        "metadata": {"referenceSystem": "https://www.opengis.net/def/crs/EPSG/0/7415"},
+        "CityObjects": {
+            "B1": {
+                "type": "Building",
+                "geometry": [
+                    {
+                        "type": "MultiSurface",
+                        "lod": "2",
+                        "boundaries": surfaces,
+                        "semantics": {
+                            "surfaces": [{"type": "RoofSurface"}, {"type": "WallSurface"}],
+                            "values": [0, 1, 1, 1, 1],
+                        },
+                        "texture": {
+                            "rgb": {"values": [value, [[None]], [[None]], [[None]], [[None]]]}
+                        },
+                    }
+                ],
+            }
+        },
+        "vertices": box,
+        "appearance": {
+            "textures": [{"type": "PNG", "image": "roof.png"}],
+            "vertices-texture": vertices_texture,
+        },
+    }
+    path = folder / "city.json"
+    path.write_text(json.dumps(document))
+    return path
+
+
+UV = [[0, 0], [1, 0], [1, 1], [0, 1]]
+
+
+def test_a_cityjson_texture_is_read_with_its_orientation(tmp_path: Path) -> None:
+    mesh = finest(_cityjson(tmp_path, [[0, 0, 1, 2, 3]], UV))
+    [roof] = textured(mesh)
+    centre = roof.vertices.mean(axis=0)
+    inset = np.array([1.0, 1.0, 0.0])
+    corner = roof.vertices.min(axis=0) + inset
+    corner[2] = centre[2]
+    far = roof.vertices.max(axis=0) - inset
+    for point, colour in ((corner, "bottom_left"), (far, "top_right")):
+        face = next(
+            f for f in range(len(roof.faces)) if _inside(roof.vertices[roof.faces[f]], point)
+        )
+        assert np.array_equal(
+            roof.colors_at(np.array([face]), point[None])[0, :3], QUADRANTS[colour]
+        )
+
+
+@pytest.mark.parametrize(
+    ("value", "problem"),
+    [
+        ([[5, 0, 1, 2, 3]], "name texture 5, which does not exist"),
+        ([[0, 0, 1, 2, 9]], "refer to texture vertices that do not exist"),
+        ([[0, 0, 1, 2]], "have texture values that do not match their rings"),
+        ([[0, 0, 0, 0, 0]], "cover no area (a 0×0 footprint)"),
+        ([[True, 0, 1, 2, 3]], "a texture index that is not a whole number"),
+    ],
+)
+def test_cityjson_texture_values_that_cannot_be_used_are_warned_of(
+    tmp_path: Path, value: list, problem: str
+) -> None:
+    source = _cityjson(tmp_path, value, UV)
+    [warning] = [w for w in warned(source, tmp_path / "out.x3d") if problem in w]
+    assert f"{source}: B1: 1 surface(s)" in warning
+    assert not textured(finest(source))
+
+
+# --- 3D Tiles: atlases ----------------------------------------------------------------------
+
+
+def test_images_pack_into_bounded_pages_and_map_their_coordinates() -> None:
+    """Every image lands whole in a page of at most the atlas size (a larger one halved), no
+    two overlap, and each image's corners map onto its own texels."""
+    rng = np.random.default_rng(7)
+    sizes = [(40, 70), (100, 30), (64, 64), (10, 200), (300, 20), (90, 90), (700, 100)]
+    images = [rng.integers(0, 255, (h, w, 4), dtype=np.uint8) for h, w in sizes]
+    for image in images:
+        image[..., 3] = 255
+    atlas = packed(images, 256)
+    assert len(atlas.pages) >= 2 and all(max(p.shape[:2]) <= 256 for p in atlas.pages)
+    again = packed(images, 256)
+    assert all(np.array_equal(a, b) for a, b in zip(atlas.pages, again.pages, strict=True))
+    for k, image in enumerate(images):
+        page = atlas.pages[atlas.page_of[k]]
+        h, w = page.shape[:2]
+        fitted = image if max(image.shape[:2]) <= 256 - 2 * PADDING else None
+        centre = np.array([[0.5, 0.5]])
+        for corner in ((0.01, 0.01), (0.99, 0.99), (0.01, 0.99)):
+            u, v = atlas.coordinates(k, np.array([corner]))[0]
+            x, y = int(u * w), int((1 - v) * h)
+            if fitted is not None:
+                row = int((1 - corner[1]) * image.shape[0])
+                col = int(corner[0] * image.shape[1])
+                assert np.array_equal(page[y, x], image[row, col])
+        assert 0 < atlas.coordinates(k, centre)[0].min() < 1
+    big = atlas.pages[atlas.page_of[6]]  # 700 × 100, halved to 350 × 50, then to 175 × 25
+    assert max(big.shape[:2]) <= 256
+
+
+def test_a_tileset_packs_textures_into_atlases_and_passes_the_official_validator(
+    tmp_path: Path,
+) -> None:
+    """The PLATEAU building to 3D Tiles: its finest tile draws its textured surfaces with the
+    texture in an atlas page (at most ``--atlas-size`` a side), its feature ids and metadata
+    as before; the coarser tiles carry the texture's colours in their vertices."""
+    source = PLATEAU / "plateau_53394517_bldg_lod012_v2.gml"
+    if not source.exists():
+        pytest.skip(f"{source} is absent")
+    for size in (4096, 256):
+        out = tmp_path / str(size) / "tileset.json"
+        result = run(source, "-o", out, "--atlas-size", str(size), "-q")
+        assert result.returncode == 0, result.stderr
+        [finest] = (out.parent / "tiles").glob("*_finest.glb")
+        document, blob = glb_parts(finest.read_bytes())
+        textured = [
+            p for p in document["meshes"][0]["primitives"] if "TEXCOORD_0" in p["attributes"]
+        ]
+        assert len(textured) == 1 and "_FEATURE_ID_0" in textured[0]["attributes"]
+        [image] = document["images"]
+        view = document["bufferViews"][image["bufferView"]]
+        data = blob[view["byteOffset"] : view["byteOffset"] + view["byteLength"]]
+        page = Image.open(io.BytesIO(data))
+        assert max(page.size) <= size and image["mimeType"] == "image/jpeg"
+        assert document["materials"][textured[0]["material"]]["alphaMode"] == "OPAQUE"
+    report = official(out, tmp_path / "report.json")
+    assert report["numErrors"] == 0 and report["numWarnings"] == 0, report["issues"]
+
+
+def test_a_textured_roof_shows_its_texture_in_the_tile_and_its_colour_far_away(
+    tmp_path: Path,
+) -> None:
+    """The roof's texels reach the atlas at its coordinates (within JPEG's error); the prism
+    of the coarser tile takes the texture's mean colour, not the material's white."""
+    source = city(tmp_path, texture("tex/roof.png", coordinates="0 0 0.4 0 0.4 0.4 0 0.4 0 0"))
+    out = tmp_path / "out" / "tileset.json"
+    result = run(source, "-o", out, "--workers", "1", "-q")
+    assert result.returncode == 0, result.stderr
+    [finest] = (out.parent / "tiles").glob("*_finest.glb")
+    document, blob = glb_parts(finest.read_bytes())
+    [image] = document["images"]
+    view = document["bufferViews"][image["bufferView"]]
+    page = np.asarray(Image.open(io.BytesIO(blob[view["byteOffset"] :][: view["byteLength"]])))
+    [primitive] = [
+        p for p in document["meshes"][0]["primitives"] if "TEXCOORD_0" in p["attributes"]
+    ]
+    accessor = document["accessors"][primitive["attributes"]["TEXCOORD_0"]]
+    at = document["bufferViews"][accessor["bufferView"]]["byteOffset"]
+    uv = np.frombuffer(blob, np.float32, accessor["count"] * 2, at).reshape(-1, 2)
+    indices = document["accessors"][primitive["indices"]]
+    index_at = document["bufferViews"][indices["bufferView"]]["byteOffset"]
+    dtype = np.uint16 if indices["componentType"] == 5123 else np.uint32
+    used = np.frombuffer(blob, dtype, indices["count"], index_at)
+    centre = uv[used].mean(axis=0)  # glTF: origin at the top left
+    texel = page[int(centre[1] * page.shape[0]), int(centre[0] * page.shape[1]), :3]
+    assert np.abs(texel.astype(int) - QUADRANTS["bottom_left"]).max() <= 12
+    colours = []
+    for tile in (out.parent / "tiles").glob("*.glb"):
+        if "finest" not in tile.name:
+            for node in read_scene(tile).nodes:
+                colours += [
+                    n.geometry.baked_colors() for n in node.walk() if n.geometry is not None
+                ]
+    found = np.concatenate(colours)[:, :3].astype(int)
+    assert (np.abs(found - QUADRANTS["bottom_left"]).max(axis=1) <= 3).any()
+    assert not (found == 255).all(axis=1).any()
