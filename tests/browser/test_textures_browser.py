@@ -1,0 +1,94 @@
+"""A textured city in real browsers: the PLATEAU building's texture, read from its CityGML
+appearance, is decoded and drawn by three.js and Babylon.js from the ``.glb``, and by CesiumJS
+from the tileset's atlas page, which shows the texture's colours, not the class colours.
+docs/textures.md; the screenshot in docs/textures_cesium.png comes from this test."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from lodconvert.semantics import DEFAULT_CLASS_COLORS
+from lodconvert.viewer import write_page
+
+from ..conftest import ROOT, SHARED, require
+from ..test_cli import run
+from .conftest import REQUIRE, Drive, Driver, console_text
+from .test_tiles_cesium import CESIUM, _page
+
+pytestmark = [pytest.mark.browser, pytest.mark.slow]
+
+PLATEAU = SHARED / "data" / "citygml" / "plateau_53394517_bldg_lod012_v2.gml"
+ATLAS = SHARED / "data" / "citygml" / "53394517_bldg_6697_appearance" / "stad0158.jpg"
+MIN_VISIBLE = 0.02
+"""Least share of the view the building covers."""
+
+
+@pytest.fixture(scope="module")
+def plateau(site: Path) -> dict[str, Path]:
+    """The PLATEAU building as a ``.glb`` and as a tileset (with its CesiumJS page)."""
+    require(PLATEAU.exists(), f"{PLATEAU} is absent (shared data not checked out)")
+    glb = site / "plateau.glb"
+    tileset = site / "plateau_tiles" / "tileset.json"
+    for out in (glb, tileset):
+        result = run(PLATEAU, "-o", out, "-q")
+        assert result.returncode == 0, result.stderr
+    write_page(tileset, library=CESIUM)
+    return {"glb": glb, "tiles": tileset}
+
+
+def test_three_decodes_the_buildings_texture(plateau: dict[str, Path], drive: Drive) -> None:
+    """three.js's loader gives the LoD2 level's mesh its decoded image and coordinates (the
+    test page has no light, so its lit material is not judged by its pixels)."""
+    out = drive("three", file=plateau["glb"].name, node=1)  # the LoD2 level
+    result = out["result"]
+    message = f"{result}\n{console_text(out)}"
+    assert result["textures"], message
+    assert all(t["width"] > 0 and t["height"] > 0 and t["uv"] for t in result["textures"]), message
+
+
+def test_babylon_draws_the_buildings_texture(plateau: dict[str, Path], drive: Drive) -> None:
+    out = drive("babylon", file=plateau["glb"].name)
+    result = out["result"]
+    message = f"{result}\n{console_text(out)}"
+    textured = [m for m in result["meshes"] if m["texture"] and m["texture"]["width"] > 0]
+    assert textured, message
+    assert result["foreground"] >= MIN_VISIBLE, message
+
+
+def test_cesium_shows_the_texture_from_the_atlas(
+    plateau: dict[str, Path],
+    driver: Driver,
+    site: Path,
+    tmp_path: Path,
+    measure: Callable[[str, str], None],
+) -> None:
+    """From 300 m at 50° above, the building shows the atlas's colours: its pixels' median
+    is near the texture's and far from the roof and wall class colours, and they vary as a
+    photograph does (a flat class colour, even lit, varies far less)."""
+    package = ROOT / "node_modules" / "cesium" / "package.json"
+    require(package.exists(), f"{package} is absent (scripts/test.sh installs it)", REQUIRE)
+    look = driver("tiles.mjs")
+    shot = tmp_path / "plateau.png"
+    camera = {"name": "plateau", "range": 300.0, "pitch": -50, "shot": str(shot)}
+    out = look("cameras", page=_page(site, plateau["tiles"]), cameras=[camera])
+    [seen] = out["result"]["cameras"]
+    message = f"{seen}\n{console_text(out)}"
+    assert seen["failed"] == [] and seen["tilesSelected"] > 0, message
+    assert any("_finest" in t["uri"] for t in seen["tiles"]), message
+    view = np.asarray(Image.open(shot).convert("RGB")).astype(float)
+    pixels = view[130:-50].reshape(-1, 3)  # below the page's panel, above CesiumJS's logo
+    background = np.median(pixels, axis=0)  # the bare globe, around the building
+    building = pixels[np.abs(pixels - background).max(axis=1) > 24]
+    assert len(building) >= MIN_VISIBLE * len(pixels), message
+    texture = np.asarray(Image.open(ATLAS).convert("RGB")).reshape(-1, 3).astype(float)
+    seen_median, texture_median = np.median(building, axis=0), np.median(texture, axis=0)
+    measure("CesiumJS PLATEAU textured, median colour", f"{seen_median.astype(int).tolist()}")
+    assert np.abs(seen_median - texture_median).max() <= 60, (seen_median, texture_median)
+    for kind in ("roof", "wall"):
+        assert np.abs(seen_median - DEFAULT_CLASS_COLORS[kind][:3]).max() > 40, seen_median
+    assert building.std(axis=0).mean() > 12, building.std(axis=0)
