@@ -600,3 +600,28 @@ def test_a_textured_roof_shows_its_texture_in_the_tile_and_its_colour_far_away(
     found = np.concatenate(colours)[:, :3].astype(int)
     assert (np.abs(found - QUADRANTS["bottom_left"]).max(axis=1) <= 3).any()
     assert not (found == 255).all(axis=1).any()
+
+
+def test_a_cityjsonseq_feature_wears_its_own_textures(tmp_path: Path) -> None:
+    """A CityJSONSeq feature's own ``appearance`` (its textures and texture vertices) is read
+    against the image beside the file, in one process and on two workers alike."""
+    document = json.loads(_cityjson(tmp_path, [[0, 0, 1, 2, 3]], UV).read_text())
+    header = {k: document[k] for k in ("type", "version", "transform", "metadata")}
+    header |= {"CityObjects": {}, "vertices": []}
+    feature = {
+        "type": "CityJSONFeature",
+        "id": "B1",
+        "CityObjects": document["CityObjects"],
+        "vertices": document["vertices"],
+        "appearance": document["appearance"],
+    }
+    source = tmp_path / "city.jsonl"
+    source.write_text(json.dumps(header) + "\n" + json.dumps(feature) + "\n")
+    [roof] = textured(finest(source))
+    assert roof.texture is not None
+    outputs = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}.glb"
+        assert not warned(source, out, "--workers", workers)
+        outputs.append(out.read_bytes())
+    assert outputs[0] == outputs[1]
