@@ -93,3 +93,40 @@ def delta_e(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """CIE76 colour difference of sRGB bytes ``a`` and ``b`` (..., 3 or 4): the Euclidean
     distance of their :func:`lab` values."""
     return np.linalg.norm(lab(a) - lab(b), axis=-1)
+
+
+def delta_e_2000(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """CIEDE2000 colour difference of sRGB bytes ``a`` and ``b`` (..., 3 or 4)."""
+    return ciede2000(lab(a), lab(b))
+
+
+def ciede2000(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """CIEDE2000 colour difference of CIE L*a*b* colours (..., 3), with kL = kC = kH = 1
+    (Sharma, Wu and Dalal's formulation)."""
+    (l1, a1, b1), (l2, a2, b2) = np.moveaxis(first, -1, 0), np.moveaxis(second, -1, 0)
+    mean_c = (np.hypot(a1, b1) + np.hypot(a2, b2)) / 2
+    g = 0.5 * (1 - np.sqrt(mean_c**7 / (mean_c**7 + 25.0**7)))
+    a1, a2 = a1 * (1 + g), a2 * (1 + g)
+    c1, c2 = np.hypot(a1, b1), np.hypot(a2, b2)
+    h1 = np.degrees(np.arctan2(b1, a1)) % 360
+    h2 = np.degrees(np.arctan2(b2, a2)) % 360
+    dl, dc = l2 - l1, c2 - c1
+    dh = h2 - h1
+    dh = np.where(dh > 180, dh - 360, np.where(dh < -180, dh + 360, dh))
+    dh = np.where(c1 * c2 == 0, 0.0, dh)
+    dhh = 2 * np.sqrt(c1 * c2) * np.sin(np.radians(dh / 2))
+    ml, mc = (l1 + l2) / 2, (c1 + c2) / 2
+    mh = (h1 + h2) / 2
+    mh = np.where(np.abs(h1 - h2) > 180, np.where(h1 + h2 < 360, mh + 180, mh - 180), mh)
+    mh = np.where(c1 * c2 == 0, h1 + h2, mh)
+    rad = np.radians(mh)
+    t = 1 - 0.17 * np.cos(rad - np.radians(30)) + 0.24 * np.cos(2 * rad)
+    t += 0.32 * np.cos(3 * rad + np.radians(6)) - 0.20 * np.cos(4 * rad - np.radians(63))
+    sl = 1 + 0.015 * (ml - 50) ** 2 / np.sqrt(20 + (ml - 50) ** 2)
+    sc, sh = 1 + 0.045 * mc, 1 + 0.015 * mc * t
+    rt = (
+        -2
+        * np.sqrt(mc**7 / (mc**7 + 25.0**7))
+        * np.sin(np.radians(60 * np.exp(-(((mh - 275) / 25) ** 2))))
+    )
+    return np.sqrt((dl / sl) ** 2 + (dc / sc) ** 2 + (dhh / sh) ** 2 + rt * (dc / sc) * (dhh / sh))

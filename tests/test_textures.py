@@ -17,6 +17,7 @@ import pytest
 from lxml import etree
 from PIL import Image
 
+from lodconvert.colors import ciede2000
 from lodconvert.io import read_scene
 from lodconvert.io.tiles.check import glb_parts
 from lodconvert.model import Mesh, Surface
@@ -625,3 +626,38 @@ def test_a_cityjsonseq_feature_wears_its_own_textures(tmp_path: Path) -> None:
         assert not warned(source, out, "--workers", workers)
         outputs.append(out.read_bytes())
     assert outputs[0] == outputs[1]
+
+
+@pytest.mark.parametrize(
+    ("first", "second", "expected"),
+    [  # Sharma, Wu and Dalal's test data, pairs 1, 7, 13, 17 and 25
+        ((50.0, 2.6772, -79.7751), (50.0, 0.0, -82.7485), 2.0425),
+        ((50.0, 2.5, 0.0), (50.0, 0.0, -2.5), 4.3065),
+        ((50.0, -1.0, 2.0), (50.0, 0.0, 0.0), 2.3669),
+        ((60.2574, -34.0099, 36.2677), (60.4626, -34.1751, 39.4387), 1.2644),
+        ((22.7233, 20.0904, -46.6940), (23.0331, 14.9730, -42.5619), 2.0373),
+    ],
+)
+def test_ciede2000_matches_the_published_test_data(
+    first: tuple[float, ...], second: tuple[float, ...], expected: float
+) -> None:
+    assert float(ciede2000(np.array(first), np.array(second))) == pytest.approx(expected, abs=1e-4)
+
+
+def test_a_coarser_source_lod_takes_the_textures_colours(tmp_path: Path) -> None:
+    """A source LoD1 without an appearance of its own (PLATEAU's lod1Solid) is drawn in the
+    colours of the finest LoD's textures, roofs and walls apart, not in class colours."""
+    from lodconvert.city.prisms import in_texture_colours, prism_colors
+
+    source = city(tmp_path, texture("tex/roof.png", coordinates="0 0 0.4 0 0.4 0.4 0 0.4 0 0"))
+    finest_mesh = finest(source)
+    plain = Mesh([Surface(p.vertices, p.faces, base_color=p.base_color) for p in finest_mesh.parts])
+    coloured = in_texture_colours(plain, finest_mesh)
+    roof, wall = prism_colors(finest_mesh)
+    [part] = coloured.parts
+    up = coloured.face_normals(np.arange(coloured.face_count))[:, 2] > 0.5
+    faces = part.faces
+    assert (part.vertex_colors[faces[up]] == roof).all()
+    assert (part.vertex_colors[faces[~up]] == wall).all()
+    assert np.abs(roof[:3].astype(int) - QUADRANTS["bottom_left"]).max() <= 2
+    assert in_texture_colours(plain, plain) is plain

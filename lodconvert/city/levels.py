@@ -21,14 +21,23 @@ from ..model import Level, Mesh, Node
 from ..model.lods import GROUND_COVERS, SLOTS, lod_name, unused_levels
 from ..plan import view_estimate
 from ..ranges import cutoff
-from .prisms import FOOTPRINT_TOLERANCE_PX, LOW_F, MIN_PRISM_F, MORE_TRIANGLES, prism
+from .blocks import shared_corners
+from .prisms import (
+    FOOTPRINT_TOLERANCE_PX,
+    LOW_F,
+    MIN_PRISM_F,
+    MORE_TRIANGLES,
+    in_texture_colours,
+    prism,
+)
 
 
 def source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOptions) -> ChainPlan:
     """The CityGML-style chain of a city object with its own LoDs (:mod:`.model.lods`): its
     finest source LoD covers every slot up to its own; each coarser slot is the source's LoD
-    there, else (LOD1) a prism from its footprint, else (LOD3, LOD2) baked points where they
-    pay; a slot with none of these leaves the finer level on."""
+    there (in the colours of the finest one's textures where it has none of its own), else
+    (LOD1) a prism from its footprint, else (LOD3, LOD2) baked points where they pay; a slot
+    with none of these leaves the finer level on."""
     finest_slot = max(k for k in sources if k in SLOTS)
     finest = sources[finest_slot][1]
     frame = framed(finest)
@@ -42,7 +51,10 @@ def source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOpti
         name = f"LOD{slot}"
         level: Level | str | None = None
         if slot in sources:
-            level = Level(name=name, kind="source", mesh=sources[slot][1].translated(-origin))
+            coarse = in_texture_colours(sources[slot][1], finest)
+            if coarse is not sources[slot][1]:
+                coarse = shared_corners(coarse)  # a vertex per corner and colour
+            level = Level(name=name, kind="source", mesh=coarse.translated(-origin))
         elif slot == 1 and obj.type in GROUND_COVERS:
             level = f"a {obj.type} covers the ground: no prism"
         elif slot == 1:

@@ -22,7 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..heap import return_freed_heap
-from ..model import GREY, Mesh, Surface
+from ..model import GREY, WHITE, Mesh, Surface
 from ..model.lods import source_levels
 
 CLOSED_TOLERANCE = 1e-3
@@ -409,6 +409,31 @@ def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
         seen = finest.face_colors(faces).astype(np.float64)
         colors.append(np.rint(weights @ seen / weights.sum()).astype(np.uint8))
     return colors[0], colors[1]
+
+
+def in_texture_colours(coarse: Mesh, finest: Mesh) -> Mesh:
+    """``coarse`` (a coarser source LoD without textures of its own) with its roofs and walls
+    in the colours of ``finest``'s textures (:func:`prism_colors`); itself where ``finest``
+    has no texture or ``coarse`` has one."""
+    textured = [p.texture is not None and p.uv is not None for p in finest.parts]
+    if not any(textured) or any(p.texture is not None for p in coarse.parts):
+        return coarse
+    slopes = _slopes(coarse)
+    roof, wall = prism_colors(finest)
+    faces = np.arange(coarse.face_count)
+    colours = coarse.face_colors(faces)
+    colours[slopes.roofs], colours[slopes.walls] = roof, wall
+    corners = coarse.triangles.reshape(-1, 3)  # a vertex per corner: each face its colour
+    return Mesh(
+        [
+            Surface(
+                corners,
+                np.arange(len(corners)).reshape(-1, 3),
+                vertex_colors=np.repeat(colours, 3, axis=0),
+                base_color=WHITE.copy(),
+            )
+        ]
+    )
 
 
 def simplified(outline: Outline, tolerance: float) -> list[FootprintPart]:
