@@ -1,0 +1,120 @@
+"""Far levels of a textured city against their textured source, as a viewer sees them: N
+copies of the PLATEAU building (``textured_district.py``) baked with LOD parents of 250 m and
+1 km (far levels of blocks, and of simplified meshes), every level drawn in its own colours,
+unlit, textures sampled with mipmaps (``lodconvert.analysis.albedo``), from the guard's 24
+views of the upper hemisphere at the level's switch-in distance, with the reference view's
+focal length (1080 px, 45°). Per tier, the mean CIEDE2000 ΔE of the pixels both show, roofs
+and walls apart by the source's face there ("pixels"), and the ΔE of the mean colours of those
+pixels ("means"), each a mean over a tier's levels with its largest:
+
+    python benchmarks/texture_colours.py               # 20 copies: results/texture_colours.md
+
+Tiers: ``LOD1`` (each building's LoD1 against its textured LoD2), ``blocks`` and ``mesh``
+(each cell's far level against its buildings' finest levels).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from tables import markdown_table, one_core_facts, write_results
+from textured_district import district
+
+HERE = Path(__file__).resolve().parent
+
+
+def tiers(path: Path, kind: str, renderer: Any, directions: np.ndarray) -> dict[str, list[dict]]:
+    """Per tier, each level's rendered ΔE (and its switch-in distance)."""
+    from lodconvert.analysis.albedo import class_delta_e_rendered
+    from lodconvert.bake import get_backend
+    from lodconvert.bakery import iter_chains
+    from lodconvert.chain import ChainOptions
+    from lodconvert.city.far_mesh import finest_mesh, merge
+    from lodconvert.city.hlod import HlodOptions
+    from lodconvert.context import RunContext
+    from lodconvert.io import read_scene
+    from lodconvert.model import CellChain
+
+    hlod = HlodOptions((250.0, 1000.0), kind)
+    items = iter_chains(read_scene(path), ChainOptions(), RunContext.here(get_backend("numpy")),
+                        hlod=hlod)  # fmt: skip
+    cells = [cell for item in items if isinstance(item, CellChain) for cell in item.cells()]
+    found: dict[str, list[dict]] = {}
+    if kind == "blocks":
+        for chain in {id(c): c for cell in cells for c in cell.objects()}.values():
+            meshes = [(k, lv) for k, lv in enumerate(chain.levels) if lv.mesh is not None]
+            lod1 = [(k, lv) for k, lv in meshes if lv.name == "LOD1" and k > 0]
+            if not lod1:
+                continue
+            k, level = lod1[0]
+            distance = chain.cutoffs[k - 1]
+            errors = class_delta_e_rendered(renderer, meshes[0][1].mesh, level.mesh, distance,
+                                            directions)  # fmt: skip
+            found.setdefault("LOD1", []).append({"distance": distance, **errors})
+    for cell in cells:
+        assert cell.far.mesh is not None
+        source = merge([finest_mesh(chain) for chain in cell.objects()]).translated(-cell.origin)
+        distance = cell.cutoffs[0]
+        errors = class_delta_e_rendered(renderer, source, cell.far.mesh, distance, directions)
+        found.setdefault(kind, []).append({"distance": distance, **errors})
+    return found
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--copies", type=int, default=20)
+    parser.add_argument("--out", type=Path, default=HERE / "results" / "texture_colours.md")
+    args = parser.parse_args()
+    from lodconvert.analysis.albedo import AlbedoRenderer
+    from lodconvert.views import guard_views, towards_camera
+
+    directions = np.stack([towards_camera(a, e) for a, e in guard_views()])
+    start = time.process_time()
+    found: dict[str, list[dict]] = {}
+    with (
+        tempfile.TemporaryDirectory(prefix="texture_colours_") as tmp,
+        AlbedoRenderer() as renderer,
+    ):
+        source = district(args.copies, Path(tmp), textured=True)
+        for kind in ("blocks", "mesh"):
+            for tier, rows in tiers(source, kind, renderer, directions).items():
+                found.setdefault(tier, []).extend(rows)
+        name = renderer.renderer_name
+    rows = []
+    for tier, levels in found.items():
+        distances = [r["distance"] for r in levels]
+        row = [tier, f"{len(levels)}", f"{min(distances):,.0f}–{max(distances):,.0f}"]
+        for key in ("roof", "wall", "roof_mean", "wall_mean"):
+            values = [r[key] for r in levels if not math.isnan(r[key])]
+            row += [f"{np.mean(values):.1f}", f"{max(values):.1f}"]
+        rows.append(row)
+    header = ["tier", "levels", "switch-in m", "roof pixels ΔE", "max", "wall pixels ΔE", "max",
+              "roof means ΔE", "max", "wall means ΔE", "max"]  # fmt: skip
+    text = "\n".join(
+        [
+            f"# Far levels of {args.copies} textured PLATEAU copies against their textures, drawn",
+            "",
+            *one_core_facts(
+                f"python benchmarks/texture_colours.py --copies {args.copies}",
+                time.process_time() - start,
+            ),
+            f"- Renderer: {name}",
+            "",
+            __doc__.split("\n\n")[0].replace("\n", " "),
+            "",
+            markdown_table(header, rows, 1),
+            "",
+        ]
+    )
+    write_results(args.out, text)
+    print(text)
+
+
+if __name__ == "__main__":
+    main()
