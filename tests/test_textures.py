@@ -10,6 +10,7 @@ import io
 import json
 import os
 import zipfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,7 @@ from lodconvert.model import Mesh, Surface
 from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.textures import PADDING, packed
 
-from .conftest import SHARED
+from .conftest import SHARED, gl_renderer
 from .test_cli import run
 from .test_gltf import _assert_valid
 from .test_tiles import official
@@ -661,3 +662,45 @@ def test_a_coarser_source_lod_takes_the_textures_colours(tmp_path: Path) -> None
     assert (part.vertex_colors[faces[~up]] == wall).all()
     assert np.abs(roof[:3].astype(int) - QUADRANTS["bottom_left"]).max() <= 2
     assert in_texture_colours(plain, plain) is plain
+
+
+@pytest.fixture(scope="module")
+def albedo() -> Iterator[object]:
+    from lodconvert.analysis.albedo import AlbedoRenderer
+
+    yield from gl_renderer(AlbedoRenderer)
+
+
+@pytest.mark.gl
+def test_the_colour_renderer_draws_a_roof_in_its_texture_and_a_flat_one_apart(
+    tmp_path: Path, albedo: object
+) -> None:
+    """The roof drawn from above shows the quadrants where they lie (from near) and their
+    mean (from afar, mipmapped); a roof in one flat colour is that colour's ΔE away."""
+    from lodconvert.analysis.albedo import ROOF as ROOF_KIND
+    from lodconvert.analysis.albedo import class_delta_e_rendered
+    from lodconvert.views import towards_camera
+
+    mesh = finest(city(tmp_path, texture("tex/roof.png")))
+    centre = (mesh.bounds[0] + mesh.bounds[1]) / 2
+    [near] = albedo.pictures(mesh, centre, 50.0, towards_camera(0, 89.9)[None], 256)  # type: ignore[attr-defined]
+    roof = near.kind == ROOF_KIND
+    assert roof.sum() > 1000
+    colours = {tuple(c) for c in near.rgb[roof].reshape(-1, 3)[::50]}
+    assert {tuple(QUADRANTS[q]) for q in QUADRANTS} <= colours
+    [far] = albedo.pictures(mesh, centre, 2_000.0, towards_camera(0, 89.9)[None], 16)  # type: ignore[attr-defined]
+    mean = np.mean([QUADRANTS[q] for q in QUADRANTS], axis=0)
+    assert np.abs(far.rgb[far.kind == ROOF_KIND].mean(axis=0) - mean).max() < 12
+    flat = Mesh(
+        [
+            Surface(
+                p.vertices,
+                p.faces,
+                base_color=ROOF.copy() if p.texture is not None else p.base_color,
+            )
+            for p in mesh.parts
+        ]
+    )  # the roof in its class colour, the walls as they are
+    oblique = towards_camera(45, 30)[None]
+    errors = class_delta_e_rendered(albedo, mesh, flat, 50.0, oblique)  # type: ignore[arg-type]
+    assert errors["roof"] > 20 and errors["wall"] == pytest.approx(0.0, abs=0.5)
