@@ -361,6 +361,9 @@ def test_the_plateau_building_keeps_its_texture_in_x3d_and_glb(
             assert result.returncode == 0, result.stderr
         assert schema.validate(etree.parse(str(x3d))), schema.error_log
         assert x3d.read_text().count("<ImageTexture") == 1
+        assert "data:image/jpeg;base64," in x3d.read_text()  # a photograph stays a JPEG
+        document, _ = glb_parts(glb.read_bytes())
+        assert [image["mimeType"] for image in document["images"]] == ["image/jpeg"]
         _assert_valid(gltf_validator(glb))  # type: ignore[operator]
         back = read_scene(glb)
         assert sum(len(textured(n.geometry)) for n in back.nodes if n.geometry is not None) == 1
@@ -383,6 +386,7 @@ def test_the_prism_takes_its_roof_colour_from_the_texture(tmp_path: Path) -> Non
 
 
 def test_a_textured_city_converts_alike_on_any_number_of_workers(tmp_path: Path) -> None:
+    """Same bytes on one worker and two; a PNG texture stays lossless (PNG)."""
     source = city(tmp_path, texture("tex/roof.png"), material("0 0.5 1"))
     outputs = []
     for workers in ("1", "2"):
@@ -390,6 +394,8 @@ def test_a_textured_city_converts_alike_on_any_number_of_workers(tmp_path: Path)
         assert run(source, "-o", out, "--workers", workers).returncode == 0
         outputs.append(out.read_bytes())
     assert outputs[0] == outputs[1]
+    document, _ = glb_parts(outputs[0])
+    assert [image["mimeType"] for image in document["images"]] == ["image/png"]
 
 
 # --- CityJSON ------------------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""The texture images a city model's appearances name (:class:`Images`): each resolved
+"""The texture images a city model's appearances name (:class:`Images`), and images encoded
+for writing (:func:`encoded`). Each image read is resolved
 against the input's folder (or, in a ``.zip``, the folder of the city model inside it), never
 outside it, through a link or over a network; held to the run's ``image_bytes`` and
 ``image_pixels`` limits (the pixels from the image's header, before it is decoded); decoded
@@ -34,6 +35,7 @@ class Images:
     def __init__(self, source: Path, limits: Limits, warn: Callable[[str], None]) -> None:
         self.source, self.limits, self.warn = source, limits, warn
         self._found: dict[str, np.ndarray | None] = {}
+        self._photographs: set[str] = set()
         self.used: list[str] = []
         """The URIs of the images decoded, in the order they were first asked for."""
         self.unusable: list[str] = []
@@ -56,11 +58,18 @@ class Images:
             "unusable_images": list(self.unusable),
         }
 
+    def photographic(self, uri: str) -> bool:
+        """Whether the image ``uri`` (read by :meth:`image`) was given as a photograph
+        (JPEG)."""
+        return uri in self._photographs
+
     def image(self, uri: str, where: str) -> np.ndarray | None:
         """The image ``uri`` names, (h, w, 4) uint8 RGBA, top row first; ``None`` (warned
         of once, naming ``where``: the object that asks first) where it cannot be used."""
         if uri not in self._found:
-            found, problem = self._read(uri)
+            found, problem, photograph = self._read(uri)
+            if photograph:
+                self._photographs.add(uri)
             if problem is not None:
                 self.unusable.append(uri)
                 self.warn(
@@ -72,17 +81,17 @@ class Images:
             self._found[uri] = found
         return self._found[uri]
 
-    def _read(self, uri: str) -> tuple[np.ndarray | None, str | None]:
-        """The decoded image of ``uri``, or why it cannot be used."""
+    def _read(self, uri: str) -> tuple[np.ndarray | None, str | None, bool]:
+        """The decoded image of ``uri`` and whether it is a JPEG, or why it cannot be used."""
         text = uri.strip().replace("\\", "/")
         if _SCHEME.match(text):
-            return None, "is not a file beside the input (a URI is not read over a network)"
+            return None, "is not a file beside the input (a URI is not read over a network)", False
         relative = PurePosixPath(unquote(text))
         if relative.is_absolute() or ".." in relative.parts or not relative.parts:
-            return None, "lies outside the input's folder (not read)"
+            return None, "lies outside the input's folder (not read)", False
         data, problem = self._bytes(relative)
         if data is None:
-            return None, problem
+            return None, problem, False
         return _decoded(data, self.limits)
 
     def _bytes(self, relative: PurePosixPath) -> tuple[bytes | None, str | None]:
@@ -135,9 +144,10 @@ def _zip_bytes(
     return data, None
 
 
-def _decoded(data: bytes, limits: Limits) -> tuple[np.ndarray | None, str | None]:
-    """The RGBA pixels of the image file ``data``, or why it cannot be decoded: its size is
-    checked against ``limits.image_pixels`` from its header, before its pixels are."""
+def _decoded(data: bytes, limits: Limits) -> tuple[np.ndarray | None, str | None, bool]:
+    """The RGBA pixels of the image file ``data`` and whether it is a JPEG, or why it cannot
+    be decoded: its size is checked against ``limits.image_pixels`` from its header, before
+    its pixels are."""
     from PIL import Image, UnidentifiedImageError
 
     kept, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None  # checked here, from the header
@@ -145,15 +155,39 @@ def _decoded(data: bytes, limits: Limits) -> tuple[np.ndarray | None, str | None
         with Image.open(io.BytesIO(data)) as image:
             width, height = image.size
             if width * height > limits.image_pixels:
-                return None, (
-                    f"has {width:,} × {height:,} pixels, over the limit of "
-                    f"{limits.image_pixels:,} (raise it with --limit image_pixels=N)"
+                return (
+                    None,
+                    (
+                        f"has {width:,} × {height:,} pixels, over the limit of "
+                        f"{limits.image_pixels:,} (raise it with --limit image_pixels=N)"
+                    ),
+                    False,
                 )
+            photograph = image.format in ("JPEG", "MPO")
             rgba = np.asarray(image.convert("RGBA"), dtype=np.uint8)
     except UnidentifiedImageError:
-        return None, "is not an image lodconvert can decode (PNG, JPEG, WebP…)"
+        return None, "is not an image lodconvert can decode (PNG, JPEG, WebP…)", False
     except (OSError, SyntaxError, ValueError, EOFError) as exc:
-        return None, f"cannot be decoded ({str(exc) or type(exc).__name__})"
+        return None, f"cannot be decoded ({str(exc) or type(exc).__name__})", False
     finally:
         Image.MAX_IMAGE_PIXELS = kept
-    return np.ascontiguousarray(rgba), None
+    return np.ascontiguousarray(rgba), None, photograph
+
+
+JPEG_QUALITY = 90
+"""Quality of a photograph written as JPEG."""
+
+
+def encoded(rgba: np.ndarray, photographic: bool) -> tuple[bytes, str]:
+    """Deterministic bytes of an RGBA uint8 image (top row first) and their MIME type: JPEG
+    (quality :data:`JPEG_QUALITY`, no metadata) for a ``photographic`` one whose texels are all
+    opaque, else PNG (lossless, no timestamp or text chunk)."""
+    from PIL import Image
+
+    out = io.BytesIO()
+    if photographic and int(rgba[..., 3].min(initial=255)) == 255:
+        rgb = Image.fromarray(np.ascontiguousarray(rgba[..., :3], dtype=np.uint8), "RGB")
+        rgb.save(out, format="JPEG", quality=JPEG_QUALITY, optimize=False, progressive=False)
+        return out.getvalue(), "image/jpeg"
+    Image.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8), "RGBA").save(out, format="PNG")
+    return out.getvalue(), "image/png"

@@ -139,6 +139,7 @@ def surface_from_trimesh(
         if image is not None and uv is not None and len(uv) == len(vertices):
             surface.texture = _image_rgba(image)
             surface.uv = np.asarray(uv, dtype=np.float64)
+            surface.photographic = getattr(image, "format", None) in ("JPEG", "MPO")
         # glTF COLOR_0 beside a material: trimesh keeps the accessor's values as they are
         attributes = getattr(visual, "vertex_attributes", None) or {}
         _set_vertex_colors(surface, srgb_bytes(attributes.get("color"), linear_colors))

@@ -23,7 +23,9 @@ class Surface:
 
     ``vertices`` (n, 3) float64, ``faces`` (m, 3) int64. ``vertex_colors`` (n, 4) uint8 RGBA,
     ``uv`` (n, 2) float64 with ``texture`` (h, w, 4) uint8 RGBA, ``base_color`` (4,) uint8 or
-    None when the source names none (then :attr:`material_color` picks a neutral one).
+    None when the source names none (then :attr:`material_color` picks a neutral one);
+    ``photographic``: the texture is a photograph, which a lossy encoding suits (the source
+    gave it so).
     """
 
     vertices: np.ndarray
@@ -32,6 +34,7 @@ class Surface:
     uv: np.ndarray | None = None
     texture: np.ndarray | None = None
     base_color: np.ndarray | None = None
+    photographic: bool = False
     # Arrays derived from the geometry (bounds, per-face tables), computed once per Surface.
     # Not an init field, so ``dataclasses.replace`` starts a fresh cache for new geometry.
     _derived: dict[str, Any] = field(default_factory=dict, init=False, repr=False, compare=False)

@@ -276,6 +276,7 @@ def _triangulated(
                 assert image is not None  # as _texture_coordinates found it
                 surface.uv, surface.texture = cropped(group.uv, image)
                 surface.base_color = WHITE.copy()  # the texture carries the colour
+                surface.photographic = images.photographic(group.image)
             surface.derived("bounds", lambda box=box: box)  # what Surface.bounds computes
             group.holder.surfaces.setdefault(group.lod, []).append(surface)
 

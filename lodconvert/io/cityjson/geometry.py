@@ -149,13 +149,14 @@ class Textured:
     """A polygon that wears a texture: its rings' points and texture coordinates ((k, 2),
     the ring's points in order), its image and key (the texture's index, semantic class and
     material: an object's polygons of one texture are one surface, whose image is cut once),
-    and its colour without the texture."""
+    its colour without the texture, and whether the image is a photograph (a JPEG)."""
 
     rings: list[np.ndarray]
     uv: list[np.ndarray]
     image: np.ndarray
     key: tuple[int, int, Any]
     color: np.ndarray
+    photographic: bool = False
 
 
 def read_lod(
@@ -205,7 +206,12 @@ def read_lod(
                 klass, material = pairs[k]
                 color = _color(_CLASSES[klass], material, ctx, kind)
                 rings = points[first[k] : first[k + 1]]
-                textured.append(Textured(rings, uv, image, (texture, klass, material), color))
+                photo = ctx.images is not None and ctx.images.photographic(
+                    ctx.textures[texture].get("image", "")
+                )
+                textured.append(
+                    Textured(rings, uv, image, (texture, klass, material), color, photo)
+                )
                 plain[k] = False
             ring_kept = plain.repeat(ring_counts)
             index = index[ring_kept.repeat(ring_lengths)]

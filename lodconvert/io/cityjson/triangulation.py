@@ -16,7 +16,7 @@ from ...model import WHITE, Mesh, Surface
 from ...polygons import triangulate_many
 from ...textures import cropped, polygon_coordinates
 from ..geometry_checks import faces_with_area
-from .geometry import Lod
+from .geometry import Lod, Textured
 
 
 def _opened(lengths: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -177,7 +177,7 @@ def _textured_surfaces(lod: Lod) -> list[Surface]:
     triangulated = triangulate_many([polygon.rings for polygon in lod.textured])
     groups: dict[tuple[Any, ...], list[tuple[np.ndarray, np.ndarray, np.ndarray | None]]] = {}
     colors: dict[tuple[Any, ...], np.ndarray] = {}
-    images: dict[tuple[Any, ...], np.ndarray] = {}
+    images: dict[tuple[Any, ...], Textured] = {}
     faults: Counter[str] = Counter()
     for polygon, triangles in zip(lod.textured, triangulated, strict=True):
         if triangles is None:
@@ -192,7 +192,7 @@ def _textured_surfaces(lod: Lod) -> list[Surface]:
         if fault is not None:
             faults[fault] += 1
         key = (*polygon.key, polygon.color.tobytes()) if uv is None else polygon.key[:1]
-        colors[key], images[key] = polygon.color, polygon.image
+        colors[key], images[key] = polygon.color, polygon
         groups.setdefault(key, []).append((points, faces[keep], uv))
     lod.faults.update(faults)
     surfaces = []
@@ -207,8 +207,9 @@ def _textured_surfaces(lod: Lod) -> list[Surface]:
         )
         if pieces[0][2] is not None:
             uv = np.concatenate([uv for _, _, uv in pieces if uv is not None])
-            surface.uv, surface.texture = cropped(uv, images[key])
+            surface.uv, surface.texture = cropped(uv, images[key].image)
             surface.base_color = WHITE.copy()  # the texture carries the colour
+            surface.photographic = images[key].photographic
         surfaces.append(surface)
     return surfaces
 

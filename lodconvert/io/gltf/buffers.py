@@ -5,7 +5,6 @@ JSON text of each accessor, so that the writer only appends them to the document
 
 from __future__ import annotations
 
-import io
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -16,6 +15,7 @@ from ...colors import linear_rgba, linear_rgba16
 from ...errors import LodConvertError
 from ...model import Level, LodChain, PointCloud, Surface
 from .. import OutputInfo
+from ..images import encoded
 from .binary import (
     ARRAY_BUFFER,
     COMPONENT_TYPES,
@@ -84,26 +84,10 @@ def alpha_mode_of(*alphas: np.ndarray | None) -> str:
     return "BLEND" if blend else "OPAQUE"
 
 
-def _png(rgba: np.ndarray) -> bytes:
-    """Deterministic PNG bytes of an RGBA uint8 image (no timestamps or text chunks)."""
-    from PIL import Image as PILImage  # only for textures: a worker baking none never loads it
-
-    out = io.BytesIO()
-    PILImage.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8), "RGBA").save(out, format="PNG")
-    return out.getvalue()
-
-
-def encoded_image(rgba: np.ndarray) -> tuple[bytes, str]:
-    """Deterministic bytes of an RGBA uint8 image and their MIME type: JPEG (quality 90, no
-    metadata) where every texel is opaque, else PNG."""
-    from PIL import Image as PILImage
-
-    if int(rgba[..., 3].min(initial=255)) < 255:
-        return _png(rgba), "image/png"
-    out = io.BytesIO()
-    rgb = PILImage.fromarray(np.ascontiguousarray(rgba[..., :3], dtype=np.uint8), "RGB")
-    rgb.save(out, format="JPEG", quality=90, optimize=False, progressive=False)
-    return out.getvalue(), "image/jpeg"
+def surface_image(surface: Surface) -> tuple[bytes, str]:
+    """The bytes and MIME type of a textured surface's image (:func:`~..images.encoded`)."""
+    assert surface.texture is not None
+    return encoded(surface.texture, surface.photographic)
 
 
 @dataclass(frozen=True)
@@ -148,14 +132,15 @@ def _colors(rgba: np.ndarray) -> AccessorData:
 class PrimitiveData:
     """What a primitive's JSON needs of its geometry: its accessors' data in the order they
     are added to the buffer (``POSITION``, ``NORMAL``, ``COLOR_0``, ``TEXCOORD_0``), its
-    texture (PNG bytes, added next) and indices (last); for a mesh, the linear base colour of
-    its material (``None``: a point level's shared unlit one) and the alpha mode."""
+    texture (image bytes and MIME type, added next: :func:`surface_image`) and indices (last);
+    for a mesh, the linear base colour of its material (``None``: a point level's shared unlit
+    one) and the alpha mode."""
 
     attributes: dict[str, AccessorData]
     mode: int
     alpha_mode: str
     base: list[float] | None = None
-    png: bytes | None = None
+    image: tuple[bytes, str] | None = None
     indices: AccessorData | None = None
 
 
@@ -166,12 +151,12 @@ def _mesh_data(surface: Surface, normals: bool = True) -> PrimitiveData:
     if surface.vertex_colors is not None:
         attributes["COLOR_0"] = _colors(surface.vertex_colors)
     textured = surface.texture is not None and surface.uv is not None
-    png = None
+    image = None
     if textured:
         # Surface.uv has its origin at the image's bottom-left, glTF at the top-left.
         flipped = np.column_stack([surface.uv[:, 0], 1.0 - surface.uv[:, 1]])
         attributes["TEXCOORD_0"] = _accessor_data(flipped.astype(np.float32))
-        png = _png(surface.texture)
+        image = surface_image(surface)
     index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
     indices = _accessor_data(surface.faces.ravel().astype(index_type), ELEMENT_ARRAY_BUFFER)
     alpha_mode = alpha_mode_of(
@@ -180,7 +165,7 @@ def _mesh_data(surface: Surface, normals: bool = True) -> PrimitiveData:
         surface.texture[..., 3] if textured else None,
     )
     base = [float(v) for v in linear_rgba(surface.material_color)]
-    return PrimitiveData(attributes, TRIANGLES, alpha_mode, base, png, indices)
+    return PrimitiveData(attributes, TRIANGLES, alpha_mode, base, image, indices)
 
 
 def _points_data(points: PointCloud) -> PrimitiveData:

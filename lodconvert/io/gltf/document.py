@@ -111,8 +111,8 @@ class Document:
             return self.accessors.append_text(VIEW_HEAD + str(view) + accessor.compact_tail)
         return self.accessors.append({"bufferView": view, **accessor.fields})
 
-    def _texture(self, png: bytes) -> int:
-        image = {"mimeType": "image/png", "bufferView": self._buffer_view(png)}
+    def _texture(self, data: tuple[bytes, str]) -> int:
+        image = {"mimeType": data[1], "bufferView": self._buffer_view(data[0])}
         sampler = {
             "magFilter": LINEAR,
             "minFilter": LINEAR_MIPMAP_LINEAR,
@@ -126,7 +126,7 @@ class Document:
     def _primitive(self, data: PrimitiveData) -> dict[str, Any]:
         """A primitive's JSON, its accessors (and texture) added."""
         added = {name: self._accessor(accessor) for name, accessor in data.attributes.items()}
-        texture = self._texture(data.png) if data.png is not None else None
+        texture = self._texture(data.image) if data.image is not None else None
         primitive: dict[str, Any] = {
             "attributes": json_object(
                 POSITION=added["POSITION"],

@@ -29,8 +29,9 @@ from ..gltf.binary import (
     VECTOR_TYPES,
     pack_glb,
 )
-from ..gltf.buffers import alpha_mode_of, encoded_image, float32_positions, vertex_normals
+from ..gltf.buffers import alpha_mode_of, float32_positions, vertex_normals
 from ..gltf.document import UNLIT
+from ..images import encoded
 from .metadata import Feature, property_table
 
 MESH_FEATURES = "EXT_mesh_features"
@@ -46,10 +47,10 @@ class _Builder:
         self.accessors: list[dict[str, Any]] = []
         self.images: list[dict[str, Any]] = []
 
-    def texture(self, rgba: np.ndarray) -> int:
-        """A texture of the image ``rgba`` (JPEG where opaque, else PNG), sampled with
-        mipmaps and clamped at its edges (an atlas page: nothing repeats)."""
-        data, mime = encoded_image(rgba)
+    def texture(self, rgba: np.ndarray, photographic: bool) -> int:
+        """A texture of the image ``rgba`` (:func:`~..images.encoded`), sampled with mipmaps
+        and clamped at its edges (an atlas page: nothing repeats)."""
+        data, mime = encoded(rgba, photographic)
         self.images.append({"bufferView": self.view(data), "mimeType": mime})
         return len(self.images) - 1
 
@@ -113,11 +114,13 @@ class _Builder:
 @dataclass(frozen=True)
 class TileTextures:
     """The textures of a tile's vertices: per vertex, its image (an index into ``images``;
-    -1: none) and texture coordinates ((n, 2), origin at the image's bottom left)."""
+    -1: none) and texture coordinates ((n, 2), origin at the image's bottom left); whether
+    every image is a photograph (then opaque pages are written as JPEG)."""
 
     image_of: np.ndarray
     uv: np.ndarray
     images: tuple[np.ndarray, ...]
+    photographic: bool = False
 
 
 def _document(generator: str, drawn: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict:
@@ -200,7 +203,8 @@ def mesh_glb(
         _, atlas_uv, atlas = paged
         coordinates = {"TEXCOORD_0": builder.accessor(atlas_uv)}
         for page, image in enumerate(atlas.pages):
-            material = _material(image[..., 3].ravel(), texture=builder.texture(image))
+            texture = builder.texture(image, textures.photographic)  # type: ignore[union-attr]
+            material = _material(image[..., 3].ravel(), texture=texture)
             drawn.append((primitive(faces[face_page == page], coordinates), material))
     document = _document(generator, drawn)
     document.update(builder.textures())

@@ -100,7 +100,7 @@ class TileTask:
         head = [self.name, self.where.key, self.generator, self.features]
         textures = self.textures
         if textures is not None:
-            head.append(self.atlas_size)
+            head += [self.atlas_size, textures.photographic]
         digest.update(json.dumps(head, sort_keys=True, default=str).encode())
         arrays = [self.vertices, self.colors, self.faces, self.feature_ids]
         if textures is not None:

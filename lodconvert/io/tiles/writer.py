@@ -95,6 +95,7 @@ def _textures(meshes: list[Mesh]) -> TileTextures | None:
     images: dict[int, int] = {}
     found: list[np.ndarray] = []
     image_of, uv = [], []
+    photographic = True
     for part in (part for mesh in meshes for part in mesh.parts):
         if part.texture is None or part.uv is None:
             image_of.append(np.full(len(part.vertices), -1, dtype=np.int64))
@@ -105,9 +106,10 @@ def _textures(meshes: list[Mesh]) -> TileTextures | None:
             found.append(part.texture)
         image_of.append(np.full(len(part.vertices), images[id(part.texture)], dtype=np.int64))
         uv.append(part.uv)
+        photographic = photographic and part.photographic
     if not found:
         return None
-    return TileTextures(np.concatenate(image_of), np.concatenate(uv), tuple(found))
+    return TileTextures(np.concatenate(image_of), np.concatenate(uv), tuple(found), photographic)
 
 
 def _feature(chain: LodChain) -> Feature:

@@ -7,7 +7,6 @@ Why each rule holds (texture modulation, point attenuation): ``docs/x3d.md``."""
 from __future__ import annotations
 
 import base64
-import io
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import replace
@@ -15,6 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from ...model import Level, Mesh, Surface
+from ..images import encoded
 from ..numbers import format_exact, format_fixed, format_ints, format_unit_bytes, geometry_decimals
 from .xmltext import XmlOut, mfstring
 
@@ -33,10 +33,8 @@ MAX_SHAPE_TRIANGLES = 200_000
 :data:`MAX_SHAPE_VERTICES`, at most 6 characters each) stays under 3.6 MB."""
 
 MAX_TEXTURE_URL = 8_000_000
-"""Most characters of a texture's PNG ``data:`` URI, so that the ``url`` attribute stays under
+"""Most characters of a texture's ``data:`` URI, so that the ``url`` attribute stays under
 libxml2's 10 MB limit like every other: a larger image is halved until it fits."""
-
-PNG_DATA_URI = "data:image/png;base64,"
 
 
 def point_properties(level: Level, switch_in: float, alpha: float) -> dict[str, str]:
@@ -129,21 +127,21 @@ def _textured(surface: Surface) -> bool:
     return surface.texture is not None and surface.uv is not None
 
 
-def texture_url(rgba: np.ndarray) -> str:
-    """The image ``rgba`` (h, w, 4) uint8, top row first, as a PNG ``data:`` URI for an
-    ``ImageTexture`` ``url``: same pixels, same text.
+def texture_url(rgba: np.ndarray, photographic: bool = False) -> str:
+    """The image ``rgba`` (h, w, 4) uint8, top row first, as a ``data:`` URI for an
+    ``ImageTexture`` ``url`` (:func:`~..images.encoded`: JPEG for an opaque photograph, else
+    PNG): same pixels, same text.
 
-    Pillow writes the PNG with fixed options and no timestamp or text chunk. An image whose URI
-    would be longer than :data:`MAX_TEXTURE_URL` is halved (2×2 box average, odd edges
-    rounded up) until it fits; texture coordinates stay valid as they are relative.
+    An image whose URI would be longer than :data:`MAX_TEXTURE_URL` is halved (2×2 box
+    average, odd edges rounded up) until it fits; texture coordinates stay valid as they are
+    relative.
     """
     from PIL import Image as PILImage  # only for textures: a worker baking none never loads it
 
     image = PILImage.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8))
     while True:
-        png = io.BytesIO()
-        image.save(png, format="PNG", optimize=False, compress_level=6)
-        url = PNG_DATA_URI + base64.b64encode(png.getvalue()).decode("ascii")
+        data, mime = encoded(np.asarray(image), photographic)
+        url = f"data:{mime};base64," + base64.b64encode(data).decode("ascii")
         if len(url) <= MAX_TEXTURE_URL or max(image.size) == 1:
             return url
         image = image.reduce(2)
@@ -193,7 +191,8 @@ def _part_shapes(out: XmlOut, surface: Surface, appearance: str) -> None:
     uv = surface.uv if _textured(surface) else None
     if uv is not None:
         assert surface.texture is not None
-        children.append(("ImageTexture", {"url": mfstring([texture_url(surface.texture)])}))
+        url = texture_url(surface.texture, surface.photographic)
+        children.append(("ImageTexture", {"url": mfstring([url])}))
     colors = vertex_colors(surface)
     decimals = geometry_decimals(surface.vertices)
     uv_decimals = geometry_decimals(uv) if uv is not None else 0
