@@ -11,9 +11,10 @@ import { doing, evaluate, openTestPage, openViewer, run, waitFor } from "./harne
 
 /**
  * Pixels of the element `selector` that differ from the background (by more than 24 in a
- * channel; the background is the top-left pixel unless given): their number, `foreground`, and
- * their mean brightness (Rec. 709 luma, 0-255; null without any), `brightness`. The screenshot
- * is decoded in the page itself.
+ * channel; the background is the top-left pixel unless given): their number, `foreground`,
+ * their mean brightness (Rec. 709 luma, 0-255; null without any), `brightness`, their mean
+ * colour, `mean`, and the mean of their three channels' standard deviations, `spread`. The
+ * screenshot is decoded in the page itself.
  */
 async function pixels(page, selector, background = null) {
   doing(`screenshot of ${selector}`);
@@ -29,13 +30,24 @@ async function pixels(page, selector, background = null) {
       const bg = background ?? [rgba[0], rgba[1], rgba[2]];
       let count = 0;
       let luma = 0;
+      const sums = [0, 0, 0];
+      const squares = [0, 0, 0];
       for (let i = 0; i < rgba.length; i += 4) {
         if ([0, 1, 2].some((k) => Math.abs(rgba[i + k] - bg[k]) > 24)) {
           count += 1;
           luma += 0.2126 * rgba[i] + 0.7152 * rgba[i + 1] + 0.0722 * rgba[i + 2];
+          for (const k of [0, 1, 2]) {
+            sums[k] += rgba[i + k];
+            squares[k] += rgba[i + k] * rgba[i + k];
+          }
         }
       }
-      return { foreground: count, brightness: count ? luma / count : null };
+      const spread = count
+        ? [0, 1, 2].map((k) => Math.sqrt(Math.max(squares[k] / count - (sums[k] / count) ** 2, 0)))
+          .reduce((a, b) => a + b) / 3
+        : null;
+      const mean = count ? sums.map((v) => v / count) : null;
+      return { foreground: count, brightness: count ? luma / count : null, spread, mean };
     },
     { data: png.toString("base64"), background },
   );
