@@ -710,3 +710,23 @@ def test_the_colour_renderer_draws_a_roof_in_its_texture_and_a_flat_one_apart(
     oblique = towards_camera(45, 30)[None]
     errors = class_delta_e_rendered(albedo, mesh, flat, 50.0, oblique)  # type: ignore[arg-type]
     assert errors["roof"] > 20 and errors["wall"] == pytest.approx(0.0, abs=0.5)
+
+
+def test_appearances_are_found_across_the_chunks_a_document_is_read_in(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The scan for appearances reads a document a chunk at a time (a memory map would make
+    every page of a 12 GB city resident) and finds an ``appearanceMember`` whose tags straddle
+    two chunks, wherever the boundary falls."""
+    from lodconvert.io.citygml import appearance
+    from lodconvert.limits import DEFAULT_LIMITS
+
+    monkeypatch.setattr(appearance, "_SCAN_BYTES", 64)
+    path = tmp_path / "city.gml"
+    for pad in range(70):
+        path.write_bytes(b"x" * pad + b"<app:appearanceMember>" + b" " * 30 + b"<app:Appearance>")
+        assert appearance._marks(path, DEFAULT_LIMITS) == {b"Appearance", b"appearanceMember"}
+    path.write_bytes(b"x" * 60 + b"<app:Appearance>" + b"x" * 200)
+    assert appearance._marks(path, DEFAULT_LIMITS) == {b"Appearance"}
+    path.write_bytes(b"x" * 500)
+    assert appearance._marks(path, DEFAULT_LIMITS) == set()

@@ -10,7 +10,6 @@ object and those at the root (``appearanceMember``, read before the objects:
 from __future__ import annotations
 
 import math
-import mmap
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,7 +31,7 @@ names spell it in lower case)."""
 _ROOT_CHILDREN = tuple(f"{{*}}{name}" for name in sorted(MEMBERS | {"appearanceMember"}))
 """Tags of the root's children that the scan for appearances frees or reads."""
 _SCAN_BYTES = 1 << 22
-"""Bytes read at a time when a compressed document is scanned for the marks."""
+"""Bytes read at a time when a document is scanned for the marks."""
 
 
 @dataclass(frozen=True)
@@ -230,8 +229,7 @@ def _association_target(element: etree._Element) -> str | None:
 
 def document_appearances(path: Path, limits: Limits, theme: str | None) -> Appearances | None:
     """The appearances at the root of the document ``path`` (in the theme ``theme``, else the
-    first met), read before its objects; ``None`` when it holds no appearance at all. A plain
-    file is searched in place (memory-mapped), a compressed one as it inflates."""
+    first met), read before its objects; ``None`` when it holds no appearance at all."""
     marks = _marks(path, limits)
     if ANY_MARK not in marks:
         return None
@@ -246,20 +244,24 @@ def document_appearances(path: Path, limits: Limits, theme: str | None) -> Appea
 
 
 def _marks(path: Path, limits: Limits) -> set[bytes]:
-    """Which of :data:`ANY_MARK` and :data:`GLOBAL_MARK` the document ``path`` holds."""
-    if not path.name.lower().endswith((".gz", ".zip")):
-        with path.open("rb") as handle, mmap.mmap(handle.fileno(), 0, access=mmap.ACCESS_READ) as m:
-            if m.find(ANY_MARK) < 0:
-                return set()
-            return {ANY_MARK} | ({GLOBAL_MARK} if m.find(GLOBAL_MARK) >= 0 else set())
+    """Which of :data:`ANY_MARK` and :data:`GLOBAL_MARK` the document ``path`` holds, read a
+    chunk at a time (what it inflates to, for a ``.gz`` or ``.zip``): a memory map would put
+    every page of a large file in the process's resident memory."""
     found: set[bytes] = set()
     stream = open_compressed(path, limits)
     try:
-        tail = b""
+        last = b""
         while len(found) < 2 and (chunk := stream.read(_SCAN_BYTES)):
-            window = tail + chunk
-            found.update(mark for mark in (ANY_MARK, GLOBAL_MARK) if mark in window)
-            tail = chunk[-len(GLOBAL_MARK) :]
+            # every appearanceMember holds an Appearance: look for it once that is found (in
+            # this chunk and the one before, which its start tag may end)
+            mark = GLOBAL_MARK if found else ANY_MARK
+            edge = last[-len(GLOBAL_MARK) :] + chunk[: len(GLOBAL_MARK)]  # across the chunks
+            if mark in chunk or mark in edge:
+                found.add(mark)
+                if mark is ANY_MARK and (GLOBAL_MARK in last or GLOBAL_MARK in edge
+                                         or GLOBAL_MARK in chunk):  # fmt: skip
+                    found.add(GLOBAL_MARK)
+            last = chunk
     finally:
         stream.close()
     return found
