@@ -730,3 +730,21 @@ def test_appearances_are_found_across_the_chunks_a_document_is_read_in(
     assert appearance._marks(path, DEFAULT_LIMITS) == {b"Appearance"}
     path.write_bytes(b"x" * 500)
     assert appearance._marks(path, DEFAULT_LIMITS) == set()
+
+
+@pytest.mark.parametrize(
+    ("output", "size", "message"),
+    [
+        ("out/tileset.json", "100", "--atlas-size must be a power of two from 64 to 16384 texels"),
+        ("out/tileset.json", "32768", "--atlas-size must be a power of two from 64 to 16384"),
+        ("out.glb", "256", "--atlas-size is for 3D Tiles; write DIR/tileset.json"),
+    ],
+)
+def test_a_wrong_atlas_size_is_a_usage_error_that_writes_nothing(
+    tmp_path: Path, output: str, size: str, message: str
+) -> None:
+    source = city(tmp_path, texture("tex/roof.png"))
+    result = run(source, "-o", tmp_path / output, "--atlas-size", size)
+    assert result.returncode == 2 and message in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists() and not (tmp_path / "out.glb").exists()
