@@ -18,8 +18,9 @@ import pytest
 from lxml import etree
 from PIL import Image
 
-from lodconvert.colors import ciede2000
+from lodconvert.colors import ciede2000, normalized
 from lodconvert.io import read_scene
+from lodconvert.io.gltf.binary import accessor_values
 from lodconvert.io.tiles.check import glb_parts
 from lodconvert.model import Mesh, Surface
 from lodconvert.semantics import DEFAULT_CLASS_COLORS
@@ -588,13 +589,8 @@ def test_a_textured_roof_shows_its_texture_in_the_tile_and_its_colour_far_away(
     [primitive] = [
         p for p in document["meshes"][0]["primitives"] if "TEXCOORD_0" in p["attributes"]
     ]
-    accessor = document["accessors"][primitive["attributes"]["TEXCOORD_0"]]
-    at = document["bufferViews"][accessor["bufferView"]]["byteOffset"]
-    uv = np.frombuffer(blob, np.float32, accessor["count"] * 2, at).reshape(-1, 2)
-    indices = document["accessors"][primitive["indices"]]
-    index_at = document["bufferViews"][indices["bufferView"]]["byteOffset"]
-    dtype = np.uint16 if indices["componentType"] == 5123 else np.uint32
-    used = np.frombuffer(blob, dtype, indices["count"], index_at)
+    uv = normalized(accessor_values(document, blob, primitive["attributes"]["TEXCOORD_0"]))
+    used = accessor_values(document, blob, primitive["indices"])
     centre = uv[used].mean(axis=0)  # glTF: origin at the top left
     texel = page[int(centre[1] * page.shape[0]), int(centre[0] * page.shape[1]), :3]
     assert np.abs(texel.astype(int) - QUADRANTS["bottom_left"]).max() <= 12

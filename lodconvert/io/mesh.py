@@ -347,8 +347,14 @@ def _label_obj_objects(text: str) -> tuple[str, list[str | None]]:
 
 def _load_trimesh(data: bytes, path: Path, suffix: str, **options: object) -> object:
     """``data`` loaded by trimesh as a scene (resources such as MTL files and textures are
-    looked up beside ``path``)."""
+    looked up beside ``path``; a GLB's views packed with ``EXT_meshopt_compression`` decoded
+    first, :func:`~.gltf.binary.unpacked_glb`)."""
     import trimesh
+
+    if suffix == ".glb":
+        from .gltf.binary import unpacked_glb  # the glTF format: loaded for a GLB only
+
+        data = unpacked_glb(data)
 
     resolver = trimesh.resolvers.FilePathResolver(str(path.parent))
     return trimesh.load(

@@ -204,11 +204,12 @@ function scaleLods(scale) {
 
 const backend = {
   async load(host) {
-    let GLTFLoader, OrbitControls;
-    [THREE, { GLTFLoader }, { OrbitControls }] = await Promise.all([
+    let GLTFLoader, OrbitControls, MeshoptDecoder;
+    [THREE, { GLTFLoader }, { OrbitControls }, { MeshoptDecoder }] = await Promise.all([
       import("three"),
       import("three/addons/loaders/GLTFLoader.js"),
       import("three/addons/controls/OrbitControls.js"),
+      import("three/addons/libs/meshopt_decoder.module.js"), // --compress meshopt
     ]);
     origin = new THREE.Vector3(...focus); // the page's origin, so float32 keeps precision
     renderer = new THREE.WebGLRenderer({ antialias: true });
@@ -219,7 +220,8 @@ const backend = {
     camera = new THREE.PerspectiveCamera(config.view.fov_y_deg, 1, nearest / 50, 10 * farthest);
     camera.add(new THREE.DirectionalLight(0xffffff, 1.5));
     scene.add(camera, new THREE.HemisphereLight(0xffffff, 0x444444, 2));
-    await buildScene(await new GLTFLoader().loadAsync(config.asset));
+    const loader = new GLTFLoader().setMeshoptDecoder(MeshoptDecoder);
+    await buildScene(await loader.loadAsync(config.asset));
     raycaster = new THREE.Raycaster();
     controls = new OrbitControls(camera, renderer.domElement);
     controls.addEventListener("change", render);

@@ -16,6 +16,7 @@ from ...city.hlod import KINDS, HlodOptions, parse_sizes
 from ...errors import UsageError
 from ...io import output_format
 from ...io.frame import UP_AXES
+from ...io.gltf.compression import check_compression
 from ...io.x3d import SWITCHING_MODES
 from ...limits import DEFAULT_LIMITS
 from ...model.lods import lod_name
@@ -141,6 +142,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "(default 4096; docs/textures.md)",
     )
     out.add_argument(
+        "--compress",
+        metavar="HOW",
+        help="glTF geometry: none, meshopt (EXT_meshopt_compression with exact positions; "
+        "a tileset's default) or quantize (KHR_mesh_quantization, positions to 1/65535 of "
+        "a tile's extent); docs/compression.md",
+    )
+    out.add_argument(
         "-q",
         "--quiet",
         action="count",
@@ -171,6 +179,10 @@ def _check_tiles(args: argparse.Namespace) -> None:
         raise UsageError(f"--atlas-size is for 3D Tiles; write DIR/tileset.json, not {args.output}")
     if args.atlas_size is not None:
         check_atlas_size(args.atlas_size)
+    if args.compress is not None and "compress" not in output_format(args.output).write_options:
+        raise UsageError(f"--compress is for glTF and 3D Tiles, not {args.output}")
+    if args.compress is not None:
+        check_compression(args.compress)
 
 
 def _hlod_line(hlod: dict[str, Any]) -> str:
@@ -253,7 +265,12 @@ def run(args: argparse.Namespace, console: Console) -> int:
         strict=args.strict,
         hlod=hlod,
         hlod_kind=args.hlod_kind,
-        write_options={"switching": args.switching, "sse": args.sse, "atlas_size": args.atlas_size},
+        write_options={
+            "switching": args.switching,
+            "sse": args.sse,
+            "atlas_size": args.atlas_size,
+            "compress": args.compress,
+        },
         also=stage_page if args.html else None,
         limits=limits,
     )

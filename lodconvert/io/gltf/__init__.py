@@ -21,6 +21,7 @@ FORMAT = Format(
     check=check_gltf,
     viewer="gltf",
     formatter=buffers_formatter,
+    write_options=("compress",),
 )
 
 __all__ = [

@@ -5,6 +5,8 @@ component types and widths, and accessor values read from a buffer."""
 
 from __future__ import annotations
 
+import io
+import json
 import os
 import shutil
 import struct
@@ -48,9 +50,11 @@ VECTOR_TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
 ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
 """Buffer view targets: vertex attributes, indices."""
 POINTS, TRIANGLES = 0, 4
+"""Primitive modes (triangles the default)."""
 LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT, CLAMP_TO_EDGE = 9729, 9987, 10497, 33071
 """Sampler filters and wrap modes."""
-"""Primitive modes (triangles the default)."""
+MESHOPT = "EXT_meshopt_compression"
+"""The extension whose buffer views :func:`accessor_values` decodes."""
 
 
 class GlbError(ValueError):
@@ -194,19 +198,97 @@ def split_glb(data: bytes | memoryview) -> tuple[memoryview, memoryview]:
     return view[start : start + size], view[bin_start : bin_start + bin_size]
 
 
+def unpacked_view(blob: bytes | memoryview, packed: dict[str, Any]) -> bytes:
+    """The bytes of a buffer view packed with ``EXT_meshopt_compression`` (its extension
+    object ``packed``, its data in ``blob``): :class:`GlbError` for data elsewhere, a filter
+    other than ``EXPONENTIAL`` or data that cannot be decoded."""
+    # loads numba: only here
+    from .meshopt import MeshoptError, decode_indices, decode_vertices, from_exponential
+
+    filter_ = packed.get("filter", "NONE")
+    if packed.get("buffer", 0) != 0 or filter_ not in ("NONE", "EXPONENTIAL"):
+        raise GlbError(f"meshopt data outside the binary chunk, or its {filter_} filter")
+    data = memoryview(blob)[packed.get("byteOffset", 0) :][: packed["byteLength"]]
+    stride, count = packed["byteStride"], packed["count"]
+    try:
+        if packed["mode"] == "ATTRIBUTES":
+            decoded = decode_vertices(data, count, stride).ravel()
+            if filter_ == "EXPONENTIAL":
+                decoded = from_exponential(decoded.view("<u4")).view(np.uint8)
+            return decoded.tobytes()
+        return decode_indices(data, count, packed["mode"]).astype(f"<u{stride}").tobytes()
+    except (MeshoptError, KeyError, TypeError) as exc:
+        raise GlbError(f"meshopt data cannot be read ({exc})") from None
+
+
 def accessor_values(document: dict[str, Any], blob: bytes | memoryview, index: int) -> np.ndarray:
     """The values of accessor ``index`` of ``document`` in buffer ``blob``, (count,) or
-    (count, width) of its stored type; :class:`GlbError` for an interleaved buffer view."""
+    (count, width) of its stored type; a view under ``EXT_meshopt_compression`` (its data in
+    ``blob``) decoded; :class:`GlbError` for views interleaving several accessors or data
+    that cannot be read."""
     accessor = document["accessors"][index]
     view = document["bufferViews"][accessor["bufferView"]]
     dtype = COMPONENT_DTYPES[accessor["componentType"]]
     width = WIDTHS[accessor["type"]]
-    if view.get("byteStride", dtype.itemsize * width) != dtype.itemsize * width:
-        raise GlbError("interleaved buffer views are not supported")
-    start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
+    size = dtype.itemsize * width
+    stride = view.get("byteStride", size)
     count = accessor["count"]
-    values = np.frombuffer(blob, dtype=dtype, count=count * width, offset=start)
+    start = accessor.get("byteOffset", 0)
+    packed = view.get("extensions", {}).get(MESHOPT)
+    if packed is not None:
+        blob = unpacked_view(blob, packed)
+    else:
+        start += view.get("byteOffset", 0)
+    if stride < size or (stride > size and accessor.get("byteOffset", 0) + size > stride):
+        raise GlbError("interleaved buffer views are not supported")
+    if stride == size:
+        values = np.frombuffer(blob, dtype=dtype, count=count * width, offset=start)
+    else:
+        rows_of = np.frombuffer(blob, dtype=np.uint8, count=count * stride, offset=start)
+        values = rows_of.reshape(count, stride)[:, :size].copy().view(dtype).ravel()
     return values.reshape(count, width) if width > 1 else values
+
+
+def unpacked_glb(data: bytes) -> bytes:
+    """GLB ``data`` with the buffer views packed by ``EXT_meshopt_compression`` decoded into
+    its binary chunk and the extension (and its fallback buffers) gone, for a reader that
+    does not know it; ``data`` itself when nothing is packed. :class:`GlbError` where a view
+    cannot be decoded (:func:`unpacked_view`)."""
+    text, blob = split_glb(data)
+    if MESHOPT.encode() not in bytes(text):
+        return data
+    document = json.loads(bytes(text))
+    views = document.get("bufferViews", [])
+    if not any(MESHOPT in (view.get("extensions") or {}) for view in views):
+        return data
+    out = bytearray(blob)
+    for view in views:
+        packed = (view.get("extensions") or {}).pop(MESHOPT, None)
+        if packed is None:
+            continue
+        decoded = unpacked_view(blob, packed)
+        out.extend(b"\0" * (-len(out) % 4))
+        view.update(buffer=0, byteOffset=len(out), byteLength=len(decoded))
+        out.extend(decoded)
+        if not view["extensions"]:
+            del view["extensions"]
+    buffers = document["buffers"]
+    kept = [k for k, b in enumerate(buffers) if MESHOPT not in (b.get("extensions") or {})]
+    renumbered = {old: new for new, old in enumerate(kept)}
+    if any(view.get("buffer", 0) not in renumbered for view in views):
+        raise GlbError("a buffer view reads a meshopt fallback buffer without being packed")
+    for view in views:
+        view["buffer"] = renumbered[view.get("buffer", 0)]
+    document["buffers"] = [buffers[k] for k in kept]
+    document["buffers"][0]["byteLength"] = len(out)
+    for key in ("extensionsUsed", "extensionsRequired"):
+        if key in document:
+            document[key] = [name for name in document[key] if name != MESHOPT] or None
+            if document[key] is None:
+                del document[key]
+    handle = io.BytesIO()
+    pack_glb(handle, json.dumps(document, separators=(",", ":")).encode(), bytes(out))
+    return handle.getvalue()
 
 
 ChunkData = bytes | IO[bytes]

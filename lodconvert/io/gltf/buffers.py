@@ -6,7 +6,8 @@ JSON text of each accessor, so that the writer only appends them to the document
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,18 @@ from .binary import (
     POINTS,
     TRIANGLES,
     VECTOR_TYPES,
+)
+from .compression import (
+    MESHOPT,
+    NONE,
+    QUANTIZE,
+    Quantizer,
+    StoredView,
+    check_compression,
+    quantizer,
+    stored_attribute,
+    stored_positions,
+    stored_view,
 )
 from .json_text import COMPACT, json_object
 
@@ -92,10 +105,11 @@ def surface_image(surface: Surface) -> tuple[bytes, str]:
 
 @dataclass(frozen=True)
 class AccessorData:
-    """An accessor's bytes (little-endian), its buffer view's target and its other fields, with
-    their compact JSON text (what follows its ``bufferView`` number in a GLB)."""
+    """An accessor's buffer view (its bytes, little-endian, as compressed:
+    :class:`~.compression.StoredView`), the view's target and the accessor's other fields,
+    with their compact JSON text (what follows its ``bufferView`` number in a GLB)."""
 
-    data: bytes
+    view: StoredView
     target: int
     fields: dict[str, Any]
     compact_tail: str
@@ -105,9 +119,15 @@ VIEW_HEAD = '{"bufferView":'
 
 
 def _accessor_data(
-    array: np.ndarray, target: int = ARRAY_BUFFER, normalized: bool = False, bounds: bool = False
+    array: np.ndarray,
+    target: int = ARRAY_BUFFER,
+    normalized: bool = False,
+    bounds: bool = False,
+    compress: str = NONE,
+    words: np.ndarray | None = None,
 ) -> AccessorData:
-    """An accessor over ``array`` ((k,) scalars or (k, w) vectors, dtype of the buffer)."""
+    """An accessor over ``array`` ((k,) scalars or (k, w) vectors, dtype of the buffer), its
+    view stored as ``compress`` says (``words``: positions' exponential filter)."""
     data = np.ascontiguousarray(array)
     stored = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
     fields = json_object(
@@ -120,12 +140,8 @@ def _accessor_data(
         min=[float(v) for v in data.min(axis=0)] if bounds else None,
     )
     compact = COMPACT.text({"bufferView": 0, **fields}, 2)
-    return AccessorData(stored.tobytes(), target, fields, compact[len(VIEW_HEAD) + 1 :])
-
-
-def _colors(rgba: np.ndarray) -> AccessorData:
-    """COLOR_0 accessor: VEC4 normalised unsigned shorts in linear space."""
-    return _accessor_data(linear_rgba16(rgba), normalized=True)
+    view = stored_view(stored, target, compress, words)
+    return AccessorData(view, target, fields, compact[len(VIEW_HEAD) + 1 :])
 
 
 @dataclass(frozen=True)
@@ -134,7 +150,7 @@ class PrimitiveData:
     are added to the buffer (``POSITION``, ``NORMAL``, ``COLOR_0``, ``TEXCOORD_0``), its
     texture (image bytes and MIME type, added next: :func:`surface_image`) and indices (last);
     for a mesh, the linear base colour of its material (``None``: a point level's shared unlit
-    one) and the alpha mode."""
+    one) and the alpha mode; how its positions are stored (:class:`Stored`)."""
 
     attributes: dict[str, AccessorData]
     mode: int
@@ -142,23 +158,73 @@ class PrimitiveData:
     base: list[float] | None = None
     image: tuple[bytes, str] | None = None
     indices: AccessorData | None = None
+    stored: Stored | None = None
 
 
-def _mesh_data(surface: Surface, normals: bool = True) -> PrimitiveData:
-    attributes = {"POSITION": _accessor_data(float32_positions(surface.vertices), bounds=True)}
+@dataclass(frozen=True)
+class Stored:
+    """How a level's positions are stored: the node transform of quantized ones (the same
+    for all its primitives), the largest difference of a coordinate from its float32
+    position (metres), whether an attribute is quantized and whether views are packed."""
+
+    node: dict[str, Any]
+    error: float
+    quantized: bool
+    packed: bool
+
+
+class _Storing:
+    """Accessors of one level stored as ``compress`` says (quantized positions as
+    ``steps_of`` makes them)."""
+
+    def __init__(self, compress: str, steps_of: Quantizer | None) -> None:
+        self.compress, self.steps_of = compress, steps_of
+        self.quantized = False
+        self.error = 0.0
+
+    def data(self, array: np.ndarray, target: int = ARRAY_BUFFER, **fields: Any) -> AccessorData:
+        """An accessor over ``array`` (:func:`_accessor_data`)."""
+        return _accessor_data(array, target, compress=self.compress, **fields)
+
+    def positions(self, vertices: np.ndarray) -> AccessorData:
+        """The ``POSITION`` accessor of ``vertices`` (:func:`~.compression.stored_positions`)."""
+        stored = stored_positions(float32_positions(vertices), self.compress, self.steps_of)
+        self.quantized |= stored.quantizer is not None
+        self.error = max(self.error, stored.error)
+        return self.data(stored.values, bounds=True, words=stored.words)
+
+    def attribute(self, name: str, values: np.ndarray) -> AccessorData:
+        """The ``NORMAL`` or ``TEXCOORD_0`` accessor of float32 ``values``
+        (:func:`~.compression.stored_attribute`)."""
+        stored, quantized = stored_attribute(name, values, self.compress)
+        self.quantized |= quantized
+        return self.data(stored, normalized=quantized)
+
+    def colors(self, rgba: np.ndarray) -> AccessorData:
+        """COLOR_0 accessor: VEC4 normalised unsigned shorts in linear space."""
+        return self.data(linear_rgba16(rgba), normalized=True)
+
+    def stored(self) -> Stored:
+        """How the level's positions were stored."""
+        node = self.steps_of.node() if self.steps_of is not None else {}
+        return Stored(node, self.error, self.quantized, self.compress == MESHOPT)
+
+
+def _mesh_data(surface: Surface, storing: _Storing, normals: bool = True) -> PrimitiveData:
+    attributes = {"POSITION": storing.positions(surface.vertices)}
     if normals:
-        attributes["NORMAL"] = _accessor_data(vertex_normals(surface))
+        attributes["NORMAL"] = storing.attribute("NORMAL", vertex_normals(surface))
     if surface.vertex_colors is not None:
-        attributes["COLOR_0"] = _colors(surface.vertex_colors)
+        attributes["COLOR_0"] = storing.colors(surface.vertex_colors)
     textured = surface.texture is not None and surface.uv is not None
     image = None
     if textured:
         # Surface.uv has its origin at the image's bottom-left, glTF at the top-left.
         flipped = np.column_stack([surface.uv[:, 0], 1.0 - surface.uv[:, 1]])
-        attributes["TEXCOORD_0"] = _accessor_data(flipped.astype(np.float32))
+        attributes["TEXCOORD_0"] = storing.attribute("TEXCOORD_0", flipped.astype(np.float32))
         image = surface_image(surface)
     index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
-    indices = _accessor_data(surface.faces.ravel().astype(index_type), ELEMENT_ARRAY_BUFFER)
+    indices = storing.data(surface.faces.ravel().astype(index_type), ELEMENT_ARRAY_BUFFER)
     alpha_mode = alpha_mode_of(
         surface.material_color[3:],
         None if surface.vertex_colors is None else surface.vertex_colors[:, 3],
@@ -168,38 +234,52 @@ def _mesh_data(surface: Surface, normals: bool = True) -> PrimitiveData:
     return PrimitiveData(attributes, TRIANGLES, alpha_mode, base, image, indices)
 
 
-def _points_data(points: PointCloud) -> PrimitiveData:
+def _points_data(points: PointCloud, storing: _Storing) -> PrimitiveData:
     attributes = {
-        "POSITION": _accessor_data(float32_positions(points.positions), bounds=True),
-        "NORMAL": _accessor_data(unit_normals(points.normals)),
-        "COLOR_0": _colors(points.colors),
+        "POSITION": storing.positions(points.positions),
+        "NORMAL": storing.attribute("NORMAL", unit_normals(points.normals)),
+        "COLOR_0": storing.colors(points.colors),
     }
     return PrimitiveData(attributes, POINTS, alpha_mode_of(points.colors[:, 3]))
 
 
-def level_data(level: Level) -> list[PrimitiveData]:
-    """The primitives of one (non-empty) level. A LOD parent's merged far mesh has no normals:
-    its corners are welded (:func:`~lodconvert.bake.qem.simplify_within`), where normals per
-    vertex would round every building's edges, and glTF clients shade a primitive without
-    normals flat (three.js from screen-space derivatives, with no vertex split)."""
+def level_data(level: Level, compress: str = NONE) -> list[PrimitiveData]:
+    """The primitives of one (non-empty) level, compressed as ``compress`` says (quantized
+    positions: in steps of the whole level, whose node turns them back). A LOD parent's
+    merged far mesh has no normals: its corners are welded
+    (:func:`~lodconvert.bake.qem.simplify_within`), where normals per vertex would round every
+    building's edges, and glTF clients shade a primitive without normals flat (three.js from
+    screen-space derivatives, with no vertex split)."""
+    steps_of = None
+    if compress == QUANTIZE:
+        mesh = level.mesh
+        parts = [level.points.positions] if mesh is None else [p.vertices for p in mesh.parts]
+        steps_of = quantizer(float32_positions(np.concatenate(parts)).astype(np.float64))
+    storing = _Storing(compress, steps_of)
     if level.mesh is None:
-        return [_points_data(level.points)]
-    flat = level.kind == "merged"
-    return [_mesh_data(part, not flat) for part in level.mesh.parts]
+        made = [_points_data(level.points, storing)]
+    else:
+        flat = level.kind == "merged"
+        made = [_mesh_data(part, storing, not flat) for part in level.mesh.parts]
+    stored = storing.stored()
+    return [replace(data, stored=stored) for data in made]
 
 
 ChainBuffers = tuple["list[PrimitiveData] | None", ...]
 """A chain's buffers made by a worker: each level's primitives (``None`` for an empty one)."""
 
 
-def chain_buffers(chain: LodChain) -> ChainBuffers | None:
+def chain_buffers(chain: LodChain, compress: str = NONE) -> ChainBuffers | None:
     """The glTF formats' chain formatter (:mod:`lodconvert.io`): the buffers of a chain that
-    is not an instance of shared geometry (whose levels are written once, by the first)."""
+    is not an instance of shared geometry (whose levels are written once, by the first),
+    compressed as ``compress`` says."""
     if chain.transform is not None:
         return None
-    return tuple(level_data(level) if level.count else None for level in chain.levels)
+    return tuple(level_data(level, compress) if level.count else None for level in chain.levels)
 
 
-def buffers_formatter(info: OutputInfo) -> Callable[[LodChain], ChainBuffers | None]:
+def buffers_formatter(
+    info: OutputInfo, compress: str = NONE
+) -> Callable[[LodChain], ChainBuffers | None]:
     """The glTF formats' ``formatter`` (:mod:`lodconvert.io`)."""
-    return chain_buffers
+    return partial(chain_buffers, compress=check_compression(compress))

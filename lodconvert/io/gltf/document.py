@@ -11,6 +11,7 @@ from typing import IO, Any
 from ...model import Level
 from .binary import LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT
 from .buffers import VIEW_HEAD, AccessorData, PrimitiveData, level_data
+from .compression import NONE, StoredView, fallback_buffer, required
 from .json_text import COMPACT, DataUri, JsonArray, Layout, json_object
 
 UNLIT = "KHR_materials_unlit"
@@ -46,10 +47,12 @@ def _material(
 class Document:
     """A glTF document being written: its JSON arrays and binary buffer go to temporary files
     as they are made (:mod:`.json_text`), so memory holds the chain being added, not what was
-    added before; :meth:`close` deletes them."""
+    added before; :meth:`close` deletes them. Levels made here are compressed as ``compress``
+    says (docs/compression.md)."""
 
-    def __init__(self, layout: Layout) -> None:
+    def __init__(self, layout: Layout, compress: str = NONE) -> None:
         self._layout = layout
+        self.compress = compress
         self._files = contextlib.ExitStack()
         self.blob = self._spool()
         self.blob_length = 0
@@ -63,6 +66,13 @@ class Document:
         self.samplers = self.array()
         self.textures = self.array()
         self.extensions_used: list[str] = []
+        self.fallback_length = 0
+        """Bytes of the meshopt fallback buffer (the packed views' uncompressed layout)."""
+        self.quantized = False
+        self.position_error = 0.0
+        """The largest difference of a stored coordinate from its float32 position."""
+        self.mesh_nodes: dict[int, dict[str, Any]] = {}
+        """The node fields (quantized positions' transform) of each mesh that needs them."""
         self._point_materials: dict[str, int] = {}
         self._mesh_materials: dict[tuple[float | str, ...], int] = {}
         self._shared: dict[int, tuple[Level, int]] = {}  # level of an instance → its mesh
@@ -88,8 +98,11 @@ class Document:
         if extension not in self.extensions_used:
             self.extensions_used.append(extension)
 
-    def _buffer_view(self, data: bytes | memoryview, target: int | None = None) -> int:
-        """Append ``data`` at the next 4-byte boundary of the buffer as a new buffer view."""
+    def _buffer_view(
+        self, data: bytes | memoryview, target: int | None = None, stored: StoredView | None = None
+    ) -> int:
+        """Append ``data`` (a packed view's: ``stored``'s) at the next 4-byte boundary of the
+        buffer as a new buffer view."""
         pad = -self.blob_length % 4
         self._blob_pending += b"\x00" * pad
         self._blob_pending += data
@@ -97,6 +110,11 @@ class Document:
             self.flush_blob()
         start = self.blob_length + pad
         self.blob_length = start + len(data)
+        if stored is not None and (stored.packed is not None or stored.stride is not None):
+            view = stored.json(target, start, self.fallback_length)
+            if stored.packed is not None:
+                self.fallback_length += -(-stored.length // 4) * 4
+            return self.buffer_views.append(view)
         if self._layout is COMPACT:  # as Layout.text lays it out, without the walk
             tail = "}" if target is None else f',"target":{target}}}'
             text = f'{{"buffer":0,"byteOffset":{start},"byteLength":{len(data)}{tail}'
@@ -106,7 +124,7 @@ class Document:
 
     def _accessor(self, accessor: AccessorData) -> int:
         """Add an accessor (and its buffer view); its index."""
-        view = self._buffer_view(accessor.data, accessor.target)
+        view = self._buffer_view(accessor.view.data, accessor.target, accessor.view)
         if self._layout is COMPACT:
             return self.accessors.append_text(VIEW_HEAD + str(view) + accessor.compact_tail)
         return self.accessors.append({"bufferView": view, **accessor.fields})
@@ -179,8 +197,15 @@ class Document:
             return None
         if id(level) in self._shared:
             return self._shared[id(level)][1]
-        primitives = [self._primitive(data) for data in made or level_data(level)]
+        made = made or level_data(level, self.compress)
+        primitives = [self._primitive(data) for data in made]
         mesh = self.meshes.append({"primitives": primitives, "name": name})
+        stored = made[0].stored
+        if stored is not None:
+            self.quantized |= stored.quantized
+            self.position_error = max(self.position_error, stored.error)
+            if stored.node:
+                self.mesh_nodes[mesh] = stored.node
         if shared:  # kept alive with the level, so its id stays unique
             self._shared[id(level)] = (level, mesh)
         return mesh
@@ -194,12 +219,16 @@ class Document:
         if self.blob_length:
             uri = DataUri(self.blob) if data_uri else None
             buffers.append(json_object(uri=uri, byteLength=self.blob_length))
+        if self.fallback_length:
+            buffers.append(fallback_buffer(self.fallback_length))
+        needed = required(self.quantized, self.fallback_length > 0)
         return json_object(
             accessors=self.accessors,
             asset=asset,
             bufferViews=self.buffer_views,
             buffers=buffers,
-            extensionsUsed=self.extensions_used,
+            extensionsUsed=self.extensions_used + needed,
+            extensionsRequired=needed or None,
             images=self.images,
             materials=self.materials,
             meshes=self.meshes,

@@ -17,6 +17,7 @@ from ...ranges import ReferenceView, screen_coverage
 from .. import OutputInfo, Pieces
 from ..frame import ROTATION, SceneFrame, scene_frame
 from .buffers import ChainBuffers
+from .compression import NONE
 from .document import Document
 from .json_text import JsonArray, json_object
 
@@ -166,10 +167,16 @@ def _level_node(
     mesh: int | None,
     extras: dict[str, Any],
     extensions: dict[str, Any] | None = None,
+    placed: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """A node holding one level's mesh (none when the level is empty)."""
+    """A node holding one level's mesh (none when the level is empty), ``placed`` by the
+    translation and scale of its quantized positions where they are."""
     return json_object(
-        extensions=extensions, extras=extras, mesh=mesh, name=_level_name(chain, level)
+        extensions=extensions,
+        extras=extras,
+        mesh=mesh,
+        name=_level_name(chain, level),
+        **(placed or {}),
     )
 
 
@@ -223,11 +230,16 @@ class LodScene:
         far_name = f"{cell.cell_id}_{cell.far.name}"
         mesh = self.doc.level_mesh(far_name, cell.far)
         facts = {"level": cell.far.name, **_level_params(cell.far), "switch_in": cell.cutoffs[0]}
+        translation = self._placed(cell.origin, f"cell {cell.cell_id!r}")
+        steps = self.doc.mesh_nodes.get(mesh, {}) if mesh is not None else {}
+        if steps:  # quantized positions: their corner from the cell's origin, their scale
+            translation = translation + np.asarray(steps["translation"])
         far = json_object(
             extras={"lodconvert": _plain(facts)},
             mesh=mesh,
             name=far_name,
-            translation=[float(v) for v in self._placed(cell.origin, f"cell {cell.cell_id!r}")],
+            translation=[float(v) for v in translation],
+            scale=steps.get("scale"),
         )
         assert self.doc.nodes.append(far) == at
 
@@ -250,10 +262,15 @@ class LodScene:
             extras["MSFT_screencoverage"] = _coverages(chain, self.reference_view)
         extras["lodconvert"] = _chain_extras(chain)
         extensions = {MSFT_LOD: {"ids": ids}} if ids else None
-        self.doc.nodes.append(_level_node(chain, chain.levels[0], finest_mesh, extras, extensions))
+        placed = self.doc.mesh_nodes.get
+        finest = _level_node(
+            chain, chain.levels[0], finest_mesh, extras, extensions, placed(finest_mesh)
+        )
+        self.doc.nodes.append(finest)
         for level, switch_in, mesh in coarser:
             facts = {"level": level.name, **_level_params(level), "switch_in": float(switch_in)}
-            self.doc.nodes.append(_level_node(chain, level, mesh, {"lodconvert": facts}))
+            node = _level_node(chain, level, mesh, {"lodconvert": facts}, placed=placed(mesh))
+            self.doc.nodes.append(node)
 
     def _placed(self, origin: np.ndarray, what: str) -> np.ndarray:
         """Where a node at ``origin`` (source coordinates) is translated: from the scene
@@ -273,8 +290,11 @@ class LodScene:
     def json_value(self, data_uri: bool) -> dict[str, Any]:
         """The document's glTF JSON object (see :meth:`Document.json_value`) with the asset and
         the scene."""
+        extras = _asset_extras(self.info, self.frame)
+        if self.doc.compress != NONE:
+            extras.update(compress=self.doc.compress, position_error=self.doc.position_error)
         asset = {
-            "extras": {"lodconvert": _asset_extras(self.info, self.frame)},
+            "extras": {"lodconvert": extras},
             "generator": self.info.generator,
             "version": "2.0",
         }

@@ -206,7 +206,7 @@ def _primitive(obj: dict[str, Any], blob: bytes, primitive: dict[str, Any]) -> d
             linear = np.column_stack([linear, np.ones(len(linear))])
         out["colors"] = srgb_rgba(linear)
     if "NORMAL" in attributes:
-        out["normals"] = accessor_values(obj, blob, attributes["NORMAL"]).copy()
+        out["normals"] = normalized(accessor_values(obj, blob, attributes["NORMAL"]))
     if "indices" in primitive:
         indices = accessor_values(obj, blob, primitive["indices"])
         out["faces"] = indices.astype(np.int64).reshape(-1, 3)
@@ -214,12 +214,15 @@ def _primitive(obj: dict[str, Any], blob: bytes, primitive: dict[str, Any]) -> d
 
 
 def _read_level(obj: dict[str, Any], blob: bytes, node: dict[str, Any], facts: dict) -> GltfLevel:
-    """One level node's geometry: its mesh's primitives (one per part) joined in order."""
+    """One level node's geometry: its mesh's primitives (one per part) joined in order, the
+    node's scale and translation (of quantized positions) applied."""
     positions = np.zeros((0, 3))
     colors = normals = faces = None
     if "mesh" in node:
         parts = [_primitive(obj, blob, p) for p in obj["meshes"][node["mesh"]]["primitives"]]
-        positions = np.concatenate([p["positions"] for p in parts])
+        scale = np.asarray(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
+        translation = np.asarray(node.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64)
+        positions = np.concatenate([p["positions"] for p in parts]) * scale + translation
         if any(p["colors"] is not None for p in parts):
             colors = np.concatenate(
                 [

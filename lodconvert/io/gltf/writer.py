@@ -16,6 +16,7 @@ from ...model import LodChain
 from ...sinks import writing_temporary
 from .. import OutputInfo, Pieces
 from .binary import pack_glb
+from .compression import NONE, check_compression
 from .document import SPOOL_BYTES, Document
 from .json_text import COMPACT, INDENTED, Layout, write_json
 from .lod import LodScene
@@ -23,11 +24,15 @@ from .lod import LodScene
 
 @contextlib.contextmanager
 def _scene(
-    chains: Iterable[LodChain], info: OutputInfo, layout: Layout, pieces: Pieces | None
+    chains: Iterable[LodChain],
+    info: OutputInfo,
+    layout: Layout,
+    pieces: Pieces | None,
+    compress: str,
 ) -> Iterator[LodScene]:
-    """A document holding ``chains`` (with the buffers workers made of them in ``pieces``); its
-    temporary files are deleted when the block ends."""
-    doc = Document(layout)
+    """A document holding ``chains`` (with the buffers workers made of them in ``pieces``),
+    compressed as ``compress`` says; its temporary files are deleted when the block ends."""
+    doc = Document(layout, check_compression(compress))
     try:
         scene = LodScene(doc, info, pieces or Pieces())
         with writing_temporary():
@@ -40,13 +45,17 @@ def _scene(
 
 
 def write_glb(
-    chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo, pieces: Pieces | None = None
+    chains: Iterable[LodChain],
+    handle: BinaryIO,
+    info: OutputInfo,
+    pieces: Pieces | None = None,
+    compress: str = NONE,
 ) -> None:
-    """Write ``chains`` as binary glTF (one JSON chunk, one BIN chunk) to ``handle``; the
-    buffers of a chain in ``pieces`` (made by a worker, :func:`.buffers.chain_buffers`) are
-    taken as they are."""
+    """Write ``chains`` as binary glTF (one JSON chunk, one BIN chunk) to ``handle``, its
+    geometry compressed as ``compress`` says (docs/compression.md); the buffers of a chain in
+    ``pieces`` (made by a worker, :func:`.buffers.chain_buffers`) are taken as they are."""
     with (
-        _scene(chains, info, COMPACT, pieces) as scene,
+        _scene(chains, info, COMPACT, pieces, compress) as scene,
         tempfile.SpooledTemporaryFile(SPOOL_BYTES) as text,
     ):
         with writing_temporary():
@@ -55,10 +64,14 @@ def write_glb(
 
 
 def write_gltf(
-    chains: Iterable[LodChain], handle: BinaryIO, info: OutputInfo, pieces: Pieces | None = None
+    chains: Iterable[LodChain],
+    handle: BinaryIO,
+    info: OutputInfo,
+    pieces: Pieces | None = None,
+    compress: str = NONE,
 ) -> None:
     """Write ``chains`` as one self-contained glTF JSON file (buffer as a base64 data URI), as
-    :func:`write_glb` takes ``pieces``."""
-    with _scene(chains, info, INDENTED, pieces) as scene:
+    :func:`write_glb` takes ``pieces`` and ``compress``."""
+    with _scene(chains, info, INDENTED, pieces, compress) as scene:
         write_json(scene.json_value(data_uri=True), handle, INDENTED)
     handle.write(b"\n")

@@ -165,9 +165,10 @@ class _Checker:
         """A GLB's positions; its feature ids and property tables checked."""
         found = []
         tables = document.get("extensions", {}).get("EXT_structural_metadata", {})
-        for mesh in document.get("meshes", []):
+        for mesh, (translation, scale) in _mesh_transforms(document):
             for primitive in mesh["primitives"]:
-                found.append(accessor_values(document, blob, primitive["attributes"]["POSITION"]))
+                steps = accessor_values(document, blob, primitive["attributes"]["POSITION"])
+                found.append(translation + scale * steps.astype(np.float64))
                 features = primitive.get("extensions", {}).get("EXT_mesh_features", {})
                 for ids in features.get("featureIds", []):
                     name = f"_FEATURE_ID_{ids['attribute']}"
@@ -214,6 +215,19 @@ class _Checker:
                     wanted = _BYTES.get(definition.get("componentType", ""), 1) * count
                 if length < wanted:
                     self.findings.error("PROPERTY_TABLE", f"{where}: column {name} too short")
+
+
+def _mesh_transforms(document: dict) -> list[tuple[dict, tuple[np.ndarray, np.ndarray]]]:
+    """Each mesh of a GLB as we write them (one node a mesh, with at most a translation and
+    a scale: those of quantized positions) with that node's translation and scale."""
+    meshes = document.get("meshes", [])
+    placed = []
+    for node in document.get("nodes", []):
+        if "mesh" in node:
+            translation = np.asarray(node.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64)
+            scale = np.asarray(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
+            placed.append((meshes[node["mesh"]], (translation, scale)))
+    return placed
 
 
 def _external(tile: Tile) -> bool:

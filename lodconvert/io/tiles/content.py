@@ -9,7 +9,7 @@ from __future__ import annotations
 import io
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -30,6 +30,16 @@ from ..gltf.binary import (
     pack_glb,
 )
 from ..gltf.buffers import alpha_mode_of, float32_positions, vertex_normals
+from ..gltf.compression import (
+    NONE,
+    Quantizer,
+    StoredView,
+    fallback_buffer,
+    required,
+    stored_attribute,
+    stored_positions,
+    stored_view,
+)
 from ..gltf.document import UNLIT
 from ..images import encoded
 from .metadata import Feature, property_table
@@ -39,13 +49,22 @@ STRUCTURAL_METADATA = "EXT_structural_metadata"
 
 
 class _Builder:
-    """A GLB's binary buffer, buffer views and accessors."""
+    """A GLB's binary buffer, buffer views and accessors; with ``compress`` (a
+    :data:`~..gltf.compression.COMPRESSIONS`) other than ``none``, its vertex attributes and
+    indices compressed so."""
 
-    def __init__(self) -> None:
+    def __init__(self, compress: str = NONE) -> None:
+        self.compress = compress
         self.blob = bytearray()
         self.views: list[dict[str, Any]] = []
         self.accessors: list[dict[str, Any]] = []
         self.images: list[dict[str, Any]] = []
+        self.fallback = 0
+        """Bytes of the meshopt fallback buffer (the compressed views' uncompressed layout)."""
+        self.quantized = False
+        """Whether an attribute is stored as ``KHR_mesh_quantization`` allows."""
+        self.position_error = 0.0
+        """How far (metres) a stored position lies from its float32 position, at most."""
 
     def texture(self, rgba: np.ndarray, photographic: bool) -> int:
         """A texture of the image ``rgba`` (:func:`~..images.encoded`), sampled with mipmaps
@@ -68,43 +87,86 @@ class _Builder:
 
     def view(self, data: bytes, target: int | None = None) -> int:
         """A buffer view of ``data`` at an 8-byte boundary (as property tables need)."""
+        return self._add(StoredView(data, len(data)), target)
+
+    def _add(self, stored: StoredView, target: int | None) -> int:
+        """A buffer view of ``stored`` (its data at an 8-byte boundary)."""
         self.blob.extend(b"\0" * (-len(self.blob) % 8))
-        view: dict[str, Any] = {"buffer": 0, "byteOffset": len(self.blob), "byteLength": len(data)}
-        if target is not None:
-            view["target"] = target
-        self.blob.extend(data)
-        self.views.append(view)
+        self.views.append(stored.json(target, len(self.blob), self.fallback))
+        self.blob.extend(stored.data)
+        if stored.packed is not None:
+            self.fallback += -(-stored.length // 4) * 4
         return len(self.views) - 1
 
     def accessor(
-        self, array: np.ndarray, target: int = ARRAY_BUFFER, normalized: bool = False
+        self,
+        array: np.ndarray,
+        target: int = ARRAY_BUFFER,
+        normalized: bool = False,
+        bounds: bool = False,
+        words: np.ndarray | None = None,
     ) -> int:
-        """An accessor of ``array`` ((n,) or (n, k)); positions get their bounds."""
+        """An accessor of ``array`` ((n,) or (n, k)), with its ``bounds`` (positions), its
+        view as the builder compresses (:func:`~..gltf.compression.stored_view`)."""
         array = np.ascontiguousarray(array)
+        view = self._add(stored_view(array, target, self.compress, words), target)
         width = 1 if array.ndim == 1 else array.shape[1]
         accessor: dict[str, Any] = {
-            "bufferView": self.view(array.tobytes(), target),
+            "bufferView": view,
             "componentType": COMPONENT_TYPES[array.dtype],
             "count": len(array),
             "type": VECTOR_TYPES[width],
         }
         if normalized:
             accessor["normalized"] = True
-        if width == 3 and array.dtype == np.float32 and target == ARRAY_BUFFER:
-            accessor["min"] = [float(v) for v in array.min(axis=0)]
-            accessor["max"] = [float(v) for v in array.max(axis=0)]
+        if bounds:
+            accessor["min"] = array.min(axis=0).tolist()
+            accessor["max"] = array.max(axis=0).tolist()
         self.accessors.append(accessor)
         return len(self.accessors) - 1
 
+    def positions(self, positions: np.ndarray) -> tuple[int, Quantizer | None]:
+        """The ``POSITION`` accessor of float32 ``positions`` as the builder stores them
+        (:func:`~..gltf.compression.stored_positions`; the node transform of quantized ones
+        returned), their error kept in :attr:`position_error`."""
+        stored = stored_positions(positions, self.compress)
+        self.quantized |= stored.quantizer is not None
+        self.position_error = stored.error
+        return self.accessor(stored.values, bounds=True, words=stored.words), stored.quantizer
+
+    def attribute(self, name: str, values: np.ndarray) -> int:
+        """The ``NORMAL`` or ``TEXCOORD_0`` accessor of float32 ``values`` as the builder
+        stores them (:func:`~..gltf.compression.stored_attribute`)."""
+        stored, quantized = stored_attribute(name, values, self.compress)
+        self.quantized |= quantized
+        return self.accessor(stored, normalized=quantized)
+
+    def feature_ids(self, ids: np.ndarray, count: int) -> int:
+        """The ``_FEATURE_ID_0`` accessor of ``ids`` (below ``count``): unsigned shorts where
+        the builder compresses and they fit, else float32."""
+        small = self.compress != NONE and count <= 65536
+        return self.accessor(ids.astype(np.uint16 if small else np.float32))
+
     def glb(self, document: dict[str, Any]) -> bytes:
-        """The GLB of ``document`` with this buffer."""
+        """The GLB of ``document`` with this buffer (and the fallback buffer of compressed
+        views, the extensions they take named used and required)."""
         self.blob.extend(b"\0" * (-len(self.blob) % 4))
+        buffers: list[dict[str, Any]] = [{"byteLength": len(self.blob)}]
+        if self.fallback:
+            buffers.append(fallback_buffer(self.fallback))
+        needed = required(self.quantized, self.fallback > 0)
         document = {
             **document,
             "accessors": self.accessors,
             "bufferViews": self.views,
-            "buffers": [{"byteLength": len(self.blob)}],
+            "buffers": buffers,
         }
+        if needed:
+            document["extensionsUsed"] = document.get("extensionsUsed", []) + needed
+            document["extensionsRequired"] = needed
+        if self.compress != NONE:
+            extras = {"compress": self.compress, "position_error": self.position_error}
+            document["asset"] = {**document["asset"], "extras": {"lodconvert": extras}}
         text = json.dumps(document, separators=(",", ":"), ensure_ascii=False).encode()
         out = io.BytesIO()
         pack_glb(out, text, bytes(self.blob))
@@ -123,14 +185,19 @@ class TileTextures:
     photographic: bool = False
 
 
-def _document(generator: str, drawn: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict:
+def _document(
+    generator: str,
+    drawn: list[tuple[dict[str, Any], dict[str, Any]]],
+    quantized: Quantizer | None = None,
+) -> dict:
     """A glTF document of one node drawing one mesh of ``drawn`` primitives, each with its
-    material."""
+    material (the node's transform turns ``quantized`` positions back)."""
+    node = {"mesh": 0, **(quantized.node() if quantized is not None else {})}
     return {
         "asset": {"version": "2.0", "generator": generator},
         "scene": 0,
         "scenes": [{"nodes": [0]}],
-        "nodes": [{"mesh": 0}],
+        "nodes": [node],
         "meshes": [{"primitives": [{**p, "material": k} for k, (p, _) in enumerate(drawn)]}],
         "materials": [material for _, material in drawn],
     }
@@ -165,25 +232,31 @@ def mesh_glb(
     generator: str,
     textures: TileTextures | None = None,
     atlas_size: int = ATLAS_SIZE,
+    compress: str = NONE,
 ) -> bytes:
     """A GLB of a triangle primitive: ``vertices`` (n, 3) glTF coordinates (y-up, about the
     tile's origin), ``faces`` (m, 3), ``colors`` (n, 4) sRGB bytes, ``feature_ids`` (n,) into
     ``features`` (``None``: content without features, a merged far level); the faces of
     textured vertices (``textures``) are drawn by a primitive per atlas page (at most
     ``atlas_size`` texels a side) instead, on the same vertices (their colours multiply the
-    texture: white shows it as it is)."""
-    builder = _Builder()
+    texture: white shows it as it is); its geometry compressed as ``compress`` says."""
+    if compress != NONE:
+        vertices, faces, colors, feature_ids, textures = _in_fetch_order(
+            vertices, faces, colors, feature_ids, textures
+        )
+    builder = _Builder(compress)
     positions = float32_positions(vertices)
     normals = vertex_normals(Surface(positions.astype(np.float64), faces))
     index_type = np.uint16 if len(vertices) < 65536 else np.uint32
     paged = _pages(textures, atlas_size) if textures is not None else None
+    position, quantized = builder.positions(positions)
     attributes = {
-        "POSITION": builder.accessor(positions),
-        "NORMAL": builder.accessor(normals),
+        "POSITION": position,
+        "NORMAL": builder.attribute("NORMAL", normals),
         "COLOR_0": builder.accessor(linear_rgba16(colors), normalized=True),
     }
     if feature_ids is not None:
-        attributes["_FEATURE_ID_0"] = builder.accessor(feature_ids.astype(np.float32))
+        attributes["_FEATURE_ID_0"] = builder.feature_ids(feature_ids, len(features))
     extensions: dict[str, Any] = {}
     if feature_ids is not None:
         ids = {"featureCount": len(features), "attribute": 0, "propertyTable": 0}
@@ -201,17 +274,38 @@ def mesh_glb(
         drawn.append((primitive(plain, {}), _material(colors[:, 3])))
     if paged is not None:
         _, atlas_uv, atlas = paged
-        coordinates = {"TEXCOORD_0": builder.accessor(atlas_uv)}
+        coordinates = {"TEXCOORD_0": builder.attribute("TEXCOORD_0", atlas_uv)}
         for page, image in enumerate(atlas.pages):
             texture = builder.texture(image, textures.photographic)  # type: ignore[union-attr]
             material = _material(image[..., 3].ravel(), texture=texture)
             drawn.append((primitive(faces[face_page == page], coordinates), material))
-    document = _document(generator, drawn)
+    document = _document(generator, drawn, quantized)
     document.update(builder.textures())
     if feature_ids is not None:
         document["extensionsUsed"] = [MESH_FEATURES, STRUCTURAL_METADATA]
         document["extensions"] = {STRUCTURAL_METADATA: property_table(features, builder.view)}
     return builder.glb(document)
+
+
+def _in_fetch_order(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    colors: np.ndarray,
+    feature_ids: np.ndarray | None,
+    textures: TileTextures | None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, TileTextures | None]:
+    """The vertices (and what each carries) in the order the faces first use them, unused
+    ones last, and the faces on them: consecutive vertices then lie close and the triangle
+    codec finds most indices as the next new vertex."""
+    used, first = np.unique(faces.ravel(), return_index=True)
+    rest = np.setdiff1d(np.arange(len(vertices)), used)
+    order = np.concatenate([used[np.argsort(first, kind="stable")], rest])
+    index_of = np.empty(len(vertices), dtype=np.int64)
+    index_of[order] = np.arange(len(vertices))
+    if textures is not None:
+        textures = replace(textures, image_of=textures.image_of[order], uv=textures.uv[order])
+    ids = feature_ids[order] if feature_ids is not None else None
+    return vertices[order], index_of[faces], colors[order], ids, textures
 
 
 def _pages(textures: TileTextures, size: int) -> tuple[np.ndarray, np.ndarray, Atlas] | None:
@@ -231,15 +325,19 @@ def _pages(textures: TileTextures, size: int) -> tuple[np.ndarray, np.ndarray, A
     return pages, uv.astype(np.float32), atlas
 
 
-def points_glb(positions: np.ndarray, colors: np.ndarray, generator: str) -> bytes:
+def points_glb(
+    positions: np.ndarray, colors: np.ndarray, generator: str, compress: str = NONE
+) -> bytes:
     """A GLB of one ``POINTS`` primitive: ``positions`` (n, 3) glTF coordinates, ``colors``
-    (n, 4) sRGB bytes."""
-    builder = _Builder()
+    (n, 4) sRGB bytes; compressed as ``compress`` says."""
+    builder = _Builder(compress)
+    position, quantized = builder.positions(float32_positions(positions))
     attributes = {
-        "POSITION": builder.accessor(float32_positions(positions)),
+        "POSITION": position,
         "COLOR_0": builder.accessor(linear_rgba16(colors), normalized=True),
     }
     primitive = {"attributes": attributes, "mode": POINTS}
-    document = _document(generator, [(primitive, _material(colors[:, 3], unlit=True))])
+    drawn = [(primitive, _material(colors[:, 3], unlit=True))]
+    document = _document(generator, drawn, quantized)
     document["extensionsUsed"] = [UNLIT]
     return builder.glb(document)

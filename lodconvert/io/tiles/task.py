@@ -25,6 +25,7 @@ import numpy as np
 from ...errors import LodConvertError
 from ...sinks import RESUME, DirectorySink
 from ...textures import ATLAS_SIZE
+from ..gltf.compression import MESHOPT
 from .content import TileTextures, mesh_glb, points_glb
 from .metadata import Feature
 from .placement import Placement, world_to_frame
@@ -81,7 +82,8 @@ class TileTask:
     """The GLB ``name`` in the tileset's ``tiles/``: a triangle mesh (``faces``; with
     ``feature_ids`` into ``features``, or none for a merged far level) or, without ``faces``,
     points; ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes; the textures of
-    its textured vertices (``textures``), packed into atlas pages of ``atlas_size``."""
+    its textured vertices (``textures``), packed into atlas pages of ``atlas_size``; its
+    geometry compressed as ``compress`` (:data:`~..gltf.compression.COMPRESSIONS`) says."""
 
     name: str
     where: Where
@@ -93,11 +95,12 @@ class TileTask:
     generator: str
     textures: TileTextures | None = None
     atlas_size: int = ATLAS_SIZE
+    compress: str = MESHOPT
 
     def key(self) -> str:
         """The hash of everything that makes this tile's file, frame and box."""
         digest = hashlib.sha256()
-        head = [self.name, self.where.key, self.generator, self.features]
+        head = [self.name, self.where.key, self.generator, self.features, self.compress]
         textures = self.textures
         if textures is not None:
             head += [self.atlas_size, textures.photographic]
@@ -156,10 +159,10 @@ class TileTask:
     def _glb(self, gltf: np.ndarray) -> bytes:
         """The GLB of the tile's content at glTF coordinates ``gltf``."""
         if self.faces is None:
-            return points_glb(gltf, self.colors, self.generator)
+            return points_glb(gltf, self.colors, self.generator, self.compress)
         return mesh_glb(
             gltf, self.faces, self.colors, self.feature_ids, self.features, self.generator,
-            self.textures, self.atlas_size,
+            self.textures, self.atlas_size, self.compress,
         )  # fmt: skip
 
     def failed(self, reason: str) -> TileResult:

@@ -25,6 +25,7 @@ from ...errors import LodConvertError, UsageError
 from ...model import CellChain, LodChain, Mesh, Surface
 from ...textures import ATLAS_SIZE, check_atlas_size
 from .. import OutputInfo, Pieces
+from ..gltf.compression import MESHOPT, check_compression
 from .metadata import Feature
 from .placement import Placement, world_to_frame
 
@@ -132,8 +133,10 @@ class TilesetWriter:
         executor: Any = None,
         progress: Callable[[str], None] | None = None,
         atlas_size: int = ATLAS_SIZE,
+        compress: str = MESHOPT,
     ) -> None:
         self.sink, self.info, self.sse, self.atlas_size = sink, info, sse, atlas_size
+        self.compress = compress
         self.executor, self.progress = executor, progress
         self.placement = Placement(info.georef, info.crs, info.source)
         georef = info.georef
@@ -171,7 +174,7 @@ class TilesetWriter:
         (its frame and box are filled in from the task's result); see :class:`TileTask`."""
         task = TileTask(
             f"{name}.glb", self.where, vertices, colors, faces, feature_ids, features,
-            self.info.generator, textures, self.atlas_size,
+            self.info.generator, textures, self.atlas_size, self.compress,
         )  # fmt: skip
         tile = Tile(None, None, error, task.name)
         self._queued.append((tile, task))
@@ -434,14 +437,17 @@ def write_tileset(
     pieces: Pieces | None = None,
     sse: float = DEFAULT_SSE,
     atlas_size: int = ATLAS_SIZE,
+    compress: str | None = None,
 ) -> None:
     """The registry's ``write``: the tileset of ``chains`` (LOD parents and objects, as
     :func:`~lodconvert.bakery.iter_chains` yields them with cells) into ``sink``, each tile's
     GLB made by the executor of the run's ``context`` (``None``: here), its textures packed
-    into atlas pages of at most ``atlas_size`` texels a side; a tileset takes no ``pieces``."""
+    into atlas pages of at most ``atlas_size`` texels a side, its geometry compressed as
+    ``compress`` says (``None``: ``meshopt``); a tileset takes no ``pieces``."""
     if not (math.isfinite(sse) and sse > 0):
         raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
     check_atlas_size(atlas_size)
+    compress = check_compression(compress or MESHOPT)
     executor, progress = (context.executor, context.progress) if context else (None, None)
-    writer = TilesetWriter(sink, info, sse, executor, progress, atlas_size)
+    writer = TilesetWriter(sink, info, sse, executor, progress, atlas_size, compress)
     writer.write(chains, "tileset.json")

@@ -1,0 +1,298 @@
+"""Compressed glTF geometry (``--compress``, docs/compression.md): meshoptimizer's bitstreams
+written byte for byte as its own encoder writes them and read back, tilesets (meshopt by
+default) and ``.glb`` files that pass the official validators with the same geometry within
+the error they state, and a wrong ``--compress`` refused in one line."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.spatial import cKDTree
+
+from lodconvert.io.gltf.binary import accessor_values
+from lodconvert.io.gltf.compression import POSITION_STEPS
+from lodconvert.io.gltf.meshopt import (
+    MeshoptError,
+    decode_indices,
+    decode_vertices,
+    encode_sequence,
+    encode_triangles,
+    encode_vertices,
+    exponential,
+    from_exponential,
+)
+from lodconvert.io.gltf.reader import read_lod_gltf
+from lodconvert.io.tiles.check import read_glb
+
+from .conftest import ROOT, SHARED, require
+from .test_cli import assert_one_line_error, run
+from .test_tiles import official
+
+TUM = SHARED / "data" / "citygml" / "tum_munich_lod2_v2.zip"
+BUNNY = SHARED / "data" / "stanford"
+REFERENCE = ROOT / "node_modules" / "meshoptimizer" / "index.js"
+MESHOPT = "EXT_meshopt_compression"
+QUANTIZATION = "KHR_mesh_quantization"
+_SCRIPT = """
+import {{ MeshoptEncoder, MeshoptDecoder }} from {module};
+import fs from 'fs';
+await MeshoptEncoder.ready; await MeshoptDecoder.ready;
+const [what, file, count, size] = process.argv.slice(2);
+const b = fs.readFileSync(file);
+const src = new Uint8Array(b.buffer, b.byteOffset, b.length);
+let out;
+if (what === 'vertices') out = MeshoptEncoder.encodeVertexBufferLevel(src, +count, +size, 2, 0);
+else if (what === 'sequence') out = MeshoptEncoder.encodeIndexSequence(src, +count, +size);
+else if (what === 'triangles') out = MeshoptEncoder.encodeIndexBuffer(src, +count, +size);
+else if (what === 'exponential') out = MeshoptEncoder.encodeFilterExp(
+  new Float32Array(b.buffer, b.byteOffset, b.length / 4), +count, +size, 24, 'SharedComponent');
+else {{
+  out = new Uint8Array(+count * +size);
+  MeshoptDecoder.decodeGltfBuffer(out, +count, +size, src, what);
+}}
+process.stdout.write(Buffer.from(out).toString('base64'));
+"""
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """meshoptimizer's own encoders and decoder (its npm package, run by node): a function
+    of (what, bytes, count, size) giving the bytes it makes."""
+    node = shutil.which("node")
+    require(node is not None, "node is not on PATH (meshoptimizer's reference encoder)")
+    require(REFERENCE.exists(), f"{REFERENCE} is absent (scripts/test.sh installs it)")
+    folder = tmp_path_factory.mktemp("meshopt")
+    script = folder / "reference.mjs"
+    script.write_text(_SCRIPT.format(module=json.dumps(REFERENCE.as_uri())))
+
+    def make(what: str, data: bytes, count: int, size: int) -> bytes:
+        source = folder / "in.bin"
+        source.write_bytes(data)
+        done = subprocess.run(
+            [node, str(script), what, str(source), str(count), str(size)],
+            capture_output=True, text=True, timeout=120, check=True,
+        )  # fmt: skip
+        import base64
+
+        return base64.b64decode(done.stdout)
+
+    return make
+
+
+RNG = np.random.default_rng(7)
+SHAPES = [(1, 4), (5, 12), (300, 12), (1000, 36), (4000, 8), (17, 256), (0, 12)]
+
+
+@pytest.mark.parametrize(("count", "stride"), SHAPES)
+def test_vertex_data_is_what_meshoptimizer_writes(reference, count, stride):
+    smooth = np.cumsum(RNG.integers(-3, 4, size=(count, stride // 4)), axis=0)
+    rows = smooth.astype(np.float32).view(np.uint8).reshape(count, stride)
+    assert encode_vertices(rows) == reference("vertices", rows.tobytes(), count, stride)
+    noise = RNG.integers(0, 256, size=(count, stride), dtype=np.uint8)
+    packed = encode_vertices(noise)
+    assert packed == reference("vertices", noise.tobytes(), count, stride)
+    assert np.array_equal(decode_vertices(packed, count, stride), noise)
+
+
+MESHES = {
+    "box": trimesh.creation.box().faces,
+    "sphere": trimesh.creation.icosphere(3).faces,
+    "two boxes (a reset)": np.vstack([trimesh.creation.box().faces] * 2),
+    "random": RNG.integers(0, 100_000, size=(1000, 3)),
+}
+
+
+@pytest.mark.parametrize("name", MESHES)
+def test_index_data_is_what_meshoptimizer_writes(reference, name):
+    indices = np.asarray(MESHES[name], dtype=np.uint32).ravel()
+    raw = indices.tobytes()
+    triangles = encode_triangles(indices)
+    assert triangles == reference("triangles", raw, len(indices), 4)
+    sequence = encode_sequence(indices)
+    assert sequence == reference("sequence", raw, len(indices), 4)
+    assert np.array_equal(decode_indices(sequence, len(indices), "INDICES"), indices)
+    # the triangle codec may start a triangle at another corner: as meshoptimizer decodes it
+    decoded = decode_indices(triangles, len(indices), "TRIANGLES")
+    theirs = reference("TRIANGLES", triangles, len(indices), 4)
+    assert decoded.tobytes() == theirs
+    assert sorted(map(_turned, decoded.reshape(-1, 3))) == sorted(
+        map(_turned, indices.reshape(-1, 3))
+    )
+
+
+def _turned(triangle: np.ndarray) -> tuple[int, ...]:
+    """A triangle from its least corner, keeping its winding."""
+    k = int(np.argmin(triangle))
+    return tuple(int(v) for v in np.roll(triangle, -k))
+
+
+def test_the_exponential_filter_is_meshoptimizers_and_within_half_a_float32_step(reference):
+    for scale in (1e-3, 1.0, 300.0):
+        values = (RNG.normal(size=(500, 3)) * scale).astype(np.float32)
+        values[5] = 0.0
+        words = exponential(values)
+        theirs = reference("exponential", values.tobytes(), 500, 12)
+        assert words.tobytes() == theirs
+        back = from_exponential(words)
+        largest = np.abs(values).max(axis=0)
+        assert (np.abs(back - values) <= np.spacing(largest)).all()
+
+
+@pytest.mark.parametrize(
+    "damage", ["truncated", "wrong header", "garbage", "empty"], ids=lambda d: d
+)
+def test_malformed_meshopt_data_is_refused_not_crashed_on(damage):
+    rows = RNG.integers(0, 256, size=(300, 12), dtype=np.uint8)
+    good = {"vertices": encode_vertices(rows), "triangles": encode_triangles(MESHES["sphere"])}
+    count = MESHES["sphere"].size
+    for what, data in good.items():
+        bad = {
+            "truncated": data[: len(data) // 2],
+            "wrong header": b"\x00" + data[1:],
+            "garbage": RNG.integers(0, 256, size=len(data), dtype=np.uint8).tobytes(),
+            "empty": b"",
+        }[damage]
+        with pytest.raises(MeshoptError):
+            if what == "vertices":
+                decode_vertices(bad, 300, 12)
+            else:
+                decode_indices(bad, count, "TRIANGLES")
+
+
+@pytest.fixture(scope="module")
+def tum_tilesets(tmp_path_factory) -> dict[str, Path]:
+    """TUM Munich as a tileset three ways: ``none``, the default (``meshopt``), ``quantize``."""
+    require(TUM.exists(), f"{TUM} is absent (shared data not checked out)")
+    out = tmp_path_factory.mktemp("compressed")
+    made = {}
+    for how in ("none", None, "quantize"):
+        name = how or "default"
+        extra = ["--compress", how] if how else []
+        result = run(TUM, "-o", out / name / "tileset.json", "-q", *extra)
+        assert result.returncode == 0, result.stderr
+        made[name] = out / name / "tileset.json"
+    return made
+
+
+def _positions(tileset: Path) -> dict[str, tuple[np.ndarray, np.ndarray, dict]]:
+    """Every tile's content positions (the node's transform applied), feature ids and asset
+    extras, by file name."""
+    found = {}
+    for path in sorted((tileset.parent / "tiles").glob("*.glb")):
+        document, blob = read_glb(path)
+        node = document["nodes"][0]
+        points, ids = [], []
+        for primitive in document["meshes"][0]["primitives"]:
+            steps = accessor_values(document, blob, primitive["attributes"]["POSITION"])
+            scale = np.asarray(node.get("scale", [1.0] * 3))
+            points.append(steps * scale + np.asarray(node.get("translation", [0.0] * 3)))
+            if "_FEATURE_ID_0" in primitive["attributes"]:
+                feature = accessor_values(document, blob, primitive["attributes"]["_FEATURE_ID_0"])
+                ids.append(feature.astype(np.int64))
+        extras = document["asset"].get("extras", {}).get("lodconvert", {})
+        found[path.name] = (np.vstack(points), np.concatenate(ids) if ids else None, extras)
+    return found
+
+
+def _same_geometry(plain: Path, packed: Path) -> float:
+    """Assert the two tilesets' tiles hold the same vertices (in any order: each has one of
+    the other's within the packed tile's stated error per coordinate) and feature ids; the
+    largest error stated."""
+    ours, theirs = _positions(plain), _positions(packed)
+    assert ours.keys() == theirs.keys()
+    largest = 0.0
+    for name, (points, ids, _) in ours.items():
+        packed_points, packed_ids, extras = theirs[name]
+        error = extras["position_error"]
+        largest = max(largest, error)
+        assert len(points) == len(packed_points), name
+        for a, b in ((points, packed_points), (packed_points, points)):
+            gap = cKDTree(a).query(b, p=np.inf)[0].max()
+            assert gap <= error + 1e-9, (name, gap, error)
+        if ids is not None:
+            assert sorted(ids.tolist()) == sorted(packed_ids.tolist())
+    return largest
+
+
+def test_a_tileset_is_meshopt_compressed_by_default_to_under_half_the_bytes(tum_tilesets):
+    plain, packed = tum_tilesets["none"], tum_tilesets["default"]
+    sizes = {
+        name: sum(f.stat().st_size for f in (path.parent / "tiles").glob("*.glb"))
+        for name, path in tum_tilesets.items()
+    }
+    assert sizes["default"] <= 0.42 * sizes["none"], sizes
+    assert sizes["quantize"] < sizes["none"], sizes
+    packed_bytes = 0
+    for path in (packed.parent / "tiles").glob("*.glb"):
+        document, _ = read_glb(path)
+        views = [v for v in document["bufferViews"] if MESHOPT in v.get("extensions", {})]
+        assert (MESHOPT in document.get("extensionsRequired", [])) == bool(views)
+        packed_bytes += path.stat().st_size if views else 0
+    assert packed_bytes >= 0.95 * sizes["default"]  # only views too small to gain stay plain
+    # exact to float32's precision: within a float32 step of a 512 m coordinate
+    assert _same_geometry(plain, packed) <= 2.0**-14
+
+
+def test_quantized_tiles_keep_their_stated_error_within_a_step_of_their_extent(tum_tilesets):
+    plain = tum_tilesets["none"]
+    largest = _same_geometry(plain, tum_tilesets["quantize"])
+    assert 0 < largest < 0.01  # TUM's tiles are under 600 m across: half a step < 5 mm
+    for name, (points, _, extras) in _positions(tum_tilesets["quantize"]).items():
+        extent = float((points.max(axis=0) - points.min(axis=0)).max())
+        assert extras["position_error"] <= extent / POSITION_STEPS / 2 * 1.01 + 1e-9, name
+
+
+@pytest.mark.parametrize("how", ["default", "quantize"])
+def test_compressed_tilesets_pass_the_official_validator(tum_tilesets, how, tmp_path):
+    tileset = tum_tilesets[how]
+    report = official(tileset, tmp_path / "report.json")
+    assert report["numErrors"] == 0 and report["numWarnings"] == 0, report["issues"][:3]
+    assert run("validate", tileset).returncode == 0
+
+
+@pytest.mark.parametrize("how", ["meshopt", "quantize"])
+def test_a_compressed_glb_passes_the_khronos_validator_with_the_same_levels(
+    how, tmp_path, gltf_validator
+):
+    bunny = sorted(BUNNY.glob("bunny*"))
+    require(bool(bunny), f"{BUNNY} holds no bunny (shared data not checked out)")
+    made = {}
+    for name in ("none", how):
+        out = tmp_path / f"{name}.glb"
+        assert run(bunny[0], "-o", out, "--compress", name, "-q").returncode == 0
+        made[name] = out
+    assert made[how].stat().st_size < 0.7 * made["none"].stat().st_size
+    report = gltf_validator(made[how])
+    assert report["issues"]["numErrors"] == 0 and report["issues"]["numWarnings"] == 0
+    used = {
+        m["message"] for m in report["issues"]["messages"] if m["code"] == "UNSUPPORTED_EXTENSION"
+    }
+    assert used <= {
+        f"Cannot validate an extension as it is not supported by the validator: '{name}'."
+        for name in ("MSFT_lod", MESHOPT)
+    }
+    plain, packed = read_lod_gltf(made["none"]), read_lod_gltf(made[how])
+    document, _ = read_glb(made[how])
+    error = document["asset"]["extras"]["lodconvert"]["position_error"]
+    assert error > 0
+    for ours, theirs in zip(plain, packed, strict=True):
+        for level, packed_level in zip(ours.levels, theirs.levels, strict=True):
+            gap = np.abs(level.positions - packed_level.positions).max(initial=0.0)
+            assert gap <= error + 1e-9, (level.name, gap, error)
+    assert run("validate", made[how]).returncode == 0
+
+
+def test_a_wrong_compress_is_a_one_line_usage_error_that_writes_nothing(tmp_path):
+    cube = tmp_path / "cube.obj"
+    trimesh.creation.box().export(cube)
+    result = run(cube, "-o", tmp_path / "out.glb", "--compress", "zstd")
+    assert_one_line_error(result, 2, "--compress", "zstd")
+    result = run(cube, "-o", tmp_path / "out.x3d", "--compress", "meshopt")
+    assert_one_line_error(result, 2, "--compress", "out.x3d")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cube.obj"]
