@@ -77,7 +77,8 @@ def main() -> None:
             for setup in SETUPS:
                 root = args.before if setup == "before" else ROOT
                 options = () if setup == "before" else ("--compress", setup)
-                run = convert_once(TUM, out[setup], "1", root=root, options=options, prefix=PIN)
+                report = Path(folder) / f"{setup}.report.json"
+                run = convert_once(TUM, out[setup], "1", root, options, report, PIN)
                 cpu[setup].append(run.cpu)
         found = {setup: parts(out[setup]) for setup in SETUPS}
         seen = {setup: cesium_metrics(out[setup]) for setup in SETUPS}
