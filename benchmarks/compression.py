@@ -78,7 +78,9 @@ def main() -> None:
                 root = args.before if setup == "before" else ROOT
                 options = () if setup == "before" else ("--compress", setup)
                 report = Path(folder) / f"{setup}.report.json"
-                run = convert_once(TUM, out[setup], "1", root, options, report, PIN)
+                run = convert_once(
+                    TUM, out[setup], "1", root=root, options=options, report=report, prefix=PIN
+                )
                 cpu[setup].append(run.cpu)
         found = {setup: parts(out[setup]) for setup in SETUPS}
         seen = {setup: cesium_metrics(out[setup]) for setup in SETUPS}
