@@ -27,7 +27,7 @@ from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.textures import PADDING, packed
 
 from .conftest import SHARED, gl_renderer
-from .test_cli import run
+from .test_cli import assert_one_line_error, run
 from .test_gltf import _assert_valid
 from .test_tiles import official
 
@@ -744,3 +744,57 @@ def test_a_wrong_atlas_size_is_a_usage_error_that_writes_nothing(
     assert result.returncode == 2 and message in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists() and not (tmp_path / "out.glb").exists()
+
+
+def _webp_textures(document: dict, blob: bytes) -> list[tuple[Image.Image, Image.Image]]:
+    """Each texture's fallback image and its ``EXT_texture_webp`` copy, decoded."""
+    views = document["bufferViews"]
+
+    def image(index: int) -> Image.Image:
+        view = views[document["images"][index]["bufferView"]]
+        data = blob[view["byteOffset"] :][: view["byteLength"]]
+        return Image.open(io.BytesIO(data))
+
+    return [
+        (image(t["source"]), image(t["extensions"]["EXT_texture_webp"]["source"]))
+        for t in document["textures"]
+    ]
+
+
+def test_webp_copies_of_textures_pass_the_validators_and_hold_the_same_texels(
+    tmp_path: Path, gltf_validator
+) -> None:
+    """``--texture-format webp``: every texture of a ``.glb`` and of a tileset's atlas pages
+    also comes as WebP (``EXT_texture_webp``, used, not required: the PNG stays), lossless for
+    a PNG source (the same texels), as both validators accept; the same run twice writes the
+    same bytes."""
+    source = city(tmp_path, texture("tex/roof.png"))
+    glb, again = tmp_path / "roof.glb", tmp_path / "again.glb"
+    tileset = tmp_path / "tiles" / "tileset.json"
+    for out in (glb, again, tileset):
+        result = run(source, "-o", out, "--texture-format", "webp", "-q")
+        assert result.returncode == 0, result.stderr
+    assert glb.read_bytes() == again.read_bytes()
+    _assert_valid(gltf_validator(glb))
+    report = official(tileset, tmp_path / "report.json")
+    assert report["numErrors"] == 0 and report["numWarnings"] == 0, report["issues"]
+    pages = [glb, *(tileset.parent / "tiles").glob("*_finest.glb")]
+    for path in pages:
+        document, blob = glb_parts(path.read_bytes())
+        assert "EXT_texture_webp" in document["extensionsUsed"]
+        assert "EXT_texture_webp" not in document.get("extensionsRequired", [])
+        pairs = _webp_textures(document, blob)
+        assert pairs, path.name
+        for fallback, webp in pairs:
+            assert fallback.format == "PNG" and webp.format == "WEBP"
+            texels = (np.asarray(image.convert("RGBA")) for image in (fallback, webp))
+            assert np.array_equal(*texels)
+
+
+def test_a_wrong_texture_format_is_a_one_line_usage_error(tmp_path: Path) -> None:
+    source = city(tmp_path, texture("tex/roof.png"))
+    result = run(source, "-o", tmp_path / "out.glb", "--texture-format", "ktx9")
+    assert_one_line_error(result, 2, "--texture-format", "ktx9")
+    result = run(source, "-o", tmp_path / "out.x3d", "--texture-format", "webp")
+    assert_one_line_error(result, 2, "--texture-format", "out.x3d")
+    assert not (tmp_path / "out.glb").exists() and not (tmp_path / "out.x3d").exists()

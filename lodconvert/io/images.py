@@ -178,6 +178,22 @@ JPEG_QUALITY = 90
 """Quality of a photograph written as JPEG."""
 
 
+def webp_encoded(rgba: np.ndarray, photographic: bool) -> bytes:
+    """Deterministic WebP bytes of an RGBA uint8 image (top row first): lossy (quality
+    :data:`JPEG_QUALITY`) for a ``photographic`` one whose texels are all opaque, else
+    lossless (transparent texels' colours kept)."""
+    from PIL import Image
+
+    out = io.BytesIO()
+    if photographic and int(rgba[..., 3].min(initial=255)) == 255:
+        rgb = Image.fromarray(np.ascontiguousarray(rgba[..., :3], dtype=np.uint8), "RGB")
+        rgb.save(out, format="WEBP", quality=JPEG_QUALITY, method=4)
+    else:
+        image = Image.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8), "RGBA")
+        image.save(out, format="WEBP", lossless=True, quality=100, method=4, exact=True)
+    return out.getvalue()
+
+
 def encoded(rgba: np.ndarray, photographic: bool) -> tuple[bytes, str]:
     """Deterministic bytes of an RGBA uint8 image (top row first) and their MIME type: JPEG
     (quality :data:`JPEG_QUALITY`, no metadata) for a ``photographic`` one whose texels are all

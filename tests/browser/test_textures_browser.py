@@ -5,6 +5,7 @@ docs/textures.md; the screenshot in docs/textures_cesium.png comes from this tes
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from lodconvert.io.tiles.check import glb_parts
 from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.viewer import write_page
 
@@ -38,13 +40,33 @@ def plateau(site: Path) -> dict[str, Path]:
         "tiles": site / "plateau_tiles" / "tileset.json",
         "x3d": site / "plateau.x3d",
         "plain": site / "plateau_plain.x3d",
+        "webp_glb": site / "plateau_webp.glb",
+        "webp_tiles": site / "plateau_webp_tiles" / "tileset.json",
     }
     for name, out in made.items():
         theme = ("--appearance-theme", "none") if name == "plain" else ()
-        result = run(PLATEAU, "-o", out, "-q", *theme)
+        webp = ("--texture-format", "webp") if name.startswith("webp") else ()
+        result = run(PLATEAU, "-o", out, "-q", *theme, *webp)
         assert result.returncode == 0, result.stderr
-    write_page(made["tiles"], library=CESIUM)
+    for glb in (made["webp_glb"], *(made["webp_tiles"].parent / "tiles").glob("*.glb")):
+        _break_fallbacks(glb)
+    for name in ("tiles", "webp_tiles"):
+        write_page(made[name], library=CESIUM)
     return made
+
+
+def _break_fallbacks(glb: Path) -> None:
+    """Zero the bytes of every image that a texture's WebP copy stands in for, so that only
+    a viewer taking the WebP copy shows the texture."""
+    document, _ = glb_parts(glb.read_bytes())
+    data = bytearray(glb.read_bytes())
+    start = 20 + struct.unpack_from("<I", data, 12)[0] + 8  # the BIN chunk's data
+    for texture in document.get("textures", []):
+        if "EXT_texture_webp" in texture.get("extensions", {}):
+            view = document["bufferViews"][document["images"][texture["source"]]["bufferView"]]
+            at = start + view["byteOffset"]
+            data[at : at + view["byteLength"]] = bytes(view["byteLength"])
+    glb.write_bytes(bytes(data))
 
 
 def test_three_decodes_the_buildings_texture(plateau: dict[str, Path], drive: Drive) -> None:
@@ -85,22 +107,38 @@ def test_babylon_draws_the_buildings_texture(plateau: dict[str, Path], drive: Dr
     assert result["foreground"] >= MIN_VISIBLE, message
 
 
+def test_three_and_babylon_take_a_textures_webp_copy(
+    plateau: dict[str, Path], drive: Drive
+) -> None:
+    """With ``--texture-format webp`` and the JPEG each WebP copy stands in for zeroed, both
+    still decode the texture: they read ``EXT_texture_webp``."""
+    out = drive("three", file=plateau["webp_glb"].name, node=1)
+    message = f"{out['result']}\n{console_text(out)}"
+    assert any(t["width"] > 0 and t["uv"] for t in out["result"]["textures"]), message
+    out = drive("babylon", file=plateau["webp_glb"].name)
+    message = f"{out['result']}\n{console_text(out)}"
+    assert any(m["texture"] and m["texture"]["width"] > 0 for m in out["result"]["meshes"]), message
+
+
+@pytest.mark.parametrize("name", ["tiles", "webp_tiles"])
 def test_cesium_shows_the_texture_from_the_atlas(
     plateau: dict[str, Path],
     driver: Driver,
     site: Path,
     tmp_path: Path,
     measure: Callable[[str, str], None],
+    name: str,
 ) -> None:
     """From 300 m at 50° above, the building shows the atlas's colours: its pixels' median
     is near the texture's and far from the roof and wall class colours, and they vary as a
-    photograph does (a flat class colour, even lit, varies far less)."""
+    photograph does (a flat class colour, even lit, varies far less). With
+    ``--texture-format webp`` (each page's JPEG zeroed) CesiumJS takes the WebP copy."""
     package = ROOT / "node_modules" / "cesium" / "package.json"
     require(package.exists(), f"{package} is absent (scripts/test.sh installs it)", REQUIRE)
     look = driver("tiles.mjs")
     shot = tmp_path / "plateau.png"
     camera = {"name": "plateau", "range": 300.0, "pitch": -50, "shot": str(shot)}
-    out = look("cameras", page=_page(site, plateau["tiles"]), cameras=[camera])
+    out = look("cameras", page=_page(site, plateau[name]), cameras=[camera])
     [seen] = out["result"]["cameras"]
     message = f"{seen}\n{console_text(out)}"
     assert seen["failed"] == [] and seen["tilesSelected"] > 0, message
@@ -112,7 +150,8 @@ def test_cesium_shows_the_texture_from_the_atlas(
     assert len(building) >= MIN_VISIBLE * len(pixels), message
     texture = np.asarray(Image.open(ATLAS).convert("RGB")).reshape(-1, 3).astype(float)
     seen_median, texture_median = np.median(building, axis=0), np.median(texture, axis=0)
-    measure("CesiumJS PLATEAU textured, median colour", f"{seen_median.astype(int).tolist()}")
+    what = "CesiumJS PLATEAU textured" + (", WebP" if name == "webp_tiles" else "")
+    measure(f"{what}, median colour", f"{seen_median.astype(int).tolist()}")
     assert np.abs(seen_median - texture_median).max() <= 60, (seen_median, texture_median)
     for kind in ("roof", "wall"):
         assert np.abs(seen_median - DEFAULT_CLASS_COLORS[kind][:3]).max() > 40, seen_median

@@ -16,7 +16,7 @@ from ...city.hlod import KINDS, HlodOptions, parse_sizes
 from ...errors import UsageError
 from ...io import output_format
 from ...io.frame import UP_AXES
-from ...io.gltf.compression import check_compression
+from ...io.gltf.compression import check_compression, check_texture_format
 from ...io.x3d import SWITCHING_MODES
 from ...limits import DEFAULT_LIMITS
 from ...model.lods import lod_name
@@ -144,9 +144,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     out.add_argument(
         "--compress",
         metavar="HOW",
-        help="glTF geometry: none, meshopt (EXT_meshopt_compression with exact positions; "
-        "a tileset's default) or quantize (KHR_mesh_quantization, positions to 1/65535 of "
-        "a tile's extent); docs/compression.md",
+        help="glTF geometry: none, meshopt (EXT_meshopt_compression, a tile's positions within "
+        "0.05 mm; a tileset's default) or quantize (KHR_mesh_quantization, positions to "
+        "1/65535 of a tile's extent); docs/compression.md",
+    )
+    out.add_argument(
+        "--texture-format",
+        metavar="FORMAT",
+        help="glTF and 3D Tiles textures: default (PNG, or JPEG for photographs) or webp "
+        "(each also as WebP, EXT_texture_webp, which a viewer that reads it prefers); "
+        "docs/textures.md",
     )
     out.add_argument(
         "-q",
@@ -183,6 +190,10 @@ def _check_tiles(args: argparse.Namespace) -> None:
         raise UsageError(f"--compress is for glTF and 3D Tiles, not {args.output}")
     if args.compress is not None:
         check_compression(args.compress)
+    if args.texture_format is not None:
+        if "texture_format" not in output_format(args.output).write_options:
+            raise UsageError(f"--texture-format is for glTF and 3D Tiles, not {args.output}")
+        check_texture_format(args.texture_format)
 
 
 def _hlod_line(hlod: dict[str, Any]) -> str:
@@ -270,6 +281,7 @@ def run(args: argparse.Namespace, console: Console) -> int:
             "sse": args.sse,
             "atlas_size": args.atlas_size,
             "compress": args.compress,
+            "texture_format": args.texture_format,
         },
         also=stage_page if args.html else None,
         limits=limits,

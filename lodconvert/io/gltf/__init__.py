@@ -21,7 +21,7 @@ FORMAT = Format(
     check=check_gltf,
     viewer="gltf",
     formatter=buffers_formatter,
-    write_options=("compress",),
+    write_options=("compress", "texture_format"),
 )
 
 __all__ = [

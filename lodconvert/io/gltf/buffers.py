@@ -16,7 +16,7 @@ from ...colors import linear_rgba, linear_rgba16
 from ...errors import LodConvertError
 from ...model import Level, LodChain, PointCloud, Surface
 from .. import OutputInfo
-from ..images import encoded
+from ..images import encoded, webp_encoded
 from .binary import (
     ARRAY_BUFFER,
     COMPONENT_TYPES,
@@ -32,6 +32,7 @@ from .compression import (
     Quantizer,
     StoredView,
     check_compression,
+    check_texture_format,
     quantizer,
     stored_attribute,
     stored_positions,
@@ -159,6 +160,8 @@ class PrimitiveData:
     image: tuple[bytes, str] | None = None
     indices: AccessorData | None = None
     stored: Stored | None = None
+    webp: bytes | None = None
+    """The image's WebP copy (``--texture-format webp``), which the texture prefers."""
 
 
 @dataclass(frozen=True)
@@ -210,19 +213,24 @@ class _Storing:
         return Stored(node, self.error, self.quantized, self.compress == MESHOPT)
 
 
-def _mesh_data(surface: Surface, storing: _Storing, normals: bool = True) -> PrimitiveData:
+def _mesh_data(
+    surface: Surface, storing: _Storing, normals: bool = True, webp: bool = False
+) -> PrimitiveData:
     attributes = {"POSITION": storing.positions(surface.vertices)}
     if normals:
         attributes["NORMAL"] = storing.attribute("NORMAL", vertex_normals(surface))
     if surface.vertex_colors is not None:
         attributes["COLOR_0"] = storing.colors(surface.vertex_colors)
     textured = surface.texture is not None and surface.uv is not None
-    image = None
+    image = copy = None
     if textured:
         # Surface.uv has its origin at the image's bottom-left, glTF at the top-left.
         flipped = np.column_stack([surface.uv[:, 0], 1.0 - surface.uv[:, 1]])
         attributes["TEXCOORD_0"] = storing.attribute("TEXCOORD_0", flipped.astype(np.float32))
         image = surface_image(surface)
+        if webp:
+            assert surface.texture is not None
+            copy = webp_encoded(surface.texture, surface.photographic)
     index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
     indices = storing.data(surface.faces.ravel().astype(index_type), ELEMENT_ARRAY_BUFFER)
     alpha_mode = alpha_mode_of(
@@ -231,7 +239,7 @@ def _mesh_data(surface: Surface, storing: _Storing, normals: bool = True) -> Pri
         surface.texture[..., 3] if textured else None,
     )
     base = [float(v) for v in linear_rgba(surface.material_color)]
-    return PrimitiveData(attributes, TRIANGLES, alpha_mode, base, image, indices)
+    return PrimitiveData(attributes, TRIANGLES, alpha_mode, base, image, indices, webp=copy)
 
 
 def _points_data(points: PointCloud, storing: _Storing) -> PrimitiveData:
@@ -243,9 +251,10 @@ def _points_data(points: PointCloud, storing: _Storing) -> PrimitiveData:
     return PrimitiveData(attributes, POINTS, alpha_mode_of(points.colors[:, 3]))
 
 
-def level_data(level: Level, compress: str = NONE) -> list[PrimitiveData]:
+def level_data(level: Level, compress: str = NONE, webp: bool = False) -> list[PrimitiveData]:
     """The primitives of one (non-empty) level, compressed as ``compress`` says (quantized
-    positions: in steps of the whole level, whose node turns them back). A LOD parent's
+    positions: in steps of the whole level, whose node turns them back), their textures with a
+    ``webp`` copy where asked. A LOD parent's
     merged far mesh has no normals: its corners are welded
     (:func:`~lodconvert.bake.qem.simplify_within`), where normals per vertex would round every
     building's edges, and glTF clients shade a primitive without normals flat (three.js from
@@ -260,7 +269,7 @@ def level_data(level: Level, compress: str = NONE) -> list[PrimitiveData]:
         made = [_points_data(level.points, storing)]
     else:
         flat = level.kind == "merged"
-        made = [_mesh_data(part, storing, not flat) for part in level.mesh.parts]
+        made = [_mesh_data(part, storing, not flat, webp) for part in level.mesh.parts]
     stored = storing.stored()
     return [replace(data, stored=stored) for data in made]
 
@@ -269,17 +278,19 @@ ChainBuffers = tuple["list[PrimitiveData] | None", ...]
 """A chain's buffers made by a worker: each level's primitives (``None`` for an empty one)."""
 
 
-def chain_buffers(chain: LodChain, compress: str = NONE) -> ChainBuffers | None:
+def chain_buffers(chain: LodChain, compress: str = NONE, webp: bool = False) -> ChainBuffers | None:
     """The glTF formats' chain formatter (:mod:`lodconvert.io`): the buffers of a chain that
     is not an instance of shared geometry (whose levels are written once, by the first),
-    compressed as ``compress`` says."""
+    compressed as ``compress`` says, textures with a ``webp`` copy where asked."""
     if chain.transform is not None:
         return None
-    return tuple(level_data(level, compress) if level.count else None for level in chain.levels)
+    levels = chain.levels
+    return tuple(level_data(lv, compress, webp) if lv.count else None for lv in levels)
 
 
 def buffers_formatter(
-    info: OutputInfo, compress: str = NONE
+    info: OutputInfo, compress: str = NONE, texture_format: str = "default"
 ) -> Callable[[LodChain], ChainBuffers | None]:
     """The glTF formats' ``formatter`` (:mod:`lodconvert.io`)."""
-    return partial(chain_buffers, compress=check_compression(compress))
+    webp = check_texture_format(texture_format)
+    return partial(chain_buffers, compress=check_compression(compress), webp=webp)

@@ -24,8 +24,27 @@ QUANTIZATION = "KHR_mesh_quantization"
 PACKING_COST = 160
 """Bytes a packed view's JSON adds (its extension object, the fallback view's stride): a
 view is packed only where that saves more."""
+POSITION_TOLERANCE = 5e-5
+"""Metres a ``meshopt`` position of a tile may move (a twentieth of the 1 mm placement claim,
+below a source's millimetres), unless float32 itself cannot hold it closer. A ``.glb``, whose
+units may not be metres, keeps float32's own step."""
 POSITION_STEPS = 65535
 """Steps of a quantized position across the content's largest extent."""
+
+
+TEXTURE_FORMATS = ("default", "webp")
+"""The ``--texture-format`` choices: PNG or JPEG (:func:`~..images.encoded`), or those with a
+WebP copy each texture prefers (``EXT_texture_webp``)."""
+WEBP = "EXT_texture_webp"
+
+
+def check_texture_format(name: str) -> bool:
+    """Whether textures get a WebP copy (``name`` ``webp``); :class:`UsageError` for a name
+    not in :data:`TEXTURE_FORMATS`."""
+    if name not in TEXTURE_FORMATS:
+        choices = ", ".join(TEXTURE_FORMATS)
+        raise UsageError(f"--texture-format must be one of {choices}, got {name!r}")
+    return name == "webp"
 
 
 def check_compression(name: str) -> str:
@@ -163,10 +182,14 @@ class StoredPositions:
 
 
 def stored_positions(
-    positions: np.ndarray, compress: str, steps_of: Quantizer | None = None
+    positions: np.ndarray,
+    compress: str,
+    steps_of: Quantizer | None = None,
+    tolerance: float | None = None,
 ) -> StoredPositions:
     """float32 ``positions`` (n, 3) as ``compress`` stores them (quantized: as ``steps_of``,
-    default their own :func:`quantizer`, makes them)."""
+    default their own :func:`quantizer`, makes them; under the exponential filter: within
+    ``tolerance``, default float32's own step)."""
     if compress == QUANTIZE:
         q = steps_of or quantizer(positions.astype(np.float64))
         steps = q.steps(positions.astype(np.float64))
@@ -174,7 +197,7 @@ def stored_positions(
     if compress == MESHOPT:
         from .meshopt import exponential, from_exponential  # compiled: numba loaded here
 
-        words = exponential(positions)
+        words = exponential(positions, tolerance)
         values = from_exponential(words)
         return StoredPositions(values, words, None, _largest_gap(values, positions))
     return StoredPositions(positions)

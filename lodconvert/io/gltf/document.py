@@ -11,7 +11,7 @@ from typing import IO, Any
 from ...model import Level
 from .binary import LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT
 from .buffers import VIEW_HEAD, AccessorData, PrimitiveData, level_data
-from .compression import NONE, StoredView, fallback_buffer, required
+from .compression import NONE, WEBP, StoredView, fallback_buffer, required
 from .json_text import COMPACT, DataUri, JsonArray, Layout, json_object
 
 UNLIT = "KHR_materials_unlit"
@@ -48,11 +48,11 @@ class Document:
     """A glTF document being written: its JSON arrays and binary buffer go to temporary files
     as they are made (:mod:`.json_text`), so memory holds the chain being added, not what was
     added before; :meth:`close` deletes them. Levels made here are compressed as ``compress``
-    says (docs/compression.md)."""
+    says (docs/compression.md), their textures with a ``webp`` copy where asked."""
 
-    def __init__(self, layout: Layout, compress: str = NONE) -> None:
+    def __init__(self, layout: Layout, compress: str = NONE, webp: bool = False) -> None:
         self._layout = layout
-        self.compress = compress
+        self.compress, self.webp = compress, webp
         self._files = contextlib.ExitStack()
         self.blob = self._spool()
         self.blob_length = 0
@@ -129,7 +129,9 @@ class Document:
             return self.accessors.append_text(VIEW_HEAD + str(view) + accessor.compact_tail)
         return self.accessors.append({"bufferView": view, **accessor.fields})
 
-    def _texture(self, data: tuple[bytes, str]) -> int:
+    def _texture(self, data: tuple[bytes, str], webp: bytes | None = None) -> int:
+        """A texture of the image ``data`` (bytes, MIME type), preferring its ``webp`` copy
+        where there is one (``EXT_texture_webp``: the image stays for clients without it)."""
         image = {"mimeType": data[1], "bufferView": self._buffer_view(data[0])}
         sampler = {
             "magFilter": LINEAR,
@@ -137,14 +139,20 @@ class Document:
             "wrapS": REPEAT,
             "wrapT": REPEAT,
         }
-        return self.textures.append(
-            {"sampler": self.samplers.append(sampler), "source": self.images.append(image)}
-        )
+        texture: dict[str, Any] = {
+            "sampler": self.samplers.append(sampler),
+            "source": self.images.append(image),
+        }
+        if webp is not None:
+            self.use(WEBP)
+            copy = {"mimeType": "image/webp", "bufferView": self._buffer_view(webp)}
+            texture["extensions"] = {WEBP: {"source": self.images.append(copy)}}
+        return self.textures.append(texture)
 
     def _primitive(self, data: PrimitiveData) -> dict[str, Any]:
         """A primitive's JSON, its accessors (and texture) added."""
         added = {name: self._accessor(accessor) for name, accessor in data.attributes.items()}
-        texture = self._texture(data.image) if data.image is not None else None
+        texture = self._texture(data.image, data.webp) if data.image is not None else None
         primitive: dict[str, Any] = {
             "attributes": json_object(
                 POSITION=added["POSITION"],
@@ -197,7 +205,7 @@ class Document:
             return None
         if id(level) in self._shared:
             return self._shared[id(level)][1]
-        made = made or level_data(level, self.compress)
+        made = made or level_data(level, self.compress, self.webp)
         primitives = [self._primitive(data) for data in made]
         mesh = self.meshes.append({"primitives": primitives, "name": name})
         stored = made[0].stored

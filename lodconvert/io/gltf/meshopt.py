@@ -597,20 +597,25 @@ def decode_indices(data: bytes | memoryview, count: int, mode: str) -> np.ndarra
 
 
 MANTISSA_BITS = 24
-"""Bits of an exponential filter's mantissa (its most: float32's precision)."""
+"""Bits of an exponential filter's mantissa at most (float32's precision)."""
 
 
-def exponential(values: np.ndarray) -> np.ndarray:
+def exponential(values: np.ndarray, tolerance: float | None = None) -> np.ndarray:
     """float ``values`` (n, k) under meshopt's exponential filter with one exponent a column
-    (``SharedComponent``): 24-bit mantissas of the column's largest magnitude, as uint32
-    words (mantissa in the low 24 bits, exponent in the top 8)."""
+    (``SharedComponent``), as uint32 words (mantissa in the low 24 bits, exponent in the top
+    8): mantissas of 24 bits for the column's largest magnitude, or, with a ``tolerance``,
+    of the fewest bits that keep every value within it (24 at most: float32's own step)."""
     values = np.asarray(values, dtype=np.float32)
-    exponents = np.full(values.shape[1], -100, dtype=np.int64)
+    largest = np.full(values.shape[1], -100, dtype=np.int64)  # frexp exponents
     if len(values):
         biased = (values.view(np.uint32) >> 23) & 0xFF
         found = biased.astype(np.int64).max(axis=0) - 127 + 1
-        exponents = np.maximum(exponents, np.where(biased.max(axis=0) > 0, found, -100))
-    exponents -= MANTISSA_BITS - 1
+        largest = np.maximum(largest, np.where(biased.max(axis=0) > 0, found, -100))
+    bits = np.full(values.shape[1], MANTISSA_BITS, dtype=np.int64)
+    if tolerance is not None:  # a value moves by at most 2^(largest - bits)
+        fewest = np.ceil(largest - np.log2(tolerance)).astype(np.int64)
+        bits = np.clip(fewest, 1, MANTISSA_BITS)
+    exponents = largest - (bits - 1)
     scaled = values.astype(np.float64) * np.exp2(-exponents.astype(np.float64))
     mantissas = np.trunc(scaled + np.where(values >= 0, 0.5, -0.5)).astype(np.int64)
     mantissas = np.minimum(mantissas, (1 << (MANTISSA_BITS - 1)) - 1)

@@ -16,7 +16,7 @@ from ...model import LodChain
 from ...sinks import writing_temporary
 from .. import OutputInfo, Pieces
 from .binary import pack_glb
-from .compression import NONE, check_compression
+from .compression import NONE, check_compression, check_texture_format
 from .document import SPOOL_BYTES, Document
 from .json_text import COMPACT, INDENTED, Layout, write_json
 from .lod import LodScene
@@ -29,10 +29,12 @@ def _scene(
     layout: Layout,
     pieces: Pieces | None,
     compress: str,
+    texture_format: str,
 ) -> Iterator[LodScene]:
     """A document holding ``chains`` (with the buffers workers made of them in ``pieces``),
-    compressed as ``compress`` says; its temporary files are deleted when the block ends."""
-    doc = Document(layout, check_compression(compress))
+    compressed as ``compress`` says, textures as ``texture_format`` says; its temporary files
+    are deleted when the block ends."""
+    doc = Document(layout, check_compression(compress), check_texture_format(texture_format))
     try:
         scene = LodScene(doc, info, pieces or Pieces())
         with writing_temporary():
@@ -50,12 +52,14 @@ def write_glb(
     info: OutputInfo,
     pieces: Pieces | None = None,
     compress: str = NONE,
+    texture_format: str = "default",
 ) -> None:
     """Write ``chains`` as binary glTF (one JSON chunk, one BIN chunk) to ``handle``, its
-    geometry compressed as ``compress`` says (docs/compression.md); the buffers of a chain in
-    ``pieces`` (made by a worker, :func:`.buffers.chain_buffers`) are taken as they are."""
+    geometry compressed as ``compress`` says (docs/compression.md), its textures with a WebP
+    copy where ``texture_format`` is ``webp``; the buffers of a chain in ``pieces`` (made by a
+    worker, :func:`.buffers.chain_buffers`) are taken as they are."""
     with (
-        _scene(chains, info, COMPACT, pieces, compress) as scene,
+        _scene(chains, info, COMPACT, pieces, compress, texture_format) as scene,
         tempfile.SpooledTemporaryFile(SPOOL_BYTES) as text,
     ):
         with writing_temporary():
@@ -69,9 +73,10 @@ def write_gltf(
     info: OutputInfo,
     pieces: Pieces | None = None,
     compress: str = NONE,
+    texture_format: str = "default",
 ) -> None:
     """Write ``chains`` as one self-contained glTF JSON file (buffer as a base64 data URI), as
-    :func:`write_glb` takes ``pieces`` and ``compress``."""
-    with _scene(chains, info, INDENTED, pieces, compress) as scene:
+    :func:`write_glb` takes ``pieces``, ``compress`` and ``texture_format``."""
+    with _scene(chains, info, INDENTED, pieces, compress, texture_format) as scene:
         write_json(scene.json_value(data_uri=True), handle, INDENTED)
     handle.write(b"\n")

@@ -32,6 +32,8 @@ from ..gltf.binary import (
 from ..gltf.buffers import alpha_mode_of, float32_positions, vertex_normals
 from ..gltf.compression import (
     NONE,
+    POSITION_TOLERANCE,
+    WEBP,
     Quantizer,
     StoredView,
     fallback_buffer,
@@ -41,7 +43,7 @@ from ..gltf.compression import (
     stored_view,
 )
 from ..gltf.document import UNLIT
-from ..images import encoded
+from ..images import encoded, webp_encoded
 from .metadata import Feature, property_table
 
 MESH_FEATURES = "EXT_mesh_features"
@@ -51,14 +53,15 @@ STRUCTURAL_METADATA = "EXT_structural_metadata"
 class _Builder:
     """A GLB's binary buffer, buffer views and accessors; with ``compress`` (a
     :data:`~..gltf.compression.COMPRESSIONS`) other than ``none``, its vertex attributes and
-    indices compressed so."""
+    indices compressed so; its textures with a WebP copy where ``webp``."""
 
-    def __init__(self, compress: str = NONE) -> None:
-        self.compress = compress
+    def __init__(self, compress: str = NONE, webp: bool = False) -> None:
+        self.compress, self.webp = compress, webp
         self.blob = bytearray()
         self.views: list[dict[str, Any]] = []
         self.accessors: list[dict[str, Any]] = []
         self.images: list[dict[str, Any]] = []
+        self.textures_made: list[dict[str, Any]] = []
         self.fallback = 0
         """Bytes of the meshopt fallback buffer (the compressed views' uncompressed layout)."""
         self.quantized = False
@@ -67,11 +70,18 @@ class _Builder:
         """How far (metres) a stored position lies from its float32 position, at most."""
 
     def texture(self, rgba: np.ndarray, photographic: bool) -> int:
-        """A texture of the image ``rgba`` (:func:`~..images.encoded`), sampled with mipmaps
-        and clamped at its edges (an atlas page: nothing repeats)."""
+        """A texture of the image ``rgba`` (:func:`~..images.encoded`; preferring a WebP copy
+        where the builder makes one), sampled with mipmaps and clamped at its edges (an atlas
+        page: nothing repeats)."""
         data, mime = encoded(rgba, photographic)
         self.images.append({"bufferView": self.view(data), "mimeType": mime})
-        return len(self.images) - 1
+        texture: dict[str, Any] = {"sampler": 0, "source": len(self.images) - 1}
+        if self.webp:
+            copy = self.view(webp_encoded(rgba, photographic))
+            self.images.append({"bufferView": copy, "mimeType": "image/webp"})
+            texture["extensions"] = {WEBP: {"source": len(self.images) - 1}}
+        self.textures_made.append(texture)
+        return len(self.textures_made) - 1
 
     def textures(self) -> dict[str, Any]:
         """The document's ``images``, ``samplers`` and ``textures`` (one per image)."""
@@ -79,11 +89,7 @@ class _Builder:
             return {}
         sampler = {"magFilter": LINEAR, "minFilter": LINEAR_MIPMAP_LINEAR,
                    "wrapS": CLAMP_TO_EDGE, "wrapT": CLAMP_TO_EDGE}  # fmt: skip
-        return {
-            "images": self.images,
-            "samplers": [sampler],
-            "textures": [{"sampler": 0, "source": k} for k in range(len(self.images))],
-        }
+        return {"images": self.images, "samplers": [sampler], "textures": self.textures_made}
 
     def view(self, data: bytes, target: int | None = None) -> int:
         """A buffer view of ``data`` at an 8-byte boundary (as property tables need)."""
@@ -129,7 +135,7 @@ class _Builder:
         """The ``POSITION`` accessor of float32 ``positions`` as the builder stores them
         (:func:`~..gltf.compression.stored_positions`; the node transform of quantized ones
         returned), their error kept in :attr:`position_error`."""
-        stored = stored_positions(positions, self.compress)
+        stored = stored_positions(positions, self.compress, tolerance=POSITION_TOLERANCE)
         self.quantized |= stored.quantizer is not None
         self.position_error = stored.error
         return self.accessor(stored.values, bounds=True, words=stored.words), stored.quantizer
@@ -149,20 +155,22 @@ class _Builder:
 
     def glb(self, document: dict[str, Any]) -> bytes:
         """The GLB of ``document`` with this buffer (and the fallback buffer of compressed
-        views, the extensions they take named used and required)."""
+        views, the extensions they take named used and required, and WebP's used)."""
         self.blob.extend(b"\0" * (-len(self.blob) % 4))
         buffers: list[dict[str, Any]] = [{"byteLength": len(self.blob)}]
         if self.fallback:
             buffers.append(fallback_buffer(self.fallback))
         needed = required(self.quantized, self.fallback > 0)
+        used = document.get("extensionsUsed", []) + [WEBP] * (self.webp and bool(self.images))
         document = {
             **document,
             "accessors": self.accessors,
             "bufferViews": self.views,
             "buffers": buffers,
         }
+        if used + needed:
+            document["extensionsUsed"] = used + needed
         if needed:
-            document["extensionsUsed"] = document.get("extensionsUsed", []) + needed
             document["extensionsRequired"] = needed
         if self.compress != NONE:
             extras = {"compress": self.compress, "position_error": self.position_error}
@@ -233,18 +241,20 @@ def mesh_glb(
     textures: TileTextures | None = None,
     atlas_size: int = ATLAS_SIZE,
     compress: str = NONE,
+    webp: bool = False,
 ) -> bytes:
     """A GLB of a triangle primitive: ``vertices`` (n, 3) glTF coordinates (y-up, about the
     tile's origin), ``faces`` (m, 3), ``colors`` (n, 4) sRGB bytes, ``feature_ids`` (n,) into
     ``features`` (``None``: content without features, a merged far level); the faces of
     textured vertices (``textures``) are drawn by a primitive per atlas page (at most
     ``atlas_size`` texels a side) instead, on the same vertices (their colours multiply the
-    texture: white shows it as it is); its geometry compressed as ``compress`` says."""
+    texture: white shows it as it is); its geometry compressed as ``compress`` says, its pages
+    with a WebP copy where ``webp``."""
     if compress != NONE:
         vertices, faces, colors, feature_ids, textures = _in_fetch_order(
             vertices, faces, colors, feature_ids, textures
         )
-    builder = _Builder(compress)
+    builder = _Builder(compress, webp)
     positions = float32_positions(vertices)
     normals = vertex_normals(Surface(positions.astype(np.float64), faces))
     index_type = np.uint16 if len(vertices) < 65536 else np.uint32

@@ -83,7 +83,8 @@ class TileTask:
     ``feature_ids`` into ``features``, or none for a merged far level) or, without ``faces``,
     points; ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes; the textures of
     its textured vertices (``textures``), packed into atlas pages of ``atlas_size``; its
-    geometry compressed as ``compress`` (:data:`~..gltf.compression.COMPRESSIONS`) says."""
+    geometry compressed as ``compress`` (:data:`~..gltf.compression.COMPRESSIONS`) says, its
+    atlas pages with a WebP copy where ``webp``."""
 
     name: str
     where: Where
@@ -96,11 +97,13 @@ class TileTask:
     textures: TileTextures | None = None
     atlas_size: int = ATLAS_SIZE
     compress: str = MESHOPT
+    webp: bool = False
 
     def key(self) -> str:
         """The hash of everything that makes this tile's file, frame and box."""
         digest = hashlib.sha256()
         head = [self.name, self.where.key, self.generator, self.features, self.compress]
+        head += [self.webp]
         textures = self.textures
         if textures is not None:
             head += [self.atlas_size, textures.photographic]
@@ -162,7 +165,7 @@ class TileTask:
             return points_glb(gltf, self.colors, self.generator, self.compress)
         return mesh_glb(
             gltf, self.faces, self.colors, self.feature_ids, self.features, self.generator,
-            self.textures, self.atlas_size, self.compress,
+            self.textures, self.atlas_size, self.compress, self.webp,
         )  # fmt: skip
 
     def failed(self, reason: str) -> TileResult:

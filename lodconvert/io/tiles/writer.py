@@ -25,7 +25,7 @@ from ...errors import LodConvertError, UsageError
 from ...model import CellChain, LodChain, Mesh, Surface
 from ...textures import ATLAS_SIZE, check_atlas_size
 from .. import OutputInfo, Pieces
-from ..gltf.compression import MESHOPT, check_compression
+from ..gltf.compression import MESHOPT, check_compression, check_texture_format
 from .metadata import Feature
 from .placement import Placement, world_to_frame
 
@@ -134,9 +134,10 @@ class TilesetWriter:
         progress: Callable[[str], None] | None = None,
         atlas_size: int = ATLAS_SIZE,
         compress: str = MESHOPT,
+        webp: bool = False,
     ) -> None:
         self.sink, self.info, self.sse, self.atlas_size = sink, info, sse, atlas_size
-        self.compress = compress
+        self.compress, self.webp = compress, webp
         self.executor, self.progress = executor, progress
         self.placement = Placement(info.georef, info.crs, info.source)
         georef = info.georef
@@ -174,7 +175,7 @@ class TilesetWriter:
         (its frame and box are filled in from the task's result); see :class:`TileTask`."""
         task = TileTask(
             f"{name}.glb", self.where, vertices, colors, faces, feature_ids, features,
-            self.info.generator, textures, self.atlas_size, self.compress,
+            self.info.generator, textures, self.atlas_size, self.compress, self.webp,
         )  # fmt: skip
         tile = Tile(None, None, error, task.name)
         self._queued.append((tile, task))
@@ -438,16 +439,19 @@ def write_tileset(
     sse: float = DEFAULT_SSE,
     atlas_size: int = ATLAS_SIZE,
     compress: str | None = None,
+    texture_format: str = "default",
 ) -> None:
     """The registry's ``write``: the tileset of ``chains`` (LOD parents and objects, as
     :func:`~lodconvert.bakery.iter_chains` yields them with cells) into ``sink``, each tile's
     GLB made by the executor of the run's ``context`` (``None``: here), its textures packed
     into atlas pages of at most ``atlas_size`` texels a side, its geometry compressed as
-    ``compress`` says (``None``: ``meshopt``); a tileset takes no ``pieces``."""
+    ``compress`` says (``None``: ``meshopt``), its pages with a WebP copy where
+    ``texture_format`` is ``webp``; a tileset takes no ``pieces``."""
     if not (math.isfinite(sse) and sse > 0):
         raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
     check_atlas_size(atlas_size)
     compress = check_compression(compress or MESHOPT)
+    webp = check_texture_format(texture_format)
     executor, progress = (context.executor, context.progress) if context else (None, None)
-    writer = TilesetWriter(sink, info, sse, executor, progress, atlas_size, compress)
+    writer = TilesetWriter(sink, info, sse, executor, progress, atlas_size, compress, webp)
     writer.write(chains, "tileset.json")
