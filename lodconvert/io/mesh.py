@@ -345,16 +345,22 @@ def _label_obj_objects(text: str) -> tuple[str, list[str | None]]:
     return f"o 0\n{text}", labels
 
 
+def _unpacked(data: bytes, path: Path, limit: int) -> bytes:
+    """GLB ``data`` with its meshopt-packed views decoded (:func:`~.gltf.binary.unpacked_glb`,
+    at most ``limit`` bytes of them), or :class:`InputError` naming ``path``."""
+    from .gltf.binary import GlbError, unpacked_glb  # the glTF format: loaded for a GLB only
+
+    try:
+        return unpacked_glb(data, limit)
+    except (ValueError, TypeError, KeyError, AttributeError, IndexError, RecursionError) as exc:
+        reason = str(exc) if isinstance(exc, GlbError) else f"{type(exc).__name__}: {exc}"
+        raise InputError(f"cannot be read as GLB: {reason}", str(path)) from None
+
+
 def _load_trimesh(data: bytes, path: Path, suffix: str, **options: object) -> object:
     """``data`` loaded by trimesh as a scene (resources such as MTL files and textures are
-    looked up beside ``path``; a GLB's views packed with ``EXT_meshopt_compression`` decoded
-    first, :func:`~.gltf.binary.unpacked_glb`)."""
+    looked up beside ``path``)."""
     import trimesh
-
-    if suffix == ".glb":
-        from .gltf.binary import unpacked_glb  # the glTF format: loaded for a GLB only
-
-        data = unpacked_glb(data)
 
     resolver = trimesh.resolvers.FilePathResolver(str(path.parent))
     return trimesh.load(
@@ -548,6 +554,8 @@ def read_mesh(
         data = data[:needed] if needed < len(data) else data
     elif suffix == ".off":
         _check_off_counts(data, tally)
+    if suffix == ".glb":
+        data = _unpacked(data, path, limits.decompressed_bytes)
     labels = None
     options: dict[str, object] = {}
     if suffix in (".obj", ".off") or (suffix == ".stl" and not _is_binary_stl(data)):

@@ -145,7 +145,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--compress",
         metavar="HOW",
         help="glTF geometry: none, meshopt (EXT_meshopt_compression, a tile's positions within "
-        "0.05 mm; a tileset's default) or quantize (KHR_mesh_quantization, positions to "
+        "0.05 to 1 mm; a tileset's default) or quantize (KHR_mesh_quantization, positions to "
         "1/65535 of a tile's extent); docs/compression.md",
     )
     out.add_argument(

@@ -55,6 +55,9 @@ LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT, CLAMP_TO_EDGE = 9729, 9987, 10497, 33071
 """Sampler filters and wrap modes."""
 MESHOPT = "EXT_meshopt_compression"
 """The extension whose buffer views :func:`accessor_values` decodes."""
+MESHOPT_EXPANSION = 64
+"""The most meshopt data can grow by decoding (a block's 256 zero deltas of a byte take a
+4-byte header): a view claiming more is refused before anything is allocated."""
 
 
 class GlbError(ValueError):
@@ -200,21 +203,39 @@ def split_glb(data: bytes | memoryview) -> tuple[memoryview, memoryview]:
 
 def unpacked_view(blob: bytes | memoryview, packed: dict[str, Any]) -> bytes:
     """The bytes of a buffer view packed with ``EXT_meshopt_compression`` (its extension
-    object ``packed``, its data in ``blob``): :class:`GlbError` for data elsewhere, a filter
-    other than ``EXPONENTIAL`` or data that cannot be decoded."""
+    object ``packed``, its data in ``blob``): :class:`GlbError` for data elsewhere, the
+    quaternion filter (not decoded here) or data that cannot be decoded."""
     # loads numba: only here
-    from .meshopt import MeshoptError, decode_indices, decode_vertices, from_exponential
+    from .meshopt import (
+        MeshoptError,
+        decode_indices,
+        decode_vertices,
+        from_exponential,
+        from_octahedral,
+    )
 
     filter_ = packed.get("filter", "NONE")
-    if packed.get("buffer", 0) != 0 or filter_ not in ("NONE", "EXPONENTIAL"):
-        raise GlbError(f"meshopt data outside the binary chunk, or its {filter_} filter")
-    data = memoryview(blob)[packed.get("byteOffset", 0) :][: packed["byteLength"]]
-    stride, count = packed["byteStride"], packed["count"]
+    octahedral = filter_ == "OCTAHEDRAL" and packed.get("byteStride") in (4, 8)
+    if packed.get("buffer", 0) != 0 or not (octahedral or filter_ in ("NONE", "EXPONENTIAL")):
+        raise GlbError(
+            f"meshopt data outside the binary chunk, or under the {filter_} filter "
+            f"with a stride of {packed.get('byteStride')!r}"
+        )
+    try:
+        data = memoryview(blob)[packed.get("byteOffset", 0) :][: packed["byteLength"]]
+        stride, count = int(packed["byteStride"]), int(packed["count"])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise GlbError(f"a meshopt view's fields cannot be read ({exc})") from None
+    if not 0 <= stride * count <= MESHOPT_EXPANSION * len(data) + 1024:
+        raise GlbError(f"a meshopt view claims {count} × {stride} bytes from {len(data)} bytes")
     try:
         if packed["mode"] == "ATTRIBUTES":
             decoded = decode_vertices(data, count, stride).ravel()
             if filter_ == "EXPONENTIAL":
                 decoded = from_exponential(decoded.view("<u4")).view(np.uint8)
+            elif octahedral:
+                kind = "<i1" if stride == 4 else "<i2"
+                decoded = from_octahedral(decoded.view(kind).reshape(-1, 4)).view(np.uint8)
             return decoded.tobytes()
         return decode_indices(data, count, packed["mode"]).astype(f"<u{stride}").tobytes()
     except (MeshoptError, KeyError, TypeError) as exc:
@@ -249,11 +270,11 @@ def accessor_values(document: dict[str, Any], blob: bytes | memoryview, index: i
     return values.reshape(count, width) if width > 1 else values
 
 
-def unpacked_glb(data: bytes) -> bytes:
+def unpacked_glb(data: bytes, limit: int) -> bytes:
     """GLB ``data`` with the buffer views packed by ``EXT_meshopt_compression`` decoded into
     its binary chunk and the extension (and its fallback buffers) gone, for a reader that
     does not know it; ``data`` itself when nothing is packed. :class:`GlbError` where a view
-    cannot be decoded (:func:`unpacked_view`)."""
+    cannot be decoded (:func:`unpacked_view`) or they would decode to over ``limit`` bytes."""
     text, blob = split_glb(data)
     if MESHOPT.encode() not in bytes(text):
         return data
@@ -266,6 +287,9 @@ def unpacked_glb(data: bytes) -> bytes:
         packed = (view.get("extensions") or {}).pop(MESHOPT, None)
         if packed is None:
             continue
+        claimed = int(packed.get("byteStride", 0)) * int(packed.get("count", 0))
+        if len(out) - len(blob) + claimed > limit:
+            raise GlbError(f"its meshopt views decode to over {limit:,} bytes (the limit)")
         decoded = unpacked_view(blob, packed)
         out.extend(b"\0" * (-len(out) % 4))
         view.update(buffer=0, byteOffset=len(out), byteLength=len(decoded))

@@ -29,6 +29,7 @@ from .compression import (
     MESHOPT,
     NONE,
     QUANTIZE,
+    Filtered,
     Quantizer,
     StoredView,
     check_compression,
@@ -125,10 +126,10 @@ def _accessor_data(
     normalized: bool = False,
     bounds: bool = False,
     compress: str = NONE,
-    words: np.ndarray | None = None,
+    filtered: Filtered | None = None,
 ) -> AccessorData:
     """An accessor over ``array`` ((k,) scalars or (k, w) vectors, dtype of the buffer), its
-    view stored as ``compress`` says (``words``: positions' exponential filter)."""
+    view stored as ``compress`` says (``filtered``: the data packed in its place)."""
     data = np.ascontiguousarray(array)
     stored = np.ascontiguousarray(data, dtype=data.dtype.newbyteorder("<"))
     fields = json_object(
@@ -141,7 +142,7 @@ def _accessor_data(
         min=[float(v) for v in data.min(axis=0)] if bounds else None,
     )
     compact = COMPACT.text({"bufferView": 0, **fields}, 2)
-    view = stored_view(stored, target, compress, words)
+    view = stored_view(stored, target, compress, filtered)
     return AccessorData(view, target, fields, compact[len(VIEW_HEAD) + 1 :])
 
 
@@ -194,14 +195,14 @@ class _Storing:
         stored = stored_positions(float32_positions(vertices), self.compress, self.steps_of)
         self.quantized |= stored.quantizer is not None
         self.error = max(self.error, stored.error)
-        return self.data(stored.values, bounds=True, words=stored.words)
+        return self.data(stored.values, bounds=True, filtered=stored.filtered)
 
     def attribute(self, name: str, values: np.ndarray) -> AccessorData:
         """The ``NORMAL`` or ``TEXCOORD_0`` accessor of float32 ``values``
         (:func:`~.compression.stored_attribute`)."""
-        stored, quantized = stored_attribute(name, values, self.compress)
-        self.quantized |= quantized
-        return self.data(stored, normalized=quantized)
+        stored = stored_attribute(name, values, self.compress)
+        self.quantized |= stored.normalized
+        return self.data(stored.values, normalized=stored.normalized, filtered=stored.filtered)
 
     def colors(self, rgba: np.ndarray) -> AccessorData:
         """COLOR_0 accessor: VEC4 normalised unsigned shorts in linear space."""

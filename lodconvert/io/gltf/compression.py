@@ -24,10 +24,21 @@ QUANTIZATION = "KHR_mesh_quantization"
 PACKING_COST = 160
 """Bytes a packed view's JSON adds (its extension object, the fallback view's stride): a
 view is packed only where that saves more."""
-POSITION_TOLERANCE = 5e-5
-"""Metres a ``meshopt`` position of a tile may move (a twentieth of the 1 mm placement claim,
-below a source's millimetres), unless float32 itself cannot hold it closer. A ``.glb``, whose
+POSITION_TOLERANCE = (5e-5, 1e-3)
+"""The least and most metres a ``meshopt`` position of a tile may move: a thousandth of the
+tile's geometric error between them (:func:`position_tolerance`), from a twentieth of the
+1 mm placement claim (a leaf's, below a source's millimetres) to that claim. A ``.glb``, whose
 units may not be metres, keeps float32's own step."""
+
+
+def position_tolerance(geometric_error: float) -> float:
+    """How far (metres) a ``meshopt`` position of a tile of ``geometric_error`` may move:
+    a thousandth of it (a 16 px screen-space error there is 0.016 px), within
+    :data:`POSITION_TOLERANCE`."""
+    least, most = POSITION_TOLERANCE
+    return min(most, max(least, geometric_error / 1000.0))
+
+
 POSITION_STEPS = 65535
 """Steps of a quantized position across the content's largest extent."""
 
@@ -85,20 +96,42 @@ def quantizer(positions: np.ndarray) -> Quantizer:
     return Quantizer((float(low[0]), float(low[1]), float(low[2])), scale)
 
 
-def stored_attribute(name: str, values: np.ndarray, compress: str) -> tuple[np.ndarray, bool]:
+Filtered = tuple[np.ndarray, str]
+"""A vertex attribute's data under a meshopt filter, and the filter's name."""
+
+
+@dataclass(frozen=True)
+class StoredAttribute:
+    """A ``NORMAL`` or ``TEXCOORD_0`` accessor's ``values`` as stored (those a reader
+    decodes), whether they are normalized integers (quantized), and the filtered data packed
+    in their place (``filtered``)."""
+
+    values: np.ndarray
+    normalized: bool = False
+    filtered: Filtered | None = None
+
+
+def stored_attribute(name: str, values: np.ndarray, compress: str) -> StoredAttribute:
     """A ``NORMAL`` or ``TEXCOORD_0`` accessor's float32 ``values`` as ``compress`` stores
-    them, and whether they are quantized (normalized integers): unit normals as signed bytes,
+    them: unit normals as signed bytes (``meshopt``: under the octahedral filter, 8 bits),
     texture coordinates in [0, 1] as 16-bit fractions (others keep float32, as a repeating
     texture needs)."""
     if compress == NONE:
-        return values, False
+        return StoredAttribute(values)
     if name == "NORMAL":
-        return np.rint(np.clip(values, -1.0, 1.0) * 127.0).astype(np.int8), True
+        if compress != MESHOPT:
+            return StoredAttribute(
+                np.rint(np.clip(values, -1.0, 1.0) * 127.0).astype(np.int8), True
+            )
+        from .meshopt import from_octahedral, octahedral  # numba loaded here (compiled codecs)
+
+        words = octahedral(values)
+        return StoredAttribute(from_octahedral(words)[:, :3], True, (words, "OCTAHEDRAL"))
     if len(values) and not (
         np.isfinite(values).all() and values.min() >= 0.0 and values.max() <= 1.0
     ):
-        return values, False
-    return np.rint(values * 65535.0).astype(np.uint16), True
+        return StoredAttribute(values)
+    return StoredAttribute(np.rint(values * 65535.0).astype(np.uint16), True)
 
 
 @dataclass(frozen=True)
@@ -141,12 +174,12 @@ def _rows(array: np.ndarray, target: int) -> tuple[np.ndarray, int, int]:
 
 
 def stored_view(
-    array: np.ndarray, target: int, compress: str, words: np.ndarray | None = None
+    array: np.ndarray, target: int, compress: str, filtered: Filtered | None = None
 ) -> StoredView:
     """The buffer view of accessor data ``array`` (little-endian, (n,) or (n, k)) for
     ``target``, packed with meshopt's codec where ``compress`` is ``meshopt`` and that makes
-    it smaller by more than :data:`PACKING_COST` (a vertex attribute's exponential filter
-    ``words`` packed in its place, where given)."""
+    it smaller by more than :data:`PACKING_COST` (a vertex attribute's ``filtered`` data
+    packed in its place, where given)."""
     rows, stride, size = _rows(array, target)
     plain = StoredView(rows.tobytes(), len(rows) * stride, stride if stride != size else None)
     if compress != MESHOPT:
@@ -154,16 +187,16 @@ def stored_view(
     from .meshopt import encode_triangles, encode_vertices  # compiled: numba loaded here
 
     if target == ARRAY_BUFFER:
-        filtered = rows if words is None else _rows(words, target)[0]
-        data, mode = encode_vertices(filtered), "ATTRIBUTES"
+        source = rows if filtered is None else _rows(filtered[0], target)[0]
+        data, mode = encode_vertices(source), "ATTRIBUTES"
     else:
         data, mode = encode_triangles(rows.view(f"<u{stride}").ravel()), "TRIANGLES"
     if len(data) + PACKING_COST >= plain.length:
         return plain
     packed: dict[str, Any] = {"byteLength": len(data), "byteStride": stride,
                               "count": len(rows), "mode": mode}  # fmt: skip
-    if words is not None:
-        packed["filter"] = "EXPONENTIAL"
+    if filtered is not None:
+        packed["filter"] = filtered[1]
     vertex_stride = stride if target == ARRAY_BUFFER else None
     return StoredView(data, plain.length, vertex_stride, packed)
 
@@ -171,12 +204,12 @@ def stored_view(
 @dataclass(frozen=True)
 class StoredPositions:
     """Float32 positions as ``compress`` stores them: the accessor's ``values`` (16-bit steps
-    where quantized, else float32: those a reader decodes), the exponential filter's
-    ``words`` (meshopt), the steps' node transform (``quantizer``) and the largest
+    where quantized, else float32: those a reader decodes), the data under the exponential
+    filter (``filtered``, meshopt), the steps' node transform (``quantizer``) and the largest
     difference of a coordinate from its float32 position (``error``, metres)."""
 
     values: np.ndarray
-    words: np.ndarray | None = None
+    filtered: Filtered | None = None
     quantizer: Quantizer | None = None
     error: float = 0.0
 
@@ -199,7 +232,8 @@ def stored_positions(
 
         words = exponential(positions, tolerance)
         values = from_exponential(words)
-        return StoredPositions(values, words, None, _largest_gap(values, positions))
+        error = _largest_gap(values, positions)
+        return StoredPositions(values, (words, "EXPONENTIAL"), None, error)
     return StoredPositions(positions)
 
 

@@ -15,7 +15,15 @@ from typing import Any
 import numpy as np
 
 from ..findings import Findings
-from .binary import COMPONENT_DTYPES, COMPONENT_SIZES, TRIANGLES, WIDTHS
+from .binary import (
+    COMPONENT_DTYPES,
+    COMPONENT_SIZES,
+    MESHOPT,
+    TRIANGLES,
+    WIDTHS,
+    GlbError,
+    unpacked_view,
+)
 from .lod import MSFT_LOD
 from .rules import (
     READ_BUDGET,
@@ -24,6 +32,10 @@ from .rules import (
     lod_extras_findings,
 )
 from .stream import LazyArray
+
+_MODES = ("ATTRIBUTES", "TRIANGLES", "INDICES")
+_FILTERS = ("NONE", "OCTAHEDRAL", "QUATERNION", "EXPONENTIAL")
+"""The modes and filters of ``EXT_meshopt_compression``."""
 
 
 def _is_uint(value: Any) -> bool:
@@ -130,6 +142,32 @@ class ElementChecks:
                 f"{where} ends at byte {offset + length}, past buffer {view['buffer']} "
                 f"({buffer_length} bytes)",
             )
+        packed = (view.get("extensions") or {}).get(MESHOPT)
+        return packed is None or self.check_packed(where, view, packed)
+
+    def check_packed(self, where: str, view: dict[str, Any], packed: Any) -> bool:
+        """Whether a view's ``EXT_meshopt_compression`` object is usable: its fields of their
+        types, its data inside buffer 0, its count × byteStride the view's byteLength."""
+        fields = ("byteOffset", "byteLength", "byteStride", "count")
+        if not (
+            isinstance(packed, dict)
+            and packed.get("buffer", 0) == 0
+            and all(_is_uint(packed.get(k, 0)) for k in fields)
+            and packed.get("mode") in _MODES
+            and packed.get("filter", "NONE") in _FILTERS
+        ):
+            self.findings.error("MESHOPT", f"{where} has an {MESHOPT} object that is not usable")
+            return False
+        if packed["count"] * packed["byteStride"] != view["byteLength"]:
+            self.findings.error(
+                "MESHOPT",
+                f"{where} holds {view['byteLength']} bytes but its {MESHOPT} data "
+                f"{packed['count']} × {packed['byteStride']}",
+            )
+            return False
+        if packed.get("byteOffset", 0) + packed["byteLength"] > len(self.blob):
+            self.findings.error("MESHOPT", f"{where} has {MESHOPT} data past buffer 0")
+            return False
         return True
 
     def check_accessor(self, index: int, accessor: dict[str, Any]) -> bool:
@@ -187,6 +225,15 @@ class ElementChecks:
         width = WIDTHS[accessor["type"]]
         start = view.get("byteOffset", 0) + accessor.get("byteOffset", 0)
         stride = view.get("byteStride", dtype.itemsize * width)
+        source = self.blob
+        packed = (view.get("extensions") or {}).get(MESHOPT)
+        if packed is not None:
+            source = self._unpacked(index, packed)
+            if source is None:
+                return None
+            start = accessor.get("byteOffset", 0)
+        elif view.get("buffer", 0) != 0:
+            return None
         left = self.read_budget
         self.read_budget -= stride * accessor["count"]
         if self.read_budget < 0:
@@ -198,8 +245,21 @@ class ElementChecks:
                 )
             return None
         return np.ndarray(
-            (accessor["count"], width), dtype, self.blob, start, (stride, dtype.itemsize)
+            (accessor["count"], width), dtype, source, start, (stride, dtype.itemsize)
         )
+
+    def _unpacked(self, index: int, packed: dict[str, Any]) -> bytes | None:
+        """The decoded bytes of accessor ``index``'s packed view; ``None`` (an error, or a
+        warning for a filter lodconvert does not decode) where they cannot be had."""
+        try:
+            return unpacked_view(self.blob, packed)
+        except GlbError as exc:
+            if packed.get("filter", "NONE") != "QUATERNION":
+                self.findings.error("MESHOPT", f"accessor {index}: {exc}")
+            else:
+                self.findings.warning("MESHOPT_UNCHECKED", f"accessor {index}: {exc}")
+            self.bad_accessors.add(index)
+            return None
 
     def check_bounds(self, index: int, where: str) -> None:
         """Declared ``min``/``max`` equal the data's (POSITION must declare them)."""

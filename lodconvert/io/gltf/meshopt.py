@@ -629,3 +629,49 @@ def from_exponential(words: np.ndarray) -> np.ndarray:
     mantissas = (words.astype(np.int64) << 40) >> 40
     exponents = words.view(np.int32).astype(np.int64) >> 24
     return (mantissas * np.exp2(exponents.astype(np.float64))).astype(np.float32)
+
+
+def _snorm(values: np.ndarray, bits: int) -> np.ndarray:
+    """float32 ``values`` clamped to [-1, 1] as signed integers of ``bits`` (rounded half
+    away from zero), as meshoptimizer quantizes them."""
+    scale = np.float32((1 << (bits - 1)) - 1)
+    clamped = np.clip(values.astype(np.float32), np.float32(-1), np.float32(1))
+    half = np.where(clamped >= 0, np.float32(0.5), np.float32(-0.5))
+    return np.trunc(clamped * scale + half).astype(np.int64)
+
+
+def octahedral(normals: np.ndarray) -> np.ndarray:
+    """Unit ``normals`` (n, 3) under meshopt's octahedral filter with 8 bits: (n, 4) signed
+    bytes (u, v, 127, 0)."""
+    n = np.asarray(normals, dtype=np.float32)
+    x, y, z = n[:, 0], n[:, 1], n[:, 2]
+    length = np.abs(x) + np.abs(y) + np.abs(z)
+    inverse = np.where(length == 0, np.float32(0), np.float32(1) / np.where(length == 0, 1, length))
+    x, y = x * inverse, y * inverse
+    sign_x = np.where(x >= 0, np.float32(1), np.float32(-1))
+    sign_y = np.where(y >= 0, np.float32(1), np.float32(-1))
+    u = np.where(z >= 0, x, (np.float32(1) - np.abs(y)) * sign_x)
+    v = np.where(z >= 0, y, (np.float32(1) - np.abs(x)) * sign_y)
+    out = np.zeros((len(n), 4), dtype=np.int8)
+    out[:, 0], out[:, 1] = _snorm(u, 8), _snorm(v, 8)
+    out[:, 2] = 127
+    return out
+
+
+def from_octahedral(data: np.ndarray) -> np.ndarray:
+    """The (n, 4) signed bytes or shorts of octahedral filter ``data`` decoded as meshopt's
+    decoder does: x, y, z normalized to the type's largest value (the fourth kept)."""
+    data = np.asarray(data)
+    largest = np.float32(np.iinfo(data.dtype).max)
+    x, y = data[:, 0].astype(np.float32), data[:, 1].astype(np.float32)
+    z = data[:, 2].astype(np.float32) - np.abs(x) - np.abs(y)
+    t = np.minimum(z, np.float32(0))
+    x = x + np.where(x >= 0, t, -t)
+    y = y + np.where(y >= 0, t, -t)
+    length = np.sqrt(x * x + y * y + z * z)
+    s = largest / np.where(length == 0, np.float32(1), length)
+    out = data.copy()
+    for k, value in enumerate((x, y, z)):
+        half = np.where(value >= 0, np.float32(0.5), np.float32(-0.5))
+        out[:, k] = np.trunc(value * s + half).astype(data.dtype)
+    return out

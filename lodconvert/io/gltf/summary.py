@@ -156,6 +156,8 @@ class _Views(_Facts):
     columns = ("buffer", "offset", "length", "stride")
 
     def take_all(self, first: int, items: list[dict[str, Any]]) -> bool:
+        if any("extensions" in item for item in items):
+            return False  # meshopt-packed: the checks element by element decode them
         if any("byteStride" in item for item in items):
             return super().take_all(first, items)  # not all as lodconvert writes them
         buffer = [item.get("buffer") for item in items]
@@ -172,6 +174,8 @@ class _Views(_Facts):
         return True
 
     def take(self, index: int, item: dict[str, Any]) -> bool:
+        if "extensions" in item:
+            return False
         buffer, offset = item.get("buffer"), item.get("byteOffset", 0)
         length, stride = item.get("byteLength"), item.get("byteStride", 0)
         if "byteStride" in item and not (type(stride) is int and 4 <= stride <= 252):

@@ -34,6 +34,7 @@ from ..gltf.compression import (
     NONE,
     POSITION_TOLERANCE,
     WEBP,
+    Filtered,
     Quantizer,
     StoredView,
     fallback_buffer,
@@ -53,10 +54,11 @@ STRUCTURAL_METADATA = "EXT_structural_metadata"
 class _Builder:
     """A GLB's binary buffer, buffer views and accessors; with ``compress`` (a
     :data:`~..gltf.compression.COMPRESSIONS`) other than ``none``, its vertex attributes and
-    indices compressed so; its textures with a WebP copy where ``webp``."""
+    indices compressed so (meshopt positions within ``tolerance`` metres, or float32's step
+    where that is finer); its textures with a WebP copy where ``webp``."""
 
-    def __init__(self, compress: str = NONE, webp: bool = False) -> None:
-        self.compress, self.webp = compress, webp
+    def __init__(self, compress: str = NONE, webp: bool = False, tolerance: float = 0.0) -> None:
+        self.compress, self.webp, self.tolerance = compress, webp, tolerance
         self.blob = bytearray()
         self.views: list[dict[str, Any]] = []
         self.accessors: list[dict[str, Any]] = []
@@ -110,12 +112,12 @@ class _Builder:
         target: int = ARRAY_BUFFER,
         normalized: bool = False,
         bounds: bool = False,
-        words: np.ndarray | None = None,
+        filtered: Filtered | None = None,
     ) -> int:
         """An accessor of ``array`` ((n,) or (n, k)), with its ``bounds`` (positions), its
         view as the builder compresses (:func:`~..gltf.compression.stored_view`)."""
         array = np.ascontiguousarray(array)
-        view = self._add(stored_view(array, target, self.compress, words), target)
+        view = self._add(stored_view(array, target, self.compress, filtered), target)
         width = 1 if array.ndim == 1 else array.shape[1]
         accessor: dict[str, Any] = {
             "bufferView": view,
@@ -135,17 +137,18 @@ class _Builder:
         """The ``POSITION`` accessor of float32 ``positions`` as the builder stores them
         (:func:`~..gltf.compression.stored_positions`; the node transform of quantized ones
         returned), their error kept in :attr:`position_error`."""
-        stored = stored_positions(positions, self.compress, tolerance=POSITION_TOLERANCE)
+        stored = stored_positions(positions, self.compress, tolerance=self.tolerance)
         self.quantized |= stored.quantizer is not None
         self.position_error = stored.error
-        return self.accessor(stored.values, bounds=True, words=stored.words), stored.quantizer
+        accessor = self.accessor(stored.values, bounds=True, filtered=stored.filtered)
+        return accessor, stored.quantizer
 
     def attribute(self, name: str, values: np.ndarray) -> int:
         """The ``NORMAL`` or ``TEXCOORD_0`` accessor of float32 ``values`` as the builder
         stores them (:func:`~..gltf.compression.stored_attribute`)."""
-        stored, quantized = stored_attribute(name, values, self.compress)
-        self.quantized |= quantized
-        return self.accessor(stored, normalized=quantized)
+        stored = stored_attribute(name, values, self.compress)
+        self.quantized |= stored.normalized
+        return self.accessor(stored.values, normalized=stored.normalized, filtered=stored.filtered)
 
     def feature_ids(self, ids: np.ndarray, count: int) -> int:
         """The ``_FEATURE_ID_0`` accessor of ``ids`` (below ``count``): unsigned shorts where
@@ -242,19 +245,20 @@ def mesh_glb(
     atlas_size: int = ATLAS_SIZE,
     compress: str = NONE,
     webp: bool = False,
+    tolerance: float = POSITION_TOLERANCE[0],
 ) -> bytes:
     """A GLB of a triangle primitive: ``vertices`` (n, 3) glTF coordinates (y-up, about the
     tile's origin), ``faces`` (m, 3), ``colors`` (n, 4) sRGB bytes, ``feature_ids`` (n,) into
     ``features`` (``None``: content without features, a merged far level); the faces of
     textured vertices (``textures``) are drawn by a primitive per atlas page (at most
     ``atlas_size`` texels a side) instead, on the same vertices (their colours multiply the
-    texture: white shows it as it is); its geometry compressed as ``compress`` says, its pages
-    with a WebP copy where ``webp``."""
+    texture: white shows it as it is); its geometry compressed as ``compress`` says (meshopt
+    positions within ``tolerance`` metres), its pages with a WebP copy where ``webp``."""
     if compress != NONE:
         vertices, faces, colors, feature_ids, textures = _in_fetch_order(
             vertices, faces, colors, feature_ids, textures
         )
-    builder = _Builder(compress, webp)
+    builder = _Builder(compress, webp, tolerance)
     positions = float32_positions(vertices)
     normals = vertex_normals(Surface(positions.astype(np.float64), faces))
     index_type = np.uint16 if len(vertices) < 65536 else np.uint32
@@ -336,11 +340,16 @@ def _pages(textures: TileTextures, size: int) -> tuple[np.ndarray, np.ndarray, A
 
 
 def points_glb(
-    positions: np.ndarray, colors: np.ndarray, generator: str, compress: str = NONE
+    positions: np.ndarray,
+    colors: np.ndarray,
+    generator: str,
+    compress: str = NONE,
+    tolerance: float = POSITION_TOLERANCE[0],
 ) -> bytes:
     """A GLB of one ``POINTS`` primitive: ``positions`` (n, 3) glTF coordinates, ``colors``
-    (n, 4) sRGB bytes; compressed as ``compress`` says."""
-    builder = _Builder(compress)
+    (n, 4) sRGB bytes; compressed as ``compress`` says (meshopt positions within
+    ``tolerance`` metres)."""
+    builder = _Builder(compress, tolerance=tolerance)
     position, quantized = builder.positions(float32_positions(positions))
     attributes = {
         "POSITION": position,

@@ -25,7 +25,7 @@ import numpy as np
 from ...errors import LodConvertError
 from ...sinks import RESUME, DirectorySink
 from ...textures import ATLAS_SIZE
-from ..gltf.compression import MESHOPT
+from ..gltf.compression import MESHOPT, POSITION_TOLERANCE
 from .content import TileTextures, mesh_glb, points_glb
 from .metadata import Feature
 from .placement import Placement, world_to_frame
@@ -83,8 +83,9 @@ class TileTask:
     ``feature_ids`` into ``features``, or none for a merged far level) or, without ``faces``,
     points; ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes; the textures of
     its textured vertices (``textures``), packed into atlas pages of ``atlas_size``; its
-    geometry compressed as ``compress`` (:data:`~..gltf.compression.COMPRESSIONS`) says, its
-    atlas pages with a WebP copy where ``webp``."""
+    geometry compressed as ``compress`` (:data:`~..gltf.compression.COMPRESSIONS`) says
+    (meshopt positions within ``tolerance`` metres), its atlas pages with a WebP copy where
+    ``webp``."""
 
     name: str
     where: Where
@@ -98,12 +99,13 @@ class TileTask:
     atlas_size: int = ATLAS_SIZE
     compress: str = MESHOPT
     webp: bool = False
+    tolerance: float = POSITION_TOLERANCE[0]
 
     def key(self) -> str:
         """The hash of everything that makes this tile's file, frame and box."""
         digest = hashlib.sha256()
         head = [self.name, self.where.key, self.generator, self.features, self.compress]
-        head += [self.webp]
+        head += [self.webp, self.tolerance]
         textures = self.textures
         if textures is not None:
             head += [self.atlas_size, textures.photographic]
@@ -162,10 +164,10 @@ class TileTask:
     def _glb(self, gltf: np.ndarray) -> bytes:
         """The GLB of the tile's content at glTF coordinates ``gltf``."""
         if self.faces is None:
-            return points_glb(gltf, self.colors, self.generator, self.compress)
+            return points_glb(gltf, self.colors, self.generator, self.compress, self.tolerance)
         return mesh_glb(
             gltf, self.faces, self.colors, self.feature_ids, self.features, self.generator,
-            self.textures, self.atlas_size, self.compress, self.webp,
+            self.textures, self.atlas_size, self.compress, self.webp, self.tolerance,
         )  # fmt: skip
 
     def failed(self, reason: str) -> TileResult:

@@ -25,7 +25,12 @@ from ...errors import LodConvertError, UsageError
 from ...model import CellChain, LodChain, Mesh, Surface
 from ...textures import ATLAS_SIZE, check_atlas_size
 from .. import OutputInfo, Pieces
-from ..gltf.compression import MESHOPT, check_compression, check_texture_format
+from ..gltf.compression import (
+    MESHOPT,
+    check_compression,
+    check_texture_format,
+    position_tolerance,
+)
 from .metadata import Feature
 from .placement import Placement, world_to_frame
 
@@ -176,6 +181,7 @@ class TilesetWriter:
         task = TileTask(
             f"{name}.glb", self.where, vertices, colors, faces, feature_ids, features,
             self.info.generator, textures, self.atlas_size, self.compress, self.webp,
+            position_tolerance(error),
         )  # fmt: skip
         tile = Tile(None, None, error, task.name)
         self._queued.append((tile, task))
