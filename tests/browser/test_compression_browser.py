@@ -80,10 +80,13 @@ def test_babylon_draws_a_compressed_glb_as_the_plain_one(
     assert not _errors(packed), message
 
 
+@pytest.mark.parametrize("how", ["meshopt", "quantize"])
 def test_the_viewer_page_switches_a_compressed_glbs_levels(
-    knots: dict[str, Chain], drive: Drive
+    knots: dict[str, Chain], drive: Drive, how: str
 ) -> None:
-    chain = knots["meshopt"]
+    """Each level where it belongs (quantized positions: each level node scaled and moved
+    back)."""
+    chain = knots[how]
     _check_viewer_page_stops(chain, drive("viewer", page=chain.page, stops=chain.stops()))
 
 
