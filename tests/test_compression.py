@@ -6,8 +6,10 @@ the error they state, and a wrong ``--compress`` refused in one line."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -394,3 +396,46 @@ def test_a_packed_view_that_claims_more_than_it_may_is_refused_in_one_line(tmp_p
     assert_one_line_error(result, 1, "claims.glb", *words)
     assert not (tmp_path / "never.x3d").exists()
     assert run("validate", source).returncode != 0 or claim == "limit"
+
+
+_FUZZ = """
+import numpy as np, trimesh
+from lodconvert.io.gltf.meshopt import (MeshoptError, decode_indices, decode_vertices,
+    encode_sequence, encode_triangles, encode_vertices)
+rng = np.random.default_rng(11)
+rows = np.cumsum(rng.integers(-3, 4, size=(700, 3)), axis=0).astype(np.float32)
+faces = trimesh.creation.icosphere(2).faces.astype(np.uint32).ravel()
+cases = [
+    (encode_vertices(rows.view(np.uint8).reshape(700, 12)), lambda d: decode_vertices(d, 700, 12)),
+    (encode_triangles(faces), lambda d: decode_indices(d, len(faces), "TRIANGLES")),
+    (encode_sequence(faces), lambda d: decode_indices(d, len(faces), "INDICES")),
+]
+decoded = refused = 0
+for good, decode in cases:
+    for _ in range(700):
+        data = bytearray(good)
+        for _ in range(int(rng.integers(1, 9))):
+            data[int(rng.integers(0, len(data)))] = int(rng.integers(0, 256))
+        cut = int(rng.integers(0, len(data) + 1)) if rng.random() < 0.3 else len(data)
+        try:
+            decode(bytes(data[:cut]))
+            decoded += 1
+        except MeshoptError:
+            refused += 1
+print(decoded, refused)
+"""
+
+
+def test_damaged_meshopt_data_never_reads_outside_its_bytes(tmp_path):
+    """2,100 damaged encodings (bytes changed, cut short) decoded with numba's bounds checks
+    on: each decodes or is refused, none reads or writes outside its arrays (an IndexError
+    there), whatever the damage."""
+    script = tmp_path / "fuzz.py"
+    script.write_text(_FUZZ)
+    env = {**os.environ, "NUMBA_BOUNDSCHECK": "1", "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    done = subprocess.run(
+        [sys.executable, str(script)], capture_output=True, text=True, env=env, check=False
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    decoded, refused = map(int, done.stdout.split())
+    assert decoded + refused == 2100 and refused > 0
