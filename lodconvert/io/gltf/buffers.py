@@ -26,7 +26,6 @@ from .binary import (
     VECTOR_TYPES,
 )
 from .compression import (
-    MESHOPT,
     NONE,
     QUANTIZE,
     Filtered,
@@ -169,12 +168,11 @@ class PrimitiveData:
 class Stored:
     """How a level's positions are stored: the node transform of quantized ones (the same
     for all its primitives), the largest difference of a coordinate from its float32
-    position (metres), whether an attribute is quantized and whether views are packed."""
+    position (metres) and whether an attribute is quantized."""
 
     node: dict[str, Any]
     error: float
     quantized: bool
-    packed: bool
 
 
 class _Storing:
@@ -211,7 +209,7 @@ class _Storing:
     def stored(self) -> Stored:
         """How the level's positions were stored."""
         node = self.steps_of.node() if self.steps_of is not None else {}
-        return Stored(node, self.error, self.quantized, self.compress == MESHOPT)
+        return Stored(node, self.error, self.quantized)
 
 
 def _mesh_data(
