@@ -29,6 +29,7 @@ from lodconvert.bakery import iter_chains
 from lodconvert.chain import ChainOptions
 from lodconvert.context import RunContext
 from lodconvert.errors import LodConvertError
+from lodconvert.io.citygml.ranges import RangeResult
 from lodconvert.io.geometry_checks import tally_of
 from lodconvert.limits import DEFAULT_LIMITS
 from lodconvert.model import Scene
@@ -39,6 +40,7 @@ from .fuzz import hostile_citygml
 from .test_cli import assert_one_line_error
 from .test_parallel_reading import (
     _read,
+    _read_of,
     _town,
     one_member_a_task,  # noqa: F401  (a fixture)
     ten_lines,
@@ -155,14 +157,17 @@ def _cluster(address: str) -> Callable[[], Executor]:
 def test_a_city_read_by_the_cluster_is_the_city_read_in_one_process(
     name: str, address: str, tmp_path: Path
 ) -> None:
-    """CityGML members, CityJSONSeq lines, CityJSON objects, each a task: the same nodes, ids
-    and skipped objects; the town's implicit geometry is read in the main process."""
+    """CityGML members (from ranges of the file: the workers open it), CityJSONSeq lines,
+    CityJSON objects, each a task: the same nodes, ids and skipped objects; the town's
+    implicit geometry is read in the main process."""
     path = CITIES[name](tmp_path)
     one, one_facts, _, _ = _read(path, spread=False)
     two, two_facts, results, told = _read(path, spread=True, workers=_cluster(address))
     assert two_facts == one_facts
     assert tally_of(two).skipped == tally_of(one).skipped != []
-    assert sum(sum(node is not None for node in result.nodes) for result in results) >= 8
+    read = [_read_of(result) for result in results]
+    assert sum(sum(node is not None for node in r.nodes) for r in read) >= 8
+    assert all(isinstance(r, RangeResult) for r in results) == name.endswith(".gml")
     implicit = [f"{path}: implicit geometry is read in the main process"]
     assert told == (implicit if name.endswith(".gml") else [])
 

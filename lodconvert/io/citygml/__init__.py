@@ -29,6 +29,7 @@ from .appearance import Appearances, document_appearances
 from .document import Document
 from .names import CITYGML_NAMESPACE
 from .parallel import SpreadReading
+from .ranges import RangeReading, by_ranges
 
 if TYPE_CHECKING:
     from ...context import RunContext
@@ -82,7 +83,7 @@ def read_citygml(
 
     reading = None
     if context is not None:
-        reading = SpreadReading(make)
+        reading = (RangeReading if by_ranges(path) else SpreadReading)(make)
         reading.use(context.executor.results, context.progress, context.executor.task_seconds)
     document = reading.document if reading is not None else make()
     tally = document.tally

@@ -9,6 +9,12 @@ processing instruction or another ``<name``); otherwise that child is scanned ta
 comments, CDATA and processing instructions passed whole. A ``<`` cannot stand in an
 attribute value or in text, so nothing else can fool it; a document that is not well-formed
 XML ends the scan (:class:`NotSplit`), and its reader says what is wrong with it.
+
+A scan may also start inside the root, at a child's start tag (its offset in the document
+given), and stop before the first member that starts at or after a given offset: a byte range
+of the document's members (:mod:`.ranges`). :func:`member_after` finds where a member may start
+from any offset, by its start tag alone (which a comment or CDATA could hold: :mod:`.ranges`
+checks each such guess against the scan before it).
 """
 
 from __future__ import annotations
@@ -16,6 +22,8 @@ from __future__ import annotations
 import re
 from collections.abc import Iterator
 from typing import Protocol
+
+from .names import MEMBERS
 
 CHUNK = 1 << 20
 """Bytes read from the document at a time."""
@@ -28,6 +36,12 @@ _MARKUP = re.compile(
 )
 """One piece of markup: a comment, CDATA, a processing instruction, a DOCTYPE, an end tag or a
 start tag (``empty``: ``/`` for an element without content)."""
+_MEMBER_TAG = re.compile(
+    rb"<(?:[A-Za-z_][\w.-]*:)?(?:" + b"|".join(n.encode() for n in sorted(MEMBERS)) + rb")[\s/>]"
+)
+"""The start tag of a member, whatever its prefix."""
+_TAG_BYTES = 64
+"""Bytes of a member's start tag up to its name's end (at most; for a search across chunks)."""
 
 
 class Readable(Protocol):
@@ -40,12 +54,27 @@ class NotSplit(Exception):
 
 class Members:
     """A document's prolog, the root's end tag and its children, scanned from ``stream`` as
-    they are asked for (:meth:`__iter__`), a :data:`CHUNK` at a time."""
+    they are asked for (:meth:`__iter__`), a :data:`CHUNK` at a time. With ``offset``,
+    ``stream`` starts at that offset of the document, at a child of its root (no prolog);
+    with ``stop``, the scan ends before the first member starting at or after that offset."""
 
-    def __init__(self, stream: Readable) -> None:
+    def __init__(self, stream: Readable, offset: int | None = None, stop: int | None = None):
         self.stream = stream
         self.buffer = bytearray()
         self.position = self.kept = 0
+        self.base = offset or 0
+        """The document's offset of the buffer's first byte."""
+        self.stop = stop
+        self.start = -1
+        """The document's offset of the child last given."""
+        self.end = -1
+        """Where the scan ended: the offset of the root's end tag, or of the member at ``stop``."""
+        self.closed = False
+        """Whether the scan reached the root's end tag."""
+        if offset is not None:
+            self.prolog = self.root_end = b""
+            self.empty = False
+            return
         piece = self._markup(start_only=True)
         self.prolog = bytes(self.buffer[: piece.end()])
         self.root_end = b"</" + piece["start"] + b">"
@@ -60,16 +89,19 @@ class Members:
             self.kept = self.position  # what came before is done with
             piece = self._markup()
             if piece["end"] is not None:
+                self.end, self.closed = self.base + piece.start(), True
                 return
             if piece["start"] is None:
                 continue
             name, start = piece["start"], piece.start()
+            local = name.rpartition(b":")[2].decode("ascii", "replace")
+            if self.stop is not None and self.base + start >= self.stop and local in MEMBERS:
+                self.end = self.base + start
+                return
             if not piece["empty"]:
                 start, self.position = self._end_of(name, start, piece.end())
-            yield (
-                name.rpartition(b":")[2].decode("ascii", "replace"),
-                bytes(self.buffer[start : self.position]),
-            )
+            self.start = self.base + start
+            yield local, bytes(self.buffer[start : self.position])
 
     def _more(self) -> int:
         """Read more (dropping what is done with, before :attr:`kept`): a chunk, or as much
@@ -83,6 +115,7 @@ class Members:
             raise NotSplit("the document ends inside its root element")
         self.buffer += chunk  # in place: a long member is read in time linear in its bytes
         self.position -= dropped
+        self.base += dropped
         return dropped
 
     def _markup(self, start_only: bool = False) -> re.Match[bytes]:
@@ -134,3 +167,19 @@ class Members:
                 depth += 1
             if depth == 0:
                 return start, position
+
+
+def member_after(stream: Readable, offset: int) -> int | None:
+    """The offset of the first member start tag at or after ``offset`` (``stream`` starting
+    there), by its bytes alone (it may stand in a comment or CDATA); None where none follows."""
+    buffer = b""
+    while chunk := stream.read(CHUNK):
+        buffer += chunk
+        found = _MEMBER_TAG.search(buffer)
+        if found is not None:
+            return offset + found.start()
+        kept = buffer[-_TAG_BYTES:]
+        offset += len(buffer) - len(kept)
+        buffer = kept
+    found = _MEMBER_TAG.search(buffer)
+    return offset + found.start() if found is not None else None

@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from lxml import etree
 
@@ -37,9 +37,9 @@ from .members import Members, NotSplit
 from .names import MEMBERS
 from .source import Stream, first_look, open_document
 
-_READ = MEMBERS | {"boundedBy"}
+READ = MEMBERS | {"boundedBy"}
 """The root's children the reader reads (others are not shipped)."""
-_IMPLICIT = b"ImplicitGeometry"
+IMPLICIT = b"ImplicitGeometry"
 
 
 class _Taken(set[str]):
@@ -93,25 +93,52 @@ class ReadTask:
         """Read the run (``backend`` and ``progress`` are not used)."""
         if self.in_main:
             return ReadResult()
-        start = time.process_time()
-        tally = InputTally(self.source, self.limits)
-        document = Document(Path(self.source), self.limits, self.types, tally, self.palette)
-        document.crs, document.taken = self.crs, _Taken()
-        try:
-            read = document.read(io.BytesIO(self.prolog + self.members + self.root_end))
-            nodes = tuple(PackedNode.of(n) for n in with_geometry(read))
-        except InputError as exc:
-            return ReadResult(error=str(exc))
-        taken = document.taken
-        assert isinstance(taken, _Taken)
-        return ReadResult(
-            nodes, frozenset(taken), taken.collided, tally, document.stats,
-            seconds=time.process_time() - start,
-        )  # fmt: skip
+        return read_members(self, self.members)[0]
 
     def failed(self, reason: str) -> ReadResult:
         """The result of a run no worker could read, for ``reason``."""
         return ReadResult(died=reason)
+
+
+class Reading(Protocol):
+    """Where a worker's members come from and how to read them: a :class:`ReadTask`, or a
+    range of the file (:class:`~.ranges.RangeTask`)."""
+
+    @property
+    def prolog(self) -> bytes: ...
+    @property
+    def root_end(self) -> bytes: ...
+    @property
+    def source(self) -> str: ...
+    @property
+    def limits(self) -> Limits: ...
+    @property
+    def types(self) -> frozenset[str] | None: ...
+    @property
+    def palette(self) -> Palette: ...
+    @property
+    def crs(self) -> Crs | None: ...
+
+
+def read_members(task: Reading, members: bytes) -> tuple[ReadResult, Crs | None]:
+    """What reading ``members`` (a run of a document's members, as bytes) inside the document's
+    root gives a worker, and the CRS the document has after them."""
+    start = time.process_time()
+    tally = InputTally(task.source, task.limits)
+    document = Document(Path(task.source), task.limits, task.types, tally, task.palette)
+    document.crs, document.taken = task.crs, _Taken()
+    try:
+        read = document.read(io.BytesIO(task.prolog + members + task.root_end))
+        nodes = tuple(PackedNode.of(n) for n in with_geometry(read))
+    except InputError as exc:
+        return ReadResult(error=str(exc)), None
+    taken = document.taken
+    assert isinstance(taken, _Taken)
+    result = ReadResult(
+        nodes, frozenset(taken), taken.collided, tally, document.stats,
+        seconds=time.process_time() - start,
+    )  # fmt: skip
+    return result, document.crs
 
 
 class SpreadReading(Spread[list[bytes], ReadTask]):
@@ -132,7 +159,7 @@ class SpreadReading(Spread[list[bytes], ReadTask]):
         stream = open_document(document.path, document.limits)
         try:
             self.members = self._members(stream)
-            read = (member for name, member in self.members if name in _READ)
+            read = (member for name, member in self.members if name in READ)
             yield from self.spread(runs(read, len, self.sizer))
         except NotSplit:
             raise self.one_process_error() from None
@@ -173,7 +200,7 @@ class SpreadReading(Spread[list[bytes], ReadTask]):
         return ReadTask(
             members.prolog, joined, members.root_end, document.source, document.limits,
             document.types, document.palette, document.crs,
-            in_main=_IMPLICIT in joined or document.appearances is not None,
+            in_main=IMPLICIT in joined or document.appearances is not None,
         )  # fmt: skip
 
     def size(self, run: list[bytes]) -> int:
