@@ -1,8 +1,8 @@
 """What the readers that read a city in worker processes share: how many bytes of input a task
 holds (sized for the executor's ``task_seconds`` of reading, as measured so far) and how what a
-worker counted is added to the file's tally. The tasks themselves hold bytes only (no path, so
-that a worker needs no shared file system): :mod:`.citygml.parallel`,
-:mod:`.cityjson.parallel`."""
+worker counted is added to the file's tally. The tasks hold bytes (no path, so that a worker
+needs no shared file system): :mod:`.citygml.parallel`, :mod:`.cityjson.parallel`; a plain
+CityGML file is read from byte ranges of it instead (:mod:`.citygml.ranges`)."""
 
 from __future__ import annotations
 

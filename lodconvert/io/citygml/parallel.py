@@ -1,5 +1,7 @@
-"""A CityGML document read by worker processes: the main process cuts it into its root's
-children (:mod:`.members`, inflated and held to the text limit there), reads the first of them
+"""A CityGML document read by worker processes from its members sent as bytes (a ``.gz`` or
+``.zip`` one, or a plain one whose file workers cannot open; otherwise a plain one is read
+from byte ranges, :mod:`.ranges`): the main process cuts it into its root's children
+(:mod:`.members`, inflated and held to the text limit there), reads the first of them
 itself until the CRS is settled, then ships runs of members as bytes with the root's start tag
 (:class:`ReadTask`: no path, so that a worker needs no shared file system); each worker reads
 its run inside that root with the reader of one process (:class:`~.document.Document`) and
