@@ -2,9 +2,10 @@
 submits each task to the scheduler, with a bounded window of tasks in flight, and gives the
 results back in submission order, as :class:`~.tasks.PoolExecutor` does. A task travels as
 data, pickled here, so workers need no shared file system (a range of a city file is read
-by the worker where it can open the file: :mod:`.io.citygml.ranges`); a task whose workers died past the
-scheduler's retries fails as the task says; progress comes back with each result; no wait on
-the scheduler is unbounded (:data:`REQUEST_SECONDS`). What runs where: ``docs/cluster.md``.
+by the worker where it can open the file: :mod:`.io.citygml.ranges`); a task whose workers
+died past the scheduler's retries fails as the task says; progress comes back with each
+result; no wait on the scheduler is unbounded (:data:`REQUEST_SECONDS`). What runs where:
+``docs/cluster.md``.
 
 Needs the ``dask`` extra (``pip install '.[dask]'`` in a clone); :mod:`.tasks` does not.
 """

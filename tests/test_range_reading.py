@@ -18,12 +18,21 @@ from lodconvert.bake import get_backend
 from lodconvert.context import RunContext
 from lodconvert.io import read_scene, spread
 from lodconvert.io.citygml import members as members_module
+from lodconvert.io.citygml import ranges
+from lodconvert.io.citygml.appearance import MARKS
 from lodconvert.io.citygml.members import member_after
 from lodconvert.io.citygml.parallel import SpreadReading
-from lodconvert.io.citygml.ranges import RangeResult, RangeTask
+from lodconvert.io.citygml.ranges import (
+    MarksResult,
+    MarksTask,
+    RangeResult,
+    RangeTask,
+    marks_by_workers,
+)
 from lodconvert.limits import DEFAULT_LIMITS
 from lodconvert.semantics import DEFAULT_PALETTE
 
+from .conftest import SHARED, shared_data
 from .test_citygml import box, building
 from .test_parallel_reading import _city, _parked_facts, _read, _town, _tricky
 
@@ -99,7 +108,8 @@ def test_ranges_of_any_size_read_the_city_one_process_reads(
     two, told = _by(executor, path)
     assert two == one and len(one) == 11
     assert told == []
-    assert all(isinstance(result, RangeResult) for result in executor.results_kept)
+    ranged = [r for r in executor.results_kept if not isinstance(r, MarksResult)]
+    assert all(isinstance(result, RangeResult) for result in ranged)
     text = path.read_bytes()
     in_comments = {
         at
@@ -108,7 +118,7 @@ def test_ranges_of_any_size_read_the_city_one_process_reads(
         if text.startswith(tag, at) and text.rfind(b"<!--", 0, at) > text.rfind(b"-->", 0, at)
     }
     assert len(in_comments) == 6
-    guessed = {result.first for result in executor.results_kept} & in_comments
+    guessed = {result.first for result in ranged} & in_comments
     if size == 1:  # a range starts at every offset: the middle comment's tags were guessed
         assert len(guessed) == 2  # (and refused: the nodes are the same)
 
@@ -128,7 +138,8 @@ def test_a_clean_city_is_parsed_by_workers_alone(
     assert two == one and len(one) == 12
     assert parsed == [] and told == []
     assert len(executor.tasks) >= 12
-    assert sum(len(result.read.nodes) for result in executor.results_kept) == 12
+    ranged = [r for r in executor.results_kept if isinstance(r, RangeResult)]
+    assert sum(len(result.read.nodes) for result in ranged) == 12
 
 
 def _moved(number: int, task: Any, first: int = 0) -> Any:
@@ -158,7 +169,7 @@ def test_a_worker_that_cannot_open_the_file_is_sent_its_members(
         assert any(not isinstance(task, RangeTask) for task in executor.tasks)
     else:
         assert told[0] == f"{path}: {missing}; the main process reads its range"
-        assert all(isinstance(task, RangeTask) for task in executor.tasks)
+        assert all(isinstance(task, (MarksTask, RangeTask)) for task in executor.tasks)
 
 
 def test_a_file_changed_after_its_prolog_was_read_is_not_read_from_ranges(
@@ -195,3 +206,32 @@ def test_a_member_start_tag_is_found_from_any_offset(
     assert found[0] == starts[0] and found[starts[0]] == starts[0]
     assert found[starts[0] + 1] == starts[1] and found[starts[1] + 1] == starts[2]
     assert found[starts[2] + 1] is None and found[len(text)] is None
+
+
+@pytest.mark.parametrize("bytes_", [5, 11, 1 << 26])
+def test_workers_find_the_marks_of_appearances_across_their_ranges(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, bytes_: int
+) -> None:
+    """Ranges of ``bytes_`` bytes: a mark that straddles two is found, one absent is not, and
+    a worker that cannot open the file leaves the looking to this process."""
+    monkeypatch.setattr(ranges, "MARK_BYTES", bytes_)
+    path = tmp_path / "marks.gml"
+    path.write_bytes(b"<CityModel><app:appearanceMember><app:Appearance/>" + b"x" * 40)
+    executor = _InProcess()
+    assert marks_by_workers(path, executor.results, MARKS) == set(MARKS)
+    assert len(executor.tasks) == -(-path.stat().st_size // bytes_)
+    plain = tmp_path / "plain.gml"
+    plain.write_bytes(b"<CityModel><cityObjectMember/>" + b"Appearanc" * 9)
+    assert marks_by_workers(plain, _InProcess().results, MARKS) == set()
+    away = _InProcess(lambda number, task: dataclasses.replace(task, path=task.path + ".x"))
+    assert marks_by_workers(path, away.results, MARKS) is None
+
+
+def test_a_textured_city_read_from_ranges_is_the_city_one_process_reads(tmp_path: Path) -> None:
+    """PLATEAU's textured building with two worker processes: they find its appearances
+    (which are then read in this process), the same nodes and textures as in one process."""
+    source = shared_data(SHARED / "data/citygml/plateau_53394517_bldg_lod012_v2.gml")
+    _, one, _, _ = _read(source, spread=False)
+    _, two, results, _ = _read(source, spread=True)
+    assert two == one and one
+    assert [r.found for r in results if isinstance(r, MarksResult)] == [frozenset(MARKS)]

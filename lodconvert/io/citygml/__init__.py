@@ -25,11 +25,11 @@ from .. import Format
 from ..crs import Crs, LocalFrame, crs_attributes
 from ..geometry_checks import InputTally, attach_tally
 from ..images import Images
-from .appearance import Appearances, document_appearances
+from .appearance import MARKS, Appearances, document_appearances
 from .document import Document
 from .names import CITYGML_NAMESPACE
 from .parallel import SpreadReading
-from .ranges import RangeReading, by_ranges
+from .ranges import RangeReading, by_ranges, marks_by_workers
 
 if TYPE_CHECKING:
     from ...context import RunContext
@@ -69,7 +69,10 @@ def read_citygml(
     if path.stat().st_size == 0:
         raise InputError("is empty", source)
 
-    appearances = document_appearances(path, limits, appearance_theme)
+    marks = None  # with workers, they look for appearances in a plain file
+    if context is not None and by_ranges(path):
+        marks = marks_by_workers(path, context.executor.results, MARKS)
+    appearances = document_appearances(path, limits, appearance_theme, marks)
     images: Images | None = None
 
     def make() -> Document:

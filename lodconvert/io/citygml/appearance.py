@@ -227,10 +227,17 @@ def _association_target(element: etree._Element) -> str | None:
     return None
 
 
-def document_appearances(path: Path, limits: Limits, theme: str | None) -> Appearances | None:
+MARKS = (ANY_MARK, GLOBAL_MARK)
+"""What tells whether a document holds appearances, and whether at its root."""
+
+
+def document_appearances(
+    path: Path, limits: Limits, theme: str | None, marks: set[bytes] | None = None
+) -> Appearances | None:
     """The appearances at the root of the document ``path`` (in the theme ``theme``, else the
-    first met), read before its objects; ``None`` when it holds no appearance at all."""
-    marks = _marks(path, limits)
+    first met), read before its objects; ``None`` when it holds no appearance at all.
+    ``marks``: which of :data:`MARKS` it holds, where workers looked (else looked for here)."""
+    marks = _marks(path, limits) if marks is None else marks
     if ANY_MARK not in marks:
         return None
     appearances = Appearances(wanted=theme)

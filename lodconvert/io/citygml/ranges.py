@@ -31,11 +31,16 @@ from ...limits import Limits
 from ...model import Node, PackedNode
 from ...semantics import Palette
 from ..crs import Crs
+from ..spread import Results
 from .members import Members, NotSplit, member_after
 from .parallel import IMPLICIT, READ, ReadResult, SpreadReading, read_members
 from .source import open_document
 from .text_limit import TextLimit
 
+MARK_BYTES = 1 << 26
+"""Bytes of a file a worker looks through for given marks (:class:`MarksTask`)."""
+_MARK_CHUNK = 1 << 22
+"""Bytes a worker reads at a time while it looks for marks."""
 COMPRESSED = (".gz", ".zip")
 """Suffixes of files whose offsets are not those of the document (read as bytes sent)."""
 
@@ -149,6 +154,73 @@ class RangeTask:
     def failed(self, reason: str) -> RangeResult:
         """The result of a range no worker could read, for ``reason``."""
         return RangeResult(ReadResult(died=reason))
+
+
+@dataclass(frozen=True)
+class MarksResult:
+    """Which marks a worker found in its range, or why it could not open the file."""
+
+    found: frozenset[bytes] = frozenset()
+    unreachable: str | None = None
+
+
+@dataclass(frozen=True)
+class MarksTask:
+    """Which of ``marks`` start in ``start``–``stop`` of the file at ``path`` (``identity``:
+    its size and modification time; ``head``: its first bytes)."""
+
+    path: str
+    identity: tuple[int, int]
+    head: bytes
+    start: int
+    stop: int
+    marks: tuple[bytes, ...]
+
+    def run(self, backend: Any = None, progress: Any = None) -> MarksResult:
+        """Look for the marks (``backend`` and ``progress`` are not used)."""
+        try:
+            handle = opened(self.path, self.identity, self.head)
+        except (OSError, Changed) as exc:
+            return MarksResult(unreachable=getattr(exc, "strerror", None) or str(exc))
+        with handle:
+            handle.seek(self.start)
+            longest = max(len(mark) for mark in self.marks)
+            found: set[bytes] = set()
+            last, at, end = b"", self.start, self.stop + longest - 1
+            while at < end and len(found) < len(self.marks):
+                chunk = handle.read(min(_MARK_CHUNK, end - at))
+                if not chunk:
+                    break
+                at += len(chunk)
+                window = last + chunk  # a mark across two chunks
+                found.update(mark for mark in self.marks if mark in window)
+                last = chunk[1 - longest :]
+        return MarksResult(frozenset(found))
+
+    def failed(self, reason: str) -> MarksResult:
+        """The result of a range no worker could look through, for ``reason``."""
+        return MarksResult(unreachable=reason)
+
+
+def marks_by_workers(path: Path, results: Results, marks: tuple[bytes, ...]) -> set[bytes] | None:
+    """Which of ``marks`` the plain file ``path`` holds, looked for by the workers of an
+    executor's ``results`` in ranges of :data:`MARK_BYTES`; None where one could not open it
+    (then this process looks)."""
+    status = path.stat()
+    identity = (status.st_size, status.st_mtime_ns)
+    with path.open("rb") as handle:
+        head = handle.read(1024)
+    where = os.path.abspath(path)
+    tasks = (
+        MarksTask(where, identity, head, start, min(identity[0], start + MARK_BYTES), marks)
+        for start in range(0, identity[0], MARK_BYTES)
+    )
+    found: set[bytes] = set()
+    reachable = True
+    for result in results(tasks):
+        reachable = reachable and result.unreachable is None
+        found |= result.found
+    return found if reachable else None
 
 
 Ranged = Generator[Node | PackedNode, None, tuple[int, bool]]
