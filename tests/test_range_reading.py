@@ -175,8 +175,9 @@ def test_a_worker_that_cannot_open_the_file_is_sent_its_members(
 def test_a_file_changed_after_its_prolog_was_read_is_not_read_from_ranges(
     tmp_path: Path,
 ) -> None:
-    """A worker opens the file the main process read or none: another size, time or start
-    is refused before anything of it is read."""
+    """A worker opens the file the main process read or none: a link (the main process sends
+    the input's real path), another size, time or start is refused before anything of it is
+    read."""
     path = tmp_path / "town.gml"
     path.write_text(_town())
     status = os.stat(path)
@@ -186,6 +187,9 @@ def test_a_file_changed_after_its_prolog_was_read_is_not_read_from_ranges(
         False, str(path), DEFAULT_LIMITS, None, DEFAULT_PALETTE, None,
     )  # fmt: skip
     assert task.run().unreachable is None
+    link = tmp_path / "link.gml"
+    link.symlink_to(path)
+    assert "symbolic links" in str(dataclasses.replace(task, path=str(link)).run().unreachable)
     for changed in (
         dataclasses.replace(task, identity=(status.st_size + 1, status.st_mtime_ns)),
         dataclasses.replace(task, identity=(status.st_size, status.st_mtime_ns + 1)),

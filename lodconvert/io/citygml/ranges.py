@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+from ... import nofollow
 from ...errors import InputError
 from ...limits import Limits
 from ...model import Node, PackedNode
@@ -80,9 +81,10 @@ class Changed(Exception):
 
 
 def opened(path: str, identity: tuple[int, int], prolog: bytes) -> IO[bytes]:
-    """The file ``path``, checked to be the one of ``identity`` (its size and modification
-    time) and ``prolog`` (:class:`Changed`; :class:`OSError` where it cannot be opened)."""
-    handle = open(path, "rb")  # noqa: SIM115 (the caller closes it)
+    """The file ``path`` (the input's real path: a link there is not followed), checked to be
+    the one of ``identity`` (its size and modification time) and ``prolog``
+    (:class:`Changed`; :class:`OSError` where it cannot be opened)."""
+    handle = os.fdopen(os.open(path, nofollow.READ), "rb")
     status = os.fstat(handle.fileno())
     if not stat.S_ISREG(status.st_mode) or (status.st_size, status.st_mtime_ns) != identity:
         handle.close()
@@ -91,6 +93,14 @@ def opened(path: str, identity: tuple[int, int], prolog: bytes) -> IO[bytes]:
         handle.close()
         raise Changed("not the file the main process read (its start differs)")
     return handle
+
+
+def _opened_or_why(path: str, identity: tuple[int, int], head: bytes) -> IO[bytes] | str:
+    """The file :func:`opened` opens, or why it cannot."""
+    try:
+        return opened(path, identity, head)
+    except (OSError, Changed) as exc:
+        return getattr(exc, "strerror", None) or str(exc)
 
 
 @dataclass(frozen=True)
@@ -131,10 +141,9 @@ class RangeTask:
 
     def run(self, backend: Any = None, progress: Any = None) -> RangeResult:
         """Read the range (``backend`` and ``progress`` are not used)."""
-        try:
-            handle = opened(self.path, self.identity, self.prolog)
-        except (OSError, Changed) as exc:
-            return RangeResult(unreachable=getattr(exc, "strerror", None) or str(exc))
+        handle = _opened_or_why(self.path, self.identity, self.prolog)
+        if isinstance(handle, str):
+            return RangeResult(unreachable=handle)
         with handle:
             handle.seek(self.start)
             first = self.start if self.exact else member_after(handle, self.start)
@@ -178,10 +187,9 @@ class MarksTask:
 
     def run(self, backend: Any = None, progress: Any = None) -> MarksResult:
         """Look for the marks (``backend`` and ``progress`` are not used)."""
-        try:
-            handle = opened(self.path, self.identity, self.head)
-        except (OSError, Changed) as exc:
-            return MarksResult(unreachable=getattr(exc, "strerror", None) or str(exc))
+        handle = _opened_or_why(self.path, self.identity, self.head)
+        if isinstance(handle, str):
+            return MarksResult(unreachable=handle)
         with handle:
             handle.seek(self.start)
             longest = max(len(mark) for mark in self.marks)
@@ -210,7 +218,7 @@ def marks_by_workers(path: Path, results: Results, marks: tuple[bytes, ...]) -> 
     identity = (status.st_size, status.st_mtime_ns)
     with path.open("rb") as handle:
         head = handle.read(1024)
-    where = os.path.abspath(path)
+    where = os.path.realpath(path)
     tasks = (
         MarksTask(where, identity, head, start, min(identity[0], start + MARK_BYTES), marks)
         for start in range(0, identity[0], MARK_BYTES)
@@ -245,7 +253,7 @@ class RangeReading(SpreadReading):
         path = document.path
         status = path.stat()
         self.identity = (status.st_size, status.st_mtime_ns)
-        self.path = os.path.abspath(path)
+        self.path = os.path.realpath(path)
         stream = open_document(path, document.limits)
         try:
             members = self.members = self._members(stream)
