@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import json
 import os
+import zipfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -35,6 +37,7 @@ from lodconvert.semantics import DEFAULT_PALETTE
 from .conftest import SHARED, shared_data
 from .test_citygml import box, building
 from .test_parallel_reading import _city, _parked_facts, _read, _town, _tricky
+from .test_workers import TUM, _lodconvert, _untimed
 
 
 def _misleading() -> str:
@@ -239,3 +242,23 @@ def test_a_textured_city_read_from_ranges_is_the_city_one_process_reads(tmp_path
     _, two, results, _ = _read(source, spread=True)
     assert two == one and one
     assert [r.found for r in results if isinstance(r, MarksResult)] == [frozenset(MARKS)]
+
+
+@pytest.mark.slow
+def test_tum_munich_unzipped_is_converted_from_ranges_into_the_bytes_of_one_process(
+    tmp_path: Path,
+) -> None:
+    """TUM Munich's 12 MB of CityGML as a plain file: ranges of at least 1 MiB over two
+    workers give the X3D and report of one process, byte for byte."""
+    with zipfile.ZipFile(shared_data(TUM)) as archive:
+        name = next(n for n in archive.namelist() if n.endswith(".gml"))
+        path = tmp_path / "tum.gml"
+        path.write_bytes(archive.read(name))
+    outputs = []
+    for workers in (1, 2):
+        out, report = tmp_path / f"w{workers}.x3d", tmp_path / f"w{workers}.json"
+        run = _lodconvert(path, "-o", out, "--report", report, "--workers", workers, "-v")
+        assert run.returncode == 0, run.stderr
+        outputs.append((out.read_bytes(), _untimed(json.loads(report.read_text()))))
+        assert "main process" not in run.stderr  # nothing read there instead
+    assert outputs[1] == outputs[0]
