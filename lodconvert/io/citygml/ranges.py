@@ -266,8 +266,7 @@ class RangeReading(SpreadReading):
             task = self._range(at, at + self.sizer.wanted(), True)
             result = next(iter(self.results([task])))
             if result.unreachable is not None and at == len(members.prolog):
-                why = f"a worker cannot open it at {self.path} ({result.unreachable})"
-                self.progress(f"{document.source}: {why}; its members are sent as bytes")
+                self.progress(self._unopened(result.unreachable, "its members are sent as bytes"))
                 yield from super().nodes()
                 return
             at, closed = yield from self._taken_range(task, result, at)
@@ -306,8 +305,7 @@ class RangeReading(SpreadReading):
         read here (see the module's docstring)."""
         read = result.read
         if result.unreachable is not None:
-            why = f"a worker cannot open it at {self.path} ({result.unreachable})"
-            self._tell(f"{self.document.source}: {why}; the main process reads its range")
+            self._tell(self._unopened(result.unreachable, "the main process reads its range"))
         elif read.died is not None:
             self.progress(self.died(read.died))
         elif result.first == at and read.error is not None:
@@ -346,6 +344,12 @@ class RangeReading(SpreadReading):
         if found.members:
             yield from self.read_here(found.members)
         return found.end, found.closed
+
+    def _unopened(self, reason: str, instead: str) -> str:
+        """What ``-v`` tells where a worker could not open the file for ``reason``."""
+        return (
+            f"{self.document.source}: a worker cannot open it at {self.path} ({reason}); {instead}"
+        )
 
     def _tell(self, text: str) -> None:
         """Tell ``text`` once a run."""
