@@ -114,7 +114,7 @@ def convert(
         )
         executor = context.executor
         assembly = Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
-        pieces = _pieces(target, assembly.info, run, executor)
+        pieces = _pieces(target, output_path, assembly.info, run, executor)
         along = stack.enter_context(_check_along(sink, output_path, executor))
         items = iter_chains(scene, run.chain, context, run.hlod, pieces, assembly.first_at)
         with clock("write"):
@@ -216,10 +216,15 @@ def _read_stage(
     return scene, crs_record, context_of(executor)
 
 
-def _pieces(target: Format, info: OutputInfo, run: RunOptions, executor: Executor) -> Pieces | None:
-    """Where the chains' pieces of the output (``target``'s formatter) are kept, made by the
-    workers that bake them; ``None`` where this process bakes (it formats as it writes)."""
-    return None if isinstance(executor, SerialExecutor) else target.pieces(info, run.write_options)
+def _pieces(
+    target: Format, output_path: str | Path, info: OutputInfo, run: RunOptions, executor: Executor
+) -> Pieces | None:
+    """Where the chains' pieces of the output ``output_path`` (``target``'s formatter) are
+    kept, made by the workers that bake them; ``None`` where this process bakes (it formats as
+    it writes)."""
+    if isinstance(executor, SerialExecutor):
+        return None
+    return target.pieces(info, run.write_options, Path(output_path).suffix.lower())
 
 
 def _finished(

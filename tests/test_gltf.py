@@ -23,6 +23,8 @@ from lodconvert.errors import InputError
 from lodconvert.io import OutputInfo, gltf, output_format, own_format
 from lodconvert.io.gltf import FORMAT, read_lod_gltf, write_glb, write_gltf
 from lodconvert.model import LodChain, Node, PointCloud, Surface
+from lodconvert.model.safe_text import xml_text
+from lodconvert.pipeline import RunOptions, convert
 from lodconvert.plans import bake_chain
 from lodconvert.ranges import screen_coverage
 
@@ -398,7 +400,7 @@ def test_buffers_made_where_a_chain_is_baked_write_the_same_bytes(
     the document written from them is the one written from the chains alone: textures,
     accessor bounds and both layouts included."""
     chains = [culled_chain, far_chain]
-    pieces = FORMAT.pieces(INFO, {})
+    pieces = FORMAT.pieces(INFO, {}, suffix)
     assert pieces is not None and pieces.formatter is not None
     for chain in chains:
         pieces.add(chain, pieces.formatter(chain))
@@ -485,3 +487,37 @@ def test_object_attributes_are_on_its_root_node(tmp_path, sphere_chain):
     doc, _ = _load(_write(tmp_path, [chain]))
     (root,) = [doc["nodes"][i] for i in doc["scenes"][0]["nodes"]]
     assert root["name"] == "DEB_LOD2_1" and root["extras"]["attributes"] == attributes
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_text_shaped_like_a_part_mark_is_kept_with_workers(tmp_path, suffix):
+    """A worker's part of the document writes indices as marks (a JSON string of NUL, a kind
+    letter and a number) that the main process fills in; ids and attributes holding NUL or
+    the marks' very text come through as the reader keeps them, and two workers write the
+    bytes one process writes."""
+    marks = ["\x00a0", '"\\u0000n1"', "\\u0000M0", "\x00T", "\x02"]
+    objects = {}
+    for i, text in enumerate(marks):
+        ring = [4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3]
+        objects[f"b{i}{text}"] = {
+            "type": "Building",
+            "attributes": {"note": text, text: i},
+            "geometry": [{"type": "MultiSurface", "lod": "1", "boundaries": [[ring]]}],
+        }
+    corners = ((0, 0), (10, 0), (10, 10), (0, 10))
+    vertices = [[20 * i + x, y, 0] for i in range(len(marks)) for x, y in corners]
+    source = tmp_path / "marks.city.json"
+    document = {"type": "CityJSON", "version": "2.0", "CityObjects": objects}
+    source.write_text(json.dumps({**document, "vertices": vertices}))
+    written = {}
+    for workers in (1, 2):
+        out = tmp_path / f"w{workers}{suffix}"
+        convert(source, out, RunOptions(workers=workers))
+        written[workers] = out.read_bytes()
+    assert written[1] == written[2]
+    read = {o.object_id: o for o in read_lod_gltf(tmp_path / f"w2{suffix}", geometry=False)}
+    assert len(read) == len(marks)
+    for i, text in enumerate(marks):
+        kept = xml_text(text)
+        assert read[f"b{i}{kept}"].attributes["note"] == kept
+        assert read[f"b{i}{kept}"].attributes[kept] == i

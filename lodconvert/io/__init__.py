@@ -128,12 +128,16 @@ class Format:
         assert self.write is not None
         self.write(chains, sink, info, context, pieces, **_taken(options, self.write_options))
 
-    def pieces(self, info: OutputInfo, options: dict[str, Any]) -> Pieces | None:
-        """Where the pieces its ``formatter`` (with the write options this format takes) makes
-        are kept for ``write``; ``None`` for a format without one."""
+    def pieces(
+        self, info: OutputInfo, options: dict[str, Any], suffix: str | None = None
+    ) -> Pieces | None:
+        """Where the pieces its ``formatter`` (for an output with ``suffix``, by default its
+        first, and the write options this format takes) makes are kept for ``write``; ``None``
+        for a format without one."""
         if self.formatter is None:
             return None
-        return Pieces(self.formatter(info, **_taken(options, self.write_options)))
+        taken = _taken(options, self.write_options)
+        return Pieces(self.formatter(info, suffix or self.suffixes[0], **taken))
 
 
 class Pieces:

@@ -5,7 +5,7 @@ registry entry each for ``.glb`` and ``.gltf``. The package's modules: ``docs/gl
 from __future__ import annotations
 
 from .. import Format, streamed
-from .buffers import buffers_formatter
+from .chain_part import chain_parts
 from .check import check_gltf
 from .lod import MSFT_LOD
 from .reader import GltfLevel, GltfObject, read_back, read_cells, read_frame, read_lod_gltf
@@ -20,7 +20,7 @@ FORMAT = Format(
     read_frame=read_frame,
     check=check_gltf,
     viewer="gltf",
-    formatter=buffers_formatter,
+    formatter=chain_parts,
     write_options=("compress", "texture_format"),
 )
 

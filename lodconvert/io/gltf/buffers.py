@@ -1,21 +1,17 @@
-"""A chain's glTF buffers, made where the chain is baked (a worker, :func:`chain_buffers`): each
-level's geometry as the accessor data of its primitives (float32 positions, unit normals,
-linear ``COLOR_0`` shorts, flipped texture coordinates, PNG textures, indices), with the compact
-JSON text of each accessor, so that the writer only appends them to the document."""
+"""A level's glTF buffers (:func:`level_data`): its geometry as the accessor data of its
+primitives (float32 positions, unit normals, linear ``COLOR_0`` shorts, flipped texture
+coordinates, PNG textures, indices), with the compact JSON text of each accessor."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass, replace
-from functools import partial
 from typing import Any
 
 import numpy as np
 
 from ...colors import linear_rgba, linear_rgba16
 from ...errors import LodConvertError
-from ...model import Level, LodChain, PointCloud, Surface
-from .. import OutputInfo
+from ...model import Level, PointCloud, Surface
 from ..images import encoded, webp_encoded
 from .binary import (
     ARRAY_BUFFER,
@@ -31,8 +27,6 @@ from .compression import (
     Filtered,
     Quantizer,
     StoredView,
-    check_compression,
-    check_texture_format,
     quantizer,
     stored_attribute,
     stored_positions,
@@ -271,25 +265,3 @@ def level_data(level: Level, compress: str = NONE, webp: bool = False) -> list[P
         made = [_mesh_data(part, storing, not flat, webp) for part in level.mesh.parts]
     stored = storing.stored()
     return [replace(data, stored=stored) for data in made]
-
-
-ChainBuffers = tuple["list[PrimitiveData] | None", ...]
-"""A chain's buffers made by a worker: each level's primitives (``None`` for an empty one)."""
-
-
-def chain_buffers(chain: LodChain, compress: str = NONE, webp: bool = False) -> ChainBuffers | None:
-    """The glTF formats' chain formatter (:mod:`lodconvert.io`): the buffers of a chain that
-    is not an instance of shared geometry (whose levels are written once, by the first),
-    compressed as ``compress`` says, textures with a ``webp`` copy where asked."""
-    if chain.transform is not None:
-        return None
-    levels = chain.levels
-    return tuple(level_data(lv, compress, webp) if lv.count else None for lv in levels)
-
-
-def buffers_formatter(
-    info: OutputInfo, compress: str = NONE, texture_format: str = "default"
-) -> Callable[[LodChain], ChainBuffers | None]:
-    """The glTF formats' ``formatter`` (:mod:`lodconvert.io`)."""
-    webp = check_texture_format(texture_format)
-    return partial(chain_buffers, compress=check_compression(compress), webp=webp)

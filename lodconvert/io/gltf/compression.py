@@ -145,9 +145,12 @@ class StoredView:
     stride: int | None = None
     packed: dict[str, Any] | None = None
 
-    def json(self, target: int | None, offset: int, fallback_offset: int) -> dict[str, Any]:
+    def json(
+        self, target: int | None, offset: int | str, fallback_offset: int | str
+    ) -> dict[str, Any]:
         """The buffer view, its data at ``offset`` of buffer 0; a packed one's uncompressed
-        layout at ``fallback_offset`` of the fallback buffer (1)."""
+        layout at ``fallback_offset`` of the fallback buffer (1); offsets are numbers, or the
+        marks of a chain's part (:class:`~.document.PartDocument`)."""
         if self.packed is None:
             view = {"buffer": 0, "byteOffset": offset, "byteLength": self.length}
         else:

@@ -1,11 +1,17 @@
 """A glTF document being written (:class:`Document`): buffer views, accessors, textures,
 materials (untextured ones shared by colour, one unlit white for point levels) and each level's
-mesh (shared by instances of one geometry). Where the nodes go is :mod:`.lod`'s."""
+mesh (shared by instances of one geometry). A chain's part of it can be made apart, in the
+worker that baked the chain (:class:`PartDocument`), with its indices as marks that
+:meth:`Document.merge` fills in. Where the nodes go is :mod:`.lod`'s."""
 
 from __future__ import annotations
 
 import contextlib
+import io
+import re
 import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
 from typing import IO, Any
 
 from ...model import Level
@@ -17,6 +23,31 @@ from .json_text import COMPACT, DataUri, JsonArray, Layout, json_object
 UNLIT = "KHR_materials_unlit"
 SPOOL_BYTES = 1 << 20
 """How much of each temporary file (the buffer, each JSON array) stays in memory."""
+_ATTRIBUTES = ("POSITION", "NORMAL", "TEXCOORD_0", "COLOR_0")
+"""The order of a primitive's ``attributes`` in its JSON."""
+_PRIMITIVE_DEPTH = 4
+"""Where a primitive starts: ``meshes`` (1), a mesh (2), its ``primitives`` (3)."""
+_MARK = re.compile(r'"\\u0000([A-Za-z])(\d*)"')
+"""A mark in a :class:`PartDocument`'s text: a JSON string of NUL, a kind letter and a local
+index. No other text can hold it: the JSON encoder escapes every control character, and ids
+and attributes hold none (:mod:`~lodconvert.model.safe_text`)."""
+_NEXT = "\x02"
+"""What joins a part's elements of one array (raw, it is in no JSON text)."""
+TRANSLATION = '"\\u0000T"'
+"""The mark of a chain's root translation, which the scene frame decides (:mod:`.lod`)."""
+_ARRAYS = {
+    "a": "accessors",
+    "v": "buffer_views",
+    "i": "images",
+    "s": "samplers",
+    "t": "textures",
+    "M": "meshes",
+    "n": "nodes",
+}
+"""Each kind of index a mark stands for, and the array it indexes."""
+MaterialKey = tuple[Any, ...] | None
+"""What a material is shared by: ``("points", alpha mode)``, an untextured mesh's colour and
+alpha mode, or ``None`` (not shared: a textured one)."""
 _SHARED_MATERIALS = 4096
 """Distinct untextured mesh materials remembered for sharing (later ones are not shared)."""
 
@@ -44,6 +75,48 @@ def _material(
     )
 
 
+@dataclass(frozen=True)
+class Marked:
+    """JSON text with marks (:data:`_MARK`), split at them: the texts ``between`` them (one
+    more than the marks), and each mark's kind (one letter of ``kinds``) and local index."""
+
+    between: tuple[str, ...]
+    kinds: str
+    indices: tuple[int, ...]
+
+    @classmethod
+    def of(cls, text: str) -> Marked:
+        """``text`` split at its marks."""
+        parts = _MARK.split(text)
+        indices = tuple(int(index or 0) for index in parts[2::3])
+        return cls(tuple(parts[0::3]), "".join(parts[1::3]), indices)
+
+    def filled(self, values: list[str]) -> str:
+        """The text with each mark replaced by its text in ``values``."""
+        out = [""] * (2 * len(values) + 1)
+        out[0::2] = self.between
+        out[1::2] = values
+        return "".join(out)
+
+
+@dataclass(frozen=True)
+class DocumentPart:
+    """A chain's part of a document, made apart (:meth:`PartDocument.part`): the new elements
+    of each array (``counts`` of them, in the order of :data:`_ARRAYS`; their ``texts``
+    joined by :data:`_NEXT`), its materials (each with what it is shared by), its buffer bytes
+    (from a 4-byte boundary), the bytes it adds to the meshopt fallback buffer, the extensions
+    it uses (in order), and how its positions are stored."""
+
+    texts: Marked
+    counts: tuple[int, ...]
+    materials: tuple[tuple[MaterialKey, str], ...]
+    blob: bytes
+    fallback_length: int
+    extensions: tuple[str, ...]
+    quantized: bool
+    position_error: float
+
+
 class Document:
     """A glTF document being written: its JSON arrays and binary buffer go to temporary files
     as they are made (:mod:`.json_text`), so memory holds the chain being added, not what was
@@ -51,7 +124,7 @@ class Document:
     says (docs/compression.md), their textures with a ``webp`` copy where asked."""
 
     def __init__(self, layout: Layout, compress: str = NONE, webp: bool = False) -> None:
-        self._layout = layout
+        self.layout = layout
         self.compress, self.webp = compress, webp
         self._files = contextlib.ExitStack()
         self.blob = self._spool()
@@ -73,8 +146,7 @@ class Document:
         """The largest difference of a stored coordinate from its float32 position."""
         self.mesh_nodes: dict[int, dict[str, Any]] = {}
         """The node fields (quantized positions' transform) of each mesh that needs them."""
-        self._point_materials: dict[str, int] = {}
-        self._mesh_materials: dict[tuple[float | str, ...], int] = {}
+        self._materials: dict[MaterialKey, int] = {}
         self._shared: dict[int, tuple[Level, int]] = {}  # level of an instance → its mesh
 
     def _spool(self) -> IO[bytes]:
@@ -82,7 +154,16 @@ class Document:
 
     def array(self, depth: int = 1) -> JsonArray:
         """A JSON array in a temporary file of its own (``depth`` 1: a top-level member)."""
-        return JsonArray(self._layout, depth, self._spool())
+        return JsonArray(self.layout, depth, self._spool())
+
+    def ref(self, kind: str, index: int) -> str:
+        """The JSON text of an ``index`` into the array of ``kind`` (:data:`_ARRAYS`), or of a
+        byte offset into the buffer (``b``) or the fallback buffer (``f``)."""
+        return str(index)
+
+    def value(self, kind: str, index: int) -> Any:
+        """What stands for an ``index`` (as :meth:`ref`) in JSON data."""
+        return index
 
     def flush_blob(self) -> None:
         """Write what was added to the buffer to its file."""
@@ -98,6 +179,53 @@ class Document:
         if extension not in self.extensions_used:
             self.extensions_used.append(extension)
 
+    def merge(self, part: DocumentPart, translation: str) -> None:
+        """Add a chain's ``part`` made apart, its marks filled in with where it lands here
+        (and its root's translation with the JSON text ``translation``)."""
+        for extension in part.extensions:
+            self.use(extension)
+        pad = -self.blob_length % 4 if part.blob else 0
+        bases = {kind: len(getattr(self, name)) for kind, name in _ARRAYS.items()}
+        bases.update(b=self.blob_length + pad, f=self.fallback_length)
+        materials: list[int] = []
+
+        def filled(mark: re.Match[str]) -> str:  # a material's texture
+            return str(bases[mark.group(1)] + int(mark.group(2)))
+
+        for key, text in part.materials:
+            materials.append(self._material_index(key, lambda text=text: _MARK.sub(filled, text)))
+        marked = part.texts
+        values = [
+            translation if kind == "T" else str(materials[i] if kind == "m" else bases[kind] + i)
+            for kind, i in zip(marked.kinds, marked.indices, strict=True)
+        ]
+        texts = marked.filled(values).split(_NEXT)
+        at = 0
+        for name, count in zip(_ARRAYS.values(), part.counts, strict=True):
+            if count:
+                getattr(self, name).extend_text(texts[at : at + count])
+                at += count
+        if part.blob:
+            self._blob_pending += b"\x00" * pad
+            self._blob_pending += part.blob
+            self.blob_length += pad + len(part.blob)
+            if len(self._blob_pending) >= SPOOL_BYTES:
+                self.flush_blob()
+        self.fallback_length += part.fallback_length
+        self.quantized |= part.quantized
+        self.position_error = max(self.position_error, part.position_error)
+
+    def _material_index(self, key: MaterialKey, text: Callable[[], str]) -> int:
+        """The index of the material whose JSON ``text`` is made on demand: the one made
+        before for its ``key`` where there is one (mesh colours up to :data:`_SHARED_MATERIALS`
+        of them), else a new one."""
+        if key is not None and key in self._materials:
+            return self._materials[key]
+        index = self.materials.append_text(text())
+        if key is not None and (key[0] == "points" or len(self._materials) < _SHARED_MATERIALS):
+            self._materials[key] = index
+        return index
+
     def _buffer_view(
         self, data: bytes | memoryview, target: int | None = None, stored: StoredView | None = None
     ) -> int:
@@ -111,28 +239,33 @@ class Document:
         start = self.blob_length + pad
         self.blob_length = start + len(data)
         if stored is not None and (stored.packed is not None or stored.stride is not None):
-            view = stored.json(target, start, self.fallback_length)
+            fallback = self.value("f", self.fallback_length)
+            view = stored.json(target, self.value("b", start), fallback)
             if stored.packed is not None:
                 self.fallback_length += -(-stored.length // 4) * 4
             return self.buffer_views.append(view)
-        if self._layout is COMPACT:  # as Layout.text lays it out, without the walk
+        if self.layout is COMPACT:  # as Layout.text lays it out, without the walk
             tail = "}" if target is None else f',"target":{target}}}'
-            text = f'{{"buffer":0,"byteOffset":{start},"byteLength":{len(data)}{tail}'
+            offset = self.ref("b", start)
+            text = f'{{"buffer":0,"byteOffset":{offset},"byteLength":{len(data)}{tail}'
             return self.buffer_views.append_text(text)
-        view = json_object(buffer=0, byteOffset=start, byteLength=len(data), target=target)
+        view = json_object(
+            buffer=0, byteOffset=self.value("b", start), byteLength=len(data), target=target
+        )
         return self.buffer_views.append(view)
 
     def _accessor(self, accessor: AccessorData) -> int:
         """Add an accessor (and its buffer view); its index."""
         view = self._buffer_view(accessor.view.data, accessor.target, accessor.view)
-        if self._layout is COMPACT:
-            return self.accessors.append_text(VIEW_HEAD + str(view) + accessor.compact_tail)
-        return self.accessors.append({"bufferView": view, **accessor.fields})
+        if self.layout is COMPACT:
+            text = VIEW_HEAD + self.ref("v", view) + accessor.compact_tail
+            return self.accessors.append_text(text)
+        return self.accessors.append({"bufferView": self.value("v", view), **accessor.fields})
 
     def _texture(self, data: tuple[bytes, str], webp: bytes | None = None) -> int:
         """A texture of the image ``data`` (bytes, MIME type), preferring its ``webp`` copy
         where there is one (``EXT_texture_webp``: the image stays for clients without it)."""
-        image = {"mimeType": data[1], "bufferView": self._buffer_view(data[0])}
+        image = {"mimeType": data[1], "bufferView": self.value("v", self._buffer_view(data[0]))}
         sampler = {
             "magFilter": LINEAR,
             "minFilter": LINEAR_MIPMAP_LINEAR,
@@ -140,74 +273,68 @@ class Document:
             "wrapT": REPEAT,
         }
         texture: dict[str, Any] = {
-            "sampler": self.samplers.append(sampler),
-            "source": self.images.append(image),
+            "sampler": self.value("s", self.samplers.append(sampler)),
+            "source": self.value("i", self.images.append(image)),
         }
         if webp is not None:
             self.use(WEBP)
-            copy = {"mimeType": "image/webp", "bufferView": self._buffer_view(webp)}
-            texture["extensions"] = {WEBP: {"source": self.images.append(copy)}}
+            view = self.value("v", self._buffer_view(webp))
+            copy = self.images.append({"mimeType": "image/webp", "bufferView": view})
+            texture["extensions"] = {WEBP: {"source": self.value("i", copy)}}
         return self.textures.append(texture)
 
-    def _primitive(self, data: PrimitiveData) -> dict[str, Any]:
-        """A primitive's JSON, its accessors (and texture) added."""
+    def _primitive(self, data: PrimitiveData) -> str:
+        """A primitive's JSON text, its accessors (and texture) added."""
+        ref = self.ref
         added = {name: self._accessor(accessor) for name, accessor in data.attributes.items()}
         texture = self._texture(data.image, data.webp) if data.image is not None else None
-        primitive: dict[str, Any] = {
-            "attributes": json_object(
-                POSITION=added["POSITION"],
-                NORMAL=added.get("NORMAL"),
-                TEXCOORD_0=added.get("TEXCOORD_0"),
-                COLOR_0=added.get("COLOR_0"),
-            )
-        }
+        attributes = [(name, ref("a", added[name])) for name in _ATTRIBUTES if name in added]
+        members = [("attributes", self.layout.object_text(attributes, _PRIMITIVE_DEPTH + 1))]
         if data.indices is not None:
-            primitive["indices"] = self._accessor(data.indices)
-        primitive["mode"] = data.mode
+            members.append(("indices", ref("a", self._accessor(data.indices))))
+        members.append(("mode", str(data.mode)))
         if data.base is None:
-            primitive["material"] = self._point_material(data.alpha_mode)
+            material = self._point_material(data.alpha_mode)
         else:
-            primitive["material"] = self._mesh_material(data.base, data.alpha_mode, texture)
-        return primitive
+            material = self._mesh_material(data.base, data.alpha_mode, texture)
+        members.append(("material", ref("m", material)))
+        return self.layout.object_text(members, _PRIMITIVE_DEPTH)
 
     def _mesh_material(self, base: list[float], alpha_mode: str, texture: int | None) -> int:
         """The material of a mesh primitive: one for all primitives of the same colour and
         alpha mode (a city's few surface colours), its own for a textured one."""
-        key = (*base, alpha_mode)
-        if texture is None and key in self._mesh_materials:
-            return self._mesh_materials[key]
-        index = self.materials.append(_material(base, alpha_mode, True, texture=texture))
-        if texture is None and len(self._mesh_materials) < _SHARED_MATERIALS:
-            self._mesh_materials[key] = index
-        return index
+        key = (*base, alpha_mode) if texture is None else None
+        index = None if texture is None else self.value("t", texture)
+
+        def text() -> str:
+            return self.layout.text(_material(base, alpha_mode, True, texture=index), 2)
+
+        return self._material_index(key, text)
 
     def _point_material(self, alpha_mode: str) -> int:
         """The shared unlit white material of point levels (one per alpha mode)."""
-        if alpha_mode not in self._point_materials:
-            self.use(UNLIT)
-            material = _material(
-                [1.0, 1.0, 1.0, 1.0], alpha_mode, double_sided=False, extensions={UNLIT: {}}
-            )
-            self._point_materials[alpha_mode] = self.materials.append(material)
-        return self._point_materials[alpha_mode]
+        self.use(UNLIT)
 
-    def level_mesh(
-        self,
-        name: str,
-        level: Level,
-        shared: bool = False,
-        made: list[PrimitiveData] | None = None,
-    ) -> int | None:
-        """The mesh of one level's geometry (``None`` when the level is empty), of its
-        primitives as a worker ``made`` them or made here. The levels of instances of one
-        geometry (``shared``) share their meshes."""
+        def text() -> str:
+            white = [1.0, 1.0, 1.0, 1.0]
+            material = _material(white, alpha_mode, double_sided=False, extensions={UNLIT: {}})
+            return self.layout.text(material, 2)
+
+        return self._material_index(("points", alpha_mode), text)
+
+    def level_mesh(self, name: str, level: Level, shared: bool = False) -> int | None:
+        """The mesh (named by the JSON text ``name``) of one level's geometry (``None`` when
+        the level is empty). The levels of instances of one geometry (``shared``) share their
+        meshes."""
         if not level.count:
             return None
         if id(level) in self._shared:
             return self._shared[id(level)][1]
-        made = made or level_data(level, self.compress, self.webp)
-        primitives = [self._primitive(data) for data in made]
-        mesh = self.meshes.append({"primitives": primitives, "name": name})
+        made = level_data(level, self.compress, self.webp)
+        primitives = self.layout.array_text([self._primitive(data) for data in made], 3)
+        mesh = self.meshes.append_text(
+            self.layout.object_text([("primitives", primitives), ("name", name)], 2)
+        )
         stored = made[0].stored
         if stored is not None:
             self.quantized |= stored.quantized
@@ -245,4 +372,62 @@ class Document:
             scene=0,
             scenes=[json_object(nodes=scene_roots)],
             textures=self.textures,
+        )
+
+
+class _Texts(JsonArray):
+    """An array of a :class:`PartDocument`: its elements' texts, kept in a list."""
+
+    def __init__(self, layout: Layout, depth: int) -> None:
+        super().__init__(layout, depth, io.BytesIO())
+        self.texts: list[str] = []
+
+    def append_text(self, text: str) -> int:
+        self.texts.append(text)
+        self.count += 1
+        return self.count - 1
+
+
+class PartDocument(Document):
+    """A chain's part of a document, made apart (in the worker that baked the chain): its
+    indices and buffer offsets count from 0 and are written as marks (:data:`_MARK`), its
+    materials are all its own, and its buffer stays in memory; :meth:`part` is what
+    :meth:`Document.merge` takes."""
+
+    def __init__(self, layout: Layout, compress: str = NONE, webp: bool = False) -> None:
+        self._made_materials: list[tuple[MaterialKey, str]] = []
+        super().__init__(layout, compress, webp)
+
+    def _spool(self) -> IO[bytes]:
+        return io.BytesIO()
+
+    def array(self, depth: int = 1) -> JsonArray:
+        return _Texts(self.layout, depth)
+
+    def ref(self, kind: str, index: int) -> str:
+        return f'"\\u0000{kind}{index}"'
+
+    def value(self, kind: str, index: int) -> Any:
+        return f"\x00{kind}{index}"
+
+    def flush_blob(self) -> None:
+        """Keep the buffer in memory: it is the part's."""
+
+    def _material_index(self, key: MaterialKey, text: Callable[[], str]) -> int:
+        self._made_materials.append((key, text()))
+        return len(self._made_materials) - 1
+
+    def part(self) -> DocumentPart:
+        """What was added, for :meth:`Document.merge`."""
+        arrays = [getattr(self, name) for name in _ARRAYS.values()]
+        texts = [text for array in arrays for text in array.texts]
+        return DocumentPart(
+            texts=Marked.of(_NEXT.join(texts)),
+            counts=tuple(len(array.texts) for array in arrays),
+            materials=tuple(self._made_materials),
+            blob=bytes(self._blob_pending),
+            fallback_length=self.fallback_length,
+            extensions=tuple(self.extensions_used),
+            quantized=self.quantized,
+            position_error=self.position_error,
         )

@@ -43,6 +43,21 @@ class Layout:
         text = self.encode(value)
         return text if self.indent is None else text.replace("\n", self.newline(depth))
 
+    def object_text(self, members: list[tuple[str, str]], depth: int) -> str:
+        """An object that starts at ``depth`` of ``members``: plain keys (letters and digits)
+        with the text of their values, each laid out at ``depth`` + 1."""
+        items = self.newline(depth + 1)
+        body = ",".join(f'{items}"{key}"{self.colon}{text}' for key, text in members)
+        return "{" + body + self.newline(depth) + "}" if members else "{}"
+
+    def array_text(self, texts: list[str], depth: int) -> str:
+        """An array that starts at ``depth`` of elements' ``texts``, each laid out at ``depth``
+        + 1."""
+        if not texts:
+            return "[]"
+        inner = self.newline(depth + 1)
+        return "[" + ",".join(inner + t for t in texts) + self.newline(depth) + "]"
+
     def _flat(self, value: dict[str, Any], depth: int) -> str | None:
         """An object of integers, strings, booleans and lists of numbers (an accessor, a
         buffer view) laid out without the encoder; ``None`` for any other object."""
@@ -100,6 +115,18 @@ class JsonArray:
             self._flush()
         self.count += 1
         return self.count - 1
+
+    def extend_text(self, texts: list[str]) -> None:
+        """Write the JSON texts of elements laid out at the array's depth (as
+        :meth:`append_text` one by one)."""
+        if not texts:
+            return
+        head = self._head
+        self._pending.append((head if self.count else head[1:]) + texts[0])
+        self._pending.extend([head + text for text in texts[1:]])
+        self.count += len(texts)
+        if len(self._pending) >= _PENDING:
+            self._flush()
 
     def _flush(self) -> None:
         self.spool.write("".join(self._pending).encode())

@@ -7,21 +7,28 @@ hangs from one :data:`FRAME_NODE`. The layout and its reasons: ``docs/gltf.md``.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
 
-from ...model import CellChain, Level, LodChain
-from ...ranges import ReferenceView, screen_coverage
+from ...model import CellChain, LodChain
 from .. import OutputInfo, Pieces
 from ..frame import ROTATION, SceneFrame, scene_frame
-from .buffers import ChainBuffers
+from .chain_part import (
+    MEMBER_DEPTH,
+    MSFT_LOD,
+    ChainParts,
+    add_chain,
+    chain_text,
+    coverages,
+    level_params,
+    numbers_text,
+    plain,
+)
 from .compression import NONE
 from .document import Document
 from .json_text import JsonArray, json_object
 
-MSFT_LOD = "MSFT_lod"
 COVERAGE_MEANING = "projected bounding-box diagonal / viewport height at the reference view"
 FRAME_NODE = "scene_frame"
 """Name of the root node that turns a georeferenced scene y-up (:mod:`lodconvert.io.frame`)."""
@@ -29,68 +36,9 @@ FRAME_MATRIX = [float(v) for v in np.block([[ROTATION, np.zeros((3, 1))], [0, 0,
 """Its ``matrix`` (column-major): z-up source axes → y-up glTF axes, exact in float32."""
 
 
-def _plain(value: Any) -> Any:
-    """``value`` as JSON-able Python data: numpy scalars and arrays unpacked, tuples as lists,
-    non-finite floats as ``None``, unknown objects as their ``str``."""
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
-    if isinstance(value, np.generic):
-        return _plain(value.item())
-    if isinstance(value, dict):
-        return {str(k): _plain(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if value is None or isinstance(value, str | int):
-        return value
-    return str(value)
-
-
-def _level_params(level: Level) -> dict[str, Any]:
-    """Bake parameters of a point level (empty for a mesh level)."""
-    if not level.is_points:
-        return {}
-    params = level.params
-    out: dict[str, Any] = {}
-    if params is not None:
-        out.update(
-            resolution=params.resolution,
-            slices=params.slices,
-            point_size_px=params.point_size,
-            filter=params.filter,
-        )
-    out.update(spacing=level.spacing, design_distance=level.design_distance)
-    return _plain(out)
-
-
-def _chain_extras(chain: LodChain) -> dict[str, Any]:
-    """``extras.lodconvert`` of a chain's finest node: switching data and every level's facts."""
-    return _plain(
-        {
-            "cutoffs": chain.cutoffs,
-            "alpha": chain.alpha,
-            "beta": chain.beta,
-            "gamma": chain.gamma,
-            "xs": chain.xs,
-            "culled": chain.culled,
-            "center": chain.center,
-            **(
-                {"transform": chain.transform.ravel(), "origin": chain.origin}
-                if chain.transform is not None
-                else {}
-            ),
-            "levels": [
-                {"name": lv.name, "kind": lv.kind, "count": lv.count, **_level_params(lv)}
-                for lv in chain.levels
-            ],
-        }
-    )
-
-
 def _cell_extras(cell: CellChain) -> dict[str, Any]:
     """``extras.lodconvert`` of a LOD parent's near node: its switching data and facts."""
-    return _plain(
+    return plain(
         {
             "cell_id": cell.cell_id,
             "tier": cell.tier,
@@ -117,16 +65,10 @@ def _node_count(item: LodChain | CellChain) -> int:
     return 1 + len(item.levels)
 
 
-def _coverages(chain: LodChain | CellChain, view: ReferenceView) -> list[float]:
-    """``MSFT_screencoverage``: one threshold per cutoff, then 0 unless the chain is culled."""
-    values = [screen_coverage(chain.alpha, d, view) for d in chain.cutoffs]
-    return [float(v) for v in values] + ([] if chain.culled else [0.0])
-
-
 def _asset_extras(info: OutputInfo, frame: SceneFrame | None) -> dict[str, Any]:
     """``asset.extras.lodconvert``: provenance, the scene frame (a city's or one with a CRS) and the
     meaning of the coverage values."""
-    return _plain(
+    return plain(
         {
             "source": info.source,
             "crs": info.crs,
@@ -139,47 +81,6 @@ def _asset_extras(info: OutputInfo, frame: SceneFrame | None) -> dict[str, Any]:
     )
 
 
-def _root_node(chain: LodChain, finest: int, frame: SceneFrame | None) -> dict[str, Any]:
-    """A chain's root node: translated to the chain's origin, or placed by the instance's
-    matrix (from the ``frame``'s origin, where there is one), with the object's attributes
-    (where a GIS user looks for them)."""
-    placed = np.eye(4) if chain.transform is None else chain.transform.copy()
-    placed[:3, 3] += placed[:3, :3] @ chain.origin
-    if frame is not None:
-        placed[:3, 3] = frame.offset(placed[:3, 3], f"object {chain.object_id!r}")
-    moved_only = chain.transform is None or np.array_equal(placed[:3, :3], np.eye(3))
-    return json_object(
-        extras={"attributes": _plain(chain.metadata)} if chain.metadata else None,
-        translation=[float(v) for v in placed[:3, 3]] if moved_only else None,
-        children=[finest],
-        matrix=None if moved_only else [float(v) for v in placed.T.ravel()],
-        name=chain.object_id,
-    )
-
-
-def _level_name(chain: LodChain, level: Level) -> str:
-    return f"{chain.object_id}_{level.name}"
-
-
-def _level_node(
-    chain: LodChain,
-    level: Level,
-    mesh: int | None,
-    extras: dict[str, Any],
-    extensions: dict[str, Any] | None = None,
-    placed: dict[str, Any] | None = None,
-) -> dict[str, Any]:
-    """A node holding one level's mesh (none when the level is empty), ``placed`` by the
-    translation and scale of its quantized positions where they are."""
-    return json_object(
-        extensions=extensions,
-        extras=extras,
-        mesh=mesh,
-        name=_level_name(chain, level),
-        **(placed or {}),
-    )
-
-
 class LodScene:
     """The scene of a :class:`Document`: chains and LOD parents added as nodes in ``MSFT_lod``
     layout (their level meshes from the buffers a worker made, in ``pieces``, where it did)."""
@@ -189,6 +90,8 @@ class LodScene:
         self.info = info
         self.reference_view = info.view
         self.pieces = pieces
+        self.parts = ChainParts(info.view, doc.layout.indent, doc.compress, doc.webp)
+        """Makes the part of a chain no worker made."""
         self.frame: SceneFrame | None = None  # set by the first item, for a framed scene
         self.scene_nodes = doc.array(depth=3)  # at scenes[0].nodes
 
@@ -218,7 +121,7 @@ class LodScene:
         self.doc.use(MSFT_LOD)
         self.doc.nodes.append(json_object(children=[near], name=cell.cell_id))
         extras = {
-            "MSFT_screencoverage": _coverages(cell, self.reference_view),
+            "MSFT_screencoverage": coverages(cell, self.reference_view),
             "lodconvert": _cell_extras(cell),
         }
         extensions = {MSFT_LOD: {"ids": [at]}}
@@ -228,14 +131,14 @@ class LodScene:
         for member in cell.members:
             self._add(member)
         far_name = f"{cell.cell_id}_{cell.far.name}"
-        mesh = self.doc.level_mesh(far_name, cell.far)
-        facts = {"level": cell.far.name, **_level_params(cell.far), "switch_in": cell.cutoffs[0]}
+        mesh = self.doc.level_mesh(self.doc.layout.text(far_name, MEMBER_DEPTH), cell.far)
+        facts = {"level": cell.far.name, **level_params(cell.far), "switch_in": cell.cutoffs[0]}
         translation = self._placed(cell.origin, f"cell {cell.cell_id!r}")
         steps = self.doc.mesh_nodes.get(mesh, {}) if mesh is not None else {}
         if steps:  # quantized positions: their corner from the cell's origin, their scale
             translation = translation + np.asarray(steps["translation"])
         far = json_object(
-            extras={"lodconvert": _plain(facts)},
+            extras={"lodconvert": plain(facts)},
             mesh=mesh,
             name=far_name,
             translation=[float(v) for v in translation],
@@ -244,33 +147,27 @@ class LodScene:
         assert self.doc.nodes.append(far) == at
 
     def _add_chain(self, chain: LodChain) -> None:
-        """Add a chain's root node, finest node (its child) and coarser nodes (their buffers
-        as a worker made them, where one did)."""
-        shared = chain.transform is not None
-        made: ChainBuffers = self.pieces.take(chain) or (None,) * len(chain.levels)
-        meshes = [
-            self.doc.level_mesh(_level_name(chain, level), level, shared, buffers)
-            for level, buffers in zip(chain.levels, made, strict=True)
-        ]
-        finest_mesh = meshes[0]
-        coarser = list(zip(chain.levels[1:], chain.cutoffs, meshes[1:], strict=False))
-        root = self.doc.nodes.append(_root_node(chain, len(self.doc.nodes) + 1, self.frame))
-        ids = list(range(root + 2, root + 2 + len(coarser)))
-        extras: dict[str, Any] = {}
-        if ids:
-            self.doc.use(MSFT_LOD)
-            extras["MSFT_screencoverage"] = _coverages(chain, self.reference_view)
-        extras["lodconvert"] = _chain_extras(chain)
-        extensions = {MSFT_LOD: {"ids": ids}} if ids else None
-        placed = self.doc.mesh_nodes.get
-        finest = _level_node(
-            chain, chain.levels[0], finest_mesh, extras, extensions, placed(finest_mesh)
-        )
-        self.doc.nodes.append(finest)
-        for level, switch_in, mesh in coarser:
-            facts = {"level": level.name, **_level_params(level), "switch_in": float(switch_in)}
-            node = _level_node(chain, level, mesh, {"lodconvert": facts}, placed=placed(mesh))
-            self.doc.nodes.append(node)
+        """Add a chain's nodes and meshes: its part of the document as a worker made it, where
+        one did, or as one would (:mod:`.chain_part`); an instance's here, sharing the meshes
+        of its geometry's first chain."""
+        doc = self.doc
+        placed = chain.origin + 0.0  # + 0.0: no negative zero
+        if chain.transform is not None:
+            matrix = chain.transform.copy()
+            matrix[:3, 3] += matrix[:3, :3] @ chain.origin
+            placed = matrix[:3, 3]
+        placed = self._placed(placed, f"object {chain.object_id!r}")
+        if chain.transform is None:
+            part = self.pieces.take(chain) or self.parts(chain)
+            assert part.indent == doc.layout.indent, "a part made for the other layout"
+            doc.merge(part.part, numbers_text(doc.layout, placed))
+            return
+        text = chain_text(chain, self.reference_view, doc.layout)
+        if np.array_equal(matrix[:3, :3], np.eye(3)):
+            add_chain(doc, chain, text, numbers_text(doc.layout, placed))
+        else:
+            matrix[:3, 3] = placed
+            add_chain(doc, chain, text, matrix=numbers_text(doc.layout, matrix.T.ravel()))
 
     def _placed(self, origin: np.ndarray, what: str) -> np.ndarray:
         """Where a node at ``origin`` (source coordinates) is translated: from the scene

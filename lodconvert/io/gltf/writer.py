@@ -56,8 +56,8 @@ def write_glb(
 ) -> None:
     """Write ``chains`` as binary glTF (one JSON chunk, one BIN chunk) to ``handle``, its
     geometry compressed as ``compress`` says (docs/compression.md), its textures with a WebP
-    copy where ``texture_format`` is ``webp``; the buffers of a chain in ``pieces`` (made by a
-    worker, :func:`.buffers.chain_buffers`) are taken as they are."""
+    copy where ``texture_format`` is ``webp``; the part of a chain in ``pieces`` (made by a
+    worker, :class:`.chain_part.ChainParts`) is taken as it is."""
     with (
         _scene(chains, info, COMPACT, pieces, compress, texture_format) as scene,
         tempfile.SpooledTemporaryFile(SPOOL_BYTES) as text,

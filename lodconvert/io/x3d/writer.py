@@ -147,8 +147,8 @@ class ChainTexts:
         )
 
 
-def chain_texts(info: OutputInfo, switching: str = "lod") -> ChainTexts:
-    """The X3D format's ``formatter`` (:mod:`lodconvert.io`)."""
+def chain_texts(info: OutputInfo, suffix: str, switching: str = "lod") -> ChainTexts:
+    """The X3D format's ``formatter`` (:mod:`lodconvert.io`; ``.x3d`` is its one ``suffix``)."""
     return ChainTexts(switching)
 
 
