@@ -7,6 +7,7 @@ process's own CPU sampled every 50 ms, the tree's from ``wait4``), against the t
 
     python benchmarks/central.py                       # 100×, 2 workers: results/central.md
     python benchmarks/central.py --factor 10 --formats x3d
+    python benchmarks/central.py --formats glb --baseline /tmp/base   # interleaved with a checkout
 """
 
 from __future__ import annotations
@@ -18,8 +19,8 @@ import time
 from pathlib import Path
 
 from city import Template, tum_document, write_district
-from scale import convert_once
-from tables import machine_line, markdown_table, write_results
+from scale import ROOT, convert_once
+from tables import commit_of, machine_line, markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
 TARGET_MS = 0.25
@@ -32,30 +33,40 @@ def main() -> None:
     parser.add_argument("--workers", type=int, default=2, help="worker processes (2)")
     parser.add_argument("--formats", default="x3d,glb,tiles", help="x3d,glb,tiles")
     parser.add_argument("--out", type=Path, default=HERE / "results" / "central.md")
+    parser.add_argument(
+        "--baseline", type=Path, help="a checkout to run before this one, format by format"
+    )
     args = parser.parse_args()
     load, began = os.getloadavg()[0], time.perf_counter()
     rows = []
     with tempfile.TemporaryDirectory(prefix="central_") as tmp:
         folder = Path(tmp)
         district = write_district(Template(tum_document()), args.factor, folder / "tum.gml")
+        roots = [(commit_of(ROOT), ROOT)]
+        if args.baseline is not None:
+            roots.insert(0, (commit_of(args.baseline), args.baseline.resolve()))
         for fmt in args.formats.split(","):
             out = folder / ("out/tileset.json" if fmt == "tiles" else f"out.{fmt}")
-            run = convert_once(district.path, out, str(args.workers), report=folder / "r.json")
-            per = 1000 * run.main_cpu / district.buildings
-            print(fmt, run, flush=True)
-            rows.append(
-                [
-                    fmt,
-                    f"{run.wall:.1f}",
-                    f"{run.cpu:.1f}",
-                    f"{run.main_cpu:.2f}",
-                    f"{per:.3f}",
-                    f"{district.buildings / run.main_cpu:,.0f}",
-                    "yes" if per <= TARGET_MS else "no",
-                    f"{run.peak_mib:,.0f}",
-                ]
-            )
-    header = ["output", "wall s", "CPU s (tree)", "main CPU s", "main ms/building"]
+            for name, root in roots:
+                run = convert_once(
+                    district.path, out, str(args.workers), root=root, report=folder / "r.json"
+                )
+                per = 1000 * run.main_cpu / district.buildings
+                print(fmt, name, run, flush=True)
+                rows.append(
+                    [
+                        fmt if args.baseline is None else f"{fmt} ({name})",
+                        f"{run.wall:.1f}",
+                        f"{run.cpu:.1f}",
+                        f"{run.main_cpu:.2f}",
+                        f"{run.timings.get('validate', 0.0):.1f}",
+                        f"{per:.3f}",
+                        f"{district.buildings / run.main_cpu:,.0f}",
+                        "yes" if per <= TARGET_MS else "no",
+                        f"{run.peak_mib:,.0f}",
+                    ]
+                )
+    header = ["output", "wall s", "CPU s (tree)", "main CPU s", "check s", "main ms/building"]
     header += ["buildings / main CPU s", f"≤ {TARGET_MS} ms", "peak RSS MiB (tree)"]
     text = "\n".join(
         [
@@ -63,13 +74,17 @@ def main() -> None:
             "",
             machine_line(load, time.perf_counter() - began),
             f"Command: `python benchmarks/central.py --factor {args.factor} --workers "
-            f"{args.workers} --formats {args.formats}`; input: {district.buildings:,} LoD2 "
+            f"{args.workers} --formats {args.formats}"
+            + (f" --baseline {args.baseline}" if args.baseline is not None else "")
+            + f"`; input: {district.buildings:,} LoD2 "
             f"buildings, {district.bytes / 1e9:.2f} GB of CityGML 2.0 (generated, removed "
             "after); one run each.",
             "",
             markdown_table(header, rows, 1),
             "",
-            "Main CPU s: the main process's own (sampled every 50 ms); buildings / main CPU s: "
+            "Main CPU s: the main process's own (sampled every 50 ms); check s: the wall time of "
+            "its check of the written output (the report's `validate` stage); buildings / main "
+            "CPU s: "
             "the most buildings a second any number of workers could give while the main "
             "process does what it does.",
             "",

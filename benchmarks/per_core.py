@@ -24,7 +24,6 @@ import argparse
 import os
 import shutil
 import statistics
-import subprocess
 import tempfile
 import time
 from pathlib import Path
@@ -32,7 +31,7 @@ from pathlib import Path
 import numpy as np
 from city import Template, tum_document, write_district
 from scale import DELFT, Run, convert_once, write_delft_district
-from tables import machine_line, markdown_table, write_results
+from tables import commit_of, machine_line, markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
 PINNED = ("taskset", "-c", "0")
@@ -144,7 +143,7 @@ def main() -> None:
             machine_line(load, time.perf_counter() - began),
             f"Command: `python benchmarks/per_core.py --baseline {args.baseline} --runs "
             f"{args.runs} --formats {args.formats} --factor {args.factor}` (baseline: "
-            f"{_commit(trees['baseline'])}, this: {_commit(ROOT)}); medians of {args.runs} "
+            f"{commit_of(trees['baseline'])}, this: {commit_of(ROOT)}); medians of {args.runs} "
             "interleaved runs, each pinned to core 0 with `--workers 1`.",
             "",
             markdown_table(header, rows, 2),
@@ -159,19 +158,6 @@ def main() -> None:
         ]
     )
     write_results(args.out, text)
-
-
-def _commit(tree: Path) -> str:
-    """The short commit of ``tree``'s HEAD (and whether it has changes)."""
-    head = subprocess.run(
-        ["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
-    ).stdout.strip()
-    dirty = subprocess.run(
-        ["git", "-C", str(tree), "status", "--porcelain", "--untracked-files=no"],
-        capture_output=True,
-        text=True,
-    ).stdout.strip()
-    return head + (" with changes" if dirty else "")
 
 
 if __name__ == "__main__":

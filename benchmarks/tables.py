@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime
 import os
 import platform
+import subprocess
 from pathlib import Path
 
 
@@ -42,3 +43,16 @@ def one_core_facts(command: str, seconds: float) -> list[str]:
         f"- Software: Python {platform.python_version()}, lodconvert {lodconvert.__version__}",
         f"- Command: `{command}` ({seconds:.0f} s)",
     ]
+
+
+def commit_of(tree: Path) -> str:
+    """The short commit of ``tree``'s HEAD (and whether it has changes)."""
+    head = subprocess.run(
+        ["git", "-C", str(tree), "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+    ).stdout.strip()
+    dirty = subprocess.run(
+        ["git", "-C", str(tree), "status", "--porcelain", "--untracked-files=no"],
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
+    return head + (" with changes" if dirty else "")
