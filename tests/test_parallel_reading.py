@@ -29,6 +29,7 @@ from lodconvert.io.citygml.parallel import ReadResult
 from lodconvert.io.citygml.ranges import MarksResult, MarksTask, RangeResult
 from lodconvert.io.cityjson.parallel import ObjectsTask
 from lodconvert.io.geometry_checks import tally_of
+from lodconvert.io.reopened import NewlinesResult
 from lodconvert.io.spread import TASK_SECONDS
 from lodconvert.limits import DEFAULT_LIMITS, Limits
 from lodconvert.model import Mesh, Node, Scene, unpacked
@@ -144,8 +145,9 @@ class _Kills:
 
 def _read_of(result: Any) -> Any:
     """What a worker read: a run's result, or a range's (:class:`RangeResult`; nothing for
-    the marks of appearances, :class:`MarksResult`)."""
-    if isinstance(result, MarksResult):
+    the marks of appearances, :class:`MarksResult`, or a count of line breaks,
+    :class:`NewlinesResult`)."""
+    if isinstance(result, MarksResult | NewlinesResult):
         return ReadResult()
     return result.read if isinstance(result, RangeResult) else result
 
@@ -347,8 +349,9 @@ def test_a_sequence_read_by_workers_is_the_sequence_read_in_one_process(tmp_path
     one, one_facts, _, _ = _read(path, spread=False)
     two, two_facts, results, _ = _read(path, spread=True)
     assert two_facts == one_facts and len(one_facts) == 10
-    assert sum(len(result.nodes) for result in results) >= 8
-    assert {type(node).__name__ for result in results for node in result.nodes} == {"PackedNode"}
+    read = [_read_of(result) for result in results]
+    assert sum(len(result.nodes) for result in read) >= 8
+    assert {type(node).__name__ for result in read for node in result.nodes} == {"PackedNode"}
     assert tally_of(two).skipped == tally_of(one).skipped
     assert [entry["id"] for entry in tally_of(two).skipped] == ["line 6"]
 
@@ -365,7 +368,7 @@ def test_a_sequence_line_too_long_is_skipped_by_workers_as_in_one_process(tmp_pa
     one, one_facts, _, _ = _read(path, spread=False, limits=limits)
     two, two_facts, results, _ = _read(path, spread=True, limits=limits)
     assert two_facts == one_facts and len(one_facts) == 10
-    assert sum(len(result.nodes) for result in results) >= 8
+    assert sum(len(_read_of(result).nodes) for result in results) >= 8
     assert tally_of(two).skipped == tally_of(one).skipped
     assert [entry["id"] for entry in tally_of(two).skipped] == ["line 4", "line 7"]
 

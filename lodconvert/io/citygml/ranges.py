@@ -19,19 +19,18 @@ members are sent as bytes instead (:class:`.parallel.SpreadReading`).
 from __future__ import annotations
 
 import os
-import stat
 from collections import deque
 from collections.abc import Generator, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
-from ... import nofollow
 from ...errors import InputError
 from ...limits import Limits
 from ...model import Node, PackedNode
 from ...semantics import Palette
 from ..crs import Crs
+from ..reopened import Changed, identity_of, opened, opened_or_why
 from ..spread import Results
 from .members import Members, NotSplit, member_after
 from .parallel import IMPLICIT, READ, ReadResult, SpreadReading, read_members
@@ -76,33 +75,6 @@ def scan(handle: IO[bytes], start: int, stop: int, limits: Limits, source: str) 
     return Scan(kept, members.end, members.closed)
 
 
-class Changed(Exception):
-    """The file a worker opened is not the one the main process read."""
-
-
-def opened(path: str, identity: tuple[int, int], prolog: bytes) -> IO[bytes]:
-    """The file ``path`` (the input's real path: a link there is not followed), checked to be
-    the one of ``identity`` (its size and modification time) and ``prolog``
-    (:class:`Changed`; :class:`OSError` where it cannot be opened)."""
-    handle = os.fdopen(os.open(path, nofollow.READ), "rb")
-    status = os.fstat(handle.fileno())
-    if not stat.S_ISREG(status.st_mode) or (status.st_size, status.st_mtime_ns) != identity:
-        handle.close()
-        raise Changed("not the file the main process read (its size or time differ)")
-    if handle.read(len(prolog)) != prolog:
-        handle.close()
-        raise Changed("not the file the main process read (its start differs)")
-    return handle
-
-
-def _opened_or_why(path: str, identity: tuple[int, int], head: bytes) -> IO[bytes] | str:
-    """The file :func:`opened` opens, or why it cannot."""
-    try:
-        return opened(path, identity, head)
-    except (OSError, Changed) as exc:
-        return getattr(exc, "strerror", None) or str(exc)
-
-
 @dataclass(frozen=True)
 class RangeResult:
     """What a worker read of a range: where its first member starts (None: no member starts
@@ -141,7 +113,7 @@ class RangeTask:
 
     def run(self, backend: Any = None, progress: Any = None) -> RangeResult:
         """Read the range (``backend`` and ``progress`` are not used)."""
-        handle = _opened_or_why(self.path, self.identity, self.prolog)
+        handle = opened_or_why(self.path, self.identity, self.prolog)
         if isinstance(handle, str):
             return RangeResult(unreachable=handle)
         with handle:
@@ -187,7 +159,7 @@ class MarksTask:
 
     def run(self, backend: Any = None, progress: Any = None) -> MarksResult:
         """Look for the marks (``backend`` and ``progress`` are not used)."""
-        handle = _opened_or_why(self.path, self.identity, self.head)
+        handle = opened_or_why(self.path, self.identity, self.head)
         if isinstance(handle, str):
             return MarksResult(unreachable=handle)
         with handle:
@@ -214,8 +186,7 @@ def marks_by_workers(path: Path, results: Results, marks: tuple[bytes, ...]) -> 
     """Which of ``marks`` the plain file ``path`` holds, looked for by the workers of an
     executor's ``results`` in ranges of :data:`MARK_BYTES`; None where one could not open it
     (then this process looks)."""
-    status = path.stat()
-    identity = (status.st_size, status.st_mtime_ns)
+    identity = identity_of(path)
     with path.open("rb") as handle:
         head = handle.read(1024)
     where = os.path.realpath(path)
@@ -251,8 +222,7 @@ class RangeReading(SpreadReading):
             yield from super().nodes()
             return
         path = document.path
-        status = path.stat()
-        self.identity = (status.st_size, status.st_mtime_ns)
+        self.identity = identity_of(path)
         self.path = os.path.realpath(path)
         stream = open_document(path, document.limits)
         try:

@@ -21,6 +21,7 @@ from ..images import Images
 from .geometry import SURFACE_DEPTH
 from .objects import Objects, checked_node, checked_nodes
 from .parallel import ObjectsReading, SequenceReading
+from .ranges import SequenceRanges
 from .sequence import Line, long_line, sequence_lines
 from .source import (
     Context,
@@ -248,13 +249,15 @@ def read_sequence(
     except InputError:
         lines.close()
         raise
-    reading = None
+    reading: SequenceReading | SequenceRanges | None = None
     if context is not None:
 
         def again() -> Iterator[Node]:
             return iter(read_sequence(path, limits, types, palette, crs, theme=theme).nodes)
 
         reading = SequenceReading(lines, header, ctx, types, _feature_nodes, again)
+        if path.name.lower().endswith(".jsonl"):  # plain: read from ranges
+            reading = SequenceRanges(path, reading)
         executor = context.executor
         reading.use(executor.results, context.progress, executor.task_seconds)
     nodes = reading.nodes() if reading is not None else _feature_nodes(lines, header, ctx, types)

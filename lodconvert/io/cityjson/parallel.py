@@ -52,6 +52,8 @@ class LinesResult:
     died: str | None = None
     """Why no worker could read the task (they died): then this process reads it."""
     seconds: float = 0.0
+    unreachable: str | None = None
+    """Why a worker could not open the file to read its range (:mod:`.ranges`)."""
 
 
 @dataclass(frozen=True)

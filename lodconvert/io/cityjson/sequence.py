@@ -9,6 +9,7 @@ import re
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
+from typing import IO
 
 from ...limits import Limits
 from ..archive import open_compressed
@@ -26,42 +27,63 @@ def sequence_lines(path: Path, limits: Limits) -> Iterator[Line]:
     its end (:func:`long_line` says why). :class:`InputError` for a file that
     cannot be read, and one that inflates past ``limits.decompressed_bytes``
     (:func:`..archive.open_compressed`)."""
-    longest = limits.sequence_line_bytes
-    pending = bytearray()
-    number, scanned, passing = 1, 0, False  # passing over a long line
     try:
         with open_compressed(path, limits) as stream:
-            while chunk := stream.read(CHUNK):
-                if passing:
-                    end = chunk.find(b"\n")
-                    if end < 0:
-                        continue
-                    yield number, None
-                    number, passing, chunk = number + 1, False, chunk[end + 1 :]
-                if not pending and chunk.isspace():  # blank lines, skipped at C speed
-                    number += chunk.count(b"\n")
-                    continue
-                pending += chunk
-                at = 0
-                while True:
-                    start = _BLANK.match(pending, at).end()
-                    number += pending.count(b"\n", at, start)
-                    end = pending.find(b"\n", max(start, scanned))
-                    if end < 0:
-                        break
-                    yield number, bytes(pending[start:end]) if end - start <= longest else None
-                    number, at = number + 1, end + 1
-                del pending[:start]
-                scanned = len(pending)  # holds no line break: not searched again
-                if scanned > longest:
-                    pending.clear()
-                    scanned, passing = 0, True
+            for number, line, _ in stream_lines(stream, limits):
+                yield number, line
     except (OSError, EOFError, zlib.error) as exc:
         raise unreadable(path, exc) from None
+
+
+def stream_lines(
+    stream: IO[bytes], limits: Limits, number: int = 1, at: int = 0
+) -> Iterator[tuple[int, bytes | None, int]]:
+    """The lines of ``stream`` as :func:`sequence_lines` gives them, each with where it starts
+    (after the line break before it): ``stream`` starts at a line start, ``at`` bytes into its
+    file, whose number is ``number``."""
+    longest = limits.sequence_line_bytes
+    pending = bytearray()
+    base = start_of_line = at  # where pending starts in the file; where its line starts
+    scanned, passing = 0, False  # passing over a long line
+    while chunk := stream.read(CHUNK):
+        if passing:
+            end = chunk.find(b"\n")
+            if end < 0:
+                base += len(chunk)
+                continue
+            yield number, None, start_of_line
+            number, passing, chunk = number + 1, False, chunk[end + 1 :]
+            base = start_of_line = base + end + 1
+        if not pending and chunk.isspace():  # blank lines, skipped at C speed
+            if (last := chunk.rfind(b"\n")) >= 0:
+                number += chunk.count(b"\n")
+                start_of_line = base + last + 1
+            base += len(chunk)
+            continue
+        pending += chunk
+        begin = 0
+        while True:
+            start = _BLANK.match(pending, begin).end()
+            if (last := pending.rfind(b"\n", begin, start)) >= 0:
+                number += pending.count(b"\n", begin, start)
+                start_of_line = base + last + 1
+            end = pending.find(b"\n", max(start, scanned))
+            if end < 0:
+                break
+            line = bytes(pending[start:end]) if end - start <= longest else None
+            yield number, line, start_of_line
+            number, begin, start_of_line = number + 1, end + 1, base + end + 1
+        del pending[:start]
+        base += start
+        scanned = len(pending)  # holds no line break: not searched again
+        if scanned > longest:
+            pending.clear()
+            base += scanned
+            scanned, passing = 0, True
     if passing:
-        yield number, None
+        yield number, None, start_of_line
     elif pending:
-        yield number, bytes(pending)
+        yield number, bytes(pending), start_of_line
 
 
 def long_line(limits: Limits) -> str:
