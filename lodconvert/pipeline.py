@@ -289,8 +289,9 @@ def _checked(
     step("checking", 0, 1)
     if along is not None:
         along.result()
-    elif isinstance(sink, DirectorySink):
-        sink.with_staged(lambda staged: check_written(staged, output_path), Path(output_path).name)
+    elif isinstance(sink, DirectorySink):  # its tiles' contents were checked as they were made
+        name = Path(output_path).name
+        sink.with_staged(lambda staged: check_written(staged, output_path, False), name)
     else:
         sink.with_staged(lambda staged: check_written(staged, output_path))
     step("checking", 1, 1)

@@ -7,6 +7,7 @@ byte-identical across runs and worker counts."""
 from __future__ import annotations
 
 import contextlib
+import io
 import itertools
 import json
 import os
@@ -671,3 +672,39 @@ def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_p
         assert (staged / "tiles" / "t.glb").read_bytes() == result.data and written.data is None
         kept = task.kept(sink)
     assert kept is not None and kept.reused and np.array_equal(kept.box, result.box)
+
+
+def test_a_tile_whose_content_leaves_its_box_fails_where_it_is_made(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The task that makes a tile checks its GLB as the tileset's check would (the
+    conversion's own check then reads no tile content): content written 5 m off its points
+    is refused with the one line of a failed check, naming the tile."""
+    import pyproj
+
+    from lodconvert.io.gltf.binary import pack_glb
+    from lodconvert.io.tiles import task as task_module
+    from lodconvert.io.tiles.check import glb_parts
+    from lodconvert.io.tiles.task import TileTask, Where
+    from lodconvert.reproject import Georef
+
+    georef = Georef("EPSG:25832", pyproj.CRS("EPSG:25832"))
+    where = Where(georef, "EPSG:25832", "test", "EPSG:25832")
+    corners = np.array(
+        [[690000.0, 5335000.0, 520.0], [690010, 5335000, 520], [690000, 5335010, 530]]
+    )
+    task = TileTask("t.glb", where, corners, np.full((3, 4), 200, np.uint8), None, None, (), "test")
+    assert task.run().error is None
+    made = task_module.points_glb
+
+    def moved(*args: Any, **kwargs: Any) -> bytes:
+        document, blob = glb_parts(made(*args, **kwargs))
+        document["nodes"][0]["translation"] = [5.0, 0.0, 0.0]
+        out = io.BytesIO()
+        pack_glb(out, json.dumps(document).encode(), blob)
+        return out.getvalue()
+
+    monkeypatch.setattr(task_module, "points_glb", moved)
+    result = task.run()
+    failed = "output fails validation: VOLUME: tiles/t.glb: content lies outside its box"
+    assert result.error == failed

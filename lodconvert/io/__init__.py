@@ -40,10 +40,12 @@ FORMAT_MODULES = (
 @dataclass(frozen=True)
 class CheckOptions:
     """What a format's ``check`` may use: an X3D schema to validate against too (a file, or a
-    folder holding ``x3d-4.0.xsd``), and the limits of what it reads."""
+    folder holding ``x3d-4.0.xsd``), the limits of what it reads, and whether it reads a
+    tileset's contents (a conversion's tiles are checked by the tasks that make them)."""
 
     x3d_schema: str | Path | None = None
     limits: Limits = DEFAULT_LIMITS
+    contents: bool = True
 
 
 @dataclass

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,3 +37,18 @@ class Findings:
     def warning(self, code: str, message: str) -> None:
         """Record a warning."""
         self.items.append(Finding(self.path, WARNING, code, message))
+
+
+def errors_of(findings: Iterable[Finding]) -> list[Finding]:
+    """The findings of severity error."""
+    return [f for f in findings if f.severity == ERROR]
+
+
+def failure_of(findings: Iterable[Finding]) -> str | None:
+    """The line a conversion fails with for the first error of ``findings`` (and how many
+    more), if any."""
+    errors = errors_of(findings)
+    if not errors:
+        return None
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    return f"output fails validation: {errors[0].code}: {errors[0].message}{more}"

@@ -9,13 +9,12 @@ optionally the official XSD) and :mod:`lodconvert.io.gltf.check` (GLB framing, a
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from pathlib import Path
 from typing import BinaryIO
 
 from ..errors import InputError, LodConvertError
 from ..io import CheckOptions, own_format
-from ..io.findings import ERROR, WARNING, Finding, Findings
+from ..io.findings import ERROR, WARNING, Finding, Findings, errors_of, failure_of
 from ..limits import DEFAULT_LIMITS, Limits
 
 
@@ -24,14 +23,16 @@ def validate_file(
     x3d_schema: str | Path | None = None,
     kind: str | None = None,
     limits: Limits = DEFAULT_LIMITS,
+    contents: bool = True,
 ) -> list[Finding]:
     """Check ``path`` and return its findings (empty when it passes).
 
     ``kind`` is the format suffix (``.x3d``, ``.glb``, ``.gltf``, ``.json``; default:
     ``path``'s suffix). ``x3d_schema`` is an XSD file (or a folder holding ``x3d-4.0.xsd``)
     that X3D documents are validated against too; ``limits`` bound what a tileset's check
-    reads (``tileset_json_bytes``). Raises :class:`LodConvertError` only when that schema cannot be
-    loaded; every problem of the file itself is a finding.
+    reads (``tileset_json_bytes``); without ``contents``, a tileset's tile contents are not
+    read (their makers checked them). Raises :class:`LodConvertError` only when that schema
+    cannot be loaded; every problem of the file itself is a finding.
     """
     path = Path(path)
     kind = (kind or path.suffix).lower()
@@ -48,19 +49,15 @@ def validate_file(
     elif path.stat().st_size == 0:
         findings.error("EMPTY", "the file is empty")
     else:
-        check(path, findings, CheckOptions(x3d_schema, limits))
+        check(path, findings, CheckOptions(x3d_schema, limits, contents))
     return findings.items
 
 
-def errors_of(findings: Iterable[Finding]) -> list[Finding]:
-    """The findings of severity error."""
-    return [f for f in findings if f.severity == ERROR]
-
-
-def check_written(written: Path, target: str | Path) -> None:
+def check_written(written: Path, target: str | Path, contents: bool = True) -> None:
     """Raise a one-line :class:`LodConvertError` naming ``target`` when ``written`` (a freshly
-    written temporary file in ``target``'s format) has an error finding."""
-    _fail_on_errors(validate_file(written, kind=Path(target).suffix), target)
+    written temporary file in ``target``'s format) has an error finding; without
+    ``contents``, as :func:`validate_file` takes it."""
+    _fail_on_errors(validate_file(written, kind=Path(target).suffix, contents=contents), target)
 
 
 def streamed_check(target: str | Path) -> bool:
@@ -80,13 +77,9 @@ def check_stream(stream: BinaryIO, target: str | Path) -> None:
 def _fail_on_errors(findings: list[Finding], target: str | Path) -> None:
     """Raise a one-line :class:`LodConvertError` naming ``target`` for the first error of
     ``findings`` (and how many more), if any."""
-    errors = errors_of(findings)
-    if errors:
-        first = errors[0]
-        more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
-        raise LodConvertError(
-            f"output fails validation: {first.code}: {first.message}{more}", str(target)
-        )
+    failure = failure_of(findings)
+    if failure is not None:
+        raise LodConvertError(failure, str(target))
 
 
 __all__ = [

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...limits import DEFAULT_LIMITS, Limits
-from ..findings import Findings
+from ..findings import Finding, Findings, errors_of
 from ..gltf.binary import accessor_values, split_glb
 from ..gltf.stream import Source, too_deep
 from .tree import MAX_DEPTH, Problem, Tile, walk
@@ -43,8 +43,9 @@ def check_tileset(path: Path, findings: Findings, options: CheckOptions | None =
     """Check the tileset ``path`` (its external tilesets and contents too) into ``findings``,
     reading within the limits of ``options`` (default: the defaults)."""
     limits = options.limits if options is not None else DEFAULT_LIMITS
+    contents = options.contents if options is not None else True
     try:
-        _Checker(findings).run(path, limits)
+        _Checker(findings, contents).run(path, limits)
     except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
         findings.error("JSON", f"not a tileset as lodconvert writes them ({type(exc).__name__})")
 
@@ -63,8 +64,10 @@ class _Checker:
     """The checks of one tileset, reported into ``findings``; the tileset is read and walked by
     :func:`.tree.walk`, which reports what it finds unreadable too."""
 
-    def __init__(self, findings: Findings) -> None:
+    def __init__(self, findings: Findings, contents: bool = True) -> None:
         self.findings = findings
+        self.contents = contents
+        """Whether contents are read (else their makers checked them: :func:`check_content`)."""
 
     def _problem(self, problem: Problem) -> None:
         self.findings.error(problem.code, str(problem))
@@ -121,7 +124,7 @@ class _Checker:
             return _State(frame, error, None)
         centre, axes = np.asarray(box[:3], float), np.asarray(box[3:], float).reshape(3, 3)
         inside = _BoxTest(frame, centre, axes)
-        for content in tile.contents:
+        for content in tile.contents if self.contents else ():
             if content.target is not None and not content.external:
                 positions = self.glb(content.target, where)
                 if positions is not None and not inside(frame_points(frame, positions)):
@@ -156,65 +159,84 @@ class _Checker:
         """The positions (glTF coordinates) of a GLB's primitives, its features checked."""
         try:
             document, blob = read_glb(path)
-            return self._content(document, blob, where)
+            return content_positions(document, blob, where, self.findings)
         except (ValueError, KeyError, IndexError, TypeError) as exc:
             self.findings.error("CONTENT", f"{where}: {path.name} cannot be read ({exc})")
             return None
 
-    def _content(self, document: dict, blob: bytes, where: str) -> np.ndarray:
-        """A GLB's positions; its feature ids and property tables checked."""
-        found = []
-        tables = document.get("extensions", {}).get("EXT_structural_metadata", {})
-        for mesh, (translation, scale) in _mesh_transforms(document):
-            for primitive in mesh["primitives"]:
-                steps = accessor_values(document, blob, primitive["attributes"]["POSITION"])
-                found.append(translation + scale * steps.astype(np.float64))
-                features = primitive.get("extensions", {}).get("EXT_mesh_features", {})
-                for ids in features.get("featureIds", []):
-                    name = f"_FEATURE_ID_{ids['attribute']}"
-                    values = accessor_values(document, blob, primitive["attributes"][name])
-                    if len(values) and values.max() >= ids["featureCount"]:
-                        self.findings.error(
-                            "FEATURE_ID", f"{where}: feature id {values.max():g} ≥ featureCount"
-                        )
-                    table = tables["propertyTables"][ids["propertyTable"]]
-                    if table["count"] != ids["featureCount"]:
-                        self.findings.error(
-                            "PROPERTY_TABLE", f"{where}: table count is not featureCount"
-                        )
-        if tables:
-            self._tables(document, tables, where)
-        return np.concatenate(found) if found else np.zeros((0, 3))
 
-    def _tables(self, document: dict, metadata: dict, where: str) -> None:
-        """Each property table: columns of its class's properties, required ones present,
-        each long enough for its ``count``."""
-        classes = metadata["schema"]["classes"]
-        views = document["bufferViews"]
-        for table in metadata["propertyTables"]:
-            properties = classes[table["class"]]["properties"]
-            count = table["count"]
-            if set(table["properties"]) - set(properties):
-                self.findings.error("PROPERTY_TABLE", f"{where}: columns not in the class")
-            for name, definition in properties.items():
-                column = table["properties"].get(name)
-                if column is None:
-                    if definition.get("required"):
-                        self.findings.error("PROPERTY_TABLE", f"{where}: no column {name}")
-                    continue
-                length = views[column["values"]]["byteLength"]
-                kind = definition["type"]
-                if kind == "STRING":
-                    wanted = 4 * (count + 1)
-                    if views[column["stringOffsets"]]["byteLength"] < wanted:
-                        self.findings.error("PROPERTY_TABLE", f"{where}: {name} offsets short")
-                    continue
-                if kind == "BOOLEAN":
-                    wanted = (count + 7) // 8
-                else:
-                    wanted = _BYTES.get(definition.get("componentType", ""), 1) * count
-                if length < wanted:
-                    self.findings.error("PROPERTY_TABLE", f"{where}: column {name} too short")
+def check_content(data: bytes, box: np.ndarray, where: str) -> list[Finding]:
+    """The errors of a tile's GLB ``data``, as the tileset's check finds them, where its
+    content's box in its frame is ``box`` (min and max corners): what the worker that made a
+    tile checks of it (then the tileset's check reads no content: ``CheckOptions.contents``)."""
+    findings = Findings(Path(where))
+    try:
+        document, blob = glb_parts(data)
+        positions = content_positions(document, blob, where, findings)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        findings.error("CONTENT", f"{where}: cannot be read ({exc})")
+        return errors_of(findings.items)
+    local = np.asarray(positions, dtype=np.float64) @ _GLTF_TO_Z_UP.T
+    if len(local) and not (
+        (local >= box[0] - TOLERANCE).all() and (local <= box[1] + TOLERANCE).all()
+    ):
+        findings.error("VOLUME", f"{where}: content lies outside its box")
+    return errors_of(findings.items)
+
+
+def content_positions(document: dict, blob: bytes, where: str, findings: Findings) -> np.ndarray:
+    """A GLB's positions; its feature ids and property tables checked into ``findings``."""
+    found = []
+    tables = document.get("extensions", {}).get("EXT_structural_metadata", {})
+    for mesh, (translation, scale) in _mesh_transforms(document):
+        for primitive in mesh["primitives"]:
+            steps = accessor_values(document, blob, primitive["attributes"]["POSITION"])
+            found.append(translation + scale * steps.astype(np.float64))
+            features = primitive.get("extensions", {}).get("EXT_mesh_features", {})
+            for ids in features.get("featureIds", []):
+                name = f"_FEATURE_ID_{ids['attribute']}"
+                values = accessor_values(document, blob, primitive["attributes"][name])
+                if len(values) and values.max() >= ids["featureCount"]:
+                    findings.error(
+                        "FEATURE_ID", f"{where}: feature id {values.max():g} ≥ featureCount"
+                    )
+                table = tables["propertyTables"][ids["propertyTable"]]
+                if table["count"] != ids["featureCount"]:
+                    findings.error("PROPERTY_TABLE", f"{where}: table count is not featureCount")
+    if tables:
+        _tables(document, tables, where, findings)
+    return np.concatenate(found) if found else np.zeros((0, 3))
+
+
+def _tables(document: dict, metadata: dict, where: str, findings: Findings) -> None:
+    """Each property table: columns of its class's properties, required ones present,
+    each long enough for its ``count``."""
+    classes = metadata["schema"]["classes"]
+    views = document["bufferViews"]
+    for table in metadata["propertyTables"]:
+        properties = classes[table["class"]]["properties"]
+        count = table["count"]
+        if set(table["properties"]) - set(properties):
+            findings.error("PROPERTY_TABLE", f"{where}: columns not in the class")
+        for name, definition in properties.items():
+            column = table["properties"].get(name)
+            if column is None:
+                if definition.get("required"):
+                    findings.error("PROPERTY_TABLE", f"{where}: no column {name}")
+                continue
+            length = views[column["values"]]["byteLength"]
+            kind = definition["type"]
+            if kind == "STRING":
+                wanted = 4 * (count + 1)
+                if views[column["stringOffsets"]]["byteLength"] < wanted:
+                    findings.error("PROPERTY_TABLE", f"{where}: {name} offsets short")
+                continue
+            if kind == "BOOLEAN":
+                wanted = (count + 7) // 8
+            else:
+                wanted = _BYTES.get(definition.get("componentType", ""), 1) * count
+            if length < wanted:
+                findings.error("PROPERTY_TABLE", f"{where}: column {name} too short")
 
 
 def _mesh_transforms(document: dict) -> list[tuple[dict, tuple[np.ndarray, np.ndarray]]]:

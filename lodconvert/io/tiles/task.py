@@ -25,7 +25,9 @@ import numpy as np
 from ...errors import LodConvertError
 from ...sinks import RESUME, DirectorySink
 from ...textures import ATLAS_SIZE
+from ..findings import failure_of
 from ..gltf.compression import MESHOPT, POSITION_TOLERANCE
+from .check import check_content
 from .content import TileTextures, mesh_glb, points_glb
 from .metadata import Feature
 from .placement import Placement, world_to_frame
@@ -133,6 +135,9 @@ class TileTask:
         except LodConvertError as exc:
             return self.failed(str(exc))
         box = np.stack([local.min(axis=0), local.max(axis=0)])
+        failure = failure_of(check_content(data, box, f"{TILES}/{self.name}"))
+        if failure is not None:
+            return self.failed(failure)
         return TileResult(frame, box, data=data, key=self.key())
 
     def _paths(self) -> tuple[str, str]:
