@@ -47,6 +47,25 @@ def opened_or_why(path: str, identity: tuple[int, int], head: bytes) -> IO[bytes
 
 
 @dataclass(frozen=True)
+class FileSpan:
+    """``start``–``stop`` of the file at ``path`` (``identity``: its size and modification
+    time; ``head``: its first bytes), which a worker opens again."""
+
+    path: str
+    identity: tuple[int, int]
+    head: bytes
+    start: int
+    stop: int
+
+    def opened(self) -> IO[bytes] | str:
+        """The file, positioned at ``start`` (:func:`opened`), or why it cannot be opened."""
+        handle = opened_or_why(self.path, self.identity, self.head)
+        if not isinstance(handle, str):
+            handle.seek(self.start)
+        return handle
+
+
+@dataclass(frozen=True)
 class NewlinesResult:
     """How many line breaks a worker counted in its range, or why it could not open the
     file."""
@@ -56,19 +75,12 @@ class NewlinesResult:
 
 
 @dataclass(frozen=True)
-class NewlinesTask:
-    """How many line breaks lie in ``start``–``stop`` of the file at ``path`` (``identity``:
-    its size and modification time; ``head``: its first bytes)."""
-
-    path: str
-    identity: tuple[int, int]
-    head: bytes
-    start: int
-    stop: int
+class NewlinesTask(FileSpan):
+    """How many line breaks lie in the span."""
 
     def run(self, backend: Any = None, progress: Any = None) -> NewlinesResult:
         """Count them (``backend`` and ``progress`` are not used)."""
-        handle = opened_or_why(self.path, self.identity, self.head)
+        handle = self.opened()
         if isinstance(handle, str):
             return NewlinesResult(unreachable=handle)
         with handle:

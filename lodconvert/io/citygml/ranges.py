@@ -30,7 +30,7 @@ from ...limits import Limits
 from ...model import Node, PackedNode
 from ...semantics import Palette
 from ..crs import Crs
-from ..reopened import Changed, identity_of, opened, opened_or_why
+from ..reopened import Changed, FileSpan, identity_of, opened, opened_or_why
 from ..spread import Results
 from .members import Members, NotSplit, member_after
 from .parallel import IMPLICIT, READ, ReadResult, SpreadReading, read_members
@@ -146,24 +146,17 @@ class MarksResult:
 
 
 @dataclass(frozen=True)
-class MarksTask:
-    """Which of ``marks`` start in ``start``–``stop`` of the file at ``path`` (``identity``:
-    its size and modification time; ``head``: its first bytes)."""
+class MarksTask(FileSpan):
+    """Which of ``marks`` start in the span."""
 
-    path: str
-    identity: tuple[int, int]
-    head: bytes
-    start: int
-    stop: int
-    marks: tuple[bytes, ...]
+    marks: tuple[bytes, ...] = ()
 
     def run(self, backend: Any = None, progress: Any = None) -> MarksResult:
         """Look for the marks (``backend`` and ``progress`` are not used)."""
-        handle = opened_or_why(self.path, self.identity, self.head)
+        handle = self.opened()
         if isinstance(handle, str):
             return MarksResult(unreachable=handle)
         with handle:
-            handle.seek(self.start)
             longest = max(len(mark) for mark in self.marks)
             found: set[bytes] = set()
             last, at, end = b"", self.start, self.stop + longest - 1
