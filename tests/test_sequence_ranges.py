@@ -150,3 +150,27 @@ def test_a_link_in_place_of_the_file_is_not_followed(tmp_path: Path) -> None:
     task = NewlinesTask(str(tmp_path / "link.jsonl"), (0, 0), b"", 0, 10)
     (tmp_path / "link.jsonl").symlink_to(path)
     assert task.run().unreachable is not None
+
+
+def test_a_sequence_with_templates_is_read_here_and_said_once(tmp_path: Path) -> None:
+    """A file with geometry templates is read in the main process (instances share one mesh
+    per template): ``-v`` says so once, no range is sent, and the nodes are those of one
+    process."""
+    document = json.loads(multi_lod().read_text())
+    header = {key: document[key] for key in ("type", "version", "transform")}
+    cube = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]
+    quads = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    templates = {
+        "templates": [{"type": "Solid", "lod": "2", "boundaries": [[[q] for q in quads]]}],
+        "vertices-templates": cube,
+    }
+    lines = [json.dumps({**header, "geometry-templates": templates, "CityObjects": {}})]
+    lines += [json.dumps(feature) for feature in _features(document)]
+    path = tmp_path / "templates.city.jsonl"
+    path.write_text("\n".join(lines) + "\n")
+    one = _parked_facts(read_scene(path, limits=_limits()))
+    executor = _InProcess()
+    two, told = _by_limits(executor, path)
+    assert two == one and len(one) == 10
+    assert told == [f"{path}: geometry templates are read in the main process"]
+    assert executor.tasks == []

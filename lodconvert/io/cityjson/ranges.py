@@ -129,7 +129,8 @@ class SequenceRanges(Spread[LineRange, RangeLinesTask]):
         self, results: Results, progress: Callable[[str], None], seconds: float = TASK_SECONDS
     ) -> None:
         super().use(results, progress, seconds)
-        self.lines.use(results, progress, seconds)
+        if self.results is not None:  # not a file read here whole (said once, above)
+            self.lines.use(results, progress, seconds)
 
     def read_here_only(self) -> str | None:
         return self.lines.read_here_only()
