@@ -98,12 +98,11 @@ def coarser_count(chain: LodChain) -> int:
 
 @dataclass(frozen=True)
 class ChainText:
-    """A chain's node texts that hold no index, each laid out as a node's member (``indent``:
-    the layout's): the object's ``name`` and ``attributes`` (its root's ``extras``, ``None``
-    without attributes), each level node's (and mesh's) name, the finest node's ``extras``
-    and each coarser node's ``facts`` (its ``extras``)."""
+    """A chain's node texts that hold no index, each laid out as a node's member: the
+    object's ``name`` and ``attributes`` (its root's ``extras``, ``None`` without
+    attributes), each level node's (and mesh's) name, the finest node's ``extras`` and each
+    coarser node's ``facts`` (its ``extras``)."""
 
-    indent: int | None
     name: str
     attributes: str | None
     levels: tuple[str, ...]
@@ -127,7 +126,6 @@ def chain_text(chain: LodChain, view: ReferenceView, layout: Layout) -> ChainTex
         for lv, d in zip(chain.levels[1 : 1 + coarser], chain.cutoffs[:coarser], strict=True)
     )
     return ChainText(
-        indent=layout.indent,
         name=text(chain.object_id),
         attributes=text({"attributes": plain(chain.metadata)}) if chain.metadata else None,
         levels=tuple(text(f"{chain.object_id}_{lv.name}") for lv in chain.levels),

@@ -150,18 +150,16 @@ class LodScene:
         """Add a chain's nodes and meshes: its part of the document as a worker made it, where
         one did, or as one would (:mod:`.chain_part`); an instance's here, sharing the meshes
         of its geometry's first chain."""
-        doc = self.doc
-        placed = chain.origin + 0.0  # + 0.0: no negative zero
-        if chain.transform is not None:
-            matrix = chain.transform.copy()
-            matrix[:3, 3] += matrix[:3, :3] @ chain.origin
-            placed = matrix[:3, 3]
-        placed = self._placed(placed, f"object {chain.object_id!r}")
+        doc, what = self.doc, f"object {chain.object_id!r}"
         if chain.transform is None:
+            placed = self._placed(chain.origin + 0.0, what)  # + 0.0: no negative zero
             part = self.pieces.take(chain) or self.parts(chain)
             assert part.indent == doc.layout.indent, "a part made for the other layout"
             doc.merge(part.part, numbers_text(doc.layout, placed))
             return
+        matrix = chain.transform.copy()
+        matrix[:3, 3] += matrix[:3, :3] @ chain.origin
+        placed = self._placed(matrix[:3, 3], what)
         text = chain_text(chain, self.reference_view, doc.layout)
         if np.array_equal(matrix[:3, :3], np.eye(3)):
             add_chain(doc, chain, text, numbers_text(doc.layout, placed))
