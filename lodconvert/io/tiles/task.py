@@ -37,6 +37,8 @@ from .placement import Placement, world_to_frame
 ENU_TO_GLTF = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 TILES = "tiles"
 """The folder of the tiles' files in the tileset folder."""
+MARGIN = 0.001
+"""Metres a bounding box is grown by on every side (float32 content rounding, flat content)."""
 RECORDS = f"{RESUME}/tiles"
 """Where tasks record what they wrote, inside the staged folder."""
 RECORD_BYTES = 1 << 16
@@ -135,7 +137,8 @@ class TileTask:
         except LodConvertError as exc:
             return self.failed(str(exc))
         box = np.stack([local.min(axis=0), local.max(axis=0)])
-        failure = failure_of(check_content(data, box, f"{TILES}/{self.name}"))
+        grown = box + np.array([[-MARGIN], [MARGIN]])  # as the tileset's box of it grows
+        failure = failure_of(check_content(data, grown, f"{TILES}/{self.name}"))
         if failure is not None:
             return self.failed(failure)
         return TileResult(frame, box, data=data, key=self.key())

@@ -38,15 +38,13 @@ if TYPE_CHECKING:
     from ...context import RunContext
 
 from .content import TileTextures
-from .task import TILES, TileResult, TileTask, Where
+from .task import MARGIN, TILES, TileResult, TileTask, Where
 
 DEFAULT_SSE = 16.0
 """CesiumJS's default maximumScreenSpaceError."""
 EXTERNAL_BYTES = 2_000_000
 """Largest tileset JSON written as one file: past it, each child of the root is an external
 tileset of its own (``tiles/NAME.json``)."""
-MARGIN = 0.001
-"""Metres a bounding box is grown by on every side (float32 content rounding, flat content)."""
 
 
 @dataclass
