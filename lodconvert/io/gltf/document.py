@@ -184,9 +184,8 @@ class Document:
         (and its root's translation with the JSON text ``translation``)."""
         for extension in part.extensions:
             self.use(extension)
-        pad = -self.blob_length % 4 if part.blob else 0
         bases = {kind: len(getattr(self, name)) for kind, name in _ARRAYS.items()}
-        bases.update(b=self.blob_length + pad, f=self.fallback_length)
+        bases.update(b=self._aligned(part.blob) if part.blob else 0, f=self.fallback_length)
         materials: list[int] = []
 
         def filled(mark: re.Match[str]) -> str:  # a material's texture
@@ -205,15 +204,20 @@ class Document:
             if count:
                 getattr(self, name).extend_text(texts[at : at + count])
                 at += count
-        if part.blob:
-            self._blob_pending += b"\x00" * pad
-            self._blob_pending += part.blob
-            self.blob_length += pad + len(part.blob)
-            if len(self._blob_pending) >= SPOOL_BYTES:
-                self.flush_blob()
         self.fallback_length += part.fallback_length
         self.quantized |= part.quantized
         self.position_error = max(self.position_error, part.position_error)
+
+    def _aligned(self, data: bytes | memoryview) -> int:
+        """Append ``data`` to the buffer at its next 4-byte boundary; where it starts."""
+        pad = -self.blob_length % 4
+        self._blob_pending += b"\x00" * pad
+        self._blob_pending += data
+        if len(self._blob_pending) >= SPOOL_BYTES:
+            self.flush_blob()
+        start = self.blob_length + pad
+        self.blob_length = start + len(data)
+        return start
 
     def _material_index(self, key: MaterialKey, text: Callable[[], str]) -> int:
         """The index of the material whose JSON ``text`` is made on demand: the one made
@@ -231,13 +235,7 @@ class Document:
     ) -> int:
         """Append ``data`` (a packed view's: ``stored``'s) at the next 4-byte boundary of the
         buffer as a new buffer view."""
-        pad = -self.blob_length % 4
-        self._blob_pending += b"\x00" * pad
-        self._blob_pending += data
-        if len(self._blob_pending) >= SPOOL_BYTES:
-            self.flush_blob()
-        start = self.blob_length + pad
-        self.blob_length = start + len(data)
+        start = self._aligned(data)
         if stored is not None and (stored.packed is not None or stored.stride is not None):
             fallback = self.value("f", self.fallback_length)
             view = stored.json(target, self.value("b", start), fallback)
