@@ -33,6 +33,7 @@ def iter_chains(
     hlod: HlodOptions | None = None,
     pieces: Pieces | None = None,
     first_at: Callable[[np.ndarray], None] | None = None,
+    packed: bool = False,
 ) -> Iterator[LodChain | CellChain]:
     """Bake the scene's objects by the context's executor; objects with bad geometry are
     reported through its ``warn`` (unless ``strict``: the caller fails), recorded in its
@@ -40,12 +41,15 @@ def iter_chains(
     planning and baking took. ``pieces`` keeps what its formatter made of each chain where it
     was baked (those chains come without their geometry, but for LOD parents, which merge it);
     ``first_at`` hears where the scene's first object lies (its bounding-box centre) before any
-    chain comes. With ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`): one
+    chain comes; with ``packed``, chains baked elsewhere come with their geometry packed
+    (:meth:`~.model.LodChain.packed`: the writer only passes it on to its own tasks). With
+    ``hlod``, the objects come grouped in LOD parents (:mod:`.city.hlod`): one
     :class:`CellChain` per cell of the coarsest tier, in grid order, each followed by the
     members it left out (objects or finer cells, drawn on their own)."""
     bakery = _Bakery(
-        scene.source, options, context, object_count(scene), pieces=pieces, lean=hlod is None
-    )
+        scene.source, options, context, object_count(scene), pieces=pieces,
+        lean=hlod is None, packed=packed,
+    )  # fmt: skip
     nodes = scene.with_geometry()
     if first_at is not None:
         nodes = _first_told(nodes, first_at)
@@ -83,7 +87,8 @@ class _Bakery:
     the main process: warnings told, skipped objects (bad geometry) reported and left out
     (``None``), progress stepped, and geometry placed by several nodes baked once (its key is
     decided here, where the nodes were read). With ``lean``, a chain whose piece of the output
-    was made where it was baked comes without its geometry (:class:`~.tasks.BakeTask`)."""
+    was made where it was baked comes without its geometry, with ``packed`` every chain with
+    its geometry packed (:class:`~.tasks.BakeTask`)."""
 
     source: str
     options: ChainOptions
@@ -92,6 +97,7 @@ class _Bakery:
     plan_only: bool = False
     pieces: Pieces | None = None
     lean: bool = False
+    packed: bool = False
     done: int = 0
 
     def chains(
@@ -118,7 +124,7 @@ class _Bakery:
         formatter = self.pieces.formatter if self.pieces is not None else None
         made = batches(
             sent(), per_object, self.context.limits, self.plan_only, formatter,
-            self.context.executor.task_seconds, self.lean,
+            self.context.executor.task_seconds, self.lean, self.packed,
         )  # fmt: skip
         tasks = self.context.clock.iterate("plan", made)
         for result in self.context.clock.iterate("execute", self.context.executor.results(tasks)):

@@ -116,7 +116,8 @@ def convert(
         assembly = Assembly(scene, _output_info(inputs, scene, crs_record, run.chain), run.hlod)
         pieces = _pieces(target, output_path, assembly.info, run, executor)
         along = stack.enter_context(_check_along(sink, output_path, executor))
-        items = iter_chains(scene, run.chain, context, run.hlod, pieces, assembly.first_at)
+        packed = target.takes_packed and not isinstance(executor, SerialExecutor)
+        items = iter_chains(scene, run.chain, context, run.hlod, pieces, assembly.first_at, packed)
         with clock("write"):
             chains = clock.iterate("assemble", assembly.recorded(items))
             target.write_chains(chains, sink, assembly.info, context, pieces, **run.write_options)

@@ -72,13 +72,16 @@ class BakeTask:
     ``plan_only``, plan each chain (:func:`~.plans.plan_chain`) and bake nothing; with a
     ``formatter``, each chain's piece of the output is made too, and with ``lean`` (where the
     results are taken, nothing but the writer needs a chain's geometry) a chain whose piece was
-    made comes back without its geometry (:meth:`~.model.LodChain.without_geometry`)."""
+    made comes back without its geometry (:meth:`~.model.LodChain.without_geometry`); with
+    ``packed`` (where the results are taken, geometry is only passed on to other tasks) every
+    chain comes back with its geometry packed (:meth:`~.model.LodChain.packed`)."""
 
     items: tuple[tuple[Node | PackedNode, ChainOptions], ...]
     limits: Limits = DEFAULT_LIMITS
     plan_only: bool = False
     formatter: Formatter | None = None
     lean: bool = False
+    packed: bool = False
 
     def object_ids(self) -> list[str]:
         """The ids of the task's objects, in order."""
@@ -104,6 +107,8 @@ class BakeTask:
             piece = self.formatter(chain) if self.formatter and node.transform is None else None
             if piece is not None and self.lean:
                 chain = chain.without_geometry()
+            elif self.packed and isinstance(chain, LodChain):
+                chain = chain.packed()
             outcomes.append(Baked(chain, None, tuple(warnings), piece))
         return BakeResult(tuple(outcomes), time.perf_counter() - start)
 
@@ -465,17 +470,18 @@ def batches(
     formatter: Formatter | None = None,
     seconds: float = TASK_SECONDS,
     lean: bool = False,
+    packed: bool = False,
 ) -> Iterator[BakeTask]:
     """``items`` as tasks of about ``seconds`` of work each, judged by ``per_object`` (a
     one-item list: seconds an object takes so far, updated by the caller; 0: not known yet, a
-    task of one object); ``plan_only``, ``formatter`` and ``lean`` as :class:`BakeTask` has
-    them."""  # fmt: skip
+    task of one object); ``plan_only``, ``formatter``, ``lean`` and ``packed`` as
+    :class:`BakeTask` has them."""  # fmt: skip
     batch: list[tuple[Node | PackedNode, ChainOptions]] = []
     for item in items:
         batch.append(item)
         wanted = int(seconds / per_object[0]) if per_object[0] > 0 else 1
         if len(batch) >= max(1, min(MAX_BATCH, wanted)):
-            yield BakeTask(tuple(batch), limits, plan_only, formatter, lean)
+            yield BakeTask(tuple(batch), limits, plan_only, formatter, lean, packed)
             batch = []
     if batch:
-        yield BakeTask(tuple(batch), limits, plan_only, formatter, lean)
+        yield BakeTask(tuple(batch), limits, plan_only, formatter, lean, packed)

@@ -645,6 +645,23 @@ def test_far_tiers_are_lighter_than_their_children_and_buildings_beside_cells_ha
     assert validate_file(tileset) == []
 
 
+def _corner_task(where: Any, corners: np.ndarray, packed: bool) -> Any:
+    """The task of a tile of three ``corners``: a building's packed triangle (``packed``), or
+    a far level's points."""
+    from lodconvert.io.tiles.task import Placed, TileTask
+    from lodconvert.model import Level, PointCloud, Surface
+
+    origin = corners[0]
+    grey = np.full((3, 4), 200, np.uint8)
+    if packed:
+        mesh = Surface(corners - origin, np.array([[0, 1, 2]]), grey)
+        level = Level("LOD2", "source", mesh=mesh).packed()
+        assert level.mesh is None and level.packed_geometry is not None
+        return TileTask("t.glb", where, (Placed(level, origin),), (("b", "Building", {}),), "t")
+    points = PointCloud(corners - origin, grey, np.zeros((3, 3), np.float32))
+    return TileTask("t.glb", where, (Placed(Level("LOD1", "pcd", points=points), origin),), (), "t")
+
+
 def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_process(
     tmp_path: Path,
 ) -> None:
@@ -652,7 +669,7 @@ def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_p
     it gives back the GLB, which the main process writes with its record, kept when resumed."""
     import pyproj
 
-    from lodconvert.io.tiles.task import TileTask, Where
+    from lodconvert.io.tiles.task import Where
     from lodconvert.reproject import Georef
     from lodconvert.sinks import Outputs
 
@@ -661,7 +678,7 @@ def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_p
     corners = np.array(
         [[690000.0, 5335000.0, 520.0], [690010, 5335000, 520], [690000, 5335010, 530]]
     )
-    task = TileTask("t.glb", where, corners, np.full((3, 4), 200, np.uint8), None, None, (), "test")
+    task = _corner_task(where, corners, packed=True)
     result = task.run()
     assert result.error is None and result.data is not None and result.data[:4] == b"glTF"
     assert list(tmp_path.iterdir()) == []
@@ -685,7 +702,7 @@ def test_a_tile_whose_content_leaves_its_box_fails_where_it_is_made(
     from lodconvert.io.gltf.binary import pack_glb
     from lodconvert.io.tiles import task as task_module
     from lodconvert.io.tiles.check import glb_parts
-    from lodconvert.io.tiles.task import TileTask, Where
+    from lodconvert.io.tiles.task import Where
     from lodconvert.reproject import Georef
 
     georef = Georef("EPSG:25832", pyproj.CRS("EPSG:25832"))
@@ -693,7 +710,7 @@ def test_a_tile_whose_content_leaves_its_box_fails_where_it_is_made(
     corners = np.array(
         [[690000.0, 5335000.0, 520.0], [690010, 5335000, 520], [690000, 5335010, 530]]
     )
-    task = TileTask("t.glb", where, corners, np.full((3, 4), 200, np.uint8), None, None, (), "test")
+    task = _corner_task(where, corners, packed=False)
     assert task.run().error is None
     made = task_module.points_glb
 

@@ -20,20 +20,15 @@ import itertools
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, replace
-from typing import Any, TypeVar
+from typing import Any
 
 from ..bake import Backend
 from ..chain import ChainOptions
 from ..limits import Limits
-from ..model import CellChain, Level, LodChain, Mesh, Surface
+from ..model import TRAVELLING, CellChain, Level, LodChain, Mesh
 from .cell_bake import bake_cell
 from .hlod import CellPlan, Member
 
-SHIPPED = ("bounds", "block-footprint-")
-"""What a member's meshes derived that travels with a task (a few numbers each; a footprint
-takes a while to find)."""
-
-T = TypeVar("T", Mesh, Surface)
 Warn = Callable[[str], None]
 Results = Callable[[Iterable["CellTask"]], Iterator["CellResult"]]
 """An executor's ``results``: each task's result, in order."""
@@ -52,16 +47,17 @@ class CellResult:
     warnings: tuple[str, ...] = ()
     error: str | None = None
     derived: tuple[dict[str, Any], ...] = ()
-    """What the members' objects' finest levels derived that :data:`SHIPPED` names, each
-    object's in order (for a coarser tier's task; none for a coarsest cell)."""
+    """What the members' objects' finest levels derived that
+    :data:`~lodconvert.model.TRAVELLING` names, each object's in order (for a coarser tier's
+    task; none for a coarsest cell)."""
 
     def items(self, members: list[Member]) -> list[Member]:
-        """The cell of ``members`` (the task's, as the main process holds them) and the members
-        it leaves out (gathered into the ``beside`` cell where there is one), as
-        :func:`~.cell_bake.bake_cell` gives them; ``members`` themselves without a cell. The
-        objects' finest levels keep what was derived from them there."""
+        """The cell of ``members`` (the task's, as the main process holds them, their geometry
+        packed or not) and the members it leaves out (gathered into the ``beside`` cell where
+        there is one), as :func:`~.cell_bake.bake_cell` gives them; ``members`` themselves
+        without a cell. The objects' finest levels keep what was derived from them there."""
         for chain, found in zip(_objects(members), self.derived, strict=False):
-            _finest(chain)._derived.update(found)
+            _finest(chain).keep_derived(found)
         if self.cell is None:
             return list(members)
         chosen = set(self.admitted)
@@ -74,7 +70,8 @@ class CellResult:
 @dataclass(frozen=True)
 class CellTask:
     """The LOD parent of ``plan`` over its baked ``members`` (:func:`~.cell_bake.bake_cell`;
-    ``top``: a coarsest cell, which gathers what it leaves out into a cell of its own)."""
+    ``top``: a coarsest cell, which gathers what it leaves out into a cell of its own); the
+    members' geometry may come packed (:meth:`~lodconvert.model.LodChain.packed`)."""
 
     plan: CellPlan
     members: tuple[Member, ...]
@@ -86,12 +83,12 @@ class CellTask:
     def run(self, backend: Backend, progress: object = None) -> CellResult:
         """Bake the cell with ``backend``; its warnings are data."""
         warnings: list[str] = []
-        members = list(self.members)
+        members = [member.unpacked() for member in self.members]
         cell, beside = bake_cell(
             self.plan, members, self.options, self.kind, backend, warnings.append, self.limits,
             beside=self.top,
         )  # fmt: skip
-        found = () if self.top else tuple(_kept(_finest(c)) for c in _objects(members))
+        found = () if self.top else tuple(_kept(_finest(c).mesh) for c in _objects(members))
         if cell is None:
             return CellResult(None, warnings=tuple(warnings), derived=found)
         chosen = {id(m) for m in cell.members}
@@ -106,9 +103,8 @@ class CellTask:
         )
 
     def __reduce__(self) -> tuple[type[CellTask], tuple[Any, ...]]:
-        """Pickled with its members' meshes without the tables derived from them (per face
-        and vertex, several times the geometry's bytes), which are found again where the task
-        runs: only their bounds and block footprints travel along (:data:`SHIPPED`)."""
+        """Pickled with its members' meshes keeping only the derived tables that travel
+        (:meth:`~lodconvert.model.Mesh.shipped`); packed geometry as it is."""
         members = tuple(_shipped(m) for m in self.members)
         return CellTask, (self.plan, members, self.options, self.kind, self.limits, self.top)
 
@@ -171,8 +167,8 @@ class CellBaker:
 
 
 def _shipped(member: Member) -> Member:
-    """``member`` with meshes sharing its arrays but keeping only what :data:`SHIPPED` names
-    of what was derived from them."""
+    """``member`` with meshes sharing its arrays but keeping only the derived tables that
+    travel (:meth:`~lodconvert.model.Mesh.shipped`)."""
     if isinstance(member, CellChain):
         members = [_shipped(m) for m in member.members]
         return replace(member, members=members, far=_shipped_level(member.far))
@@ -181,21 +177,13 @@ def _shipped(member: Member) -> Member:
 
 def _shipped_level(level: Level) -> Level:
     """``level`` with its mesh (if any) as :func:`_shipped` ships it."""
-    if level.mesh is None:
-        return level
-    parts = [_kept_derived(part, replace(part)) for part in level.mesh.parts]
-    return replace(level, mesh=_kept_derived(level.mesh, Mesh(parts)))
+    return level if level.mesh is None else replace(level, mesh=level.mesh.shipped())
 
 
-def _kept_derived(source: T, copy: T) -> T:
-    """``copy`` given what :data:`SHIPPED` names of what ``source`` derived."""
-    copy._derived.update(_kept(source))
-    return copy
-
-
-def _kept(mesh: Mesh | Surface) -> dict[str, Any]:
-    """What :data:`SHIPPED` names of what ``mesh`` derived."""
-    return {key: value for key, value in mesh._derived.items() if key.startswith(SHIPPED)}
+def _kept(mesh: Mesh | None) -> dict[str, Any]:
+    """What :data:`~lodconvert.model.TRAVELLING` names of what ``mesh`` derived."""
+    assert mesh is not None
+    return {key: value for key, value in mesh._derived.items() if key.startswith(TRAVELLING)}
 
 
 def _objects(members: list[Member]) -> list[LodChain]:
@@ -203,9 +191,9 @@ def _objects(members: list[Member]) -> list[LodChain]:
     return [c for m in members for c in m.objects()]
 
 
-def _finest(chain: LodChain) -> Mesh:
+def _finest(chain: LodChain) -> Level:
     """The finest mesh level of ``chain`` (where its block footprint is kept)."""
-    return next(level.mesh for level in chain.levels if level.mesh is not None)
+    return next(level for level in chain.levels if not level.is_points)
 
 
 def _at_tier(plans: list[CellPlan], tier: int) -> list[CellPlan]:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import UsageError
-from ..model import CellChain, Level, LodChain
+from ..model import CellChain, LodChain
 
 KINDS = ("auto", "points", "mesh", "blocks")
 AUTO_OBJECTS = 64
@@ -139,10 +139,10 @@ def draw_counts(items: Sequence[Member]) -> dict[str, int]:
         cells = item.cells() if isinstance(item, CellChain) else []
         chains = item.objects()
         nodes += 3 * len(cells) + sum(1 + len(chain.levels) for chain in chains)
-        shapes += sum(_parts(cell.far) for cell in cells)
-        shapes += sum(_parts(level) for chain in chains for level in chain.levels)
+        shapes += sum(cell.far.parts for cell in cells)
+        shapes += sum(level.parts for chain in chains for level in chain.levels)
         far = item.far if isinstance(item, CellChain) else item.levels[-1]
-        calls += _parts(far)
+        calls += far.parts
         drawn += far.count
     return {
         "nodes": nodes,
@@ -150,7 +150,3 @@ def draw_counts(items: Sequence[Member]) -> dict[str, int]:
         "far_draw_calls": calls,
         "far_vertices_and_points": drawn,
     }
-
-
-def _parts(level: Level) -> int:
-    return len(level.mesh.parts) if level.mesh is not None else 1

@@ -93,6 +93,7 @@ class Format:
     georeferenced: bool = False
     reads_on_workers: bool = False
     checked_as_streamed: bool = False
+    takes_packed: bool = False
     viewer: str | None = None
     formatter: Callable[..., Callable[[LodChain], Any]] | None = None
     read_options: tuple[str, ...] = ()

@@ -1,12 +1,13 @@
 """The data model, free of file formats: Scene → Node (tree) → geometry parts; LodChain → Level."""
 
-from .chain import MESH_KINDS, BakeParams, CellChain, Level, LodChain
-from .geometry import GREY, WHITE, Mesh, PointCloud, Surface
+from .chain import MESH_KINDS, BakeParams, CellChain, Level, LodChain, in_scene
+from .geometry import GREY, TRAVELLING, WHITE, Mesh, PointCloud, Surface
 from .tree import Node, PackedNode, Scene, unpacked, with_geometry
 
 __all__ = [
     "GREY",
     "MESH_KINDS",
+    "TRAVELLING",
     "WHITE",
     "BakeParams",
     "CellChain",
@@ -18,6 +19,7 @@ __all__ = [
     "PointCloud",
     "Scene",
     "Surface",
+    "in_scene",
     "unpacked",
     "with_geometry",
 ]

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import pickle
 from dataclasses import dataclass, field, replace
 from typing import Any, Literal
 
@@ -34,11 +35,22 @@ set, whatever its kind."""
 @dataclass(frozen=True)
 class Counts:
     """How large a level's geometry is, where the geometry itself stayed where the level was
-    baked (:meth:`LodChain.without_geometry`): its vertices (points of a point level) and
-    triangles (``None`` for points)."""
+    baked (:meth:`LodChain.without_geometry`): its vertices (points of a point level),
+    triangles (``None`` for points) and parts (shapes drawn)."""
 
     count: int
     faces: int | None
+    parts: int = 1
+
+
+@dataclass
+class Packed:
+    """A level's geometry pickled where it was baked (:meth:`Level.packed`), passed on
+    unopened to the process that draws it, and the tables found for its mesh since
+    (``derived``), which it gets back when unpacked."""
+
+    data: bytes
+    derived: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass
@@ -67,6 +79,8 @@ class Level:
     bake_seconds: float = 0.0
     silhouette_f: float | None = None
     counts: Counts | None = None
+    packed_geometry: Packed | None = None
+    """Its geometry, pickled (:meth:`packed`), with ``counts`` in its place."""
 
     def __post_init__(self) -> None:
         if self.mesh is not None and not isinstance(self.mesh, Mesh):
@@ -98,10 +112,44 @@ class Level:
             return self.counts.faces
         return None if self.mesh is None else len(self.mesh.faces)
 
+    @property
+    def parts(self) -> int:
+        """Shapes it is drawn as: a mesh's parts, one for points."""
+        if self.counts is not None:
+            return self.counts.parts
+        return 1 if self.mesh is None else len(self.mesh.parts)
+
     def without_geometry(self) -> Level:
         """This level with its geometry's :class:`Counts` in place of the geometry."""
-        counts = Counts(self.count, self.faces)
-        return replace(self, mesh=None, points=None, counts=counts)
+        counts = Counts(self.count, self.faces, self.parts)
+        return replace(self, mesh=None, points=None, counts=counts, packed_geometry=None)
+
+    def packed(self) -> Level:
+        """This level with its geometry pickled (a mesh with only the derived tables that
+        travel, :meth:`~.geometry.Mesh.shipped`) and its :class:`Counts` in its place."""
+        geometry = self.points if self.mesh is None else self.mesh.shipped()
+        if geometry is None:
+            return self
+        data = pickle.dumps(geometry, protocol=pickle.HIGHEST_PROTOCOL)
+        return replace(self.without_geometry(), packed_geometry=Packed(data))
+
+    def unpacked(self) -> Level:
+        """This level with its packed geometry unpickled (itself when none is packed)."""
+        if self.packed_geometry is None:
+            return self
+        geometry = pickle.loads(self.packed_geometry.data)
+        if isinstance(geometry, Mesh):
+            geometry._derived.update(self.packed_geometry.derived)
+            return replace(self, mesh=geometry, counts=None, packed_geometry=None)
+        return replace(self, points=geometry, counts=None, packed_geometry=None)
+
+    def keep_derived(self, found: dict[str, Any]) -> None:
+        """Keep ``found`` (tables derived from this level's mesh elsewhere) with its mesh,
+        packed or not."""
+        if self.packed_geometry is not None:
+            self.packed_geometry.derived.update(found)
+        elif self.mesh is not None:
+            self.mesh._derived.update(found)
 
 
 @dataclass
@@ -140,16 +188,7 @@ class LodChain:
 
     def in_scene(self, mesh: Mesh) -> Mesh:
         """``mesh`` (one of this chain's levels) in scene coordinates."""
-        if self.transform is None:
-            return mesh.translated(self.origin)
-        matrix = np.asarray(self.transform, dtype=np.float64)
-        rotation, shift = matrix[:3, :3].T, matrix[:3, 3]
-        return Mesh(
-            [
-                replace(part, vertices=(part.vertices + self.origin) @ rotation + shift)
-                for part in mesh.parts
-            ]
-        )
+        return in_scene(mesh, self.origin, self.transform)
 
     def objects(self) -> list[LodChain]:
         """The object chains it holds: itself (as :meth:`CellChain.objects` gives a cell's)."""
@@ -159,6 +198,29 @@ class LodChain:
         """This chain with every level's geometry left out (:meth:`Level.without_geometry`):
         what is told and written of it where its output was made elsewhere."""
         return replace(self, levels=[level.without_geometry() for level in self.levels])
+
+    def packed(self) -> LodChain:
+        """This chain with every level's geometry packed (:meth:`Level.packed`): what a
+        worker sends back where the main process only passes geometry on to other tasks."""
+        return replace(self, levels=[level.packed() for level in self.levels])
+
+    def unpacked(self) -> LodChain:
+        """This chain with every level's geometry unpacked (itself when none is packed)."""
+        if all(level.packed_geometry is None for level in self.levels):
+            return self
+        return replace(self, levels=[level.unpacked() for level in self.levels])
+
+
+def in_scene(mesh: Mesh, origin: np.ndarray, transform: np.ndarray | None) -> Mesh:
+    """``mesh`` (relative to ``origin``, placed by ``transform`` as :attr:`LodChain.transform`
+    says) in scene coordinates."""
+    if transform is None:
+        return mesh.translated(origin)
+    matrix = np.asarray(transform, dtype=np.float64)
+    rotation, shift = matrix[:3, :3].T, matrix[:3, 3]
+    return Mesh(
+        [replace(part, vertices=(part.vertices + origin) @ rotation + shift) for part in mesh.parts]
+    )
 
 
 @dataclass
@@ -189,6 +251,10 @@ class CellChain:
     xs: list[float]
     culled: bool = False
     facts: dict[str, Any] = field(default_factory=dict)
+
+    def unpacked(self) -> CellChain:
+        """This cell with its members' geometry unpacked (:meth:`LodChain.unpacked`)."""
+        return replace(self, members=[member.unpacked() for member in self.members])
 
     def member_ids(self) -> list[str]:
         """Each member's id: an object's, or a finer cell's."""

@@ -9,10 +9,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
+TRAVELLING = ("bounds", "block-footprint-")
+"""Tables derived from a mesh that travel with it to another process (:meth:`Mesh.shipped`):
+a few numbers each, one of them (a block footprint) slow to find; the others (per face and
+vertex, several times the geometry's bytes) are found again where they are needed."""
 GREY = np.array([204, 204, 204, 255], dtype=np.uint8)
 WHITE = np.array([255, 255, 255, 255], dtype=np.uint8)
 
@@ -363,3 +367,19 @@ class Mesh:
         if self.single is None:
             _move_bounds(self._derived, moved._derived, offset)
         return moved
+
+    def shipped(self) -> Mesh:
+        """This mesh with parts sharing its arrays, keeping only the derived tables that
+        :data:`TRAVELLING` names (what is pickled for another process)."""
+        shipped = Mesh([_travelling(part, replace(part)) for part in self.parts])
+        return _travelling(self, shipped)
+
+
+T = TypeVar("T", Mesh, Surface)
+
+
+def _travelling(source: T, copy: T) -> T:
+    """``copy`` given the derived tables of ``source`` that :data:`TRAVELLING` names."""
+    found = source._derived.items()
+    copy._derived.update((k, v) for k, v in found if k.startswith(TRAVELLING))
+    return copy

@@ -104,6 +104,7 @@ FORMAT = Format(
     output_folder=output_folder,
     viewer="tiles",
     georeferenced=True,
+    takes_packed=True,
 )
 
 __all__ = [

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from ...errors import LodConvertError
+from ...model import Level, Mesh, PointCloud, Surface, in_scene
 from ...sinks import RESUME, DirectorySink
 from ...textures import ATLAS_SIZE
 from ..findings import failure_of
@@ -82,39 +83,89 @@ class TileResult:
 
 
 @dataclass(frozen=True)
+class Placed:
+    """One level drawn in a tile: its geometry (packed or not, relative to ``origin``) placed
+    by ``transform`` as :attr:`~lodconvert.model.LodChain.transform` says."""
+
+    level: Level
+    origin: np.ndarray
+    transform: np.ndarray | None = None
+
+    def geometry(self) -> Mesh | PointCloud:
+        """The level's mesh in scene coordinates, or its points (relative to ``origin``)."""
+        level = self.level.unpacked()
+        if level.mesh is not None:
+            return in_scene(level.mesh, self.origin, self.transform)
+        assert level.points is not None
+        return level.points
+
+
+@dataclass(frozen=True)
+class Drawn:
+    """What a tile draws: ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes,
+    triangles (``faces``; ``None``: points), each vertex's feature (``feature_ids``; ``None``:
+    no features) and the textures of its textured vertices."""
+
+    vertices: np.ndarray
+    colors: np.ndarray
+    faces: np.ndarray | None = None
+    feature_ids: np.ndarray | None = None
+    textures: TileTextures | None = None
+
+
+@dataclass(frozen=True)
 class TileTask:
-    """The GLB ``name`` in the tileset's ``tiles/``: a triangle mesh (``faces``; with
-    ``feature_ids`` into ``features``, or none for a merged far level) or, without ``faces``,
-    points; ``vertices`` in scene coordinates, ``colors`` (n, 4) sRGB bytes; the textures of
-    its textured vertices (``textures``), packed into atlas pages of ``atlas_size``; its
-    geometry compressed as ``compress`` (:data:`~..gltf.compression.COMPRESSIONS`) says
-    (meshopt positions within ``tolerance`` metres), its atlas pages with a WebP copy where
-    ``webp``."""
+    """The GLB ``name`` in the tileset's ``tiles/``: the levels of ``sources``, one feature per
+    level (``features``), or, without features, one far level drawn as it is (its mesh's
+    colours with textures baked in, or points); textures packed into atlas pages of
+    ``atlas_size``; its geometry compressed as ``compress``
+    (:data:`~..gltf.compression.COMPRESSIONS`) says (meshopt positions within ``tolerance``
+    metres), its atlas pages with a WebP copy where ``webp``. The sources' geometry is placed
+    where the task runs: packed geometry is opened only there."""
 
     name: str
     where: Where
-    vertices: np.ndarray
-    colors: np.ndarray
-    faces: np.ndarray | None
-    feature_ids: np.ndarray | None
+    sources: tuple[Placed, ...]
     features: tuple[Feature, ...]
     generator: str
-    textures: TileTextures | None = None
     atlas_size: int = ATLAS_SIZE
     compress: str = MESHOPT
     webp: bool = False
     tolerance: float = POSITION_TOLERANCE[0]
 
-    def key(self) -> str:
-        """The hash of everything that makes this tile's file, frame and box."""
+    def drawn(self) -> Drawn:
+        """What the tile draws, its sources placed in the scene."""
+        if not self.features:
+            (source,) = self.sources
+            far = source.geometry()
+            if isinstance(far, PointCloud):
+                return Drawn(far.positions + source.origin, far.colors)
+            return Drawn(far.vertices, far.baked_colors(), far.faces)
+        placed = [source.geometry() for source in self.sources]
+        meshes = [mesh for mesh in placed if isinstance(mesh, Mesh)]
+        starts = np.cumsum([0] + [mesh.vertex_count for mesh in meshes])
+        return Drawn(
+            np.concatenate([mesh.vertices for mesh in meshes]),
+            np.concatenate([_colors(part) for mesh in meshes for part in mesh.parts]),
+            np.concatenate(
+                [mesh.faces + start for mesh, start in zip(meshes, starts[:-1], strict=True)]
+            ),
+            np.repeat(np.arange(len(meshes)), np.diff(starts)),
+            _textures(meshes),
+        )
+
+    def key(self, drawn: Drawn | None = None) -> str:
+        """The hash of everything that makes this tile's file, frame and box (``drawn``: what
+        it draws, where already found)."""
+        drawn = drawn or self.drawn()
         digest = hashlib.sha256()
         head = [self.name, self.where.key, self.generator, self.features, self.compress]
         head += [self.webp, self.tolerance]
-        textures = self.textures
+        textures = drawn.textures
         if textures is not None:
             head += [self.atlas_size, textures.photographic]
         digest.update(json.dumps(head, sort_keys=True, default=str).encode())
-        arrays = [self.vertices, self.colors, self.faces, self.feature_ids]
+        arrays = [drawn.vertices, drawn.colors, drawn.faces, drawn.feature_ids]
         if textures is not None:
             arrays += [textures.image_of, textures.uv, *textures.images]
         for array in arrays:
@@ -128,12 +179,13 @@ class TileTask:
     def run(self, backend: Any = None, progress: Any = None) -> TileResult:
         """Make the tile's GLB, frame and box; a scene that cannot be placed is the result's
         ``error``."""
+        drawn = self.drawn()
         try:
             place = placement(self.where)
-            ecef = place.ecef(self.vertices)
+            ecef = place.ecef(drawn.vertices)
             frame = place.enu_frame((ecef.min(axis=0) + ecef.max(axis=0)) / 2.0)
             local = world_to_frame(frame, ecef)
-            data = self._glb(local @ ENU_TO_GLTF.T)
+            data = self._glb(drawn, local @ ENU_TO_GLTF.T)
         except LodConvertError as exc:
             return self.failed(str(exc))
         box = np.stack([local.min(axis=0), local.max(axis=0)])
@@ -141,7 +193,7 @@ class TileTask:
         failure = failure_of(check_content(data, grown, f"{TILES}/{self.name}"))
         if failure is not None:
             return self.failed(failure)
-        return TileResult(frame, box, data=data, key=self.key())
+        return TileResult(frame, box, data=data, key=self.key(drawn))
 
     def _paths(self) -> tuple[str, str]:
         """The tile's file in the tileset folder and its record."""
@@ -169,13 +221,13 @@ class TileTask:
             handle.write(json.dumps(text).encode())
         return replace(result, data=None, key=None)
 
-    def _glb(self, gltf: np.ndarray) -> bytes:
-        """The GLB of the tile's content at glTF coordinates ``gltf``."""
-        if self.faces is None:
-            return points_glb(gltf, self.colors, self.generator, self.compress, self.tolerance)
+    def _glb(self, drawn: Drawn, gltf: np.ndarray) -> bytes:
+        """The GLB of ``drawn`` at glTF coordinates ``gltf``."""
+        if drawn.faces is None:
+            return points_glb(gltf, drawn.colors, self.generator, self.compress, self.tolerance)
         return mesh_glb(
-            gltf, self.faces, self.colors, self.feature_ids, self.features, self.generator,
-            self.textures, self.atlas_size, self.compress, self.webp, self.tolerance,
+            gltf, drawn.faces, drawn.colors, drawn.feature_ids, self.features, self.generator,
+            drawn.textures, self.atlas_size, self.compress, self.webp, self.tolerance,
         )  # fmt: skip
 
     def failed(self, reason: str) -> TileResult:
@@ -201,3 +253,43 @@ def _kept(record: bytes, data: bytes, key: str) -> TileResult | None:
     if frame.shape != (4, 4) or box.shape != (2, 3):
         return None
     return TileResult(frame, box.astype(np.float64), reused=True)
+
+
+def _colors(part: Surface) -> np.ndarray:
+    """(n, 4) sRGB bytes per vertex of a part of a tile's meshes: white where its texture is
+    written (it carries the colour), else its colours."""
+    if part.texture is not None and part.uv is not None:
+        return np.full((len(part.vertices), 4), 255, dtype=np.uint8)
+    return part.baked_colors()
+
+
+def _textures(meshes: list[Mesh]) -> TileTextures | None:
+    """The textures of ``meshes``' vertices (each image once, however many copies of it the
+    meshes hold), or None where none is textured."""
+    images: dict[int, int] = {}
+    by_content: dict[bytes, int] = {}
+    found: list[np.ndarray] = []
+    image_of, uv = [], []
+    photographic = True
+    for part in (part for mesh in meshes for part in mesh.parts):
+        if part.texture is None or part.uv is None:
+            image_of.append(np.full(len(part.vertices), -1, dtype=np.int64))
+            uv.append(np.zeros((len(part.vertices), 2)))
+            continue
+        if id(part.texture) not in images:
+            images[id(part.texture)] = by_content.setdefault(_digest(part.texture), len(found))
+            if images[id(part.texture)] == len(found):
+                found.append(part.texture)
+        image_of.append(np.full(len(part.vertices), images[id(part.texture)], dtype=np.int64))
+        uv.append(part.uv)
+        photographic = photographic and part.photographic
+    if not found:
+        return None
+    return TileTextures(np.concatenate(image_of), np.concatenate(uv), tuple(found), photographic)
+
+
+def _digest(image: np.ndarray) -> bytes:
+    """What tells an image's texels from another's."""
+    digest = hashlib.blake2b(f"{image.dtype.str}{image.shape}".encode(), digest_size=16)
+    digest.update(np.ascontiguousarray(image).tobytes())
+    return digest.digest()

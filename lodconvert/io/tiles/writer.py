@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ...errors import LodConvertError, UsageError
-from ...model import CellChain, LodChain, Mesh, Surface
+from ...model import CellChain, Level, LodChain
 from ...textures import ATLAS_SIZE, check_atlas_size
 from .. import OutputInfo, Pieces
 from ..gltf.compression import (
@@ -37,8 +37,7 @@ from .placement import Placement, world_to_frame
 if TYPE_CHECKING:
     from ...context import RunContext
 
-from .content import TileTextures
-from .task import MARGIN, TILES, TileResult, TileTask, Where
+from .task import MARGIN, TILES, Placed, TileResult, TileTask, Where
 
 DEFAULT_SSE = 16.0
 """CesiumJS's default maximumScreenSpaceError."""
@@ -80,40 +79,9 @@ class Tile:
         return np.stack([low - MARGIN, high + MARGIN])
 
 
-def _mesh_levels(chain: LodChain) -> list[tuple[int, Mesh]]:
-    """The chain's mesh levels (index, mesh), finest first."""
-    return [(i, lv.mesh) for i, lv in enumerate(chain.levels) if lv.mesh is not None]
-
-
-def _colors(part: Surface) -> np.ndarray:
-    """(n, 4) sRGB bytes per vertex of a part of a tile's meshes: white where its texture is
-    written (it carries the colour), else its colours."""
-    if part.texture is not None and part.uv is not None:
-        return np.full((len(part.vertices), 4), 255, dtype=np.uint8)
-    return part.baked_colors()
-
-
-def _textures(meshes: list[Mesh]) -> TileTextures | None:
-    """The textures of ``meshes``' vertices (each image once), or None where none is
-    textured."""
-    images: dict[int, int] = {}
-    found: list[np.ndarray] = []
-    image_of, uv = [], []
-    photographic = True
-    for part in (part for mesh in meshes for part in mesh.parts):
-        if part.texture is None or part.uv is None:
-            image_of.append(np.full(len(part.vertices), -1, dtype=np.int64))
-            uv.append(np.zeros((len(part.vertices), 2)))
-            continue
-        if id(part.texture) not in images:
-            images[id(part.texture)] = len(found)
-            found.append(part.texture)
-        image_of.append(np.full(len(part.vertices), images[id(part.texture)], dtype=np.int64))
-        uv.append(part.uv)
-        photographic = photographic and part.photographic
-    if not found:
-        return None
-    return TileTextures(np.concatenate(image_of), np.concatenate(uv), tuple(found), photographic)
+def _mesh_levels(chain: LodChain) -> list[tuple[int, Level]]:
+    """The chain's mesh levels (index, level), finest first."""
+    return [(i, level) for i, level in enumerate(chain.levels) if not level.is_points]
 
 
 def _feature(chain: LodChain) -> Feature:
@@ -164,44 +132,23 @@ class TilesetWriter:
         return self.placement.enu_frame((ecef.min(axis=0) + ecef.max(axis=0)) / 2.0)
 
     def _tile(
-        self,
-        name: str,
-        error: float,
-        vertices: np.ndarray,
-        colors: np.ndarray,
-        faces: np.ndarray | None = None,
-        feature_ids: np.ndarray | None = None,
-        features: tuple[Feature, ...] = (),
-        textures: TileTextures | None = None,
+        self, name: str, error: float, sources: tuple[Placed, ...], features: tuple[Feature, ...]
     ) -> Tile:
         """A tile whose content ``name`` (``.glb``) is made by a task queued for the executor
         (its frame and box are filled in from the task's result); see :class:`TileTask`."""
         task = TileTask(
-            f"{name}.glb", self.where, vertices, colors, faces, feature_ids, features,
-            self.info.generator, textures, self.atlas_size, self.compress, self.webp,
-            position_tolerance(error),
+            f"{name}.glb", self.where, sources, features, self.info.generator, self.atlas_size,
+            self.compress, self.webp, position_tolerance(error),
         )  # fmt: skip
         tile = Tile(None, None, error, task.name)
         self._queued.append((tile, task))
         return tile
 
-    def mesh_tile(self, name: str, entries: list[tuple[LodChain, Mesh]], error: float) -> Tile:
-        """A tile of the meshes of ``entries`` (each a chain and one of its levels' meshes),
-        one feature per chain."""
-        placed = [chain.in_scene(mesh) for chain, mesh in entries]
-        starts = np.cumsum([0] + [mesh.vertex_count for mesh in placed])
-        return self._tile(
-            name,
-            error,
-            np.concatenate([mesh.vertices for mesh in placed]),
-            np.concatenate([_colors(part) for mesh in placed for part in mesh.parts]),
-            np.concatenate(
-                [mesh.faces + start for mesh, start in zip(placed, starts[:-1], strict=True)]
-            ),
-            np.repeat(np.arange(len(placed)), np.diff(starts)),
-            tuple(_feature(chain) for chain, _ in entries),
-            _textures(placed),
-        )
+    def mesh_tile(self, name: str, entries: list[tuple[LodChain, Level]], error: float) -> Tile:
+        """A tile of the mesh levels of ``entries`` (each a chain and one of its levels), one
+        feature per chain."""
+        sources = tuple(Placed(level, chain.origin, chain.transform) for chain, level in entries)
+        return self._tile(name, error, sources, tuple(_feature(chain) for chain, _ in entries))
 
     def far_tile(self, cell: CellChain, children: list[Tile]) -> Tile:
         """A cell's tile: its far level, switching to ``children`` at its first cutoff."""
@@ -210,19 +157,11 @@ class TilesetWriter:
         if cell.facts.get("beside"):
             extras["beside"] = True
         error = self.error(cell.cutoffs[0])
-        if far.points is not None:
-            tile = self._tile(cell.cell_id, error, far.points.positions + cell.origin,
-                              far.points.colors)  # fmt: skip
-            if far.params is not None:
-                scale = far.params.point_size / self.sse
-                self.point_scale = max(self.point_scale or 0.0, scale)
-                extras.update(point_size_px=far.params.point_size, spacing=far.spacing)
-        else:
-            assert far.mesh is not None
-            tile = self._tile(
-                cell.cell_id, error, far.mesh.vertices + cell.origin, far.mesh.baked_colors(),
-                far.mesh.faces,
-            )  # fmt: skip
+        tile = self._tile(cell.cell_id, error, (Placed(far, cell.origin),), ())
+        if far.points is not None and far.params is not None:
+            scale = far.params.point_size / self.sse
+            self.point_scale = max(self.point_scale or 0.0, scale)
+            extras.update(point_size_px=far.params.point_size, spacing=far.spacing)
         tile.children, tile.extras = children, extras
         return tile
 
