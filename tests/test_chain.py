@@ -146,3 +146,34 @@ def test_a_moved_mesh_keeps_its_bounds_exact() -> None:
     fresh = Mesh([Surface(p.vertices + offset, p.faces) for p in parts])
     np.testing.assert_array_equal(moved.bounds, fresh.bounds)
     np.testing.assert_array_equal(moved.parts[0].bounds, fresh.parts[0].bounds)
+
+
+def test_a_packed_chain_comes_back_whole_after_pickling(bunny: Node) -> None:
+    """A chain a worker sends packed (each level's geometry pickled where it was baked) is,
+    once unpacked on the other side, the chain it baked: the same levels, geometry, placement
+    and facts; tables derived from its mesh in between (a block footprint) come along, and
+    the costly ones derived before packing are found again where needed, not carried."""
+    import pickle
+
+    chain = chain_of(bunny)
+    chain.transform = np.eye(4)
+    finest = chain.levels[0].mesh
+    assert finest is not None and finest.triangles is not None  # a costly derived table
+    packed = pickle.loads(pickle.dumps(chain.packed(), protocol=5))
+    assert all(level.mesh is None and level.points is None for level in packed.levels)
+    assert [lv.count for lv in packed.levels] == [lv.count for lv in chain.levels]
+    assert [lv.faces for lv in packed.levels] == [lv.faces for lv in chain.levels]
+    packed.levels[0].keep_derived({"block-footprint-3": "found"})
+    back = pickle.loads(pickle.dumps(packed, protocol=5)).unpacked()
+    for array in ("origin", "center", "transform"):
+        assert np.array_equal(getattr(back, array), getattr(chain, array))
+        assert getattr(back, array).dtype == np.float64
+    assert (back.cutoffs, back.metadata, back.xs) == (chain.cutoffs, chain.metadata, chain.xs)
+    mesh = back.levels[0].mesh
+    assert mesh is not None and np.array_equal(mesh.vertices, finest.vertices)
+    assert mesh._derived.get("block-footprint-3") == "found"
+    assert "triangles" not in mesh._derived and "bounds" in mesh._derived
+    for before, after in zip(chain.levels[1:], back.levels[1:], strict=True):
+        assert before.points is not None and after.points is not None
+        assert np.array_equal(before.points.positions, after.points.positions)
+        assert np.array_equal(before.points.colors, after.points.colors)

@@ -11,6 +11,7 @@ import io
 import itertools
 import json
 import os
+import pickle
 import shutil
 import subprocess
 import threading
@@ -672,6 +673,7 @@ def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_p
     from lodconvert.io.tiles.task import Where
     from lodconvert.reproject import Georef
     from lodconvert.sinks import Outputs
+    from lodconvert.tasks import pickled
 
     georef = Georef("EPSG:25832", pyproj.CRS("EPSG:25832"))
     where = Where(georef, "EPSG:25832", "test", "EPSG:25832")
@@ -681,6 +683,8 @@ def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_p
     task = _corner_task(where, corners, packed=True)
     result = task.run()
     assert result.error is None and result.data is not None and result.data[:4] == b"glTF"
+    # as a worker takes it: pickled (its place, origin and packed level), the same tile
+    assert pickle.loads(pickled(task)).run().data == result.data
     assert list(tmp_path.iterdir()) == []
     with Outputs() as outputs:
         sink = outputs.directory(tmp_path / "out", resume="k" * 64)

@@ -172,6 +172,8 @@ def _shipped(member: Member) -> Member:
     if isinstance(member, CellChain):
         members = [_shipped(m) for m in member.members]
         return replace(member, members=members, far=_shipped_level(member.far))
+    if all(level.mesh is None for level in member.levels):
+        return member  # its geometry packed (or none): nothing derived travels but that
     return replace(member, levels=[_shipped_level(level) for level in member.levels])
 
 

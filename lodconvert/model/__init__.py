@@ -1,6 +1,16 @@
 """The data model, free of file formats: Scene → Node (tree) → geometry parts; LodChain → Level."""
 
-from .chain import MESH_KINDS, BakeParams, CellChain, Level, LodChain, in_scene
+from .chain import (
+    MESH_KINDS,
+    BakeParams,
+    CellChain,
+    Level,
+    LodChain,
+    Numbers,
+    as_numbers,
+    from_numbers,
+    in_scene,
+)
 from .geometry import GREY, TRAVELLING, WHITE, Mesh, PointCloud, Surface
 from .tree import Node, PackedNode, Scene, unpacked, with_geometry
 
@@ -15,10 +25,13 @@ __all__ = [
     "LodChain",
     "Mesh",
     "Node",
+    "Numbers",
     "PackedNode",
     "PointCloud",
     "Scene",
     "Surface",
+    "as_numbers",
+    "from_numbers",
     "in_scene",
     "unpacked",
     "with_geometry",

@@ -4,7 +4,7 @@
 from __future__ import annotations
 
 import pickle
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, Literal
 
 import numpy as np
@@ -186,6 +186,15 @@ class LodChain:
     """What was cut from the object's id and attributes so that every output holds them
     (:mod:`.safe_text`), one note per kind of cut."""
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled with its ``origin``, ``center`` and ``transform`` as lists of numbers (a
+        small array's pickle costs several times theirs, and a city has a chain per
+        building)."""
+        values = [getattr(self, name) for name in _CHAIN_FIELDS]
+        for at in _CHAIN_ARRAYS:
+            values[at] = as_numbers(values[at])
+        return _chain, tuple(values)
+
     def in_scene(self, mesh: Mesh) -> Mesh:
         """``mesh`` (one of this chain's levels) in scene coordinates."""
         return in_scene(mesh, self.origin, self.transform)
@@ -209,6 +218,33 @@ class LodChain:
         if all(level.packed_geometry is None for level in self.levels):
             return self
         return replace(self, levels=[level.unpacked() for level in self.levels])
+
+
+_CHAIN_FIELDS = tuple(f.name for f in fields(LodChain))
+_CHAIN_ARRAYS = tuple(_CHAIN_FIELDS.index(name) for name in ("origin", "center", "transform"))
+
+
+Numbers = tuple[list[Any], str]
+"""A small array pickled as its numbers (nested lists) and dtype (:func:`as_numbers`)."""
+
+
+def as_numbers(array: np.ndarray | None) -> Numbers | None:
+    """A small array (a point, a 4×4 matrix) as its numbers and dtype, which pickle several
+    times faster than the array; ``None`` stays ``None``."""
+    return None if array is None else (array.tolist(), array.dtype.str)
+
+
+def from_numbers(numbers: Numbers | None) -> np.ndarray | None:
+    """The array of :func:`as_numbers` (``None`` stays ``None``)."""
+    return None if numbers is None else np.array(numbers[0], dtype=numbers[1])
+
+
+def _chain(*values: Any) -> LodChain:
+    """The chain that :meth:`LodChain.__reduce__` pickled."""
+    restored = list(values)
+    for at in _CHAIN_ARRAYS:
+        restored[at] = from_numbers(restored[at])
+    return LodChain(*restored)
 
 
 def in_scene(mesh: Mesh, origin: np.ndarray, transform: np.ndarray | None) -> Mesh:

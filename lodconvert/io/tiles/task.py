@@ -17,13 +17,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import pickle
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from ...errors import LodConvertError
-from ...model import Level, Mesh, PointCloud, Surface, in_scene
+from ...model import Level, Mesh, Numbers, PointCloud, Surface, as_numbers, from_numbers, in_scene
 from ...sinks import RESUME, DirectorySink
 from ...textures import ATLAS_SIZE
 from ..findings import failure_of
@@ -55,6 +56,26 @@ class Where:
     crs_name: str | None
     source: str
     key: str
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled once per run (its CRS is long text), and unpickled once per process: a
+        tileset has a task per tile, each with its :class:`Where`."""
+        if self.key not in _pickled:
+            _pickled[self.key] = pickle.dumps(tuple(vars(self).values()), pickle.HIGHEST_PROTOCOL)
+        return _where, (self.key, _pickled[self.key])
+
+
+_pickled: dict[str, bytes] = {}
+"""This process's pickled :class:`Where` s, by key."""
+_unpickled: dict[str, Where] = {}
+"""This process's unpickled :class:`Where` s, by key."""
+
+
+def _where(key: str, data: bytes) -> Where:
+    """The :class:`Where` of ``key``, unpickled from ``data`` the first time."""
+    if key not in _unpickled:
+        _unpickled[key] = Where(*pickle.loads(data))
+    return _unpickled[key]
 
 
 _placements: dict[str, Placement] = {}
@@ -91,6 +112,10 @@ class Placed:
     origin: np.ndarray
     transform: np.ndarray | None = None
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled with its origin and transform as numbers (a tile has one per object)."""
+        return _restored, (self.level, as_numbers(self.origin), as_numbers(self.transform))
+
     def geometry(self) -> Mesh | PointCloud:
         """The level's mesh in scene coordinates, or its points (relative to ``origin``)."""
         level = self.level.unpacked()
@@ -98,6 +123,13 @@ class Placed:
             return in_scene(level.mesh, self.origin, self.transform)
         assert level.points is not None
         return level.points
+
+
+def _restored(level: Level, origin: Numbers, transform: Numbers | None) -> Placed:
+    """The :class:`Placed` that its ``__reduce__`` pickled."""
+    restored = from_numbers(origin)
+    assert restored is not None
+    return Placed(level, restored, from_numbers(transform))
 
 
 @dataclass(frozen=True)
