@@ -3,11 +3,13 @@ copies of the PLATEAU building (``textured_district.py``) baked with LOD parents
 1 km (far levels of blocks, and of simplified meshes), every level drawn in its own colours,
 unlit, textures sampled with mipmaps (``lodconvert.analysis.albedo``), from the guard's 24
 views of the upper hemisphere at the level's switch-in distance, with the reference view's
-focal length (1080 px, 45°). Per tier, the mean CIEDE2000 ΔE of the pixels both show, roofs
-and walls apart by the source's face there ("pixels"), and the ΔE of the mean colours of those
-pixels ("means"), each a mean over a tier's levels with its largest:
+focal length (1080 px, 45°), with mipmaps alone and supersampled (each pixel the mean of
+those drawn under it). Per tier, the mean CIEDE2000 ΔE of the pixels both show, roofs and walls
+apart by the source's face there ("pixels"), and the ΔE of the mean colours of those pixels
+("means"), each a mean over a tier's levels with its largest:
 
     python benchmarks/texture_colours.py               # 20 copies: results/texture_colours.md
+    python benchmarks/texture_colours.py --supersample 1   # mipmaps alone (13 s, not 3 min)
 
 Tiers: ``LOD1`` (each building's LoD1 against its textured LoD2), ``blocks`` and ``mesh``
 (each cell's far level against its buildings' finest levels).
@@ -27,9 +29,15 @@ from tables import markdown_table, one_core_facts, write_results
 from textured_district import district
 
 HERE = Path(__file__).resolve().parent
+SUPERSAMPLE = "1,64"
+"""Pixels drawn per pixel compared, a side, each a table's rows (each compared pixel their
+mean in linear light; at most 2,048 drawn a side): 1 compares what mipmaps alone give, which
+for a building a few pixels wide blend whole regions of its texture atlas into each pixel."""
 
 
-def tiers(path: Path, kind: str, renderer: Any, directions: np.ndarray) -> dict[str, list[dict]]:
+def tiers(
+    path: Path, kind: str, renderer: Any, directions: np.ndarray, supersample: int
+) -> dict[str, list[dict]]:
     """Per tier, each level's rendered ΔE (and its switch-in distance)."""
     from lodconvert.analysis.albedo import class_delta_e_rendered
     from lodconvert.bake import get_backend
@@ -55,13 +63,15 @@ def tiers(path: Path, kind: str, renderer: Any, directions: np.ndarray) -> dict[
             k, level = lod1[0]
             distance = chain.cutoffs[k - 1]
             errors = class_delta_e_rendered(renderer, meshes[0][1].mesh, level.mesh, distance,
-                                            directions)  # fmt: skip
+                                            directions, supersample)  # fmt: skip
             found.setdefault("LOD1", []).append({"distance": distance, **errors})
     for cell in cells:
         assert cell.far.mesh is not None
         source = merge([finest_mesh(chain) for chain in cell.objects()]).translated(-cell.origin)
         distance = cell.cutoffs[0]
-        errors = class_delta_e_rendered(renderer, source, cell.far.mesh, distance, directions)
+        errors = class_delta_e_rendered(
+            renderer, source, cell.far.mesh, distance, directions, supersample
+        )
         found.setdefault(kind, []).append({"distance": distance, **errors})
     return found
 
@@ -69,6 +79,11 @@ def tiers(path: Path, kind: str, renderer: Any, directions: np.ndarray) -> dict[
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--copies", type=int, default=20)
+    parser.add_argument(
+        "--supersample",
+        default=SUPERSAMPLE,
+        help="pixels drawn per pixel compared, a side; several: each compared (1,64)",
+    )
     parser.add_argument("--out", type=Path, default=HERE / "results" / "texture_colours.md")
     args = parser.parse_args()
     from lodconvert.analysis.albedo import AlbedoRenderer
@@ -76,39 +91,49 @@ def main() -> None:
 
     directions = np.stack([towards_camera(a, e) for a, e in guard_views()])
     start = time.process_time()
-    found: dict[str, list[dict]] = {}
+    found: dict[tuple[str, int], list[dict]] = {}
+    scales = [int(k) for k in str(args.supersample).split(",")]
     with (
         tempfile.TemporaryDirectory(prefix="texture_colours_") as tmp,
         AlbedoRenderer() as renderer,
     ):
         source = district(args.copies, Path(tmp), textured=True)
-        for kind in ("blocks", "mesh"):
-            for tier, rows in tiers(source, kind, renderer, directions).items():
-                found.setdefault(tier, []).extend(rows)
+        for scale in scales:
+            for kind in ("blocks", "mesh"):
+                for tier, rows in tiers(source, kind, renderer, directions, scale).items():
+                    found.setdefault((tier, scale), []).extend(rows)
         name = renderer.renderer_name
     rows = []
-    for tier, levels in found.items():
+    for (tier, scale), levels in found.items():
         distances = [r["distance"] for r in levels]
-        row = [tier, f"{len(levels)}", f"{min(distances):,.0f}–{max(distances):,.0f}"]
+        drawn = "mipmaps alone" if scale == 1 else f"{scale}× supersampled"
+        row = [tier, drawn, f"{len(levels)}", f"{min(distances):,.0f}–{max(distances):,.0f}"]
         for key in ("roof", "wall", "roof_mean", "wall_mean"):
             values = [r[key] for r in levels if not math.isnan(r[key])]
             row += [f"{np.mean(values):.1f}", f"{max(values):.1f}"]
         rows.append(row)
-    header = ["tier", "levels", "switch-in m", "roof pixels ΔE", "max", "wall pixels ΔE", "max",
-              "roof means ΔE", "max", "wall means ΔE", "max"]  # fmt: skip
+    header = ["tier", "drawn", "levels", "switch-in m", "roof pixels ΔE", "max",
+              "wall pixels ΔE", "max", "roof means ΔE", "max", "wall means ΔE", "max"]  # fmt: skip
     text = "\n".join(
         [
             f"# Far levels of {args.copies} textured PLATEAU copies against their textures, drawn",
             "",
             *one_core_facts(
-                f"python benchmarks/texture_colours.py --copies {args.copies}",
+                f"python benchmarks/texture_colours.py --copies {args.copies} "
+                f"--supersample {args.supersample}",
                 time.process_time() - start,
             ),
             f"- Renderer: {name}",
             "",
             __doc__.split("\n\n")[0].replace("\n", " "),
             "",
-            markdown_table(header, rows, 1),
+            markdown_table(header, rows, 2),
+            "",
+            "Drawn: with mipmaps alone, a pixel on a building a few pixels wide samples coarse "
+            "mipmaps, which blend whole regions of its texture atlas (walls, roof and unused "
+            "texels) into one colour; supersampled, each pixel compared is the mean, in linear "
+            "light, of the pixels drawn under it, each of a texture's own texels (at most 2,048 "
+            "a side in all): what the surfaces under the pixel show.",
             "",
         ]
     )

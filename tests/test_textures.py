@@ -704,8 +704,29 @@ def test_the_colour_renderer_draws_a_roof_in_its_texture_and_a_flat_one_apart(
         ]
     )  # the roof in its class colour, the walls as they are
     oblique = towards_camera(45, 30)[None]
-    errors = class_delta_e_rendered(albedo, mesh, flat, 50.0, oblique)  # type: ignore[arg-type]
-    assert errors["roof"] > 20 and errors["wall"] == pytest.approx(0.0, abs=0.5)
+    for supersample in (1, 8):
+        errors = class_delta_e_rendered(albedo, mesh, flat, 50.0, oblique, supersample)  # type: ignore[arg-type]
+        assert errors["roof"] > 20 and errors["wall"] == pytest.approx(0.0, abs=0.5)
+
+
+def test_a_supersampled_pixel_is_the_mean_of_the_pixels_drawn_under_it() -> None:
+    """Each compared pixel of a supersampled picture is the mean, in linear light, of the
+    drawn pixels under it that show something (the background adds no black) and of their
+    most frequent kind; one under which nothing shows shows nothing."""
+    from lodconvert.analysis.albedo import ROOF as ROOF_KIND
+    from lodconvert.analysis.albedo import WALL, _downsampled
+    from lodconvert.colors import linear_rgba, srgb_rgba
+
+    drawn = np.zeros((4, 4, 4), dtype=np.uint8)  # alpha: the face kind, 0 where nothing
+    drawn[0, 0], drawn[0, 1], drawn[1, 0] = (255, 0, 0, ROOF_KIND), (0, 0, 255, ROOF_KIND), (
+        0, 0, 255, WALL)  # fmt: skip
+    drawn[2:, 2:] = (40, 80, 120, WALL)
+    picture = _downsampled(drawn, 2)
+    under = np.array([[255, 0, 0, 255], [0, 0, 255, 255], [0, 0, 255, 255]], dtype=np.uint8)
+    expected = srgb_rgba(linear_rgba(under).mean(axis=0))[:3]
+    assert (picture.rgb[0, 0] == expected).all() and picture.kind[0, 0] == ROOF_KIND
+    assert (picture.rgb[1, 1] == (40, 80, 120)).all() and picture.kind[1, 1] == WALL
+    assert picture.kind[0, 1] == 0 and picture.kind[1, 0] == 0
 
 
 def test_appearances_are_found_across_the_chunks_a_document_is_read_in(

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..colors import ciede2000, delta_e_2000, lab
+from ..colors import ciede2000, delta_e_2000, lab, linear_rgba, srgb_rgba
 from ..model import Mesh, Surface
 from .render import OffscreenRenderer, look_at, perspective
 
@@ -71,11 +71,20 @@ class AlbedoRenderer(OffscreenRenderer):
         self.ctx.enable(self.ctx.DEPTH_TEST)
 
     def pictures(
-        self, mesh: Mesh, center: np.ndarray, distance: float, directions: np.ndarray, side: int
+        self,
+        mesh: Mesh,
+        center: np.ndarray,
+        distance: float,
+        directions: np.ndarray,
+        side: int,
+        scale: int = 1,
     ) -> list[Picture]:
         """``mesh`` seen from ``center + distance · direction`` for each unit direction,
-        looking at ``center``, on ``side`` × ``side`` pixels about it."""
+        looking at ``center``, on ``side`` × ``side`` pixels about it; with ``scale``, drawn on
+        ``scale`` × ``scale`` times the pixels and each pixel the mean of its own
+        (:func:`_downsampled`)."""
         fov = math.degrees(2 * math.atan(side / 2 / self.focal_px))
+        side *= scale
         target = self.ctx.texture((side, side), 4)
         depth = self.ctx.depth_renderbuffer((side, side))
         fbo = self.ctx.framebuffer(color_attachments=[target], depth_attachment=depth)
@@ -98,7 +107,7 @@ class AlbedoRenderer(OffscreenRenderer):
                 vao.render(self.ctx.TRIANGLES)
             data = np.frombuffer(fbo.read(components=4, alignment=1), dtype=np.uint8)
             image = data.reshape(side, side, 4)[::-1]
-            out.append(Picture(image[..., :3].copy(), image[..., 3].copy()))
+            out.append(_downsampled(image, scale))
         for vao, texture in drawn:
             vao.release()
             if texture is not None:
@@ -141,24 +150,48 @@ class AlbedoRenderer(OffscreenRenderer):
         return vao, texture
 
 
+def _downsampled(image: np.ndarray, scale: int) -> Picture:
+    """The picture of RGBA bytes ``image`` (alpha: the face kind) on a ``scale`` times coarser
+    grid: each pixel the mean colour, in linear light, of those of its ``scale`` × ``scale``
+    that show something, and their most frequent kind (0: none shows anything)."""
+    if scale == 1:
+        return Picture(image[..., :3].copy(), image[..., 3].copy())
+    side = image.shape[0] // scale
+    blocks = image.reshape(side, scale, side, scale, 4).swapaxes(1, 2).reshape(side, side, -1, 4)
+    kinds = blocks[..., 3]
+    shown = kinds > 0
+    counts = shown.sum(axis=2)
+    linear = linear_rgba(blocks)[..., :3] * shown[..., None]
+    mean = linear.sum(axis=2) / np.maximum(counts, 1)[..., None]
+    rgb = srgb_rgba(np.concatenate([mean, np.ones((side, side, 1))], axis=2))[..., :3]
+    votes = np.stack([(kinds == kind).sum(axis=2) for kind in (ROOF, WALL, OTHER)], axis=2)
+    kind = np.where(counts > 0, votes.argmax(axis=2) + 1, 0).astype(np.uint8)
+    return Picture(rgb, kind)
+
+
 def class_delta_e_rendered(
     renderer: AlbedoRenderer,
     source: Mesh,
     far: Mesh,
     distance: float,
     directions: np.ndarray,
+    supersample: int = 1,
 ) -> dict[str, float]:
     """How far ``far``'s colours lie from ``source``'s, both drawn in their colours
     (:class:`AlbedoRenderer`) from ``distance`` along each of ``directions`` towards their
     centre, over the pixels both show, ``roof`` and ``wall`` by the source's face there: the
     mean CIEDE2000 ΔE of the pixels (``roof``, ``wall``) and the CIEDE2000 ΔE of their mean
-    colours, in CIE L*a*b* (``roof_mean``, ``wall_mean``); NaN where no pixel is of a kind."""
+    colours, in CIE L*a*b* (``roof_mean``, ``wall_mean``); NaN where no pixel is of a kind.
+    With ``supersample``, each pixel is the mean of ``supersample`` × ``supersample`` drawn
+    ones (at most 2,048 a side in all): what the surfaces under it show, where mipmaps alone
+    blend a texture atlas's unrelated parts into a pixel that covers a building."""
     center = (source.bounds[0] + source.bounds[1]) / 2
     radius = float(np.linalg.norm(source.bounds[1] - source.bounds[0])) / 2
     side = max(16, 2 * math.ceil(radius * renderer.focal_px / max(distance - radius, 1e-9)) + 8)
     side = min(side, 2048)
-    wanted = renderer.pictures(source, center, distance, directions, side)
-    seen = renderer.pictures(far, center, distance, directions, side)
+    scale = max(1, min(supersample, 2048 // side))
+    wanted = renderer.pictures(source, center, distance, directions, side, scale)
+    seen = renderer.pictures(far, center, distance, directions, side, scale)
     pairs: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {"roof": [], "wall": []}
     for want, got in zip(wanted, seen, strict=True):
         both = (want.kind > 0) & (got.kind > 0)
