@@ -647,9 +647,53 @@ def test_ciede2000_matches_the_published_test_data(
     assert float(ciede2000(np.array(first), np.array(second))) == pytest.approx(expected, abs=1e-4)
 
 
+def test_each_face_of_a_coarser_level_takes_the_texture_it_stands_for() -> None:
+    """A textured roof of four squares, one quadrant of the image each, under a flat top a
+    little lower, in squares too, and a wall: each square of the top takes the mean of the
+    texture over the square above it, its own quadrant's colour, not the roof's mean; the
+    wall, which no textured face faces the way of, keeps its colour."""
+    from lodconvert.bake.qem import covered_colours
+
+    image = np.asarray(quadrants().convert("RGBA"))
+
+    def squares(z: float) -> tuple[np.ndarray, np.ndarray]:
+        corners = [(x, y) for y in (0.0, 5.0) for x in (0.0, 5.0)]
+        vertices = np.array(
+            [(x + dx, y + dy, z) for x, y in corners for dx, dy in ((0, 0), (5, 0), (5, 5), (0, 5))]
+        )
+        faces = np.array([(k, k + 1, k + 2) for k in range(0, 16, 4)]
+                         + [(k, k + 2, k + 3) for k in range(0, 16, 4)])  # fmt: skip
+        return vertices, faces
+
+    vertices, faces = squares(6.0)
+    uv = np.array(
+        [(u + du, v + dv) for v in (0.0, 0.5) for u in (0.0, 0.5)
+         for du, dv in ((0, 0), (0.5, 0), (0.5, 0.5), (0, 0.5))]
+    )  # fmt: skip
+    roof = Mesh([Surface(vertices, faces, uv=uv, texture=image)])
+    top, top_faces = squares(5.5)
+    wall = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 5.5]])
+    triangles = np.concatenate([top[top_faces], wall[None]])
+    normals = np.array([[0.0, 0.0, 1.0]] * 8 + [[0.0, -1.0, 0.0]])
+    before = np.full((9, 4), 77, dtype=np.uint8)
+    seen = roof.face_colors(np.arange(roof.face_count))
+    colours = covered_colours(roof, seen, triangles, normals, before)
+    by_square = {  # square k of the grid (x, then y, from the origin) and its quadrant
+        0: "bottom_left",
+        1: "bottom_right",
+        2: "top_left",
+        3: "top_right",
+    }
+    for square, quadrant in by_square.items():
+        for face in (square, square + 4):
+            assert np.abs(colours[face, :3].astype(int) - QUADRANTS[quadrant]).max() <= 2
+    assert (colours[8] == 77).all()
+
+
 def test_a_coarser_source_lod_takes_the_textures_colours(tmp_path: Path) -> None:
     """A source LoD1 without an appearance of its own (PLATEAU's lod1Solid) is drawn in the
-    colours of the finest LoD's textures, roofs and walls apart, not in class colours."""
+    colours of the finest LoD's textures, roofs and walls apart, not in class colours (here
+    the roof's one textured face stands for the whole of it)."""
     from lodconvert.city.prisms import in_texture_colours, prism_colors
 
     source = city(tmp_path, texture("tex/roof.png", coordinates="0 0 0.4 0 0.4 0.4 0 0.4 0 0"))

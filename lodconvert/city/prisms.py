@@ -21,6 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..bake.qem import covered_colours
 from ..heap import return_freed_heap
 from ..model import GREY, WHITE, Mesh, Surface
 from ..model.lods import source_levels
@@ -396,9 +397,10 @@ def _slopes(mesh: Mesh) -> _Slopes:
     return mesh.derived("roofs-walls", compute)
 
 
-def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
+def prism_colors(finest: Mesh, seen: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The prism's roof and wall colours (RGBA): the mean colour of ``finest``'s roofs and of
-    its walls, over their areas, textures included (grey where it has none)."""
+    its walls, over their areas, textures included (grey where it has none); ``seen``: the
+    colours of all its faces, where already found (:meth:`~lodconvert.model.Mesh.face_colors`)."""
     slopes = _slopes(finest)
     colors = []
     for faces in (np.flatnonzero(slopes.roofs), np.flatnonzero(slopes.walls)):
@@ -406,23 +408,28 @@ def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
         if weights.sum() <= 0:
             colors.append(GREY.copy())
             continue
-        seen = finest.face_colors(faces).astype(np.float64)
-        colors.append(np.rint(weights @ seen / weights.sum()).astype(np.uint8))
+        means = finest.face_colors(faces) if seen is None else seen[faces]
+        colors.append(np.rint(weights @ means.astype(np.float64) / weights.sum()).astype(np.uint8))
     return colors[0], colors[1]
 
 
 def in_texture_colours(coarse: Mesh, finest: Mesh) -> Mesh:
-    """``coarse`` (a coarser source LoD without textures of its own) with its roofs and walls
-    in the colours of ``finest``'s textures (:func:`prism_colors`); itself where ``finest``
-    has no texture or ``coarse`` has one."""
+    """``coarse`` (a coarser source LoD without textures of its own) with each face in the
+    colours of ``finest``'s textures it stands for (:func:`~..bake.qem.covered_colours`: the
+    faces of ``finest`` nearest it, facing its way), a face that stands for none in
+    the mean of its class, roofs or walls (:func:`prism_colors`); itself where ``finest`` has
+    no texture or ``coarse`` has one."""
     textured = [p.texture is not None and p.uv is not None for p in finest.parts]
     if not any(textured) or any(p.texture is not None for p in coarse.parts):
         return coarse
     slopes = _slopes(coarse)
-    roof, wall = prism_colors(finest)
+    seen = finest.face_colors(np.arange(finest.face_count))
+    roof, wall = prism_colors(finest, seen)
     faces = np.arange(coarse.face_count)
     colours = coarse.face_colors(faces)
     colours[slopes.roofs], colours[slopes.walls] = roof, wall
+    normals = coarse.face_normals(faces)
+    colours = covered_colours(finest, seen, coarse.triangles, normals, colours)
     corners = coarse.triangles.reshape(-1, 3)  # a vertex per corner: each face its colour
     return Mesh(
         [
