@@ -129,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
             "# Far levels' colours against their source's",
             "python benchmarks/far_colours.py",
         )
+        about = __doc__.split("\n\n")[1].split("\n\n")[0]
         output = args.output or RESULTS
     header = ["kind", "cell", "far level", "vertices", "roof ΔE", "wall ΔE"]
     text = "\n".join(

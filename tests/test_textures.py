@@ -9,6 +9,7 @@ from __future__ import annotations
 import io
 import json
 import os
+import sys
 import zipfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -26,7 +27,7 @@ from lodconvert.model import Mesh, Surface
 from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.textures import PADDING, packed
 
-from .conftest import SHARED, gl_renderer
+from .conftest import ROOT, SHARED, gl_renderer
 from .test_cli import assert_one_line_error, run
 from .test_gltf import _assert_valid
 from .test_tiles import official
@@ -572,6 +573,32 @@ def test_a_tileset_packs_textures_into_atlases_and_passes_the_official_validator
     assert report["numErrors"] == 0 and report["numWarnings"] == 0, report["issues"]
 
 
+def test_a_textured_district_makes_the_same_tileset_on_one_worker_and_on_two(
+    tmp_path: Path,
+) -> None:
+    """Copies of the PLATEAU building, each with its own appearance of the one image: the
+    image is packed into each tile's atlas once, however many buildings show it and whichever
+    process baked them, so that two workers write the tileset one process writes."""
+    if not (PLATEAU / "53394517_bldg_6697_appearance").exists():
+        pytest.skip("the PLATEAU texture is absent")
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from textured_district import district
+
+    source = district(9, tmp_path, textured=True)
+    folders = []
+    for workers in ("1", "2"):
+        out = tmp_path / f"w{workers}" / "tileset.json"
+        result = run(source, "-o", out, "--workers", workers, "-q")
+        assert result.returncode == 0, result.stderr
+        folders.append(out.parent)
+    files = sorted(p.relative_to(folders[0]) for p in folders[0].rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(folders[1]) for p in folders[1].rglob("*") if p.is_file())
+    assert all((folders[0] / f).read_bytes() == (folders[1] / f).read_bytes() for f in files)
+    for tile in (folders[1] / "tiles").glob("*_finest.glb"):
+        document, _ = glb_parts(tile.read_bytes())
+        assert len(document.get("images", [])) <= 1, tile.name
+
+
 def test_a_textured_roof_shows_its_texture_in_the_tile_and_its_colour_far_away(
     tmp_path: Path,
 ) -> None:
@@ -652,7 +679,7 @@ def test_each_face_of_a_coarser_level_takes_the_texture_it_stands_for() -> None:
     little lower, in squares too, and a wall: each square of the top takes the mean of the
     texture over the square above it, its own quadrant's colour, not the roof's mean; the
     wall, which no textured face faces the way of, keeps its colour."""
-    from lodconvert.bake.qem import covered_colours
+    from lodconvert.bake.qem import covered_colours, in_textures_colours
 
     image = np.asarray(quadrants().convert("RGBA"))
 
@@ -688,6 +715,15 @@ def test_each_face_of_a_coarser_level_takes_the_texture_it_stands_for() -> None:
         for face in (square, square + 4):
             assert np.abs(colours[face, :3].astype(int) - QUADRANTS[quadrant]).max() <= 2
     assert (colours[8] == 77).all()
+    # a far level (a block proxy) over a textured source takes them as vertex colours, a
+    # vertex for each corner and colour; over an untextured one it stays as it is
+    proxy = Mesh(
+        [Surface(triangles.reshape(-1, 3), np.arange(27).reshape(-1, 3), np.repeat(before, 3, 0))]
+    )
+    coloured = in_textures_colours(proxy, roof)
+    assert np.array_equal(coloured.face_colors(np.arange(9)), colours)
+    plain = Mesh([Surface(vertices, faces, base_color=np.array([9, 9, 9, 255], np.uint8))])
+    assert in_textures_colours(proxy, plain) is proxy
 
 
 def test_a_coarser_source_lod_takes_the_textures_colours(tmp_path: Path) -> None:

@@ -169,13 +169,38 @@ def covered_colours(
     return out
 
 
+def in_textures_colours(mesh: Mesh, source: Mesh) -> Mesh:
+    """``mesh`` (a far level of ``source``'s objects, in its frame) with each face in the
+    colours of ``source``'s textures that it stands for (:func:`covered_colours`; a face that
+    stands for none keeps its colour), as vertex colours on a white base, a vertex for each
+    corner and colour (:func:`_split_by_colour`); ``mesh`` itself where ``source`` has no
+    texture."""
+    if not any(part.texture is not None and part.uv is not None for part in source.parts):
+        return mesh
+    faces = np.arange(mesh.face_count)
+    seen = source.face_colors(np.arange(source.face_count))
+    colours = covered_colours(
+        source, seen, mesh.triangles, mesh.face_normals(faces), mesh.face_colors(faces)
+    )
+    return Mesh([_split_by_colour(mesh.vertices, mesh.faces, colours)])
+
+
 def _nearest_centres(centres: np.ndarray, points: np.ndarray, k: int) -> np.ndarray:
     """For each of ``points``, the indices of the ``k`` of ``centres`` nearest it, nearest
-    first."""
-    from scipy.spatial import cKDTree
-
-    _, near = cKDTree(centres).query(points, k=k)
-    return np.asarray(near).reshape(len(points), k)
+    first, found a block of points at a time (``centres``: the faces of a coarser level, a few
+    hundred)."""
+    middle = centres.mean(axis=0)  # about the centres: no digits lost to large coordinates
+    centres = centres - middle
+    block = max(1, (1 << 22) // max(len(centres), 1))
+    lengths = np.einsum("ij,ij->i", centres, centres)
+    found = []
+    for start in range(0, len(points), block):
+        chunk = points[start : start + block] - middle
+        squared = lengths[None] - 2.0 * (chunk @ centres.T)  # + |point|², the same along a row
+        near = np.argpartition(squared, k - 1, axis=1)[:, :k]
+        order = np.argsort(np.take_along_axis(squared, near, axis=1), axis=1, kind="stable")
+        found.append(np.take_along_axis(near, order, axis=1))
+    return np.concatenate(found) if found else np.zeros((0, k), dtype=np.int64)
 
 
 def _most_facing(

@@ -9,10 +9,12 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from ..bake.qem import in_textures_colours
 from ..chain import ChainOptions
 from ..model import Level, LodChain, Mesh
 from .blocks import block_proxy, blocks_of, object_footprint, shared_corners
@@ -39,8 +41,10 @@ def blocks_level(
     """The objects as block proxies (:mod:`.blocks`) seen from ``distance``: of every
     tolerance of :data:`BLOCK_PX` and band depth of :data:`BAND_M`, the proxy with the fewest
     vertices whose silhouette F against ``source`` (the objects' finest geometry about
-    ``origin``) reaches :data:`MIN_CELL_F` (tried fewest first), else the most faithful; its
-    level, F and facts. ``None`` when no object has a footprint."""
+    ``origin``) reaches :data:`MIN_CELL_F` (tried fewest first), else the most faithful, its
+    faces in the colours of the textures they stand for where ``source`` is textured
+    (:func:`~..bake.qem.in_textures_colours`); its level, F and facts. ``None`` when no object
+    has a footprint."""
     pixel = distance / options.view.focal_px
     prints = [p for chain in objects if (p := object_footprint(chain, finest_mesh(chain)))]
     if not prints:
@@ -63,6 +67,8 @@ def blocks_level(
             break
     assert best is not None
     f, level, px, band = best
+    assert level.mesh is not None
+    level = replace(level, mesh=in_textures_colours(level.mesh, source))
     facts = {
         "blocks": len(found.polygons),
         "objects": len(prints),
@@ -84,8 +90,9 @@ def member_blocks_level(
     block, seen from ``distance``: every member's outlines at the finest of :data:`BLOCK_PX`
     first, then, coarser tolerance by coarser tolerance, as many of them made coarser (those
     that save the most vertices first) as keep the silhouette F against ``source`` at
-    :data:`MIN_CELL_F`. Roofs and walls share their corners (:func:`~.blocks.shared_corners`).
-    Its level, F and facts; ``None`` when no object has a footprint."""
+    :data:`MIN_CELL_F`. Roofs and walls share their corners (:func:`~.blocks.shared_corners`);
+    faces take the textures they stand for as :func:`blocks_level`'s do. Its level, F and
+    facts; ``None`` when no object has a footprint."""
     ladder = sorted(BLOCK_PX)
     proxies, blocks, objects = _member_proxies(members, distance / options.view.focal_px, ladder)
     if all(row[0] is None for row in proxies):
@@ -108,7 +115,9 @@ def member_blocks_level(
             break
         steps = _coarsened(steps, step, proxies, made)
         level, f = made(steps)
-    assert level is not None  # the finest has area; a coarser one only where F is kept
+    assert level is not None and level.mesh is not None  # the finest has area; a coarser
+    # one only where F is kept
+    level = replace(level, mesh=in_textures_colours(level.mesh, source))
     facts = {
         "blocks": blocks,
         "objects": objects,
