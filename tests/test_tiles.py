@@ -658,9 +658,11 @@ def _corner_task(where: Any, corners: np.ndarray, packed: bool) -> Any:
         mesh = Surface(corners - origin, np.array([[0, 1, 2]]), grey)
         level = Level("LOD2", "source", mesh=mesh).packed()
         assert level.mesh is None and level.packed_geometry is not None
-        return TileTask("t.glb", where, (Placed(level, origin),), (("b", "Building", {}),), "t")
+        return TileTask(
+            "t.glb", where, (Placed(level.geometry, origin),), (("b", "Building", {}),), "t"
+        )
     points = PointCloud(corners - origin, grey, np.zeros((3, 3), np.float32))
-    return TileTask("t.glb", where, (Placed(Level("LOD1", "pcd", points=points), origin),), (), "t")
+    return TileTask("t.glb", where, (Placed(points, origin),), (), "t")
 
 
 def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_process(

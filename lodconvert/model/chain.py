@@ -52,6 +52,14 @@ class Packed:
     data: bytes
     derived: dict[str, Any] = field(default_factory=dict)
 
+    def opened(self) -> Mesh | PointCloud:
+        """The geometry, unpickled; a mesh with the tables found for it since."""
+        geometry = pickle.loads(self.data)
+        if isinstance(geometry, Mesh):
+            geometry._derived.update(self.derived)
+        assert isinstance(geometry, Mesh | PointCloud)
+        return geometry
+
 
 @dataclass
 class Level:
@@ -137,11 +145,18 @@ class Level:
         """This level with its packed geometry unpickled (itself when none is packed)."""
         if self.packed_geometry is None:
             return self
-        geometry = pickle.loads(self.packed_geometry.data)
+        geometry = self.packed_geometry.opened()
         if isinstance(geometry, Mesh):
-            geometry._derived.update(self.packed_geometry.derived)
             return replace(self, mesh=geometry, counts=None, packed_geometry=None)
         return replace(self, points=geometry, counts=None, packed_geometry=None)
+
+    @property
+    def geometry(self) -> Mesh | PointCloud | Packed:
+        """Its mesh, points or packed geometry (a level without any has only counts)."""
+        for found in (self.mesh, self.points, self.packed_geometry):
+            if found is not None:
+                return found
+        raise ValueError(f"level {self.name} holds no geometry, only its counts")
 
     def keep_derived(self, found: dict[str, Any]) -> None:
         """Keep ``found`` (tables derived from this level's mesh elsewhere) with its mesh,

@@ -24,7 +24,16 @@ from typing import Any
 import numpy as np
 
 from ...errors import LodConvertError
-from ...model import Level, Mesh, Numbers, PointCloud, Surface, as_numbers, from_numbers, in_scene
+from ...model import (
+    Mesh,
+    Numbers,
+    Packed,
+    PointCloud,
+    Surface,
+    as_numbers,
+    from_numbers,
+    in_scene,
+)
 from ...sinks import RESUME, DirectorySink
 from ...textures import ATLAS_SIZE
 from ..findings import failure_of
@@ -105,10 +114,11 @@ class TileResult:
 
 @dataclass(frozen=True)
 class Placed:
-    """One level drawn in a tile: its geometry (packed or not, relative to ``origin``) placed
-    by ``transform`` as :attr:`~lodconvert.model.LodChain.transform` says."""
+    """One level drawn in a tile: its geometry (a mesh or points relative to ``origin``, or
+    either packed where it was baked) placed by ``transform`` as
+    :attr:`~lodconvert.model.LodChain.transform` says."""
 
-    level: Level
+    level: Mesh | PointCloud | Packed
     origin: np.ndarray
     transform: np.ndarray | None = None
 
@@ -118,14 +128,15 @@ class Placed:
 
     def geometry(self) -> Mesh | PointCloud:
         """The level's mesh in scene coordinates, or its points (relative to ``origin``)."""
-        level = self.level.unpacked()
-        if level.mesh is not None:
-            return in_scene(level.mesh, self.origin, self.transform)
-        assert level.points is not None
-        return level.points
+        level = self.level.opened() if isinstance(self.level, Packed) else self.level
+        if isinstance(level, Mesh):
+            return in_scene(level, self.origin, self.transform)
+        return level
 
 
-def _restored(level: Level, origin: Numbers, transform: Numbers | None) -> Placed:
+def _restored(
+    level: Mesh | PointCloud | Packed, origin: Numbers, transform: Numbers | None
+) -> Placed:
     """The :class:`Placed` that its ``__reduce__`` pickled."""
     restored = from_numbers(origin)
     assert restored is not None

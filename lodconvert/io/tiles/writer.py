@@ -147,7 +147,9 @@ class TilesetWriter:
     def mesh_tile(self, name: str, entries: list[tuple[LodChain, Level]], error: float) -> Tile:
         """A tile of the mesh levels of ``entries`` (each a chain and one of its levels), one
         feature per chain."""
-        sources = tuple(Placed(level, chain.origin, chain.transform) for chain, level in entries)
+        sources = tuple(
+            Placed(level.geometry, chain.origin, chain.transform) for chain, level in entries
+        )
         return self._tile(name, error, sources, tuple(_feature(chain) for chain, _ in entries))
 
     def far_tile(self, cell: CellChain, children: list[Tile]) -> Tile:
@@ -157,7 +159,7 @@ class TilesetWriter:
         if cell.facts.get("beside"):
             extras["beside"] = True
         error = self.error(cell.cutoffs[0])
-        tile = self._tile(cell.cell_id, error, (Placed(far, cell.origin),), ())
+        tile = self._tile(cell.cell_id, error, (Placed(far.geometry, cell.origin),), ())
         if far.points is not None and far.params is not None:
             scale = far.params.point_size / self.sse
             self.point_scale = max(self.point_scale or 0.0, scale)
