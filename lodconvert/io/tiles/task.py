@@ -1,6 +1,7 @@
 """One tile's content as a picklable task, run by any executor (:mod:`lodconvert.tasks`): its
-vertices (scene coordinates) placed in ECEF and in the tile's ENU frame and encoded as a GLB;
-the result is the GLB, the tile's frame and content box, which the main process writes into
+levels' geometry (:class:`Placed`, opened here where it comes packed) placed in the scene, in
+ECEF and in the tile's ENU frame and encoded as a GLB; the result is the GLB, the tile's frame
+and content box, which the main process writes into
 the staged tileset folder through its sink (:meth:`TileTask.written`), so that a worker needs no
 access to it.
 
