@@ -679,7 +679,7 @@ def test_each_face_of_a_coarser_level_takes_the_texture_it_stands_for() -> None:
     little lower, in squares too, and a wall: each square of the top takes the mean of the
     texture over the square above it, its own quadrant's colour, not the roof's mean; the
     wall, which no textured face faces the way of, keeps its colour."""
-    from lodconvert.bake.qem import covered_colours, in_textures_colours
+    from lodconvert.bake.qem import coloured_by_textures, covered_colours
 
     image = np.asarray(quadrants().convert("RGBA"))
 
@@ -720,10 +720,10 @@ def test_each_face_of_a_coarser_level_takes_the_texture_it_stands_for() -> None:
     proxy = Mesh(
         [Surface(triangles.reshape(-1, 3), np.arange(27).reshape(-1, 3), np.repeat(before, 3, 0))]
     )
-    coloured = in_textures_colours(proxy, roof)
+    coloured = coloured_by_textures(proxy, roof)
     assert np.array_equal(coloured.face_colors(np.arange(9)), colours)
     plain = Mesh([Surface(vertices, faces, base_color=np.array([9, 9, 9, 255], np.uint8))])
-    assert in_textures_colours(proxy, plain) is proxy
+    assert coloured_by_textures(proxy, plain) is proxy
 
 
 def test_a_coarser_source_lod_takes_the_textures_colours(tmp_path: Path) -> None:

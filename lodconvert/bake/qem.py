@@ -169,7 +169,7 @@ def covered_colours(
     return out
 
 
-def in_textures_colours(mesh: Mesh, source: Mesh) -> Mesh:
+def coloured_by_textures(mesh: Mesh, source: Mesh) -> Mesh:
     """``mesh`` (a far level of ``source``'s objects, in its frame) with each face in the
     colours of ``source``'s textures that it stands for (:func:`covered_colours`; a face that
     stands for none keeps its colour), as vertex colours on a white base, a vertex for each

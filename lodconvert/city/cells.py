@@ -25,7 +25,7 @@ from typing import Any
 from ..bake import Backend
 from ..chain import ChainOptions
 from ..limits import Limits
-from ..model import TRAVELLING, CellChain, Level, LodChain, Mesh
+from ..model import CellChain, Level, LodChain, travelling_tables
 from .cell_bake import bake_cell
 from .hlod import CellPlan, Member
 
@@ -88,7 +88,7 @@ class CellTask:
             self.plan, members, self.options, self.kind, backend, warnings.append, self.limits,
             beside=self.top,
         )  # fmt: skip
-        found = () if self.top else tuple(_kept(_finest(c).mesh) for c in _objects(members))
+        found = () if self.top else tuple(_finest_tables(c) for c in _objects(members))
         if cell is None:
             return CellResult(None, warnings=tuple(warnings), derived=found)
         chosen = {id(m) for m in cell.members}
@@ -182,10 +182,11 @@ def _shipped_level(level: Level) -> Level:
     return level if level.mesh is None else replace(level, mesh=level.mesh.shipped())
 
 
-def _kept(mesh: Mesh | None) -> dict[str, Any]:
-    """What :data:`~lodconvert.model.TRAVELLING` names of what ``mesh`` derived."""
+def _finest_tables(chain: LodChain) -> dict[str, Any]:
+    """The travelling tables derived from ``chain``'s finest mesh (its geometry unpacked)."""
+    mesh = _finest(chain).mesh
     assert mesh is not None
-    return {key: value for key, value in mesh._derived.items() if key.startswith(TRAVELLING)}
+    return travelling_tables(mesh)
 
 
 def _objects(members: list[Member]) -> list[LodChain]:

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..bake.qem import in_textures_colours
+from ..bake.qem import coloured_by_textures
 from ..chain import ChainOptions
 from ..model import Level, LodChain, Mesh
 from .blocks import block_proxy, blocks_of, object_footprint, shared_corners
@@ -43,7 +43,7 @@ def blocks_level(
     vertices whose silhouette F against ``source`` (the objects' finest geometry about
     ``origin``) reaches :data:`MIN_CELL_F` (tried fewest first), else the most faithful, its
     faces in the colours of the textures they stand for where ``source`` is textured
-    (:func:`~..bake.qem.in_textures_colours`); its level, F and facts. ``None`` when no object
+    (:func:`~..bake.qem.coloured_by_textures`); its level, F and facts. ``None`` when no object
     has a footprint."""
     pixel = distance / options.view.focal_px
     prints = [p for chain in objects if (p := object_footprint(chain, finest_mesh(chain)))]
@@ -68,7 +68,7 @@ def blocks_level(
     assert best is not None
     f, level, px, band = best
     assert level.mesh is not None
-    level = replace(level, mesh=in_textures_colours(level.mesh, source))
+    level = replace(level, mesh=coloured_by_textures(level.mesh, source))
     facts = {
         "blocks": len(found.polygons),
         "objects": len(prints),
@@ -115,9 +115,9 @@ def member_blocks_level(
             break
         steps = _coarsened(steps, step, proxies, made)
         level, f = made(steps)
-    assert level is not None and level.mesh is not None  # the finest has area; a coarser
-    # one only where F is kept
-    level = replace(level, mesh=in_textures_colours(level.mesh, source))
+    # the finest has area; a coarser one only where F is kept
+    assert level is not None and level.mesh is not None
+    level = replace(level, mesh=coloured_by_textures(level.mesh, source))
     facts = {
         "blocks": blocks,
         "objects": objects,

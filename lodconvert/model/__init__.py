@@ -12,7 +12,7 @@ from .chain import (
     from_numbers,
     in_scene,
 )
-from .geometry import GREY, TRAVELLING, WHITE, Mesh, PointCloud, Surface
+from .geometry import GREY, TRAVELLING, WHITE, Mesh, PointCloud, Surface, travelling_tables
 from .tree import Node, PackedNode, Scene, unpacked, with_geometry
 
 __all__ = [
@@ -35,6 +35,7 @@ __all__ = [
     "as_numbers",
     "from_numbers",
     "in_scene",
+    "travelling_tables",
     "unpacked",
     "with_geometry",
 ]

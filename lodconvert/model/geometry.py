@@ -378,8 +378,12 @@ class Mesh:
 T = TypeVar("T", Mesh, Surface)
 
 
+def travelling_tables(source: Mesh | Surface) -> dict[str, Any]:
+    """The tables derived from ``source`` that :data:`TRAVELLING` names."""
+    return {k: v for k, v in source._derived.items() if k.startswith(TRAVELLING)}
+
+
 def _travelling(source: T, copy: T) -> T:
     """``copy`` given the derived tables of ``source`` that :data:`TRAVELLING` names."""
-    found = source._derived.items()
-    copy._derived.update((k, v) for k, v in found if k.startswith(TRAVELLING))
+    copy._derived.update(travelling_tables(source))
     return copy
