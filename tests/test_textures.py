@@ -346,7 +346,9 @@ def test_the_plateau_building_keeps_its_texture_in_x3d_and_glb(
     tmp_path: Path, schema: etree.XMLSchema, gltf_validator: object
 ) -> None:
     """The real textured PLATEAU building (CityGML 2.0 and 3.0): its LoD2 is written with its
-    texture, roofs and walls one surface on one cut of the atlas; the outputs validate."""
+    texture, roofs and walls one surface on one cut of the atlas, and its LoD1 with a small
+    texture baked from it (two texels a pixel where it switches in); the
+    outputs validate."""
     for version in ("v2", "v3"):
         source = PLATEAU / f"plateau_53394517_bldg_lod012_{version}.gml"
         if not source.exists():
@@ -362,10 +364,12 @@ def test_the_plateau_building_keeps_its_texture_in_x3d_and_glb(
             result = run(source, "-o", out, "--report", tmp_path / f"{version}.json")
             assert result.returncode == 0, result.stderr
         assert schema.validate(etree.parse(str(x3d))), schema.error_log
-        assert x3d.read_text().count("<ImageTexture") == 1
-        assert "data:image/jpeg;base64," in x3d.read_text()  # a photograph stays a JPEG
+        assert x3d.read_text().count("<ImageTexture") == 2
+        assert x3d.read_text().count("data:image/jpeg;base64,") == 2  # photographs: JPEG
         document, _ = glb_parts(glb.read_bytes())
-        assert [image["mimeType"] for image in document["images"]] == ["image/jpeg"]
+        assert [image["mimeType"] for image in document["images"]] == ["image/jpeg"] * 2
+        sides = sorted(max(image.size) for image in _glb_images(glb))
+        assert sides[0] <= 256 and sides[1] >= 1024
         _assert_valid(gltf_validator(glb))  # type: ignore[operator]
         back = read_scene(glb)
         assert sum(len(textured(n.geometry)) for n in back.nodes if n.geometry is not None) == 1
@@ -376,6 +380,15 @@ def test_the_plateau_building_keeps_its_texture_in_x3d_and_glb(
             "images": ["53394517_bldg_6697_appearance/stad0158.jpg"],
             "unusable_images": [],
         }
+
+
+def _glb_images(glb: Path) -> list[Image.Image]:
+    """The images a ``.glb`` holds, in its order."""
+    document, blob = glb_parts(glb.read_bytes())
+    views = [document["bufferViews"][image["bufferView"]] for image in document["images"]]
+    return [
+        Image.open(io.BytesIO(blob[view["byteOffset"] :][: view["byteLength"]])) for view in views
+    ]
 
 
 def test_the_prism_takes_its_roof_colour_from_the_texture(tmp_path: Path) -> None:
@@ -573,12 +586,15 @@ def test_a_tileset_packs_textures_into_atlases_and_passes_the_official_validator
     assert report["numErrors"] == 0 and report["numWarnings"] == 0, report["issues"]
 
 
+@pytest.mark.parametrize("far", [(), ("--hlod", "250,1000", "--hlod-kind", "blocks")])
 def test_a_textured_district_makes_the_same_tileset_on_one_worker_and_on_two(
-    tmp_path: Path,
+    tmp_path: Path, far: tuple[str, ...]
 ) -> None:
     """Copies of the PLATEAU building, each with its own appearance of the one image: the
     image is packed into each tile's atlas once, however many buildings show it and whichever
-    process baked them, so that two workers write the tileset one process writes."""
+    process baked them, so that two workers write the tileset one process writes. The LOD1
+    tiles, and block proxies' far tiles, carry textures of their own baked from it, a few
+    hundred texels a side, not the photograph."""
     if not (PLATEAU / "53394517_bldg_6697_appearance").exists():
         pytest.skip("the PLATEAU texture is absent")
     sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -588,7 +604,7 @@ def test_a_textured_district_makes_the_same_tileset_on_one_worker_and_on_two(
     folders = []
     for workers in ("1", "2"):
         out = tmp_path / f"w{workers}" / "tileset.json"
-        result = run(source, "-o", out, "--workers", workers, "-q")
+        result = run(source, "-o", out, "--workers", workers, "-q", *far)
         assert result.returncode == 0, result.stderr
         folders.append(out.parent)
     files = sorted(p.relative_to(folders[0]) for p in folders[0].rglob("*") if p.is_file())
@@ -597,6 +613,13 @@ def test_a_textured_district_makes_the_same_tileset_on_one_worker_and_on_two(
     for tile in (folders[1] / "tiles").glob("*_finest.glb"):
         document, _ = glb_parts(tile.read_bytes())
         assert len(document.get("images", [])) <= 1, tile.name
+    coarser = [t for t in (folders[1] / "tiles").glob("*.glb") if "_finest" not in t.name]
+    if far:
+        assert any("_coarsest" not in t.name for t in coarser)  # the cells' far tiles
+    for tile in coarser:
+        if far or "_coarsest" in tile.name:  # a far mesh of the default kind: vertex colours
+            [image] = _glb_images(tile)
+            assert max(image.size) <= 512, tile.name
 
 
 def test_a_textured_roof_shows_its_texture_in_the_tile_and_its_colour_far_away(
@@ -674,76 +697,74 @@ def test_ciede2000_matches_the_published_test_data(
     assert float(ciede2000(np.array(first), np.array(second))) == pytest.approx(expected, abs=1e-4)
 
 
-def test_each_face_of_a_coarser_level_takes_the_texture_it_stands_for() -> None:
+def test_a_far_level_takes_a_texture_baked_from_what_it_stands_for() -> None:
     """A textured roof of four squares, one quadrant of the image each, under a flat top a
-    little lower, in squares too, and a wall: each square of the top takes the mean of the
-    texture over the square above it, its own quadrant's colour, not the roof's mean; the
-    wall, which no textured face faces the way of, keeps its colour."""
-    from lodconvert.bake.qem import coloured_by_textures, covered_colours
+    little lower (two triangles) and a wall: the top takes a texture of its own in which each
+    quarter shows the quadrant above it, in its colour, not the roof's mean; the wall, which
+    no textured face faces the way of, keeps its colour; the texture is a few texels a pixel,
+    not the source's; over an untextured source the level stays as it is."""
+    from lodconvert.bake.far_textures import in_source_textures
 
-    image = np.asarray(quadrants().convert("RGBA"))
-
-    def squares(z: float) -> tuple[np.ndarray, np.ndarray]:
-        corners = [(x, y) for y in (0.0, 5.0) for x in (0.0, 5.0)]
-        vertices = np.array(
-            [(x + dx, y + dy, z) for x, y in corners for dx, dy in ((0, 0), (5, 0), (5, 5), (0, 5))]
-        )
-        faces = np.array([(k, k + 1, k + 2) for k in range(0, 16, 4)]
-                         + [(k, k + 2, k + 3) for k in range(0, 16, 4)])  # fmt: skip
-        return vertices, faces
-
-    vertices, faces = squares(6.0)
+    image = np.asarray(quadrants(256).convert("RGBA"))
+    corners = [(x, y) for y in (0.0, 5.0) for x in (0.0, 5.0)]
+    vertices = np.array(
+        [(x + dx, y + dy, 6.0) for x, y in corners for dx, dy in ((0, 0), (5, 0), (5, 5), (0, 5))]
+    )
+    faces = np.array([(k, k + 1, k + 2) for k in range(0, 16, 4)]
+                     + [(k, k + 2, k + 3) for k in range(0, 16, 4)])  # fmt: skip
     uv = np.array(
         [(u + du, v + dv) for v in (0.0, 0.5) for u in (0.0, 0.5)
          for du, dv in ((0, 0), (0.5, 0), (0.5, 0.5), (0, 0.5))]
     )  # fmt: skip
-    roof = Mesh([Surface(vertices, faces, uv=uv, texture=image)])
-    top, top_faces = squares(5.5)
+    roof = Mesh([Surface(vertices, faces, uv=uv, texture=image, photographic=True)])
+    top = np.array([[0.0, 0.0, 5.5], [10.0, 0.0, 5.5], [10.0, 10.0, 5.5], [0.0, 10.0, 5.5]])
     wall = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [10.0, 0.0, 5.5]])
-    triangles = np.concatenate([top[top_faces], wall[None]])
-    normals = np.array([[0.0, 0.0, 1.0]] * 8 + [[0.0, -1.0, 0.0]])
-    before = np.full((9, 4), 77, dtype=np.uint8)
-    seen = roof.face_colors(np.arange(roof.face_count))
-    colours = covered_colours(roof, seen, triangles, normals, before)
-    by_square = {  # square k of the grid (x, then y, from the origin) and its quadrant
-        0: "bottom_left",
-        1: "bottom_right",
-        2: "top_left",
-        3: "top_right",
-    }
-    for square, quadrant in by_square.items():
-        for face in (square, square + 4):
-            assert np.abs(colours[face, :3].astype(int) - QUADRANTS[quadrant]).max() <= 2
-    assert (colours[8] == 77).all()
-    # a far level (a block proxy) over a textured source takes them as vertex colours, a
-    # vertex for each corner and colour; over an untextured one it stays as it is
-    proxy = Mesh(
-        [Surface(triangles.reshape(-1, 3), np.arange(27).reshape(-1, 3), np.repeat(before, 3, 0))]
+    points = np.concatenate([top, wall])
+    level = Mesh(
+        [
+            Surface(
+                points,
+                np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]]),
+                vertex_colors=np.full((7, 4), 77, dtype=np.uint8),
+            )
+        ]
     )
-    coloured = coloured_by_textures(proxy, roof)
-    assert np.array_equal(coloured.face_colors(np.arange(9)), colours)
+    baked = in_source_textures(level, roof, pixel=2.5)
+    (part,) = baked.parts
+    assert part.texture is not None and part.uv is not None and part.photographic
+    assert max(part.texture.shape[:2]) <= 64  # 1.25 m texels: 8 a side for the top
+    at = {"bottom_left": (2.5, 2.5), "bottom_right": (7.5, 2.5), "top_left": (2.5, 7.5),
+          "top_right": (7.5, 7.5)}  # fmt: skip
+    for quadrant, (x, y) in at.items():
+        point = np.array([[x, y, 5.5]])
+        face = np.array([0 if x > y else 1])
+        colour = baked.colors_at(face, point)[0, :3].astype(int)
+        assert np.abs(colour - QUADRANTS[quadrant]).max() <= 2, quadrant
+    wall_face = np.flatnonzero(baked.face_normals(np.arange(3))[:, 1] < -0.5)
+    assert (baked.face_colors(wall_face)[0, :3] == 77).all()
     plain = Mesh([Surface(vertices, faces, base_color=np.array([9, 9, 9, 255], np.uint8))])
-    assert coloured_by_textures(proxy, plain) is proxy
+    assert in_source_textures(level, plain, pixel=2.5) is level
 
 
 def test_a_coarser_source_lod_takes_the_textures_colours(tmp_path: Path) -> None:
-    """A source LoD1 without an appearance of its own (PLATEAU's lod1Solid) is drawn in the
-    colours of the finest LoD's textures, roofs and walls apart, not in class colours (here
-    the roof's one textured face stands for the whole of it)."""
+    """A source LoD1 without an appearance of its own (PLATEAU's lod1Solid) is drawn in a
+    texture baked from the finest LoD's, roofs and walls apart, not in class colours (here
+    the roof's one textured face stands for the whole of it, in one quadrant's colour)."""
     from lodconvert.city.prisms import in_texture_colours, prism_colors
 
     source = city(tmp_path, texture("tex/roof.png", coordinates="0 0 0.4 0 0.4 0.4 0 0.4 0 0"))
     finest_mesh = finest(source)
     plain = Mesh([Surface(p.vertices, p.faces, base_color=p.base_color) for p in finest_mesh.parts])
-    coloured = in_texture_colours(plain, finest_mesh)
-    roof, wall = prism_colors(finest_mesh)
+    coloured = in_texture_colours(plain, finest_mesh, pixel=1.0)
+    _, wall = prism_colors(finest_mesh)
     [part] = coloured.parts
-    up = coloured.face_normals(np.arange(coloured.face_count))[:, 2] > 0.5
-    faces = part.faces
-    assert (part.vertex_colors[faces[up]] == roof).all()
-    assert (part.vertex_colors[faces[~up]] == wall).all()
-    assert np.abs(roof[:3].astype(int) - QUADRANTS["bottom_left"]).max() <= 2
-    assert in_texture_colours(plain, plain) is plain
+    assert part.texture is not None
+    faces = np.arange(coloured.face_count)
+    up = coloured.face_normals(faces)[:, 2] > 0.5
+    colours = coloured.face_colors(faces)[:, :3].astype(int)
+    assert np.abs(colours[up] - QUADRANTS["bottom_left"]).max() <= 2
+    assert np.abs(colours[~up] - wall[:3]).max() <= 1
+    assert in_texture_colours(plain, plain, pixel=1.0) is plain
 
 
 @pytest.fixture(scope="module")
@@ -787,6 +808,8 @@ def test_the_colour_renderer_draws_a_roof_in_its_texture_and_a_flat_one_apart(
     for supersample in (1, 8):
         errors = class_delta_e_rendered(albedo, mesh, flat, 50.0, oblique, supersample)  # type: ignore[arg-type]
         assert errors["roof"] > 20 and errors["wall"] == pytest.approx(0.0, abs=0.5)
+        # one geometry: every pixel shows the same kind in both
+        assert errors["roof_same"] == errors["roof"] and errors["wall_same"] == errors["wall"]
 
 
 def test_a_supersampled_pixel_is_the_mean_of_the_pixels_drawn_under_it() -> None:

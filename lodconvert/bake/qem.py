@@ -25,9 +25,6 @@ THRESHOLD_SCALE = 1e-9
 """Factor of its pass thresholds (squared metres for a mesh in metres)."""
 NEAREST = 32
 """Faces (nearest by centre) among which a point's face is found."""
-COVERING = 16
-"""Faces (nearest by centre) among which the one a source face stands for is found
-(:func:`covered_colours`)."""
 ONE_AT_A_TIME = threading.Lock()
 """Held around each use of ``fast-simplification``: it keeps the mesh it works on in module
 state between calls, so threads baking at once would mix their meshes."""
@@ -134,73 +131,6 @@ def simplify_within(surface: Mesh, tolerance: float, colours: Mesh | None = None
     source = faces[near]
     colors = reference.face_colors(source)
     return _split_by_colour(out_points, out_faces, colors)
-
-
-def covered_colours(
-    reference: Mesh,
-    seen: np.ndarray,
-    triangles: np.ndarray,
-    normals: np.ndarray,
-    colors: np.ndarray,
-) -> np.ndarray:
-    """The colour (RGBA) of each of ``triangles`` (unit ``normals``; ``colors`` so far) as the
-    mean, over their areas, of the colours ``seen`` of the faces of ``reference`` it stands for
-    (a texture's over each face, :meth:`~lodconvert.model.Mesh.face_colors`). Each face counts
-    for the triangle facing within 60° of its way whose plane lies nearest its centre (to the
-    centimetre; the nearest by centre of those), among the :data:`COVERING` nearest by centre.
-    A triangle that stands for no face keeps its colour."""
-    faces = np.arange(reference.face_count)
-    source = reference.triangles
-    areas = np.linalg.norm(np.cross(source[:, 1] - source[:, 0], source[:, 2] - source[:, 0]), 2, 1)
-    centres = source.mean(axis=1)
-    near = _nearest_centres(triangles.mean(axis=1), centres, min(COVERING, len(triangles)))
-    facing = np.einsum("nkj,nj->nk", normals[near], reference.face_normals(faces)) > 0.5
-    offset = np.einsum("nkj,nkj->nk", centres[:, None] - triangles[near, 0], normals[near])
-    best = np.where(facing, np.round(np.abs(offset), 2), np.inf).argmin(axis=1)
-    counted = facing[faces, best] & (areas > 0)
-    target, areas, counted_colours = near[faces, best][counted], areas[counted], seen[counted]
-    weights = np.bincount(target, areas, minlength=len(triangles))
-    sums = np.stack(
-        [np.bincount(target, areas * counted_colours[:, c], len(triangles)) for c in range(4)], 1
-    )
-    covered = weights > 0
-    out = np.array(colors, dtype=np.uint8, copy=True)
-    out[covered] = np.rint(sums[covered] / weights[covered, None]).astype(np.uint8)
-    return out
-
-
-def coloured_by_textures(mesh: Mesh, source: Mesh) -> Mesh:
-    """``mesh`` (a far level of ``source``'s objects, in its frame) with each face in the
-    colours of ``source``'s textures that it stands for (:func:`covered_colours`; a face that
-    stands for none keeps its colour), as vertex colours on a white base, a vertex for each
-    corner and colour (:func:`_split_by_colour`); ``mesh`` itself where ``source`` has no
-    texture."""
-    if not any(part.texture is not None and part.uv is not None for part in source.parts):
-        return mesh
-    faces = np.arange(mesh.face_count)
-    seen = source.face_colors(np.arange(source.face_count))
-    colours = covered_colours(
-        source, seen, mesh.triangles, mesh.face_normals(faces), mesh.face_colors(faces)
-    )
-    return Mesh([_split_by_colour(mesh.vertices, mesh.faces, colours)])
-
-
-def _nearest_centres(centres: np.ndarray, points: np.ndarray, k: int) -> np.ndarray:
-    """For each of ``points``, the indices of the ``k`` of ``centres`` nearest it, nearest
-    first, found a block of points at a time (``centres``: the faces of a coarser level, a few
-    hundred)."""
-    middle = centres.mean(axis=0)  # about the centres: no digits lost to large coordinates
-    centres = centres - middle
-    block = max(1, (1 << 22) // max(len(centres), 1))
-    lengths = np.einsum("ij,ij->i", centres, centres)
-    found = []
-    for start in range(0, len(points), block):
-        chunk = points[start : start + block] - middle
-        squared = lengths[None] - 2.0 * (chunk @ centres.T)  # + |point|², the same along a row
-        near = np.argpartition(squared, k - 1, axis=1)[:, :k]
-        order = np.argsort(np.take_along_axis(squared, near, axis=1), axis=1, kind="stable")
-        found.append(np.take_along_axis(near, order, axis=1))
-    return np.concatenate(found) if found else np.zeros((0, k), dtype=np.int64)
 
 
 def _most_facing(

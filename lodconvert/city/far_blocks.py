@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..bake.qem import coloured_by_textures
+from ..bake.far_textures import in_source_textures
 from ..chain import ChainOptions
 from ..model import Level, LodChain, Mesh
 from .blocks import block_proxy, blocks_of, object_footprint, shared_corners
@@ -42,9 +42,9 @@ def blocks_level(
     tolerance of :data:`BLOCK_PX` and band depth of :data:`BAND_M`, the proxy with the fewest
     vertices whose silhouette F against ``source`` (the objects' finest geometry about
     ``origin``) reaches :data:`MIN_CELL_F` (tried fewest first), else the most faithful, its
-    faces in the colours of the textures they stand for where ``source`` is textured
-    (:func:`~..bake.qem.coloured_by_textures`); its level, F and facts. ``None`` when no object
-    has a footprint."""
+    faces in a texture baked from ``source``'s where it is textured
+    (:func:`~..bake.far_textures.in_source_textures`); its level, F and facts. ``None`` when
+    no object has a footprint."""
     pixel = distance / options.view.focal_px
     prints = [p for chain in objects if (p := object_footprint(chain, finest_mesh(chain)))]
     if not prints:
@@ -68,7 +68,7 @@ def blocks_level(
     assert best is not None
     f, level, px, band = best
     assert level.mesh is not None
-    level = replace(level, mesh=coloured_by_textures(level.mesh, source))
+    level = replace(level, mesh=in_source_textures(level.mesh, source, pixel))
     facts = {
         "blocks": len(found.polygons),
         "objects": len(prints),
@@ -91,10 +91,11 @@ def member_blocks_level(
     first, then, coarser tolerance by coarser tolerance, as many of them made coarser (those
     that save the most vertices first) as keep the silhouette F against ``source`` at
     :data:`MIN_CELL_F`. Roofs and walls share their corners (:func:`~.blocks.shared_corners`);
-    faces take the textures they stand for as :func:`blocks_level`'s do. Its level, F and
+    faces take the textures of what they stand for as :func:`blocks_level`'s do. Its level, F and
     facts; ``None`` when no object has a footprint."""
     ladder = sorted(BLOCK_PX)
-    proxies, blocks, objects = _member_proxies(members, distance / options.view.focal_px, ladder)
+    pixel = distance / options.view.focal_px
+    proxies, blocks, objects = _member_proxies(members, pixel, ladder)
     if all(row[0] is None for row in proxies):
         return None
 
@@ -117,7 +118,7 @@ def member_blocks_level(
         level, f = made(steps)
     # the finest has area; a coarser one only where F is kept
     assert level is not None and level.mesh is not None
-    level = replace(level, mesh=coloured_by_textures(level.mesh, source))
+    level = replace(level, mesh=in_source_textures(level.mesh, source, pixel))
     facts = {
         "blocks": blocks,
         "objects": objects,

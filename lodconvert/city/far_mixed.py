@@ -7,11 +7,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from ..bake.far_textures import in_source_textures
 from ..bake.grid import Grid
 from ..bake.numpy import silhouettes
 from ..chain import ChainOptions
@@ -134,7 +135,8 @@ def mixed_level(
     objects, then of the members, those that raise the F most per vertex added come first, and
     the fewest of them that reach :data:`MIN_CELL_F` are kept (the lighter of the two ways). Its
     level, F and facts; ``None`` when neither way reaches it with fewer than ``cost`` vertices
-    (a faithful far level of another kind costs that much)."""
+    (a faithful far level of another kind costs that much). Over textured buildings, the
+    level takes a texture baked from theirs (:func:`~..bake.far_textures.in_source_textures`)."""
     mix = _Mix(members, origin, source, distance, options)
     base, _ = mix.made({})
     if base is None or base.count >= cost:
@@ -150,7 +152,11 @@ def mixed_level(
         if fewest is not None:
             choice, level, f = fewest
             found.append((level, f, mix.facts(choice, way, tried)))
-    return min(found, key=lambda m: m[0].count) if found else None
+    if not found:
+        return None
+    level, f, facts = min(found, key=lambda m: m[0].count)
+    assert level.mesh is not None
+    return replace(level, mesh=in_source_textures(level.mesh, source, mix.pixel)), f, facts
 
 
 def _fewest_reaching(

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..bake.far_textures import in_source_textures
 from ..chain import (
     NO_POINTS_PAY,
     ChainOptions,
@@ -21,7 +22,6 @@ from ..model import Level, Mesh, Node
 from ..model.lods import GROUND_COVERS, SLOTS, lod_name, unused_levels
 from ..plan import view_estimate
 from ..ranges import cutoff
-from .blocks import shared_corners
 from .prisms import (
     FOOTPRINT_TOLERANCE_PX,
     LOW_F,
@@ -35,7 +35,7 @@ from .prisms import (
 def source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOptions) -> ChainPlan:
     """The CityGML-style chain of a city object with its own LoDs (:mod:`.model.lods`): its
     finest source LoD covers every slot up to its own; each coarser slot is the source's LoD
-    there (in the colours of the finest one's textures where it has none of its own), else
+    there (in a texture baked from the finest one's where it has none of its own), else
     (LOD1) a prism from its footprint, else (LOD3, LOD2) baked points where they pay; a slot
     with none of these leaves the finer level on."""
     finest_slot = max(k for k in sources if k in SLOTS)
@@ -50,16 +50,14 @@ def source_plan(obj: Node, sources: dict[int, tuple[str, Mesh]], opts: ChainOpti
         index = SLOTS.index(slot) - 1  # LOD3 → 0 … LOD1 → 2: its cutoff and exponent
         name = f"LOD{slot}"
         level: Level | str | None = None
+        distance = cutoff(frame[1], opts.beta, opts.gamma, xs[index])
         if slot in sources:
-            coarse = in_texture_colours(sources[slot][1], finest)
-            if coarse is not sources[slot][1]:
-                coarse = shared_corners(coarse)  # a vertex per corner and colour
+            coarse = in_texture_colours(sources[slot][1], finest, distance / opts.view.focal_px)
             level = Level(name=name, kind="source", mesh=coarse.translated(-origin))
         elif slot == 1 and obj.type in GROUND_COVERS:
             level = f"a {obj.type} covers the ground: no prism"
         elif slot == 1:
             made = [p.level for p in levels if p.level is not None]
-            distance = cutoff(frame[1], opts.beta, opts.gamma, xs[index])
             level = _prism_level(obj, finest, origin, surface, made[-1], distance, opts)
         elif not points_may_pay([p.level for p in levels], least_cost(surface, opts)):
             level = NO_POINTS_PAY
@@ -87,7 +85,8 @@ def _prism_level(
     opts: ChainOptions,
 ) -> Level | str:
     """The LOD1 prism of ``obj`` (its footprint simplified within
-    :data:`~.prisms.FOOTPRINT_TOLERANCE_PX` pixels at ``distance``, where it switches in), or
+    :data:`~.prisms.FOOTPRINT_TOLERANCE_PX` pixels at ``distance``, where it switches in; in a
+    texture baked from ``finest``'s where that is textured), or
     why it is left out: no footprint, no fewer triangles than ``previous`` (the source LoD
     planned before it), or a silhouette F against ``surface`` (the finest level) below
     :data:`~.prisms.MIN_PRISM_F` at ``distance``."""
@@ -105,6 +104,7 @@ def _prism_level(
     f = view_estimate(surface, mesh, distance, opts.view).f
     if f < MIN_PRISM_F:
         return f"{LOW_F} {f:.3f} where it switches in, below {MIN_PRISM_F}"
+    mesh = in_source_textures(mesh, surface, pixel)
     return Level(name="LOD1", kind="prism", mesh=mesh, silhouette_f=f)
 
 

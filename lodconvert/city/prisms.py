@@ -21,9 +21,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..bake.qem import covered_colours
+from ..bake.far_textures import in_source_textures
 from ..heap import return_freed_heap
-from ..model import GREY, WHITE, Mesh, Surface
+from ..model import GREY, Mesh, Surface
 from ..model.lods import source_levels
 
 CLOSED_TOLERANCE = 1e-3
@@ -413,34 +413,14 @@ def prism_colors(finest: Mesh, seen: np.ndarray | None = None) -> tuple[np.ndarr
     return colors[0], colors[1]
 
 
-def in_texture_colours(coarse: Mesh, finest: Mesh) -> Mesh:
-    """``coarse`` (a coarser source LoD without textures of its own) with each face in the
-    colours of ``finest``'s textures it stands for (:func:`~..bake.qem.covered_colours`: the
-    faces of ``finest`` nearest it, facing its way), a face that stands for none in
-    the mean of its class, roofs or walls (:func:`prism_colors`); itself where ``finest`` has
-    no texture or ``coarse`` has one."""
-    textured = [p.texture is not None and p.uv is not None for p in finest.parts]
-    if not any(textured) or any(p.texture is not None for p in coarse.parts):
+def in_texture_colours(coarse: Mesh, finest: Mesh, pixel: float) -> Mesh:
+    """``coarse`` (a coarser source LoD without textures of its own, seen from where a pixel
+    spans ``pixel`` metres) in a texture baked from ``finest``'s
+    (:func:`~..bake.far_textures.in_source_textures`); itself where ``finest`` has no texture
+    or ``coarse`` has one."""
+    if any(p.texture is not None for p in coarse.parts):
         return coarse
-    slopes = _slopes(coarse)
-    seen = finest.face_colors(np.arange(finest.face_count))
-    roof, wall = prism_colors(finest, seen)
-    faces = np.arange(coarse.face_count)
-    colours = coarse.face_colors(faces)
-    colours[slopes.roofs], colours[slopes.walls] = roof, wall
-    normals = coarse.face_normals(faces)
-    colours = covered_colours(finest, seen, coarse.triangles, normals, colours)
-    corners = coarse.triangles.reshape(-1, 3)  # a vertex per corner: each face its colour
-    return Mesh(
-        [
-            Surface(
-                corners,
-                np.arange(len(corners)).reshape(-1, 3),
-                vertex_colors=np.repeat(colours, 3, axis=0),
-                base_color=WHITE.copy(),
-            )
-        ]
-    )
+    return in_source_textures(coarse, finest, pixel)
 
 
 def simplified(outline: Outline, tolerance: float) -> list[FootprintPart]:

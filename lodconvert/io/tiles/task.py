@@ -160,8 +160,8 @@ class Drawn:
 @dataclass(frozen=True)
 class TileTask:
     """The GLB ``name`` in the tileset's ``tiles/``: the levels of ``sources``, one feature per
-    level (``features``), or, without features, one far level drawn as it is (its mesh's
-    colours with textures baked in, or points); textures packed into atlas pages of
+    level (``features``), or, without features, one far level drawn as it is (its mesh, in
+    its colours and textures, or points); textures packed into atlas pages of
     ``atlas_size``; its geometry compressed as ``compress``
     (:data:`~..gltf.compression.COMPRESSIONS`) says (meshopt positions within ``tolerance``
     metres), its atlas pages with a WebP copy where ``webp``. The sources' geometry is placed
@@ -184,7 +184,8 @@ class TileTask:
             far = source.geometry()
             if isinstance(far, PointCloud):
                 return Drawn(far.positions + source.origin, far.colors)
-            return Drawn(far.vertices, far.baked_colors(), far.faces)
+            colors = np.concatenate([_colors(part) for part in far.parts])
+            return Drawn(far.vertices, colors, far.faces, textures=_textures([far]))
         placed = [source.geometry() for source in self.sources]
         meshes = [mesh for mesh in placed if isinstance(mesh, Mesh)]
         starts = np.cumsum([0] + [mesh.vertex_count for mesh in meshes])
