@@ -180,8 +180,10 @@ def class_delta_e_rendered(
     """How far ``far``'s colours lie from ``source``'s, both drawn in their colours
     (:class:`AlbedoRenderer`) from ``distance`` along each of ``directions`` towards their
     centre, over the pixels both show, ``roof`` and ``wall`` by the source's face there: the
-    mean CIEDE2000 ΔE of the pixels (``roof``, ``wall``) and the CIEDE2000 ΔE of their mean
-    colours, in CIE L*a*b* (``roof_mean``, ``wall_mean``); NaN where no pixel is of a kind.
+    mean CIEDE2000 ΔE of the pixels (``roof``, ``wall``), of those where ``far`` shows a face
+    of the same kind (``roof_same``, ``wall_same``: the colours, where the geometries agree),
+    and the CIEDE2000 ΔE of their mean colours, in CIE L*a*b* (``roof_mean``,
+    ``wall_mean``); NaN where no pixel is of a kind.
     With ``supersample``, each pixel is the mean of ``supersample`` × ``supersample`` drawn
     ones (at most 2,048 a side in all): what the surfaces under it show, where mipmaps alone
     blend a texture atlas's unrelated parts into a pixel that covers a building."""
@@ -192,19 +194,22 @@ def class_delta_e_rendered(
     scale = max(1, min(supersample, 2048 // side))
     wanted = renderer.pictures(source, center, distance, directions, side, scale)
     seen = renderer.pictures(far, center, distance, directions, side, scale)
-    pairs: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {"roof": [], "wall": []}
+    pairs: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {
+        name: [] for name in ("roof", "wall", "roof_same", "wall_same")
+    }
     for want, got in zip(wanted, seen, strict=True):
         both = (want.kind > 0) & (got.kind > 0)
         for name, kind in (("roof", ROOF), ("wall", WALL)):
             chosen = both & (want.kind == kind)
             pairs[name].append((want.rgb[chosen], got.rgb[chosen]))
+            same = chosen & (got.kind == kind)
+            pairs[f"{name}_same"].append((want.rgb[same], got.rgb[same]))
     out: dict[str, float] = {}
     for name, found in pairs.items():
         a = np.concatenate([w for w, _ in found])
         b = np.concatenate([g for _, g in found])
-        if not len(a):
-            out[name] = out[f"{name}_mean"] = float("nan")
-            continue
-        out[name] = float(delta_e_2000(a, b).mean())
-        out[f"{name}_mean"] = float(ciede2000(lab(a).mean(axis=0), lab(b).mean(axis=0)))
+        out[name] = float(delta_e_2000(a, b).mean()) if len(a) else float("nan")
+        if name in ("roof", "wall"):
+            mean = ciede2000(lab(a).mean(axis=0), lab(b).mean(axis=0)) if len(a) else np.nan
+            out[f"{name}_mean"] = float(mean)
     return out
