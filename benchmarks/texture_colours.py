@@ -5,14 +5,18 @@ unlit, textures sampled with mipmaps (``lodconvert.analysis.albedo``), from the 
 views of the upper hemisphere at the level's switch-in distance, with the reference view's
 focal length (1080 px, 45°), with mipmaps alone and supersampled (each pixel the mean of
 those drawn under it). Per tier, the mean CIEDE2000 ΔE of the pixels both show, roofs and walls
-apart by the source's face there ("pixels"), and the ΔE of the mean colours of those pixels
-("means"), each a mean over a tier's levels with its largest:
+apart by the source's face there ("pixels"), of those where the far level shows a face of the
+same kind ("same kind": its colours where the geometries agree), and the ΔE of the mean
+colours of those pixels ("means"), each a mean over a tier's levels with its largest:
 
     python benchmarks/texture_colours.py               # 20 copies: results/texture_colours.md
     python benchmarks/texture_colours.py --supersample 1   # mipmaps alone (13 s, not 3 min)
 
 Tiers: ``LOD1`` (each building's LoD1 against its textured LoD2), ``blocks`` and ``mesh``
-(each cell's far level against its buildings' finest levels).
+(each cell's far level against its buildings' finest levels), and ``mesh, baked texture`` (the
+simplified far meshes with a texture baked from their buildings' as LOD1 and blocks take one,
+in place of their vertex colours), with each level's bytes as a ``.glb`` holds it
+uncompressed.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ def tiers(
     """Per tier, each level's rendered ΔE (and its switch-in distance)."""
     from lodconvert.analysis.albedo import class_delta_e_rendered
     from lodconvert.bake import get_backend
+    from lodconvert.bake.far_textures import in_source_textures
     from lodconvert.bakery import iter_chains
     from lodconvert.chain import ChainOptions
     from lodconvert.city.far_mesh import finest_mesh, merge
@@ -64,16 +69,38 @@ def tiers(
             distance = chain.cutoffs[k - 1]
             errors = class_delta_e_rendered(renderer, meshes[0][1].mesh, level.mesh, distance,
                                             directions, supersample)  # fmt: skip
-            found.setdefault("LOD1", []).append({"distance": distance, **errors})
+            row = {"distance": distance, "bytes": level_bytes(level.mesh), **errors}
+            found.setdefault("LOD1", []).append(row)
     for cell in cells:
         assert cell.far.mesh is not None
         source = merge([finest_mesh(chain) for chain in cell.objects()]).translated(-cell.origin)
         distance = cell.cutoffs[0]
-        errors = class_delta_e_rendered(
-            renderer, source, cell.far.mesh, distance, directions, supersample
-        )
-        found.setdefault(kind, []).append({"distance": distance, **errors})
+        levels = {kind: cell.far.mesh}
+        if kind == "mesh":  # its vertex colours against a texture baked as LOD1's and blocks'
+            pixel = distance / ChainOptions().view.focal_px
+            levels["mesh, baked texture"] = in_source_textures(cell.far.mesh, source, pixel)
+        for tier, mesh in levels.items():
+            errors = class_delta_e_rendered(renderer, source, mesh, distance, directions,
+                                            supersample)  # fmt: skip
+            row = {"distance": distance, "bytes": level_bytes(mesh), **errors}
+            found.setdefault(tier, []).append(row)
     return found
+
+
+def level_bytes(mesh: Any) -> int:
+    """Bytes of ``mesh`` in a ``.glb`` as lodconvert writes a level without compression:
+    positions (3 floats), vertex colours (4 shorts) or texture coordinates (2 floats), 32-bit
+    indices and its images (JPEG for a photograph)."""
+    from lodconvert.io.images import encoded
+
+    total = 0
+    for part in mesh.parts:
+        total += len(part.vertices) * 12 + len(part.faces) * 12
+        if part.vertex_colors is not None:
+            total += len(part.vertices) * 8
+        if part.texture is not None:
+            total += len(part.vertices) * 8 + len(encoded(part.texture, part.photographic)[0])
+    return total
 
 
 def main() -> None:
@@ -107,13 +134,15 @@ def main() -> None:
     for (tier, scale), levels in found.items():
         distances = [r["distance"] for r in levels]
         drawn = "mipmaps alone" if scale == 1 else f"{scale}× supersampled"
-        row = [tier, drawn, f"{len(levels)}", f"{min(distances):,.0f}–{max(distances):,.0f}"]
-        for key in ("roof", "wall", "roof_mean", "wall_mean"):
+        row = [tier, drawn, f"{len(levels)}", f"{min(distances):,.0f}–{max(distances):,.0f}",
+               f"{np.mean([r['bytes'] for r in levels]):,.0f}"]  # fmt: skip
+        for key in ("roof", "wall", "roof_same", "wall_same", "roof_mean", "wall_mean"):
             values = [r[key] for r in levels if not math.isnan(r[key])]
             row += [f"{np.mean(values):.1f}", f"{max(values):.1f}"]
         rows.append(row)
-    header = ["tier", "drawn", "levels", "switch-in m", "roof pixels ΔE", "max",
-              "wall pixels ΔE", "max", "roof means ΔE", "max", "wall means ΔE", "max"]  # fmt: skip
+    header = ["tier", "drawn", "levels", "switch-in m", "bytes a level", "roof pixels ΔE", "max",
+              "wall pixels ΔE", "max", "roof, same kind", "max", "wall, same kind", "max",
+              "roof means ΔE", "max", "wall means ΔE", "max"]  # fmt: skip
     text = "\n".join(
         [
             f"# Far levels of {args.copies} textured PLATEAU copies against their textures, drawn",
