@@ -746,6 +746,24 @@ def test_a_far_level_takes_a_texture_baked_from_what_it_stands_for() -> None:
     assert in_source_textures(level, plain, pixel=2.5) is level
 
 
+def test_the_faces_a_chart_may_see_are_every_box_it_overlaps() -> None:
+    """The grid that pairs source faces with far-level charts finds every overlapping pair of
+    boxes, and only those, whatever their sizes (a street-long face among small ones)."""
+    from lodconvert.bake.far_textures import _overlapping
+
+    rng = np.random.default_rng(7)
+    low = rng.uniform(0, 100, (400, 3))
+    high = low + rng.uniform(0, 5, (400, 3))
+    high[0] = low[0] + (90.0, 0.5, 10.0)
+    near = rng.uniform(0, 100, (60, 3))
+    far = near + rng.uniform(0, 20, (60, 3))
+    i, j = _overlapping(low, high, near, far)
+    every = ((low[:, None] <= far[None]) & (high[:, None] >= near[None])).all(axis=2)
+    found = sorted(zip(i.tolist(), j.tolist(), strict=True))
+    assert found == sorted(zip(*(k.tolist() for k in np.nonzero(every)), strict=True))
+    assert len(set(zip(i.tolist(), j.tolist(), strict=True))) == len(i)
+
+
 def test_a_coarser_source_lod_takes_the_textures_colours(tmp_path: Path) -> None:
     """A source LoD1 without an appearance of its own (PLATEAU's lod1Solid) is drawn in a
     texture baked from the finest LoD's, roofs and walls apart, not in class colours (here

@@ -26,6 +26,8 @@ light is the texel)."""
 CHART_TEXELS = 256
 """The most texels a side of one chart (a flat piece of the far level); a larger piece takes
 larger texels."""
+GRID = 1024
+"""The most squares across the grid in which boxes are paired."""
 SAMPLE_BATCH = 1 << 21
 """The most candidate (sample, source face) pairs tested at once."""
 
@@ -34,18 +36,56 @@ def _seen_by(source: Mesh, charts: _Charts, margin: float) -> tuple[np.ndarray, 
     """Pairs of a face of ``source`` and a chart that may see it: their boxes overlap, the
     chart's grown by ``margin``, and the face faces the chart's way (its normal more than
     :data:`FACING` along the chart's)."""
-    import shapely
-
     triangles = source.triangles
     low, high = triangles.min(axis=1), triangles.max(axis=1)
     near, far = charts.low - margin, charts.high + margin
-    tree = shapely.STRtree(shapely.box(low[:, 0], low[:, 1], high[:, 0], high[:, 1]))
-    chart, face = tree.query(shapely.box(near[:, 0], near[:, 1], far[:, 0], far[:, 1]))
-    overlap = (low[face, 2] <= far[chart, 2]) & (high[face, 2] >= near[chart, 2])
-    chart, face = chart[overlap], face[overlap]
+    face, chart = _overlapping(low, high, near, far)
     normals = source.face_normals(np.arange(len(triangles))).astype(np.float64)
     facing = np.einsum("pj,pj->p", normals[face], charts.normal[chart]) > FACING
     return face[facing], chart[facing]
+
+
+def _overlapping(
+    low: np.ndarray, high: np.ndarray, near: np.ndarray, far: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i, j) of boxes ``low[i]``–``high[i]`` and ``near[j]``–``far[j]`` that
+    overlap, each once, in order: found among those that share a square of a grid in plan
+    (its side the median of the ``near``–``far`` boxes', or larger, so that at most
+    :data:`GRID` squares span them all), then tested in full."""
+    if not len(low):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    corner = np.minimum(low.min(axis=0), near.min(axis=0))[:2]
+    extent = float((np.maximum(high.max(axis=0), far.max(axis=0))[:2] - corner).max())
+    side = max(float(np.median((far - near)[:, :2].max(axis=1))), extent / GRID, 1e-9)
+    first, first_square = _squares(low, high, corner, side)
+    second, second_square = _squares(near, far, corner, side)
+    order = np.argsort(first_square, kind="stable")
+    first, first_square = first[order], first_square[order]
+    start = np.searchsorted(first_square, second_square, "left")
+    counts = np.searchsorted(first_square, second_square, "right") - start
+    j = np.repeat(second, counts)
+    offsets = np.arange(len(j)) - np.repeat(np.cumsum(counts) - counts, counts)
+    i = first[np.repeat(start, counts) + offsets]
+    pairs = np.unique(i * len(near) + j)
+    i, j = pairs // len(near), pairs % len(near)
+    overlap = ((low[i] <= far[j]) & (high[i] >= near[j])).all(axis=1)
+    return i[overlap], j[overlap]
+
+
+def _squares(
+    low: np.ndarray, high: np.ndarray, corner: np.ndarray, side: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each box ``low``–``high`` once per square of a grid in plan (from ``corner``, ``side``
+    metres) that it touches: the box, and the square's number."""
+    a = np.floor((low[:, :2] - corner) / side).astype(np.int64)
+    b = np.floor((high[:, :2] - corner) / side).astype(np.int64)
+    span = b - a + 1
+    counts = span[:, 0] * span[:, 1]
+    box = np.repeat(np.arange(len(low)), counts)
+    local = np.arange(len(box)) - np.repeat(np.cumsum(counts) - counts, counts)
+    x = a[box, 0] + local % span[box, 0]
+    y = a[box, 1] + local // span[box, 0]
+    return box, x * (1 << 31) + y
 
 
 def textured(mesh: Mesh) -> bool:
