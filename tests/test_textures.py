@@ -746,6 +746,25 @@ def test_a_far_level_takes_a_texture_baked_from_what_it_stands_for() -> None:
     assert in_source_textures(level, plain, pixel=2.5) is level
 
 
+def test_colours_at_known_barycentric_coordinates_are_those_found_by_projecting() -> None:
+    """A mesh of a textured part and a vertex-coloured one gives, at points given with their
+    barycentric coordinates, the colours it finds from the points alone."""
+    image = np.asarray(quadrants().convert("RGBA"))
+    square = np.array([[0.0, 0.0, 0.0], [8.0, 0.0, 0.0], [8.0, 8.0, 0.0], [0.0, 8.0, 0.0]])
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    textured = Surface(square, faces, uv=square[:, :2] / 8.0, texture=image)
+    corners = np.array([[255, 0, 0, 255], [0, 255, 0, 255], [0, 0, 255, 255], [9, 9, 9, 255]])
+    painted = Surface(square + np.array([0.0, 0.0, 1.0]), faces, corners.astype(np.uint8))
+    mesh = Mesh([textured, painted])
+    rng = np.random.default_rng(3)
+    face_ids = rng.integers(0, 4, 200)
+    weights = rng.dirichlet((1.0, 1.0, 1.0), 200)
+    points = np.einsum("kj,kjd->kd", weights, mesh.triangles[face_ids])
+    found = mesh.colors_at(face_ids, points)
+    assert len(np.unique(found, axis=0)) > 8  # quadrants and blends, not one colour
+    assert np.array_equal(mesh.colors_at(face_ids, points, weights), found)
+
+
 def test_the_faces_a_chart_may_see_are_every_box_it_overlaps() -> None:
     """The grid that pairs source faces with far-level charts finds every overlapping pair of
     boxes, and only those, whatever their sizes (a street-long face among small ones)."""

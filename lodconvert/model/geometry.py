@@ -112,8 +112,11 @@ class Surface:
         bary = np.clip(bary, 0.0, 1.0)
         return bary / bary.sum(axis=1, keepdims=True)
 
-    def colors_at(self, face_ids: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """RGBA uint8 (k, 4) of the surface at ``points`` lying on faces ``face_ids``.
+    def colors_at(
+        self, face_ids: np.ndarray, points: np.ndarray, weights: np.ndarray | None = None
+    ) -> np.ndarray:
+        """RGBA uint8 (k, 4) of the surface at ``points`` lying on faces ``face_ids`` (their
+        barycentric coordinates ``weights`` where already known, else found).
 
         Texture colours (nearest texel, UV wrapped) win over vertex colours, which win over the
         base colour; texture and vertex colours are modulated by the base colour as in glTF.
@@ -127,13 +130,15 @@ class Surface:
             return np.repeat(base[None, :], k, axis=0)
         corners = self.faces[face_ids]
         if textured:
-            uv = np.einsum("ij,ijk->ik", self.barycentric(face_ids, points), self.uv[corners])
+            if weights is None:
+                weights = self.barycentric(face_ids, points)
+            uv = np.einsum("ij,ijk->ik", weights, self.uv[corners])
             h, w = self.texture.shape[:2]
             x = np.floor((uv[:, 0] % 1.0) * w).astype(np.int64).clip(0, w - 1)
             y = np.floor((1.0 - (uv[:, 1] % 1.0)) * h).astype(np.int64).clip(0, h - 1)
             rgba = self.texture[y, x].astype(np.float64)
         else:
-            rgba = _interpolated(self, face_ids, points, self.vertex_colors[corners])
+            rgba = _interpolated(self, face_ids, points, self.vertex_colors[corners], weights)
         rgba = rgba * (base.astype(np.float64) / 255.0)
         return np.clip(np.rint(rgba), 0, 255).astype(np.uint8)
 
@@ -182,17 +187,26 @@ share of its area."""
 
 
 def _interpolated(
-    surface: Surface, face_ids: np.ndarray, points: np.ndarray, colors: np.ndarray
+    surface: Surface,
+    face_ids: np.ndarray,
+    points: np.ndarray,
+    colors: np.ndarray,
+    weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """The colours (k, 4) float64 at ``points`` on faces ``face_ids`` of ``surface`` whose
-    corners have ``colors`` ((k, 3, 4) uint8), interpolated across each face; a face whose
+    corners have ``colors`` ((k, 3, 4) uint8), interpolated across each face (by the points'
+    barycentric coordinates ``weights`` where given); a face whose
     corners share one colour has it, as interpolating gives it within a few ulps (which no
     rounding to bytes, after any base colour, can tell: a byte times a byte over 255 is never
     within 1/510 of a half)."""
     rgba = colors[:, 0].astype(np.float64)
     mixed = np.flatnonzero((colors != colors[:, :1]).any(axis=(1, 2)))
     if len(mixed):
-        bary = surface.barycentric(face_ids[mixed], points[mixed])
+        bary = (
+            surface.barycentric(face_ids[mixed], points[mixed])
+            if weights is None
+            else weights[mixed]
+        )
         rgba[mixed] = np.einsum("ij,ijk->ik", bary, colors[mixed].astype(np.float64))
     return rgba
 
@@ -324,9 +338,17 @@ class Mesh:
             return self.single.face_normals(face_ids)
         return Surface(self.vertices, self.faces).face_normals(face_ids)
 
-    def colors_at(self, face_ids: np.ndarray, points: np.ndarray) -> np.ndarray:
-        """RGBA uint8 (k, 4) at ``points`` lying on faces ``face_ids``, each from its part."""
-        return self._by_part(face_ids, points, Surface.colors_at)
+    def colors_at(
+        self, face_ids: np.ndarray, points: np.ndarray, weights: np.ndarray | None = None
+    ) -> np.ndarray:
+        """RGBA uint8 (k, 4) at ``points`` lying on faces ``face_ids`` (barycentric
+        coordinates ``weights`` where known), each from its part."""
+        if weights is None:
+            return self._by_part(face_ids, points, Surface.colors_at)
+        rows = np.column_stack([points, weights])
+        return self._by_part(
+            face_ids, rows, lambda part, faces, at: part.colors_at(faces, at[:, :3], at[:, 3:])
+        )
 
     def baked_colors(self) -> np.ndarray:
         """RGBA uint8 (n, 4) per vertex of every part, textures baked in
