@@ -26,10 +26,8 @@ light is the texel)."""
 CHART_TEXELS = 256
 """The most texels a side of one chart (a flat piece of the far level); a larger piece takes
 larger texels."""
-GRID = 1024
-"""The most squares across the grid in which boxes are paired."""
-SAMPLE_BATCH = 1 << 21
-"""The most candidate (sample, source face) pairs tested at once."""
+BOX_BATCH = 1 << 16
+"""Source faces whose boxes are made and paired with charts at once."""
 
 
 def _seen_by(source: Mesh, charts: _Charts, margin: float) -> tuple[np.ndarray, np.ndarray]:
@@ -49,43 +47,19 @@ def _overlapping(
     low: np.ndarray, high: np.ndarray, near: np.ndarray, far: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """The pairs (i, j) of boxes ``low[i]``–``high[i]`` and ``near[j]``–``far[j]`` that
-    overlap, each once, in order: found among those that share a square of a grid in plan
-    (its side the median of the ``near``–``far`` boxes', or larger, so that at most
-    :data:`GRID` squares span them all), then tested in full."""
-    if not len(low):
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    corner = np.minimum(low.min(axis=0), near.min(axis=0))[:2]
-    extent = float((np.maximum(high.max(axis=0), far.max(axis=0))[:2] - corner).max())
-    side = max(float(np.median((far - near)[:, :2].max(axis=1))), extent / GRID, 1e-9)
-    first, first_square = _squares(low, high, corner, side)
-    second, second_square = _squares(near, far, corner, side)
-    order = np.argsort(first_square, kind="stable")
-    first, first_square = first[order], first_square[order]
-    start = np.searchsorted(first_square, second_square, "left")
-    counts = np.searchsorted(first_square, second_square, "right") - start
-    j = np.repeat(second, counts)
-    offsets = np.arange(len(j)) - np.repeat(np.cumsum(counts) - counts, counts)
-    i = first[np.repeat(start, counts) + offsets]
-    pairs = np.unique(i * len(near) + j)
-    i, j = pairs // len(near), pairs % len(near)
+    overlap, each once: the second boxes in a tree (shapely's STRtree, in plan), the first
+    queried :data:`BOX_BATCH` at a time, then tested in full."""
+    import shapely
+
+    tree = shapely.STRtree(shapely.box(near[:, 0], near[:, 1], far[:, 0], far[:, 1]))
+    found = [(np.zeros(0, dtype=np.int64),) * 2]
+    for start in range(0, len(low), BOX_BATCH):
+        lo, hi = low[start : start + BOX_BATCH], high[start : start + BOX_BATCH]
+        i, j = tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
+        found.append((i + start, j))
+    i, j = (np.concatenate(parts) for parts in zip(*found, strict=True))
     overlap = ((low[i] <= far[j]) & (high[i] >= near[j])).all(axis=1)
     return i[overlap], j[overlap]
-
-
-def _squares(
-    low: np.ndarray, high: np.ndarray, corner: np.ndarray, side: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Each box ``low``–``high`` once per square of a grid in plan (from ``corner``, ``side``
-    metres) that it touches: the box, and the square's number."""
-    a = np.floor((low[:, :2] - corner) / side).astype(np.int64)
-    b = np.floor((high[:, :2] - corner) / side).astype(np.int64)
-    span = b - a + 1
-    counts = span[:, 0] * span[:, 1]
-    box = np.repeat(np.arange(len(low)), counts)
-    local = np.arange(len(box)) - np.repeat(np.cumsum(counts) - counts, counts)
-    x = a[box, 0] + local % span[box, 0]
-    y = a[box, 1] + local // span[box, 0]
-    return box, x * (1 << 31) + y
 
 
 def textured(mesh: Mesh) -> bool:
@@ -289,60 +263,20 @@ class _Charts:
         limits = (self.size * SAMPLES)[charts]
         low = np.clip(np.ceil(flat.min(axis=1)), 0, limits).astype(np.int64)
         high = np.clip(np.floor(flat.max(axis=1)) + 1, 0, limits).astype(np.int64)
-        span = np.maximum(high - low, 0)
-        counts = span[:, 0] * span[:, 1]
-        found: list[tuple[np.ndarray, ...]] = []
-        start = 0
-        ends = np.cumsum(counts)
-        while start < len(faces):
-            done = ends[start - 1] if start else 0
-            stop = max(start + 1, int(np.searchsorted(ends, done + SAMPLE_BATCH, "right")))
-            stop = min(stop, len(faces))
-            found.append(_inside(flat, depth, low, span, counts, start, stop))
-            start = stop
-        which, x, y, bary, at = (np.concatenate(parts) for parts in zip(*found, strict=True))
-        behind = at <= front
-        which, x, y, bary, at = which[behind], x[behind], y[behind], bary[behind], at[behind]
+        width = self.size[:, 0] * SAMPLES
+        base = starts * SAMPLES * SAMPLES
+        pair = np.full(int((self.size[:, 0] * self.size[:, 1]).sum()) * SAMPLES**2, -1)
+        bary = np.zeros((len(pair), 2))
+        from .texels import outermost  # numba: loaded where a texture is baked
+
+        outermost(flat, depth, low, high, base[charts], width[charts], front, pair, bary)
+        sample = np.flatnonzero(pair >= 0)
+        which, (s, t) = pair[sample], bary[sample].T
+        weights = np.clip(np.column_stack([1.0 - s - t, s, t]), 0.0, 1.0)
+        weights /= weights.sum(axis=1, keepdims=True)
+        points = np.einsum("kj,kjd->kd", weights, source.triangles[faces[which]])
         chart = charts[which]
-        width = (self.size[:, 0] * SAMPLES)[chart]
-        sample = starts[chart] * SAMPLES * SAMPLES + y * width + x
-        first = np.lexsort((-at, sample))  # the outermost face at each sample
-        keep = first[np.r_[True, sample[first][1:] != sample[first][:-1]][: len(first)]]
-        which, x, y, bary, chart = which[keep], x[keep], y[keep], bary[keep], chart[keep]
-        points = np.einsum("kj,kjd->kd", bary, source.triangles[faces[which]])
+        local = sample - base[chart]
+        y, x = local // width[chart], local % width[chart]
         texel = starts[chart] + (y // SAMPLES) * self.size[chart, 0] + x // SAMPLES
-        return texel, source.colors_at(faces[which], points)
-
-
-def _inside(
-    flat: np.ndarray,
-    depth: np.ndarray,
-    low: np.ndarray,
-    span: np.ndarray,
-    counts: np.ndarray,
-    start: int,
-    stop: int,
-) -> tuple[np.ndarray, ...]:
-    """Of faces ``start`` to ``stop`` (corners ``flat`` in sample units, ``depth`` along the
-    normal; the bounding box of each from ``low``, ``span`` samples, ``counts`` in all), each
-    sample inside one: the face, the sample's column and row, its barycentric coordinates and
-    its depth."""
-    faces = np.arange(start, stop)
-    which = np.repeat(faces, counts[faces])
-    firsts = np.cumsum(counts[faces]) - counts[faces]
-    local = np.arange(len(which)) - np.repeat(firsts, counts[faces])
-    columns = np.maximum(span[which, 0], 1)
-    x = low[which, 0] + local % columns
-    y = low[which, 1] + local // columns
-    a, b, c = (flat[which, k] for k in range(3))
-    e1, e2 = b - a, c - a
-    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    px, py = x - a[:, 0], y - a[:, 1]
-    safe = np.where(det != 0, det, 1.0)
-    s = (px * e2[:, 1] - py * e2[:, 0]) / safe
-    t = (e1[:, 0] * py - e1[:, 1] * px) / safe
-    bary = np.column_stack([1.0 - s - t, s, t])
-    inside = (det != 0) & (bary >= -1e-9).all(axis=1)
-    which, bary = which[inside], bary[inside]
-    at = np.einsum("kj,kj->k", bary, depth[which])
-    return which, x[inside], y[inside], bary, at
+        return texel, source.colors_at(faces[which], points, weights)
