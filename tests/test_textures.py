@@ -6,6 +6,7 @@ official validators. docs/textures.md."""
 
 from __future__ import annotations
 
+import importlib
 import io
 import json
 import os
@@ -697,12 +698,15 @@ def test_ciede2000_matches_the_published_test_data(
     assert float(ciede2000(np.array(first), np.array(second))) == pytest.approx(expected, abs=1e-4)
 
 
-def test_a_far_level_takes_a_texture_baked_from_what_it_stands_for() -> None:
+def test_a_far_level_takes_a_texture_baked_from_what_it_stands_for(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     """A textured roof of four squares, one quadrant of the image each, under a flat top a
     little lower (two triangles) and a wall: the top takes a texture of its own in which each
     quarter shows the quadrant above it, in its colour, not the roof's mean; the wall, which
     no textured face faces the way of, keeps its colour; the texture is a few texels a pixel,
-    not the source's; over an untextured source the level stays as it is."""
+    not the source's, and bounded however near the level is seen; over an untextured source
+    the level stays as it is."""
     from lodconvert.bake.far_textures import in_source_textures
 
     image = np.asarray(quadrants(256).convert("RGBA"))
@@ -742,6 +746,16 @@ def test_a_far_level_takes_a_texture_baked_from_what_it_stands_for() -> None:
         assert np.abs(colour - QUADRANTS[quadrant]).max() <= 2, quadrant
     wall_face = np.flatnonzero(baked.face_normals(np.arange(3))[:, 1] < -0.5)
     assert (baked.face_colors(wall_face)[0, :3] == 77).all()
+    bounds = importlib.import_module("lodconvert.bake.far_textures")
+    monkeypatch.setattr(bounds, "MOST_TEXELS", 24 * 24)  # 2,048² in a run
+    monkeypatch.setattr(bounds, "MOST_SAMPLES", 24 * 24 * 4)
+    near = in_source_textures(level, roof, pixel=0.6)  # 34 texels a side, unbounded
+    (part,) = near.parts
+    assert part.texture is not None and part.texture.shape[0] * part.texture.shape[1] <= 32 * 64
+    for quadrant, (x, y) in at.items():
+        face = np.array([0 if x > y else 1])
+        colour = near.colors_at(face, np.array([[x, y, 5.5]]))[0, :3].astype(int)
+        assert np.abs(colour - QUADRANTS[quadrant]).max() <= 2, quadrant
     plain = Mesh([Surface(vertices, faces, base_color=np.array([9, 9, 9, 255], np.uint8))])
     assert in_source_textures(level, plain, pixel=2.5) is level
 

@@ -22,10 +22,15 @@ FACING = 0.1
 """How far along a chart's normal a face's normal must point for the chart to see it."""
 SAMPLES = 8
 """Points a side of each baked texel where the source's texture is read (their mean in linear
-light is the texel)."""
+light is the texel); fewer where a level's texels would take more than :data:`MOST_SAMPLES`."""
+MOST_SAMPLES = 1 << 22
+"""The most points read for one far level's texture (memory: some 24 bytes each)."""
 CHART_TEXELS = 256
 """The most texels a side of one chart (a flat piece of the far level); a larger piece takes
 larger texels."""
+MOST_TEXELS = 1 << 22
+"""The most texels of one far level's texture (2,048² in all); a level that would take more
+takes larger texels."""
 BOX_BATCH = 1 << 16
 """Source faces whose boxes are made and paired with charts at once."""
 
@@ -168,11 +173,17 @@ def _row_ids(rows: np.ndarray) -> np.ndarray:
     return np.unique(whole, return_inverse=True)[1].reshape(-1)
 
 
+def _texels(extent: np.ndarray, texel: np.ndarray) -> np.ndarray:
+    """How many texels of ``texel`` metres (one per chart) a side cover charts of ``extent``
+    ((k, 2) metres): at least one."""
+    return np.maximum(np.ceil(extent / texel[:, None] - 1e-9), 1).astype(np.int64)
+
+
 class _Charts:
     """The flat pieces of a far level (charts): each one's plane axes (``u``, ``v``, its
     ``normal``), box (``low``, ``high``), the corner of the rectangle its faces cover in its
     plane (``origin``), its texel side (at least the one asked for, :data:`CHART_TEXELS` at
-    most a side) and ``size`` in texels."""
+    most a side, :data:`MOST_TEXELS` in all) and ``size`` in texels."""
 
     def __init__(
         self, triangles: np.ndarray, normals: np.ndarray, charts: np.ndarray, texel: float
@@ -198,7 +209,11 @@ class _Charts:
         self.origin = low[:, :1] * self.u + low[:, 1:] * self.v + offset[:, None] * self.normal
         extent = high - low
         self.texel = np.maximum(texel, extent.max(axis=1) / CHART_TEXELS)
-        self.size = np.maximum(np.ceil(extent / self.texel[:, None] - 1e-9), 1).astype(np.int64)
+        self.size = _texels(extent, self.texel)
+        total = int((self.size[:, 0] * self.size[:, 1]).sum())
+        if total > MOST_TEXELS:  # larger texels, all alike
+            self.texel = self.texel * math.sqrt(total / MOST_TEXELS)
+            self.size = _texels(extent, self.texel)
         self.first = first
 
     def coordinates(self, triangles: np.ndarray, charts: np.ndarray) -> np.ndarray:
@@ -255,17 +270,19 @@ class _Charts:
         """The texel (of all charts', each chart's from ``starts``) of each sample under a
         face of ``faces`` seen by its chart in ``charts``, and the colour of the outermost
         such face at it."""
+        texels = int((self.size[:, 0] * self.size[:, 1]).sum())
+        n = max(1, min(SAMPLES, math.isqrt(MOST_SAMPLES // texels)))  # points a texel side
         rel = source.triangles[faces] - self.origin[charts][:, None]
-        pitch = (self.texel / SAMPLES)[charts][:, None]
+        pitch = (self.texel / n)[charts][:, None]
         flat = np.stack([np.einsum("pkj,pj->pk", rel, a[charts]) for a in (self.u, self.v)], -1)
         flat = flat / pitch[..., None] - 0.5
         depth = np.einsum("pkj,pj->pk", rel, self.normal[charts])
-        limits = (self.size * SAMPLES)[charts]
+        limits = (self.size * n)[charts]
         low = np.clip(np.ceil(flat.min(axis=1)), 0, limits).astype(np.int64)
         high = np.clip(np.floor(flat.max(axis=1)) + 1, 0, limits).astype(np.int64)
-        width = self.size[:, 0] * SAMPLES
-        base = starts * SAMPLES * SAMPLES
-        pair = np.full(int((self.size[:, 0] * self.size[:, 1]).sum()) * SAMPLES**2, -1)
+        width = self.size[:, 0] * n
+        base = starts * n * n
+        pair = np.full(texels * n * n, -1)
         bary = np.zeros((len(pair), 2))
         from .texels import outermost  # numba: loaded where a texture is baked
 
@@ -278,5 +295,5 @@ class _Charts:
         chart = charts[which]
         local = sample - base[chart]
         y, x = local // width[chart], local % width[chart]
-        texel = starts[chart] + (y // SAMPLES) * self.size[chart, 0] + x // SAMPLES
+        texel = starts[chart] + (y // n) * self.size[chart, 0] + x // n
         return texel, source.colors_at(faces[which], points, weights)
