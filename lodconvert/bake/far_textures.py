@@ -67,17 +67,14 @@ def _overlapping(
     return i[overlap], j[overlap]
 
 
-def textured(mesh: Mesh) -> bool:
+def _textured(mesh: Mesh) -> bool:
     """Whether a part of ``mesh`` has a texture."""
     return any(part.texture is not None and part.uv is not None for part in mesh.parts)
 
 
-def in_source_textures(
-    mesh: Mesh, source: Mesh, pixel: float, colours: np.ndarray | None = None
-) -> Mesh:
+def in_source_textures(mesh: Mesh, source: Mesh, pixel: float) -> Mesh:
     """``mesh`` (a far level of ``source``, in its frame, seen from where a pixel spans
-    ``pixel`` metres; ``colours``: RGBA per face where none of ``source`` lies under it, its
-    own by default) with a texture of its own baked from ``source``'s, or itself where
+    ``pixel`` metres) with a texture of its own baked from ``source``'s, or itself where
     ``source`` has no texture (or ``mesh`` no face). Every flat connected piece (a chart) is drawn,
     :data:`TEXELS_PER_PIXEL` texels a pixel, as ``source`` looks from outside straight at it:
     each texel the mean, in linear light, of the colours at :data:`SAMPLES` × :data:`SAMPLES`
@@ -85,15 +82,15 @@ def in_source_textures(
     those it may see (:func:`_seen_by`); a texel under none the mean of its chart's others, a
     chart under none its first face's colour. The charts are packed into one texture
     (:func:`_squarest`)."""
-    if not textured(source) or not mesh.face_count:
+    if not _textured(source) or not mesh.face_count:
         return mesh
     faces = np.arange(mesh.face_count)
-    colours = mesh.face_colors(faces) if colours is None else colours
     normals = mesh.face_normals(faces).astype(np.float64)
     charts = _charts(mesh, normals)
     frames = _Charts(mesh.triangles, normals, charts, pixel / TEXELS_PER_PIXEL)
     face, chart = _seen_by(source, frames, MARGIN_PX * pixel)
-    images = frames.images(source, face, chart, colours, front=pixel)
+    own = mesh.face_colors(frames.first)
+    images = frames.images(source, face, chart, own, front=pixel)
     uv = frames.coordinates(mesh.triangles, charts)
     atlas = _squarest(images)
     uv = atlas.coordinates(np.repeat(charts, 3), uv.reshape(-1, 2)).reshape(-1, 3, 2)
@@ -227,13 +224,13 @@ class _Charts:
         source: Mesh,
         faces: np.ndarray,
         charts: np.ndarray,
-        colours: np.ndarray,
+        own: np.ndarray,
         front: float,
     ) -> list[np.ndarray]:
         """Each chart's texels (rows from the top) as ``faces`` of ``source`` (each seen by
         the chart beside it in ``charts``) show them from outside along its normal, no more
-        than ``front`` in front of it; ``colours`` (per face of the far level) where none of
-        them lies under a chart."""
+        than ``front`` in front of it; ``own`` (RGBA per chart, its first face's colour)
+        where none of them lies under a chart."""
         texels = self.size[:, 0] * self.size[:, 1]
         starts = np.cumsum(texels) - texels
         owner = np.repeat(np.arange(len(texels)), texels)
@@ -246,7 +243,7 @@ class _Charts:
             sums = np.stack([np.bincount(texel, linear[:, k], len(sums)) for k in range(3)], 1)
         chart_hits = np.bincount(owner, hits, len(texels))
         chart_sums = np.stack([np.bincount(owner, sums[:, k], len(texels)) for k in range(3)], 1)
-        fallback = linear_rgba(colours[self.first])[:, :3]
+        fallback = linear_rgba(own)[:, :3]
         seen_any = chart_hits > 0
         fallback[seen_any] = chart_sums[seen_any] / chart_hits[seen_any, None]
         linear = np.ones((len(sums), 4))

@@ -397,10 +397,9 @@ def _slopes(mesh: Mesh) -> _Slopes:
     return mesh.derived("roofs-walls", compute)
 
 
-def prism_colors(finest: Mesh, seen: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def prism_colors(finest: Mesh) -> tuple[np.ndarray, np.ndarray]:
     """The prism's roof and wall colours (RGBA): the mean colour of ``finest``'s roofs and of
-    its walls, over their areas, textures included (grey where it has none); ``seen``: the
-    colours of all its faces, where already found (:meth:`~lodconvert.model.Mesh.face_colors`)."""
+    its walls, over their areas, textures included (grey where it has none)."""
     slopes = _slopes(finest)
     colors = []
     for faces in (np.flatnonzero(slopes.roofs), np.flatnonzero(slopes.walls)):
@@ -408,7 +407,7 @@ def prism_colors(finest: Mesh, seen: np.ndarray | None = None) -> tuple[np.ndarr
         if weights.sum() <= 0:
             colors.append(GREY.copy())
             continue
-        means = finest.face_colors(faces) if seen is None else seen[faces]
+        means = finest.face_colors(faces)
         colors.append(np.rint(weights @ means.astype(np.float64) / weights.sum()).astype(np.uint8))
     return colors[0], colors[1]
 
