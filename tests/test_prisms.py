@@ -179,7 +179,7 @@ def test_footprint_groups_are_the_connected_components_scipy_finds() -> None:
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from lodconvert.city.prisms import _components
+    from lodconvert.components import components
 
     rng = np.random.default_rng(7)
     for _ in range(300):
@@ -188,7 +188,7 @@ def test_footprint_groups_are_the_connected_components_scipy_finds() -> None:
         pairs = np.concatenate([edges, np.stack([np.arange(n)] * 2)], axis=1)
         graph = coo_matrix((np.ones(pairs.shape[1]), pairs), shape=(n, n))
         _, expected = connected_components(graph, directed=False)
-        assert _components(pairs, n).tolist() == expected.tolist()
+        assert components(pairs, n).tolist() == expected.tolist()
 
 
 def _sampled_percentile(heights: np.ndarray, weights: np.ndarray, share: float) -> float:

@@ -22,6 +22,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..bake.far_textures import in_source_textures
+from ..components import components
 from ..heap import return_freed_heap
 from ..model import GREY, Mesh, Surface
 from ..model.lods import source_levels
@@ -309,27 +310,9 @@ def _apart(polygons: np.ndarray) -> list[np.ndarray]:
     import shapely
 
     pairs = shapely.STRtree(polygons).query(polygons)  # bounding boxes that meet
-    labels = _components(pairs, len(polygons))
+    labels = components(pairs, len(polygons))
     order = np.argsort(labels, kind="stable")
     return np.split(polygons[order], np.cumsum(np.bincount(labels))[:-1])
-
-
-def _components(pairs: np.ndarray, n: int) -> np.ndarray:
-    """The connected components of the graph of ``n`` nodes and edges ``pairs`` ((2, k)): each
-    node's component, numbered in the order of their first nodes. Each round points every node
-    at its tree's root, then hooks each root onto the least other root it meets; a component's
-    root ends as its first node (100,000 nodes in one path: 0.02 s)."""
-    parent = np.arange(n)
-    first, second = pairs
-    while True:
-        while not np.array_equal(grand := parent[parent], parent):
-            parent = grand
-        one, other = parent[first], parent[second]
-        apart = one != other
-        if not apart.any():
-            return np.unique(parent, return_inverse=True)[1]
-        first, second, one, other = first[apart], second[apart], one[apart], other[apart]
-        np.minimum.at(parent, np.maximum(one, other), np.minimum(one, other))
 
 
 def prism_height(
