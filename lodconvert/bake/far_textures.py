@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ..colors import linear_rgba, srgb_rgba
+from ..components import components
 from ..model import Mesh, Surface
 from ..textures import ATLAS_SIZE, PADDING, Atlas, packed
 
@@ -33,27 +34,49 @@ MOST_TEXELS = 1 << 22
 takes larger texels."""
 BOX_BATCH = 1 << 16
 """Source faces whose boxes are made and paired with charts at once."""
+TESTED_PAIRS = 1 << 24
+"""The most pairs of a source face and a chart whose boxes are all tested, without a tree."""
 
 
 def _seen_by(source: Mesh, charts: _Charts, margin: float) -> tuple[np.ndarray, np.ndarray]:
     """Pairs of a face of ``source`` and a chart that may see it: their boxes overlap, the
     chart's grown by ``margin``, and the face faces the chart's way (its normal more than
     :data:`FACING` along the chart's)."""
-    triangles = source.triangles
-    low, high = triangles.min(axis=1), triangles.max(axis=1)
+    low, high = _bounds(source.triangles)
     near, far = charts.low - margin, charts.high + margin
     face, chart = _overlapping(low, high, near, far)
-    normals = source.face_normals(np.arange(len(triangles))).astype(np.float64)
+    normals = source.face_normals(np.arange(len(low))).astype(np.float64)
     facing = np.einsum("pj,pj->p", normals[face], charts.normal[chart]) > FACING
     return face[facing], chart[facing]
+
+
+def _bounds(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The least and greatest coordinates of each of ``triangles`` ((m, 3, d)): their boxes
+    (corner by corner: a reduction over an axis of three is slower)."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    return np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
 
 
 def _overlapping(
     low: np.ndarray, high: np.ndarray, near: np.ndarray, far: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
     """The pairs (i, j) of boxes ``low[i]``–``high[i]`` and ``near[j]``–``far[j]`` that
-    overlap, each once: the second boxes in a tree (shapely's STRtree, in plan), the first
-    queried :data:`BOX_BATCH` at a time, then tested in full."""
+    overlap, each once, in order: every pair tested, :data:`BOX_BATCH` · 16 at a time, where
+    there are at most :data:`TESTED_PAIRS`; else the second boxes in a tree (shapely's
+    STRtree, in plan), the first queried :data:`BOX_BATCH` at a time, then tested in full."""
+    if len(low) * len(near) <= TESTED_PAIRS:
+        step = max(1, 16 * BOX_BATCH // max(len(near), 1))
+        found = [(np.zeros(0, dtype=np.int64),) * 2]
+        for start in range(0, len(low), step):
+            lo, hi = low[start : start + step], high[start : start + step]
+            overlap = np.ones((len(lo), len(near)), dtype=bool)
+            for k in range(3):  # axis by axis: (n, m) tests, none of (n, m, 3)
+                overlap &= lo[:, k, None] <= far[None, :, k]
+                overlap &= hi[:, k, None] >= near[None, :, k]
+            i, j = np.nonzero(overlap)
+            found.append((i + start, j))
+        i, j = (np.concatenate(parts) for parts in zip(*found, strict=True))
+        return i, j
     import shapely
 
     tree = shapely.STRtree(shapely.box(near[:, 0], near[:, 1], far[:, 0], far[:, 1]))
@@ -64,7 +87,8 @@ def _overlapping(
         found.append((i + start, j))
     i, j = (np.concatenate(parts) for parts in zip(*found, strict=True))
     overlap = ((low[i] <= far[j]) & (high[i] >= near[j])).all(axis=1)
-    return i[overlap], j[overlap]
+    order = np.lexsort((j[overlap], i[overlap]))
+    return i[overlap][order], j[overlap][order]
 
 
 def _textured(mesh: Mesh) -> bool:
@@ -140,9 +164,6 @@ def _welded(part: Surface) -> Surface:
 def _charts(mesh: Mesh, normals: np.ndarray) -> np.ndarray:
     """The chart of each face of ``mesh``: faces in one plane (normals to a thousandth, offsets
     to the centimetre) joined by an edge share one."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     triangles = mesh.triangles
     offsets = np.einsum("ij,ij->i", triangles[:, 0], normals)
     planes = np.column_stack([np.round(normals, 3), np.round(offsets, 2)])
@@ -153,14 +174,9 @@ def _charts(mesh: Mesh, normals: np.ndarray) -> np.ndarray:
     points = int(corner.max()) + 1
     keys = (edges[:, 0] * points + edges[:, 1]) * (int(plane.max()) + 1) + plane[owner]
     _, edge = np.unique(keys, return_inverse=True)
-    edge = edge.reshape(-1)
     count = len(triangles)
-    links = coo_matrix(
-        (np.ones(len(owner)), (owner, edge + count)), shape=(count + edge.max() + 1,) * 2
-    )
-    _, labels = connected_components(links, directed=False)
-    _, chart = np.unique(labels[:count], return_inverse=True)  # numbered by first face
-    return chart.reshape(-1)
+    links = np.stack([owner, edge.reshape(-1) + count])  # each face to its edges
+    return components(links, count + int(edge.max()) + 1)[:count]  # numbered by first face
 
 
 def _row_ids(rows: np.ndarray) -> np.ndarray:
@@ -275,8 +291,9 @@ class _Charts:
         flat = flat / pitch[..., None] - 0.5
         depth = np.einsum("pkj,pj->pk", rel, self.normal[charts])
         limits = (self.size * n)[charts]
-        low = np.clip(np.ceil(flat.min(axis=1)), 0, limits).astype(np.int64)
-        high = np.clip(np.floor(flat.max(axis=1)) + 1, 0, limits).astype(np.int64)
+        least, most = _bounds(flat)
+        low = np.clip(np.ceil(least), 0, limits).astype(np.int64)
+        high = np.clip(np.floor(most) + 1, 0, limits).astype(np.int64)
         width = self.size[:, 0] * n
         base = starts * n * n
         pair = np.full(texels * n * n, -1)
