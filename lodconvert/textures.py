@@ -51,16 +51,20 @@ def polygon_coordinates(
     """The texture coordinates (n, 2) of ``vertices``, the points of a polygon's ``rings``
     (each with its coordinates ``uv``, a row per point, or None) that triangulating kept and
     ``faces`` join; or None and what is wrong with them: a vertex whose ring has none,
-    coordinates that are not finite, or that cover no area."""
-    at: dict[bytes, np.ndarray] = {}
-    for points, coordinates in zip(rings, uv, strict=True):
-        if coordinates is not None:
-            for point, pair in zip(points, coordinates, strict=True):
-                at.setdefault(point.tobytes(), pair)
-    found = [at.get(point.tobytes()) for point in vertices]
-    if any(each is None for each in found):
-        return None, "have rings without texture coordinates"
-    out = np.array(found, dtype=np.float64).reshape(-1, 2)
+    coordinates that are not finite, or that cover no area. Where ``vertices`` are the rings'
+    points in order without their closing ones (as triangulating keeps them), those are theirs;
+    else each vertex takes the first point's at its position."""
+    out = _in_order(vertices, rings, uv)
+    if out is None:
+        at: dict[bytes, np.ndarray] = {}
+        for points, coordinates in zip(rings, uv, strict=True):
+            if coordinates is not None:
+                for point, pair in zip(points, coordinates, strict=True):
+                    at.setdefault(point.tobytes(), pair)
+        found = [at.get(point.tobytes()) for point in vertices]
+        if any(each is None for each in found):
+            return None, "have rings without texture coordinates"
+        out = np.array(found, dtype=np.float64).reshape(-1, 2)
     if not np.isfinite(out).all():
         return None, "have texture coordinates that are not finite numbers"
     corners = out[faces]
@@ -68,6 +72,23 @@ def polygon_coordinates(
     if not np.abs(sides[:, 0] * others[:, 1] - sides[:, 1] * others[:, 0]).sum() > 0.0:
         return None, "have texture coordinates that cover no area (a 0×0 footprint)"
     return out, None
+
+
+def _in_order(
+    vertices: np.ndarray, rings: Sequence[np.ndarray], uv: Sequence[np.ndarray | None]
+) -> np.ndarray | None:
+    """The texture coordinates of ``vertices`` where they are the points of ``rings`` in
+    order, each ring without its closing point, and every ring has coordinates; else None."""
+    if any(each is None for each in uv) or sum(len(r) - 1 for r in rings) != len(vertices):
+        return None
+    if len(rings) == 1:
+        points, coordinates = rings[0][:-1], uv[0][:-1]  # type: ignore[index]
+    else:
+        points = np.concatenate([ring[:-1] for ring in rings])
+        coordinates = np.concatenate([each[:-1] for each in uv])  # type: ignore[index]
+    if not np.array_equal(points, vertices):
+        return None
+    return np.array(coordinates, dtype=np.float64)
 
 
 ATLAS_SIZE = 4096
@@ -123,12 +144,22 @@ def packed(images: Sequence[np.ndarray], size: int = ATLAS_SIZE) -> Atlas:
         image = fitted[k]
         h, w = image.shape[:2]
         target = made[page]
-        padded = np.pad(image, ((PADDING, PADDING), (PADDING, PADDING), (0, 0)), mode="edge")
-        target[y : y + h + 2 * PADDING, x : x + w + 2 * PADDING] = padded
+        _put(target[y : y + h + 2 * PADDING, x : x + w + 2 * PADDING], image)
         height, width = target.shape[:2]
         scale[k] = (w / width, h / height)
         offset[k] = ((x + PADDING) / width, 1.0 - (y + PADDING + h) / height)
     return Atlas(tuple(made), tuple(spots[k][0] for k in range(len(images))), scale, offset)
+
+
+def _put(spot: np.ndarray, image: np.ndarray) -> None:
+    """Write ``image`` in the middle of ``spot``, :data:`PADDING` texels from each side, and
+    its edge texels repeated out to them (as ``np.pad``'s ``edge`` mode, without its copy)."""
+    h, w = image.shape[:2]
+    spot[PADDING : PADDING + h, PADDING : PADDING + w] = image
+    spot[:PADDING, PADDING : PADDING + w] = image[:1]
+    spot[PADDING + h :, PADDING : PADDING + w] = image[-1:]
+    spot[:, :PADDING] = spot[:, PADDING : PADDING + 1]
+    spot[:, PADDING + w :] = spot[:, PADDING + w - 1 : PADDING + w]
 
 
 def _place(
