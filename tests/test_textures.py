@@ -909,6 +909,84 @@ def test_appearances_are_found_across_the_chunks_a_document_is_read_in(
     assert appearance._marks(path, DEFAULT_LIMITS) == set()
 
 
+TRICKY_DOCUMENT = (
+    b'<?xml version="1.0" encoding="UTF-8"?>\n<?style href="a?b"?>'
+    b'<core:CityModel xmlns:core="urn:core" xmlns:app="urn:app" xmlns="urn:plain">'
+    b"<!-- <app:appearanceMember><app:Appearance><app:theme>comment</app:theme>"
+    b"</app:Appearance></app:appearanceMember> -->"
+    b'<core:cityObjectMember><b note="appearanceMember">appearanceMember <![CDATA['
+    b"<app:appearanceMember><app:Appearance><app:theme>cdata</app:theme></app:Appearance>"
+    b"</app:appearanceMember>]]></b><appearanceMembers/></core:cityObjectMember>"
+    b'<app:appearanceMember  a=">"><app:Appearance><app:theme>one</app:theme>'
+    b"<!-- </app:appearanceMember> --></app:Appearance></app:appearanceMember >"
+    b'<app:appearanceMember xlink:href="#x" xmlns:xlink="urn:xlink"/>'
+    b"<core:cityObjectMember><x/></core:cityObjectMember>"
+    b"<appearanceMember><app:Appearance><app:theme>two</app:theme></app:Appearance>"
+    b"</appearanceMember>"
+    b"<core:appearanceMember><app:Appearance><app:theme>three</app:theme></app:Appearance>"
+    b"</core:appearanceMember></core:CityModel>"
+)
+"""A city whose appearances at the root hide among look-alikes: the name in a comment, in a
+CDATA section, in text, in an attribute and in a longer name; a ``>`` in an attribute; an end
+tag in a comment; a member by reference; members in the default namespace and another prefix."""
+
+
+@pytest.mark.parametrize("chunk", [7, 64, 1 << 16])
+def test_the_appearances_at_the_root_are_picked_from_the_bytes_alone(
+    tmp_path: Path, chunk: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Only the root's ``appearanceMember`` elements are parsed for appearances, picked from
+    the document's bytes: the same themes, in order, as parsing the whole document finds,
+    whatever the chunks it is read in; a document in UTF-16 is parsed whole, to the same."""
+    from lodconvert.io.citygml import appearance, member_bytes
+    from lodconvert.io.citygml.source import first_look, open_document
+    from lodconvert.limits import DEFAULT_LIMITS
+
+    monkeypatch.setattr(member_bytes, "CHUNK", chunk)
+    expected = ["one", "two", "three"]
+    whole = etree.fromstring(TRICKY_DOCUMENT)
+    assert [t.text for t in whole.iterfind("*/{urn:app}Appearance/{urn:app}theme")] == expected
+    for name, data, picked in (
+        ("utf8.gml", TRICKY_DOCUMENT, True),
+        ("utf8-bom.gml", b"\xef\xbb\xbf" + TRICKY_DOCUMENT, True),
+        (
+            "utf16.gml",
+            TRICKY_DOCUMENT.replace(b"UTF-8", b"UTF-16").decode().encode("utf-16"),
+            False,
+        ),
+    ):
+        path = tmp_path / name
+        path.write_bytes(data)
+        stream = open_document(path, DEFAULT_LIMITS)
+        replay, root = first_look(stream, DEFAULT_LIMITS, str(path))
+        assert (member_bytes.appearance_members(replay, replay.head, root) is not None) == picked
+        stream.close()
+        found = appearance.Appearances()
+        stream = open_document(path, DEFAULT_LIMITS)
+        appearance.read_global(stream, found, DEFAULT_LIMITS, str(path))
+        stream.close()
+        assert found.themes == expected, name
+
+
+def test_a_broken_appearance_at_the_root_is_told_at_its_line_in_the_document(
+    tmp_path: Path,
+) -> None:
+    """The members picked from the bytes keep the document's line breaks before them: a
+    broken tag in one is reported at its own line."""
+    from lodconvert.io.citygml import appearance
+    from lodconvert.io.citygml.source import open_document
+    from lodconvert.limits import DEFAULT_LIMITS
+
+    broken = TRICKY_DOCUMENT.replace(b"<app:theme>two</app:theme>", b"\n\n<app:theme>two</x>")
+    path = tmp_path / "city.gml"
+    path.write_bytes(broken.replace(b"<core:cityObjectMember>", b"\n<core:cityObjectMember>"))
+    stream = open_document(path, DEFAULT_LIMITS)
+    with pytest.raises(etree.XMLSyntaxError) as error:
+        appearance.read_global(stream, appearance.Appearances(), DEFAULT_LIMITS, str(path))
+    stream.close()
+    assert error.value.lineno == 6
+
+
 @pytest.mark.parametrize(
     ("output", "size", "message"),
     [

@@ -20,6 +20,7 @@ from lxml import etree
 from ...limits import Limits
 from ..archive import open_compressed
 from ..numbers import parse_floats
+from .member_bytes import appearance_members
 from .names import GML_IDS, MEMBERS, local
 from .source import Stream, first_look, open_document, parser_options
 
@@ -156,11 +157,13 @@ class Appearances:
         """The texture coordinates of a ``TexCoordList``: each ``textureCoordinates`` for
         the ring its ``ring`` attribute (2.0) or the ``ring`` element in its place (3.0)
         names."""
-        lists = [c for c in element if local(c) == "textureCoordinates"]
-        named = [(c.text or "").strip() for c in element if local(c) == "ring"]
+        lists = list(element.iterchildren("{*}textureCoordinates"))
+        named = [(c.text or "").strip() for c in element.iterchildren("{*}ring")]
         for i, coordinates in enumerate(lists):
             ring = coordinates.get("ring") or (named[i] if i < len(named) else "")
             ring = ring.strip().removeprefix("#")
+            if ring in self.rings:
+                continue  # the first coordinates of a ring count (PLATEAU gives each twice)
             try:
                 values = parse_floats(coordinates.text or "")
             except ValueError:
@@ -275,10 +278,13 @@ def _marks(path: Path, limits: Limits) -> set[bytes]:
 
 
 def read_global(stream: Stream, appearances: Appearances, limits: Limits, source: str) -> None:
-    """Add the appearances at the root of the document ``stream`` to ``appearances``; every
-    other child of the root is freed as it ends."""
-    replay, _ = first_look(stream, limits, source)
-    events = etree.iterparse(replay, events=("end",), tag=_ROOT_CHILDREN, **parser_options(limits))
+    """Add the appearances at the root of the document ``stream`` to ``appearances``: its
+    ``appearanceMember`` elements picked from its bytes (:mod:`.member_bytes`), else (a
+    document in UTF-16) the whole document parsed, every other child of the root freed as it
+    ends."""
+    replay, root = first_look(stream, limits, source)
+    members = appearance_members(replay, replay.head, root) or replay
+    events = etree.iterparse(members, events=("end",), tag=_ROOT_CHILDREN, **parser_options(limits))
     for _, element in events:
         parent = element.getparent()
         if parent is None or parent.getparent() is not None:
