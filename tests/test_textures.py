@@ -1057,3 +1057,24 @@ def test_a_wrong_texture_format_is_a_one_line_usage_error(tmp_path: Path) -> Non
     result = run(source, "-o", tmp_path / "out.x3d", "--texture-format", "webp")
     assert_one_line_error(result, 2, "--texture-format", "out.x3d")
     assert not (tmp_path / "out.glb").exists() and not (tmp_path / "out.x3d").exists()
+
+
+def test_texture_coordinates_follow_the_points_in_order_or_by_position() -> None:
+    """A polygon's vertices take their rings' texture coordinates: in order where they are
+    the rings' points without the closing ones (a square with a hole), by position where
+    triangulating left points out or reordered them, and never where a ring has none."""
+    from lodconvert.textures import polygon_coordinates
+
+    outer = np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0], [0, 0, 0]], dtype=float)
+    hole = np.array([[1, 1, 0], [1, 3, 0], [3, 3, 0], [3, 1, 0], [1, 1, 0]], dtype=float)
+    rings = (outer, hole)
+    uv = tuple(ring[:, :2] / 4 for ring in rings)
+    vertices = np.concatenate([outer[:-1], hole[:-1]])
+    faces = np.array([[0, 1, 4], [1, 2, 6], [2, 3, 6], [3, 0, 4]])
+    found, fault = polygon_coordinates(vertices, faces, rings, uv)
+    assert fault is None and np.array_equal(found, vertices[:, :2] / 4)
+    shuffled = vertices[[5, 0, 3, 1, 2]]
+    found, fault = polygon_coordinates(shuffled, faces % 5, rings, uv)
+    assert fault is None and np.array_equal(found, shuffled[:, :2] / 4)
+    found, fault = polygon_coordinates(vertices, faces, rings, (uv[0], None))
+    assert found is None and fault == "have rings without texture coordinates"
