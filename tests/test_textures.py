@@ -783,9 +783,10 @@ def test_colours_at_known_barycentric_coordinates_are_those_found_by_projecting(
 def test_the_faces_a_chart_may_see_are_every_box_it_overlaps(
     batch: int, tested: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    """Pairing source faces with far-level charts finds every overlapping pair of boxes, and
-    only those, in order, whatever their sizes (a street-long face among small ones): tested
-    pair by pair where they are few, through the tree where they are many."""
+    """Pairing source faces with far-level charts finds every pair of boxes that overlap and
+    face the same way, and only those, in order, whatever their sizes (a street-long face
+    among small ones): tested pair by pair where they are few, through the tree where they
+    are many."""
     from lodconvert.bake import far_textures
 
     monkeypatch.setattr(far_textures, "BOX_BATCH", batch)
@@ -796,10 +797,15 @@ def test_the_faces_a_chart_may_see_are_every_box_it_overlaps(
     high[0] = low[0] + (90.0, 0.5, 10.0)
     near = rng.uniform(0, 100, (60, 3))
     far = near + rng.uniform(0, 20, (60, 3))
-    i, j = far_textures._overlapping(low, high, near, far)
+    normal, towards = (rng.normal(size=(n, 3)) for n in (400, 60))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    towards /= np.linalg.norm(towards, axis=1, keepdims=True)
+    first = far_textures._Boxes(low, high, normal)
+    i, j = far_textures._overlapping(first, far_textures._Boxes(near, far, towards))
     every = ((low[:, None] <= far[None]) & (high[:, None] >= near[None])).all(axis=2)
-    expected = np.nonzero(every)
-    assert len(expected[0]) > 30
+    facing = np.einsum("ik,jk->ij", normal, towards) > far_textures.FACING
+    expected = np.nonzero(every & facing)
+    assert len(expected[0]) > 10 and len(np.nonzero(every)[0]) > len(expected[0])
     assert i.tolist() == expected[0].tolist() and j.tolist() == expected[1].tolist()
 
 

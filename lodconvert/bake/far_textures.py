@@ -5,6 +5,7 @@ How, and what it measures: ``docs/textures.md``."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -39,15 +40,13 @@ TESTED_PAIRS = 1 << 24
 
 
 def _seen_by(source: Mesh, charts: _Charts, margin: float) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs of a face of ``source`` and a chart that may see it: their boxes overlap, the
-    chart's grown by ``margin``, and the face faces the chart's way (its normal more than
-    :data:`FACING` along the chart's)."""
+    """Pairs of a face of ``source`` and a chart that may see it, in order: their boxes
+    overlap, the chart's grown by ``margin``, and the face faces the chart's way (its normal
+    more than :data:`FACING` along the chart's)."""
     low, high = _bounds(source.triangles)
-    near, far = charts.low - margin, charts.high + margin
-    face, chart = _overlapping(low, high, near, far)
     normals = source.face_normals(np.arange(len(low))).astype(np.float64)
-    facing = np.einsum("pj,pj->p", normals[face], charts.normal[chart]) > FACING
-    return face[facing], chart[facing]
+    near, far = charts.low - margin, charts.high + margin
+    return _overlapping(_Boxes(low, high, normals), _Boxes(near, far, charts.normal))
 
 
 def _bounds(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -57,38 +56,47 @@ def _bounds(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
 
 
-def _overlapping(
-    low: np.ndarray, high: np.ndarray, near: np.ndarray, far: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """The pairs (i, j) of boxes ``low[i]``–``high[i]`` and ``near[j]``–``far[j]`` that
-    overlap, each once, in order: every pair tested, :data:`BOX_BATCH` · 16 at a time, where
-    there are at most :data:`TESTED_PAIRS`; else the second boxes in a tree (shapely's
-    STRtree, in plan), the first queried :data:`BOX_BATCH` at a time, then tested in full."""
+class _Boxes(NamedTuple):
+    """Boxes (``low``–``high``, (n, 3) each) facing ``normal`` (unit, (n, 3))."""
+
+    low: np.ndarray
+    high: np.ndarray
+    normal: np.ndarray
+
+
+def _overlapping(first: _Boxes, second: _Boxes) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i, j) of boxes ``first[i]`` and ``second[j]`` that overlap and face the same
+    way (normals more than :data:`FACING` along each other), each once, in order: every pair
+    tested, :data:`BOX_BATCH` · 16 at a time, where there are at most :data:`TESTED_PAIRS`;
+    else the second boxes in a tree (shapely's STRtree, in plan), the first queried
+    :data:`BOX_BATCH` at a time, then tested in full."""
+    (low, high, normal), (near, far, towards) = first, second
+    found = [(np.zeros(0, dtype=np.int64),) * 2]
     if len(low) * len(near) <= TESTED_PAIRS:
         step = max(1, 16 * BOX_BATCH // max(len(near), 1))
-        found = [(np.zeros(0, dtype=np.int64),) * 2]
         for start in range(0, len(low), step):
             lo, hi = low[start : start + step], high[start : start + step]
-            overlap = np.ones((len(lo), len(near)), dtype=bool)
+            kept = normal[start : start + step] @ towards.T > FACING
             for k in range(3):  # axis by axis: (n, m) tests, none of (n, m, 3)
-                overlap &= lo[:, k, None] <= far[None, :, k]
-                overlap &= hi[:, k, None] >= near[None, :, k]
-            i, j = np.nonzero(overlap)
+                kept &= lo[:, k, None] <= far[None, :, k]
+                kept &= hi[:, k, None] >= near[None, :, k]
+            i, j = np.nonzero(kept)
             found.append((i + start, j))
         i, j = (np.concatenate(parts) for parts in zip(*found, strict=True))
         return i, j
     import shapely
 
     tree = shapely.STRtree(shapely.box(near[:, 0], near[:, 1], far[:, 0], far[:, 1]))
-    found = [(np.zeros(0, dtype=np.int64),) * 2]
     for start in range(0, len(low), BOX_BATCH):
         lo, hi = low[start : start + BOX_BATCH], high[start : start + BOX_BATCH]
         i, j = tree.query(shapely.box(lo[:, 0], lo[:, 1], hi[:, 0], hi[:, 1]))
-        found.append((i + start, j))
+        i += start
+        kept = ((low[i] <= far[j]) & (high[i] >= near[j])).all(axis=1)
+        kept &= np.einsum("pj,pj->p", normal[i], towards[j]) > FACING
+        found.append((i[kept], j[kept]))
     i, j = (np.concatenate(parts) for parts in zip(*found, strict=True))
-    overlap = ((low[i] <= far[j]) & (high[i] >= near[j])).all(axis=1)
-    order = np.lexsort((j[overlap], i[overlap]))
-    return i[overlap][order], j[overlap][order]
+    order = np.lexsort((j, i))
+    return i[order], j[order]
 
 
 def _textured(mesh: Mesh) -> bool:
