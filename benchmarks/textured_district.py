@@ -3,13 +3,14 @@ shared, each copy's ids renamed and its coordinates shifted; generated here, rem
 converted with its textures and, interleaved, as the same district without its appearances,
 to ``.glb`` and to a 3D Tiles tileset, one worker pinned to one core:
 
-    python benchmarks/textured_district.py                 # 20 copies, 3 rounds
+    python benchmarks/textured_district.py                 # 20 and 100 copies, 3 rounds
     python benchmarks/textured_district.py --copies 50 --rounds 5
 
-Measured per run: CPU seconds of the child (its workers' included), peak RSS of the tree and
-the output's bytes; for the tilesets, the texture bytes per tier (images in each tile's GLB,
-by the tile's level: finest, coarsest, far) and the largest atlas page. Writes
-``results/textured_district.md``.
+Measured per run and size: CPU seconds of the child (its workers' included), peak RSS of the
+tree and the output's bytes; between the sizes, the CPU of each further building (what a
+process pays once left out); for the largest tileset, the texture bytes per tier (images in
+each tile's GLB, by the tile's level: finest, coarsest, far) and the largest atlas page.
+Writes ``results/textured_district.md``.
 """
 
 from __future__ import annotations
@@ -60,6 +61,7 @@ def district(copies: int, folder: Path, textured: bool) -> Path:
                 f"<app:appearanceMember>{_renamed(appearance, k)}</app:appearanceMember>"
             )
     path = folder / ("textured.gml" if textured else "plain.gml")
+    folder.mkdir(parents=True, exist_ok=True)
     path.write_text(head + "".join(members) + "".join(appearances) + tail, encoding="utf-8")
     image = folder / IMAGE
     if not image.exists():
@@ -120,61 +122,83 @@ def texture_bytes(tileset: Path) -> tuple[dict[str, int], int]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--copies", type=int, default=20)
+    parser.add_argument("--copies", default="20,100", help="district sizes, comma-separated")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=HERE / "results" / "textured_district.md")
     args = parser.parse_args()
+    sizes = sorted({int(each) for each in args.copies.split(",")})
     load, began = os.getloadavg()[0], time.perf_counter()
-    runs: dict[tuple[str, str], list] = {}
+    runs: dict[tuple[str, int, str], list] = {}
+    outputs = {"glb": "out.glb", "tiles": "tiles/tileset.json"}
     with tempfile.TemporaryDirectory(prefix="textured_") as tmp:
         folder = Path(tmp)
         sources = {
-            kind: district(args.copies, folder, kind == "textured")
+            (copies, kind): district(copies, folder / str(copies), kind == "textured")
+            for copies in sizes
             for kind in ("textured", "plain")
         }
-        outputs = {"glb": "out.glb", "tiles": "tiles/tileset.json"}
         for _ in range(args.rounds):
             for output, name in outputs.items():
-                for kind, source in sources.items():  # interleaved
-                    target = folder / kind / name
+                for (copies, kind), source in sources.items():  # interleaved
+                    target = folder / str(copies) / kind / name
                     target.parent.mkdir(parents=True, exist_ok=True)
-                    report = folder / kind / f"{output}.json"
+                    report = folder / str(copies) / kind / f"{output}.json"
                     run = convert_once(source, target, "1", root=ROOT, report=report, prefix=PIN)
                     size = (
                         sum(p.stat().st_size for p in target.parent.rglob("*") if p.is_file())
                         if output == "tiles" else target.stat().st_size
                     )  # fmt: skip
-                    runs.setdefault((output, kind), []).append((run, size))
-        tiers, largest = texture_bytes(folder / "textured" / "tiles" / "tileset.json")
-        plain_tiers, _ = texture_bytes(folder / "plain" / "tiles" / "tileset.json")
+                    runs.setdefault((output, copies, kind), []).append((run, size))
+        largest_size = str(sizes[-1])
+        tiers, largest = texture_bytes(folder / largest_size / "textured/tiles/tileset.json")
+        plain_tiers, _ = texture_bytes(folder / largest_size / "plain/tiles/tileset.json")
+    cpu = {key: median(r.cpu for r, _ in found) for key, found in runs.items()}
     rows = []
-    for output in ("glb", "tiles"):
-        cpu = {
-            kind: median(r.cpu for r, _ in runs[(output, kind)]) for kind in ("textured", "plain")
-        }
-        peak = {
-            kind: max(r.peak_mib for r, _ in runs[(output, kind)]) for kind in ("textured", "plain")
-        }
-        size = {kind: runs[(output, kind)][-1][1] for kind in ("textured", "plain")}
-        rows.append(
-            [
-                output,
-                f"{cpu['plain']:.2f}",
-                f"{cpu['textured']:.2f}",
-                f"{cpu['textured'] / cpu['plain']:.2f}",
-                f"{1000 * cpu['textured'] / args.copies:.0f}",
-                f"{peak['plain']:.0f}",
-                f"{peak['textured']:.0f}",
-                f"{size['plain'] / 1e6:.2f}",
-                f"{size['textured'] / 1e6:.2f}",
-            ]
-        )
-    header = ["output", "plain CPU s", "textured CPU s", "ratio", "textured ms/building",
-              "plain peak MiB", "textured peak MiB", "plain MB", "textured MB"]  # fmt: skip
+    for output in outputs:
+        for copies in sizes:
+            key = (output, copies)
+            peak = {k: max(r.peak_mib for r, _ in runs[(*key, k)]) for k in ("textured", "plain")}
+            size = {k: runs[(*key, k)][-1][1] for k in ("textured", "plain")}
+            plain, textured = cpu[(*key, "plain")], cpu[(*key, "textured")]
+            rows.append(
+                [
+                    output,
+                    f"{copies}",
+                    f"{plain:.2f}",
+                    f"{textured:.2f}",
+                    f"{textured / plain:.2f}",
+                    f"{1000 * plain / copies:.0f}",
+                    f"{1000 * textured / copies:.0f}",
+                    f"{peak['plain']:.0f}",
+                    f"{peak['textured']:.0f}",
+                    f"{size['plain'] / 1e6:.2f}",
+                    f"{size['textured'] / 1e6:.2f}",
+                ]
+            )
+    header = ["output", "copies", "plain CPU s", "textured CPU s", "ratio", "plain ms/building",
+              "textured ms/building", "plain peak MiB", "textured peak MiB", "plain MB",
+              "textured MB"]  # fmt: skip
+    marginal = []
+    if len(sizes) > 1:
+        few, many = sizes[0], sizes[-1]
+        for output in outputs:
+            slope = {
+                k: (cpu[(output, many, k)] - cpu[(output, few, k)]) / (many - few)
+                for k in ("plain", "textured")
+            }
+            marginal.append(
+                [
+                    output,
+                    f"{1000 * slope['plain']:.1f}",
+                    f"{1000 * slope['textured']:.1f}",
+                    f"{slope['textured'] / slope['plain']:.2f}",
+                ]
+            )
     tier_rows = [[tier, f"{plain_tiers[tier]:,}", f"{tiers[tier]:,}"] for tier in tiers]
     text = "\n".join(
         [
-            f"# A textured district: {args.copies} copies of the PLATEAU building",
+            f"# A textured district: {' and '.join(map(str, sizes))} copies of the PLATEAU "
+            "building",
             "",
             machine_line(load, time.perf_counter() - began),
             f"Command: `python benchmarks/textured_district.py --copies {args.copies} "
@@ -182,10 +206,27 @@ def main() -> None:
             "textured and plain interleaved; CPU: medians of the child's rusage (its workers "
             "included); peak: the tree's largest sampled RSS.",
             "",
-            markdown_table(header, rows, 1),
+            markdown_table(header, rows, 2),
             "",
-            f"Texture bytes per tier of the textured tileset (images inside each tile's GLB; "
-            f"largest atlas page {largest} texels a side, the default --atlas-size 4096):",
+            *(
+                [
+                    f"CPU per building beyond the first {sizes[0]} (the slope from {sizes[0]} to "
+                    f"{sizes[-1]} copies: what each further building costs, without what a "
+                    "process pays once, such as loading numba for the texture bake):",
+                    "",
+                    markdown_table(
+                        ["output", "plain ms/building", "textured ms/building", "ratio"],
+                        marginal,
+                        1,
+                    ),
+                    "",
+                ]
+                if marginal
+                else []
+            ),
+            f"Texture bytes per tier of the textured tileset of {sizes[-1]} copies (images "
+            f"inside each tile's GLB; largest atlas page {largest} texels a side, the default "
+            "--atlas-size 4096):",
             "",
             markdown_table(["tier", "plain", "textured"], tier_rows, 1),
             "",

@@ -15,6 +15,7 @@ import zipfile
 import zlib
 from collections.abc import Callable
 from pathlib import Path, PurePosixPath
+from typing import TYPE_CHECKING
 from urllib.parse import unquote
 
 import numpy as np
@@ -23,6 +24,9 @@ from .. import nofollow
 from ..errors import InputError
 from ..limits import Limits
 from .archive import member_name
+
+if TYPE_CHECKING:
+    import PIL.Image
 
 _SCHEME = re.compile(r"[A-Za-z][A-Za-z0-9+.-]+:")
 """A URI's scheme (``http:``, ``file:``, ``data:``; one letter is a Windows drive)."""
@@ -182,14 +186,11 @@ def webp_encoded(rgba: np.ndarray, photographic: bool) -> bytes:
     """Deterministic WebP bytes of an RGBA uint8 image (top row first): lossy (quality
     :data:`JPEG_QUALITY`) for a ``photographic`` one whose texels are all opaque, else
     lossless (transparent texels' colours kept)."""
-    from PIL import Image
-
     out = io.BytesIO()
     if photographic and int(rgba[..., 3].min(initial=255)) == 255:
-        rgb = Image.fromarray(np.ascontiguousarray(rgba[..., :3], dtype=np.uint8), "RGB")
-        rgb.save(out, format="WEBP", quality=JPEG_QUALITY, method=4)
+        _pillow(rgba, opaque=True).save(out, format="WEBP", quality=JPEG_QUALITY, method=4)
     else:
-        image = Image.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8), "RGBA")
+        image = _pillow(rgba, opaque=False)
         image.save(out, format="WEBP", lossless=True, quality=100, method=4, exact=True)
     return out.getvalue()
 
@@ -198,12 +199,19 @@ def encoded(rgba: np.ndarray, photographic: bool) -> tuple[bytes, str]:
     """Deterministic bytes of an RGBA uint8 image (top row first) and their MIME type: JPEG
     (quality :data:`JPEG_QUALITY`, no metadata) for a ``photographic`` one whose texels are all
     opaque, else PNG (lossless, no timestamp or text chunk)."""
-    from PIL import Image
-
     out = io.BytesIO()
     if photographic and int(rgba[..., 3].min(initial=255)) == 255:
-        rgb = Image.fromarray(np.ascontiguousarray(rgba[..., :3], dtype=np.uint8), "RGB")
+        rgb = _pillow(rgba, opaque=True)
         rgb.save(out, format="JPEG", quality=JPEG_QUALITY, optimize=False, progressive=False)
         return out.getvalue(), "image/jpeg"
-    Image.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8), "RGBA").save(out, format="PNG")
+    _pillow(rgba, opaque=False).save(out, format="PNG")
     return out.getvalue(), "image/png"
+
+
+def _pillow(rgba: np.ndarray, opaque: bool) -> PIL.Image.Image:
+    """A Pillow image of an RGBA uint8 image, RGB where ``opaque`` (its alpha dropped by
+    Pillow: a numpy slice of three channels would be copied texel by texel first)."""
+    from PIL import Image
+
+    image = Image.fromarray(np.ascontiguousarray(rgba, dtype=np.uint8), "RGBA")
+    return image.convert("RGB") if opaque else image
