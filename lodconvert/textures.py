@@ -65,13 +65,34 @@ def polygon_coordinates(
         if any(each is None for each in found):
             return None, "have rings without texture coordinates"
         out = np.array(found, dtype=np.float64).reshape(-1, 2)
-    if not np.isfinite(out).all():
-        return None, "have texture coordinates that are not finite numbers"
-    corners = out[faces]
-    sides, others = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
-    if not np.abs(sides[:, 0] * others[:, 1] - sides[:, 1] * others[:, 0]).sum() > 0.0:
-        return None, "have texture coordinates that cover no area (a 0×0 footprint)"
-    return out, None
+    fault = _fault(out, faces)
+    return (out, None) if fault is None else (None, fault)
+
+
+SMALL_POLYGON = 32
+"""Faces of a polygon up to which its texture coordinates are checked number by number (numpy
+calls cost more than that)."""
+
+
+def _fault(uv: np.ndarray, faces: np.ndarray) -> str | None:
+    """What is wrong with texture coordinates ``uv`` of ``faces``: numbers that are not
+    finite, or no face covering any area; None when nothing is."""
+    not_finite = "have texture coordinates that are not finite numbers"
+    if len(faces) <= SMALL_POLYGON:
+        pairs = uv.tolist()
+        if not all(math.isfinite(u) and math.isfinite(v) for u, v in pairs):
+            return not_finite
+        area = 0.0
+        for i, j, k in faces.tolist():
+            (au, av), (bu, bv), (cu, cv) = pairs[i], pairs[j], pairs[k]
+            area += abs((bu - au) * (cv - av) - (bv - av) * (cu - au))
+    else:
+        if not np.isfinite(uv).all():
+            return not_finite
+        corners = uv[faces]
+        sides, others = corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]
+        area = float(np.abs(sides[:, 0] * others[:, 1] - sides[:, 1] * others[:, 0]).sum())
+    return None if area > 0.0 else "have texture coordinates that cover no area (a 0×0 footprint)"
 
 
 def _in_order(

@@ -1065,11 +1065,19 @@ def test_a_wrong_texture_format_is_a_one_line_usage_error(tmp_path: Path) -> Non
     assert not (tmp_path / "out.glb").exists() and not (tmp_path / "out.x3d").exists()
 
 
-def test_texture_coordinates_follow_the_points_in_order_or_by_position() -> None:
+@pytest.mark.parametrize("small", [32, 0])
+def test_texture_coordinates_follow_the_points_in_order_or_by_position(
+    small: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """A polygon's vertices take their rings' texture coordinates: in order where they are
     the rings' points without the closing ones (a square with a hole), by position where
-    triangulating left points out or reordered them, and never where a ring has none."""
+    triangulating left points out or reordered them, and never where a ring has none, where
+    one is not a finite number or where they cover no area (checked number by number for a
+    small polygon, with numpy for a large one)."""
+    from lodconvert import textures
     from lodconvert.textures import polygon_coordinates
+
+    monkeypatch.setattr(textures, "SMALL_POLYGON", small)
 
     outer = np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0], [0, 0, 0]], dtype=float)
     hole = np.array([[1, 1, 0], [1, 3, 0], [3, 3, 0], [3, 1, 0], [1, 1, 0]], dtype=float)
@@ -1084,3 +1092,12 @@ def test_texture_coordinates_follow_the_points_in_order_or_by_position() -> None
     assert fault is None and np.array_equal(found, shuffled[:, :2] / 4)
     found, fault = polygon_coordinates(vertices, faces, rings, (uv[0], None))
     assert found is None and fault == "have rings without texture coordinates"
+    broken = (uv[0].copy(), uv[1])
+    broken[0][2, 1] = np.inf
+    found, fault = polygon_coordinates(vertices, faces, rings, broken)
+    assert found is None and fault == "have texture coordinates that are not finite numbers"
+    flat = (np.zeros((5, 2)), np.zeros((5, 2)))
+    found, fault = polygon_coordinates(vertices, faces, rings, flat)
+    assert (
+        found is None and fault == "have texture coordinates that cover no area (a 0×0 footprint)"
+    )
