@@ -136,6 +136,8 @@ class Surface:
             h, w = self.texture.shape[:2]
             x = np.floor((uv[:, 0] % 1.0) * w).astype(np.int64).clip(0, w - 1)
             y = np.floor((1.0 - (uv[:, 1] % 1.0)) * h).astype(np.int64).clip(0, h - 1)
+            if (base == 255).all():  # white modulates nothing
+                return self.texture[y, x]
             rgba = self.texture[y, x].astype(np.float64)
         else:
             rgba = _interpolated(self, face_ids, points, self.vertex_colors[corners], weights)
