@@ -5,6 +5,7 @@ to ``.glb`` and to a 3D Tiles tileset, one worker pinned to one core:
 
     python benchmarks/textured_district.py                 # 20 and 100 copies, 3 rounds
     python benchmarks/textured_district.py --copies 50 --rounds 5
+    python benchmarks/textured_district.py --baseline /tmp/wt-base   # its textured runs beside
 
 Measured per run and size: CPU seconds of the child (its workers' included), peak RSS of the
 tree and the output's bytes; between the sizes, the CPU of each further building (what a
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import itertools
 import json
 import os
 import re
@@ -27,7 +29,7 @@ from pathlib import Path
 from statistics import median
 
 from scale import convert_once
-from tables import machine_line, markdown_table, write_results
+from tables import commit_of, machine_line, markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -125,7 +127,13 @@ def main() -> None:
     parser.add_argument("--copies", default="20,100", help="district sizes, comma-separated")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--out", type=Path, default=HERE / "results" / "textured_district.md")
+    parser.add_argument(
+        "--baseline",
+        type=Path,
+        help="an earlier checkout: its textured runs interleaved with these (before and after)",
+    )
     args = parser.parse_args()
+    kinds = ("textured", "plain", *(("baseline",) if args.baseline else ()))
     sizes = sorted({int(each) for each in args.copies.split(",")})
     load, began = os.getloadavg()[0], time.perf_counter()
     runs: dict[tuple[str, int, str], list] = {}
@@ -139,11 +147,13 @@ def main() -> None:
         }
         for _ in range(args.rounds):
             for output, name in outputs.items():
-                for (copies, kind), source in sources.items():  # interleaved
+                for copies, kind in itertools.product(sizes, kinds):  # interleaved
+                    source = sources[(copies, "plain" if kind == "plain" else "textured")]
+                    root = args.baseline if kind == "baseline" else ROOT
                     target = folder / str(copies) / kind / name
                     target.parent.mkdir(parents=True, exist_ok=True)
                     report = folder / str(copies) / kind / f"{output}.json"
-                    run = convert_once(source, target, "1", root=ROOT, report=report, prefix=PIN)
+                    run = convert_once(source, target, "1", root=root, report=report, prefix=PIN)
                     size = (
                         sum(p.stat().st_size for p in target.parent.rglob("*") if p.is_file())
                         if output == "tiles" else target.stat().st_size
@@ -160,6 +170,11 @@ def main() -> None:
             peak = {k: max(r.peak_mib for r, _ in runs[(*key, k)]) for k in ("textured", "plain")}
             size = {k: runs[(*key, k)][-1][1] for k in ("textured", "plain")}
             plain, textured = cpu[(*key, "plain")], cpu[(*key, "textured")]
+            before = (
+                [f"{cpu[(*key, 'baseline')]:.2f}", f"{textured / cpu[(*key, 'baseline')]:.2f}"]
+                if args.baseline
+                else []
+            )
             rows.append(
                 [
                     output,
@@ -173,11 +188,14 @@ def main() -> None:
                     f"{peak['textured']:.0f}",
                     f"{size['plain'] / 1e6:.2f}",
                     f"{size['textured'] / 1e6:.2f}",
+                    *before,
                 ]
             )
     header = ["output", "copies", "plain CPU s", "textured CPU s", "ratio", "plain ms/building",
               "textured ms/building", "plain peak MiB", "textured peak MiB", "plain MB",
               "textured MB"]  # fmt: skip
+    if args.baseline:
+        header += [f"baseline ({commit_of(args.baseline)}) textured CPU s", "textured / baseline"]
     marginal = []
     if len(sizes) > 1:
         few, many = sizes[0], sizes[-1]
@@ -202,8 +220,10 @@ def main() -> None:
             "",
             machine_line(load, time.perf_counter() - began),
             f"Command: `python benchmarks/textured_district.py --copies {args.copies} "
-            f"--rounds {args.rounds}`; each run `--workers 1` pinned to core 0 (`taskset -c 0`), "
-            "textured and plain interleaved; CPU: medians of the child's rusage (its workers "
+            f"--rounds {args.rounds}{' --baseline ' + str(args.baseline) if args.baseline else ''}`"
+            f" (this: {commit_of(ROOT)}); each run `--workers 1` pinned to core 0 "
+            "(`taskset -c 0`), textured and plain interleaved; CPU: medians of the child's "
+            "rusage (its workers "
             "included); peak: the tree's largest sampled RSS.",
             "",
             markdown_table(header, rows, 2),
