@@ -113,10 +113,11 @@ class Surface:
         return bary / bary.sum(axis=1, keepdims=True)
 
     def colors_at(
-        self, face_ids: np.ndarray, points: np.ndarray, weights: np.ndarray | None = None
+        self, face_ids: np.ndarray, points: np.ndarray | None, weights: np.ndarray | None = None
     ) -> np.ndarray:
         """RGBA uint8 (k, 4) of the surface at ``points`` lying on faces ``face_ids`` (their
-        barycentric coordinates ``weights`` where already known, else found).
+        barycentric coordinates ``weights`` where already known, else found; ``points`` may be
+        None where they are known).
 
         Texture colours (nearest texel, UV wrapped) win over vertex colours, which win over the
         base colour; texture and vertex colours are modulated by the base colour as in glTF.
@@ -131,6 +132,7 @@ class Surface:
         corners = self.faces[face_ids]
         if textured:
             if weights is None:
+                assert points is not None
                 weights = self.barycentric(face_ids, points)
             uv = np.einsum("ij,ijk->ik", weights, self.uv[corners])
             h, w = self.texture.shape[:2]
@@ -191,24 +193,24 @@ share of its area."""
 def _interpolated(
     surface: Surface,
     face_ids: np.ndarray,
-    points: np.ndarray,
+    points: np.ndarray | None,
     colors: np.ndarray,
     weights: np.ndarray | None = None,
 ) -> np.ndarray:
     """The colours (k, 4) float64 at ``points`` on faces ``face_ids`` of ``surface`` whose
     corners have ``colors`` ((k, 3, 4) uint8), interpolated across each face (by the points'
-    barycentric coordinates ``weights`` where given); a face whose
+    barycentric coordinates ``weights`` where given, ``points`` then unused); a face whose
     corners share one colour has it, as interpolating gives it within a few ulps (which no
     rounding to bytes, after any base colour, can tell: a byte times a byte over 255 is never
     within 1/510 of a half)."""
     rgba = colors[:, 0].astype(np.float64)
     mixed = np.flatnonzero((colors != colors[:, :1]).any(axis=(1, 2)))
     if len(mixed):
-        bary = (
-            surface.barycentric(face_ids[mixed], points[mixed])
-            if weights is None
-            else weights[mixed]
-        )
+        if weights is None:
+            assert points is not None
+            bary = surface.barycentric(face_ids[mixed], points[mixed])
+        else:
+            bary = weights[mixed]
         rgba[mixed] = np.einsum("ij,ijk->ik", bary, colors[mixed].astype(np.float64))
     return rgba
 
@@ -341,15 +343,15 @@ class Mesh:
         return Surface(self.vertices, self.faces).face_normals(face_ids)
 
     def colors_at(
-        self, face_ids: np.ndarray, points: np.ndarray, weights: np.ndarray | None = None
+        self, face_ids: np.ndarray, points: np.ndarray | None, weights: np.ndarray | None = None
     ) -> np.ndarray:
         """RGBA uint8 (k, 4) at ``points`` lying on faces ``face_ids`` (barycentric
-        coordinates ``weights`` where known), each from its part."""
+        coordinates ``weights`` where known: then ``points`` may be None), each from its
+        part."""
         if weights is None:
             return self._by_part(face_ids, points, Surface.colors_at)
-        rows = np.column_stack([points, weights])
         return self._by_part(
-            face_ids, rows, lambda part, faces, at: part.colors_at(faces, at[:, :3], at[:, 3:])
+            face_ids, weights, lambda part, faces, at: part.colors_at(faces, None, at)
         )
 
     def baked_colors(self) -> np.ndarray:

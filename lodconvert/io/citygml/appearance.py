@@ -197,8 +197,12 @@ class Appearances:
         return Look(image, uv, matrix, color, plan)
 
 
+_GML_ID, _GML_32_ID = GML_IDS
+
+
 def _gml_id(element: etree._Element) -> str | None:
-    return next((v for name in GML_IDS if (v := element.get(name)) is not None), None)
+    found = element.get(_GML_ID)
+    return found if found is not None else element.get(_GML_32_ID)
 
 
 def _ids_up(element: etree._Element) -> Iterator[str]:
