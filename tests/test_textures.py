@@ -974,6 +974,30 @@ def test_the_appearances_at_the_root_are_picked_from_the_bytes_alone(
         assert found.themes == expected, name
 
 
+@pytest.mark.parametrize("chunk", [7, 1 << 16])
+def test_the_city_objects_are_read_without_the_appearances_at_the_root(
+    chunk: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """What the objects are read from once the appearances are: the document without its
+    root's ``appearanceMember`` elements (so that they are neither parsed again nor held),
+    everything else as it was, its line breaks where they were."""
+    from lodconvert.io.citygml import member_bytes
+
+    monkeypatch.setattr(member_bytes, "CHUNK", chunk)
+    document = TRICKY_DOCUMENT.replace(b"><", b">\n<")
+    stream = member_bytes.without_appearance_members(io.BytesIO(document), document[:64])
+    assert stream is not None
+    kept = b"".join(iter(lambda: stream.read(), b""))
+    assert kept.count(b"\n") == document.count(b"\n")
+    root = etree.fromstring(kept)
+    names = [etree.QName(child).localname for child in root.iterchildren(etree.Element)]
+    assert names == ["cityObjectMember"] * 2
+    assert b"<app:theme>cdata</app:theme>" in kept and b"<app:theme>one" not in kept
+    assert (
+        member_bytes.without_appearance_members(io.BytesIO(b""), "\ufeff<".encode("utf-16")) is None
+    )
+
+
 def test_a_broken_appearance_at_the_root_is_told_at_its_line_in_the_document(
     tmp_path: Path,
 ) -> None:

@@ -28,6 +28,7 @@ from .appearance import Appearances, Look
 from .attributes import attributes_of
 from .holders import BrokenObject, Holder, gml_id_of, holders_of
 from .implicit import Templates
+from .member_bytes import without_appearance_members
 from .names import (
     CITYGML_NAMESPACE,
     GML_NAMESPACES,
@@ -102,8 +103,11 @@ class Document:
         try:
             replay, root = first_look(stream, self.limits, self.source)
             self.check_root(root)
+            objects = replay
+            if self.appearances is not None:  # those at the root are read apart
+                objects = without_appearance_members(replay, replay.head) or replay
             events = etree.iterparse(
-                replay, events=("end",), tag=_ROOT_CHILDREN, **parser_options(self.limits)
+                objects, events=("end",), tag=_ROOT_CHILDREN, **parser_options(self.limits)
             )
             batch: list[tuple[Node, Holder]] = []
             for _, element in events:

@@ -1,7 +1,8 @@
-"""The bytes of a CityGML document's ``appearanceMember`` elements alone, picked out of the
-stream without parsing the city objects around them (:func:`appearance_members`), inside a root
-that declares the document's namespaces: what :func:`.appearance.read_global` parses, at
-the cost of a byte search rather than of a second parse of the whole city."""
+"""A CityGML document's ``appearanceMember`` elements told apart from the rest by a byte
+search, without parsing either: the members alone, inside a root that declares the document's
+namespaces (:func:`appearance_members`: what :func:`.appearance.read_global` parses), and the
+document without them (:func:`without_appearance_members`: what the city objects are read
+from), so that each is parsed once."""
 
 from __future__ import annotations
 
@@ -33,82 +34,98 @@ _LOOK_BACK = 1024
 def appearance_members(replay: Stream, head: bytes, root: etree._Element) -> Stream | None:
     """A stream of the document ``replay`` (read from its start, which is ``head``; ``root``
     its root element) with only its ``appearanceMember`` elements inside a root declaring the
-    same namespaces, or None where its encoding does not write ASCII as ASCII (UTF-16,
-    UTF-32)."""
-    head = head.removeprefix(b"\xef\xbb\xbf")  # UTF-8's byte order mark
-    if head[:1] not in (b"<", b" ", b"\t", b"\r", b"\n") or b"\x00" in head[:4]:
-        return None
-    declared = _DECLARED.match(head)
-    encoding = declared.group(1).decode("ascii") if declared else "UTF-8"
-    try:
-        if _PROBE.encode(encoding) != _PROBE.encode("ascii"):
-            return None
-    except LookupError:
+    same namespaces, each after the line breaks of what was left out before it (so that a
+    parser's line numbers are the document's); None where its encoding does not write ASCII
+    as ASCII (UTF-16, UTF-32)."""
+    encoding = _encoding(head)
+    if encoding is None:
         return None
     names = " ".join(
         f"xmlns{'' if prefix is None else ':' + prefix}={quoteattr(uri)}"
         for prefix, uri in root.nsmap.items()
     )
     start = f'<?xml version="1.0" encoding="{encoding}"?><root {names}>'.encode(encoding)
-    return _Chunks(_picked(replay, start))
+
+    def chunks() -> Iterator[bytes]:
+        yield start
+        for inside, data in _runs(replay):
+            yield data if inside else b"\n" * data.count(b"\n")
+        yield b"</root>"
+
+    return _Chunks(chunks())
+
+
+def without_appearance_members(replay: Stream, head: bytes) -> Stream | None:
+    """A stream of the document ``replay`` (read from its start, which is ``head``) with its
+    ``appearanceMember`` elements left out but for their line breaks: what the city objects
+    are read from once the appearances are, so that they are not parsed (nor held) again;
+    None where its encoding does not write ASCII as ASCII."""
+    if _encoding(head) is None:
+        return None
+    return _Chunks(
+        data if not inside else b"\n" * data.count(b"\n") for inside, data in _runs(replay)
+    )
+
+
+def _encoding(head: bytes) -> str | None:
+    """The encoding of a document that starts with ``head``, where it writes ASCII as ASCII
+    (what the byte search needs); else None."""
+    head = head.removeprefix(b"\xef\xbb\xbf")  # UTF-8's byte order mark
+    if head[:1] not in (b"<", b" ", b"\t", b"\r", b"\n") or b"\x00" in head[:4]:
+        return None
+    declared = _DECLARED.match(head)
+    encoding = declared.group(1).decode("ascii") if declared else "UTF-8"
+    try:
+        return encoding if _PROBE.encode(encoding) == _PROBE.encode("ascii") else None
+    except LookupError:
+        return None
 
 
 class _Chunks:
-    """A binary stream of the chunks an iterator gives."""
+    """A binary stream of the chunks an iterator gives (empty ones passed over)."""
 
     def __init__(self, chunks: Iterator[bytes]) -> None:
         self.chunks = chunks
 
     def read(self, size: int = -1) -> bytes:
-        return next(self.chunks, b"")
+        return next((chunk for chunk in self.chunks if chunk), b"")
 
     def close(self) -> None:
         return None
 
 
-def _picked(stream: Stream, head: bytes) -> Iterator[bytes]:
-    """``head``, each ``appearanceMember`` element of ``stream`` as its bytes run, and the
-    root's end tag; before each element, the line breaks of what was left out before it (so
-    that a parser's line numbers are the document's)."""
-    yield head
+def _runs(stream: Stream) -> Iterator[tuple[bool, bytes]]:
+    """Every byte of ``stream`` in runs, each with whether it is (part of) one of its
+    ``appearanceMember`` elements."""
     data = b""
     pos = 0  # where the search goes on in data
-    member = -1  # where the member being given starts in data, -1 outside one
-    outside = 0  # where the bytes left out and not yet counted start in data
-    lines = 0  # line breaks left out and not yet given
+    given = 0  # the bytes of data given so far
+    member = False  # whether they end inside a member
     ended = False
     while True:
         tag, pos = _next_tag(data, pos)
         if tag is None:  # more bytes are needed, from pos on
-            if member >= 0:
-                if pos > member:
-                    yield data[member:pos]
-                member = 0
-            else:
-                lines += data.count(b"\n", outside, pos)
-                outside = 0
             if ended:
-                break
-            data, pos = data[pos:], 0
+                yield member, data[given:]
+                return
+            if pos > given:
+                yield member, data[given:pos]
+            data, pos, given = data[pos:], 0, 0
             chunk = stream.read(CHUNK)
             ended = not chunk
             data += chunk
             continue
         closing, start = tag
-        if member < 0 and not closing:
-            lines += data.count(b"\n", outside, start)
-            if lines:
-                yield b"\n" * lines
-                lines = 0
+        if not member and not closing:
+            yield False, data[given:start]
             if data[pos - 2 : pos] == b"/>":
-                yield data[start:pos]
-                outside = pos
+                yield True, data[start:pos]
+                given = pos
             else:
-                member = start
-        elif member >= 0 and closing:
-            yield data[member:pos]
-            member, outside = -1, pos
-    yield b"</root>"
+                member, given = True, start
+        elif member and closing:
+            yield True, data[given:pos]
+            member, given = False, pos
 
 
 def _next_tag(data: bytes, pos: int) -> tuple[tuple[bool, int] | None, int]:
