@@ -157,9 +157,16 @@ def _squarest(images: list[np.ndarray]) -> Atlas:
 
 
 def _welded(part: Surface) -> Surface:
-    """``part`` with one vertex per position and texture coordinate."""
+    """``part`` with one vertex per position and texture coordinate, in the order of those
+    rows (as ``np.unique(axis=0)`` gives them, found by a sort of the columns: faster)."""
     keys = np.column_stack([part.vertices, part.uv])
-    _, first, corners = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    order = np.lexsort(keys.T[::-1])  # stable: each row's first copy first
+    ranked = keys[order]
+    new = np.ones(len(keys), dtype=bool)
+    new[1:] = (ranked[1:] != ranked[:-1]).any(axis=1)
+    first = order[new]
+    corners = np.empty(len(keys), dtype=np.int64)
+    corners[order] = np.cumsum(new) - 1
     return Surface(
         part.vertices[first],
         corners.reshape(-1)[part.faces],
