@@ -139,7 +139,7 @@ class Appearances:
             self.problems.append("a ParameterizedTexture has no imageURI")
             return
         for element in data.iter("{*}TexCoordList", "{*}TexCoordGen"):
-            if local(element) == "TexCoordList":
+            if element.tag.endswith("TexCoordList"):
                 self._coordinates(uri, element)
                 continue
             target = _association_target(element)
@@ -157,10 +157,13 @@ class Appearances:
         """The texture coordinates of a ``TexCoordList``: each ``textureCoordinates`` for
         the ring its ``ring`` attribute (2.0) or the ``ring`` element in its place (3.0)
         names."""
-        lists = list(element.iterchildren("{*}textureCoordinates"))
-        named = [(c.text or "").strip() for c in element.iterchildren("{*}ring")]
-        for i, coordinates in enumerate(lists):
-            ring = coordinates.get("ring") or (named[i] if i < len(named) else "")
+        named: list[str] | None = None  # 3.0's ring elements, read where first needed
+        for i, coordinates in enumerate(element.iterchildren("{*}textureCoordinates")):
+            ring = coordinates.get("ring")
+            if not ring:
+                if named is None:
+                    named = [(c.text or "").strip() for c in element.iterchildren("{*}ring")]
+                ring = named[i] if i < len(named) else ""
             ring = ring.strip().removeprefix("#")
             if ring in self.rings:
                 continue  # the first coordinates of a ring count (PLATEAU gives each twice)
