@@ -300,28 +300,15 @@ class _Charts:
         such face at it."""
         texels = int((self.size[:, 0] * self.size[:, 1]).sum())
         n = max(1, min(SAMPLES, math.isqrt(MOST_SAMPLES // texels)))  # points a texel side
-        rel = source.triangles[faces] - self.origin[charts][:, None]
-        pitch = (self.texel / n)[charts][:, None]
-        flat = np.stack([np.einsum("pkj,pj->pk", rel, a[charts]) for a in (self.u, self.v)], -1)
-        flat = flat / pitch[..., None] - 0.5
-        depth = np.einsum("pkj,pj->pk", rel, self.normal[charts])
-        limits = (self.size * n)[charts]
-        least, most = _bounds(flat)
-        low = np.clip(np.ceil(least), 0, limits).astype(np.int64)
-        high = np.clip(np.floor(most) + 1, 0, limits).astype(np.int64)
-        width = self.size[:, 0] * n
-        base = starts * n * n
-        pair = np.full(texels * n * n, -1)
-        bary = np.zeros((len(pair), 2))
+        frame = np.stack([self.origin, self.u, self.v, self.normal], axis=1)
+        layout = np.column_stack([starts, starts * n * n, self.size])
         from .texels import outermost  # numba: loaded where a texture is baked
 
-        outermost(flat, depth, low, high, base[charts], width[charts], front, pair, bary)
-        sample = np.flatnonzero(pair >= 0)
-        which, (s, t) = pair[sample], bary[sample].T
+        triangles = np.ascontiguousarray(source.triangles, dtype=np.float64)
+        texel, which, drawn = outermost(
+            triangles, faces, charts, frame, self.texel / n, layout, n, front
+        )
+        s, t = drawn.T
         weights = np.clip(np.column_stack([1.0 - s - t, s, t]), 0.0, 1.0)
         weights /= weights.sum(axis=1, keepdims=True)
-        chart = charts[which]
-        local = sample - base[chart]
-        y, x = local // width[chart], local % width[chart]
-        texel = starts[chart] + (y // n) * self.size[chart, 0] + x // n
         return texel, source.colors_at(faces[which], None, weights)
