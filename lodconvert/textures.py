@@ -100,10 +100,12 @@ def _in_order(
 ) -> np.ndarray | None:
     """The texture coordinates of ``vertices`` where they are the points of ``rings`` in
     order, each ring without its closing point, and every ring has coordinates; else None."""
-    if any(each is None for each in uv) or sum(len(r) - 1 for r in rings) != len(vertices):
+    if len(rings) == 1:  # most polygons: no generator
+        if uv[0] is None or len(rings[0]) - 1 != len(vertices):
+            return None
+        points, coordinates = rings[0][:-1], uv[0][:-1]
+    elif any(each is None for each in uv) or sum(len(r) - 1 for r in rings) != len(vertices):
         return None
-    if len(rings) == 1:
-        points, coordinates = rings[0][:-1], uv[0][:-1]  # type: ignore[index]
     else:
         points = np.concatenate([ring[:-1] for ring in rings])
         coordinates = np.concatenate([each[:-1] for each in uv])  # type: ignore[index]

@@ -181,7 +181,10 @@ class Appearances:
         read) wears, or None when nothing targets it."""
         uv: tuple[np.ndarray | None, ...] | None = None
         image = matrix = color = plan = None
-        if self.rings:
+        if self.rings and len(rings) == 1:  # most polygons: one ring, no lists made
+            if (one := self.rings.get(_gml_id(rings[0]) or "")) is not None:
+                image, uv = one[0], (one[1],)
+        elif self.rings:
             found = [self.rings.get(_gml_id(ring) or "") for ring in rings]
             first = next((f for f in found if f is not None), None)
             if first is not None:

@@ -25,7 +25,6 @@ from .names import local
 
 _EXTERIOR = frozenset({"exterior", "outerBoundaryIs"})
 _INTERIOR = frozenset({"interior", "innerBoundaryIs"})
-_BOUNDARIES = _EXTERIOR | _INTERIOR
 
 
 @dataclass
@@ -67,9 +66,12 @@ def _ring_values(ring: etree._Element, rings: Rings) -> None:
     rings.widths.append(width)
 
 
-def _polygon_rings(polygon: Polygon, element: etree._Element, rings: Rings) -> list[int]:
+def _polygon_rings(
+    polygon: Polygon, element: etree._Element, rings: Rings, found: list[etree._Element] | None
+) -> list[int]:
     """Add the rings of ``polygon`` (its ``element``; a ``Tin``'s control points, noted with
-    its ``maxLength``); its layout: its number of rings, then their indices, exterior first."""
+    its ``maxLength``), their elements to ``found`` (but a ``Tin``'s) in the order they are
+    read; its layout: its number of rings, then their indices, exterior first."""
     exterior: list[int] = []
     interior: list[int] = []
     if local(element) == "Tin":  # its control points, triangulated later
@@ -87,12 +89,9 @@ def _polygon_rings(polygon: Polygon, element: etree._Element, rings: Rings) -> l
         for ring in boundary:
             into.append(len(rings.counts))
             _ring_values(ring, rings)
+        if found is not None:
+            found.extend(boundary)
     return [len(exterior) + len(interior), *exterior[::-1], *interior]
-
-
-def _ring_elements(element: etree._Element) -> list[etree._Element]:
-    """The rings of a polygon's element, as :func:`_polygon_rings` reads them."""
-    return [ring for boundary in element if local(boundary) in _BOUNDARIES for ring in boundary]
 
 
 def _look(look: Look | None, rings: Rings, first_ring: int, first_value: int) -> Look | None:
@@ -221,9 +220,10 @@ def read_holder(holder: Holder, rings: Rings, read: Read) -> None:
     for polygon in holder.polygons:
         assert polygon.element is not None  # not read before
         start = len(rings.counts), len(rings.values)
-        read.layout += _polygon_rings(polygon, polygon.element, rings)
-        if looks is not None and not polygon.tin:
-            look = looks(polygon.element, _ring_elements(polygon.element))
+        found: list[etree._Element] | None = None if looks is None else []
+        read.layout += _polygon_rings(polygon, polygon.element, rings, found)
+        if looks is not None and found is not None and not polygon.tin:
+            look = looks(polygon.element, found)
             polygon.look = _look(look, rings, *start)
         if polygon.implicit is not None and polygon.placed_by is not None:
             if placements[polygon.placed_by] is None:
