@@ -13,6 +13,7 @@ import math
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from lxml import etree
@@ -35,8 +36,7 @@ _SCAN_BYTES = 1 << 22
 """Bytes read at a time when a document is scanned for the marks."""
 
 
-@dataclass(frozen=True)
-class Look:
+class Look(NamedTuple):
     """What one polygon wears: an image (its URI, as the file gives it) with texture
     coordinates per ring (``uv``: (n, 2) each, a ring's points in order, the closing one
     included; with ``texels``, in texels of the image from its top-left texel's centre), a
