@@ -67,20 +67,20 @@ class _Boxes(NamedTuple):
 def _overlapping(first: _Boxes, second: _Boxes) -> tuple[np.ndarray, np.ndarray]:
     """The pairs (i, j) of boxes ``first[i]`` and ``second[j]`` that overlap and face the same
     way (normals more than :data:`FACING` along each other), each once, in order: every pair
-    tested, :data:`BOX_BATCH` · 16 at a time, where there are at most :data:`TESTED_PAIRS`;
+    tested, :data:`BOX_BATCH` · 16 at a time (facing by a matrix product, boxes in a compiled
+    loop), where there are at most :data:`TESTED_PAIRS`;
     else the second boxes in a tree (shapely's STRtree, in plan), the first queried
     :data:`BOX_BATCH` at a time, then tested in full."""
     (low, high, normal), (near, far, towards) = first, second
     found = [(np.zeros(0, dtype=np.int64),) * 2]
     if len(low) * len(near) <= TESTED_PAIRS:
+        from .texels import overlapping  # numba: loaded where a texture is baked
+
         step = max(1, 16 * BOX_BATCH // max(len(near), 1))
         for start in range(0, len(low), step):
-            lo, hi = low[start : start + step], high[start : start + step]
-            kept = normal[start : start + step] @ towards.T > FACING
-            for k in range(3):  # axis by axis: (n, m) tests, none of (n, m, 3)
-                kept &= lo[:, k, None] <= far[None, :, k]
-                kept &= hi[:, k, None] >= near[None, :, k]
-            i, j = np.nonzero(kept)
+            end = start + step
+            facing = normal[start:end] @ towards.T > FACING
+            i, j = overlapping(low[start:end], high[start:end], near, far, facing)
             found.append((i + start, j))
         i, j = (np.concatenate(parts) for parts in zip(*found, strict=True))
         return i, j

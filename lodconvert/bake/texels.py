@@ -108,3 +108,33 @@ def _drawn(
         weights[i, 0], weights[i, 1] = bary[k, 0], bary[k, 1]
         i += 1
     return texel, which, weights
+
+
+@compiled
+def overlapping(
+    low: np.ndarray, high: np.ndarray, near: np.ndarray, far: np.ndarray, facing: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs (i, j), in order, of boxes ``low[i]``–``high[i]`` and ``near[j]``–``far[j]``
+    ((n, 3) and (m, 3)) that overlap, of those that ``facing`` ((n, m) bool) holds."""
+    count = 0
+    for i in range(facing.shape[0]):
+        for j in range(facing.shape[1]):
+            count += facing[i, j]
+    first = np.empty(count, np.int64)
+    second = np.empty(count, np.int64)
+    found = 0
+    for i in range(facing.shape[0]):
+        for j in range(facing.shape[1]):
+            if (
+                facing[i, j]
+                and low[i, 0] <= far[j, 0]
+                and high[i, 0] >= near[j, 0]
+                and low[i, 1] <= far[j, 1]
+                and high[i, 1] >= near[j, 1]
+                and low[i, 2] <= far[j, 2]
+                and high[i, 2] >= near[j, 2]
+            ):
+                first[found] = i
+                second[found] = j
+                found += 1
+    return first[:found], second[:found]
