@@ -809,6 +809,40 @@ def test_the_faces_a_chart_may_see_are_every_box_it_overlaps(
     assert i.tolist() == expected[0].tolist() and j.tolist() == expected[1].tolist()
 
 
+def test_each_sample_of_a_chart_shows_the_outermost_face_within_reach() -> None:
+    """The compiled bake draws each pair of a source face and a chart into the chart's
+    samples: at each sample, of the faces over it, the outermost no more than ``front`` in
+    front of the chart (a face beyond is left out, the first of two at one height kept), with
+    its texel and barycentric coordinates; a sample no face covers is not listed."""
+    from lodconvert.bake.texels import outermost
+
+    triangles = np.array(
+        [
+            [(-1.0, -1.0, 0.5), (10.0, -1.0, 0.5), (-1.0, 10.0, 0.5)],  # the whole chart, low
+            [(0.0, 0.0, 1.0), (2.0, 0.0, 1.0), (0.0, 2.0, 1.0)],  # a corner, higher
+            [(-1.0, -1.0, 3.0), (10.0, -1.0, 3.0), (-1.0, 10.0, 3.0)],  # beyond reach
+            [(0.0, 0.0, 1.0), (2.0, 0.0, 1.0), (0.0, 2.0, 1.0)],  # the corner again
+            [(10.0, 10.0, 1.0), (11.0, 10.0, 1.0), (10.0, 11.0, 1.0)],  # beside the chart
+        ]
+    )
+    frame = np.array([[(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)]])
+    layout = np.array([[0, 0, 2, 2]])  # 2 × 2 texels from texel and sample 0
+    faces = np.arange(len(triangles))
+    texel, which, weights = outermost(
+        triangles, faces, np.zeros_like(faces), frame, np.array([1.0]), layout, 2, 2.0
+    )
+    centres = [(x + 0.5, y + 0.5) for y in range(4) for x in range(4)]  # sample by sample
+    assert which.tolist() == [1 if x + y <= 2.0 else 0 for x, y in centres]
+    assert texel.tolist() == [(y // 2) * 2 + x // 2 for y in range(4) for x in range(4)]
+    corner = which == 1
+    points = np.array(centres)[corner]
+    assert np.allclose(weights[corner], points / 2.0)  # corners 2 and 3 lie at x = 2, y = 2
+    low = np.array(centres)[~corner] + 1.0
+    assert np.allclose(weights[~corner], low / 11.0)
+    nothing = outermost(triangles[4:], faces[:1], faces[:1] * 0, frame, np.ones(1), layout, 2, 2.0)
+    assert all(len(part) == 0 for part in nothing)
+
+
 def test_a_coarser_source_lod_takes_the_textures_colours(tmp_path: Path) -> None:
     """A source LoD1 without an appearance of its own (PLATEAU's lod1Solid) is drawn in a
     texture baked from the finest LoD's, roofs and walls apart, not in class colours (here
