@@ -1,5 +1,6 @@
-"""The compiled loop of a far level's texture bake (:mod:`.far_textures`): source faces drawn
-into the samples of the charts that see them, the outermost kept at each."""
+"""The compiled loops of a far level's texture bake (:mod:`.far_textures`): the pairs of a
+source face and a chart whose boxes overlap (:func:`overlapping`), and source faces drawn into
+the samples of the charts that see them, the outermost kept at each (:func:`outermost`)."""
 
 from __future__ import annotations
 
