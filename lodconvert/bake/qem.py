@@ -153,16 +153,15 @@ def _most_facing(
 def _near(triangles: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each of ``points``, the :data:`NEAREST` faces of ``triangles`` nearest by centre
     and the distance from it to each."""
-    import trimesh
     from scipy.spatial import cKDTree
+
+    from .closest import distances  # numba: loaded where a far mesh is coloured
 
     k = min(NEAREST, len(triangles))
     _, near = cKDTree(triangles.mean(axis=1)).query(points, k=k)
-    near = np.asarray(near).reshape(len(points), k)
-    closest = trimesh.triangles.closest_point(
-        triangles[near.ravel()], np.repeat(points, k, axis=0)
-    ).reshape(len(points), k, 3)
-    return near, np.linalg.norm(closest - points[:, None], axis=2)
+    near = np.asarray(near, dtype=np.int64).reshape(len(points), k)
+    triangles = np.ascontiguousarray(triangles, dtype=np.float64)
+    return near, distances(triangles, near, np.ascontiguousarray(points, dtype=np.float64))
 
 
 def _split_by_colour(points: np.ndarray, faces: np.ndarray, colors: np.ndarray) -> Surface:
