@@ -1,8 +1,9 @@
 """Functions compiled to machine code by numba (the guard's silhouettes, a prism's roof
-percentile, a far level's texture bake): cached on disk where numba finds a place for its
-cache (beside the module, else the user's cache folder), compiled anew in each process where
-it finds none (a read-only install without a writable home). Importing this module loads
-numba: a few tenths of a second and about 130 MiB of memory in each process that does."""
+percentile, a far level's texture bake, a far mesh's colour distances): cached on disk where
+numba finds a place for its cache (beside the module, else the user's cache folder), compiled
+anew in each process where it finds none (a read-only install without a writable home).
+Importing this module loads numba: a few tenths of a second and about 130 MiB of memory in
+each process that does."""
 
 from __future__ import annotations
 

@@ -40,39 +40,60 @@ def _closest(
     """The point of triangle ``a``, ``b``, ``c`` nearest to ``p``."""
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
+    d1, d2 = _dots(abx, aby, abz, acx, acy, acz, px - ax, py - ay, pz - az)
     if abx == 0.0 and aby == 0.0 and abz == 0.0:  # the segment AC, or a point
         length = acx * acx + acy * acy + acz * acz
-        f = (apx * acx + apy * acy + apz * acz) / length if length > 0.0 else 0.0
-        f = min(max(f, 0.0), 1.0)
-        return ax + f * acx, ay + f * acy, az + f * acz
+        f = min(max(d2 / length if length > 0.0 else 0.0, 0.0), 1.0)
+        return _step(ax, ay, az, f, acx, acy, acz)
     if d1 < ZERO and d2 < ZERO:
         return ax, ay, az
-    bpx, bpy, bpz = px - bx, py - by, pz - bz
-    d3 = abx * bpx + aby * bpy + abz * bpz
-    d4 = acx * bpx + acy * bpy + acz * bpz
-    if d3 > -ZERO and d4 <= d3:
-        return bx, by, bz
-    vc = d1 * d4 - d3 * d2
-    if vc < ZERO and d1 > -ZERO and d3 < ZERO:
-        v = d1 / (d1 - d3)
-        return ax + v * abx, ay + v * aby, az + v * abz
-    cpx, cpy, cpz = px - cx, py - cy, pz - cz
-    d5 = abx * cpx + aby * cpy + abz * cpz
-    d6 = acx * cpx + acy * cpy + acz * cpz
-    if d6 > -ZERO and d5 <= d6:
-        return cx, cy, cz
-    vb = d5 * d2 - d1 * d6
-    if vb < ZERO and d2 > -ZERO and d6 < ZERO:
-        w = d2 / (d2 - d6)
-        return ax + w * acx, ay + w * acy, az + w * acz
+    d3, d4 = _dots(abx, aby, abz, acx, acy, acz, px - bx, py - by, pz - bz)
+    done, qx, qy, qz, vc = _by_corner(bx, by, bz, ax, ay, az, abx, aby, abz, d3, d4, d1, d2)
+    if done:
+        return qx, qy, qz
+    d5, d6 = _dots(abx, aby, abz, acx, acy, acz, px - cx, py - cy, pz - cz)
+    done, qx, qy, qz, vb = _by_corner(cx, cy, cz, ax, ay, az, acx, acy, acz, d6, d5, d2, d1)
+    if done:
+        return qx, qy, qz
     va = d3 * d6 - d5 * d4
     if va < ZERO and d4 - d3 > -ZERO and d5 - d6 > -ZERO:
         d43 = d4 - d3
-        w = d43 / (d43 + (d5 - d6))
-        return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz)
+        return _step(bx, by, bz, d43 / (d43 + (d5 - d6)), cx - bx, cy - by, cz - bz)
     denom = 1.0 / (va + vb + vc)
-    v, w = vb * denom, vc * denom
-    return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
+    qx, qy, qz = _step(ax, ay, az, vb * denom, abx, aby, abz)
+    return _step(qx, qy, qz, vc * denom, acx, acy, acz)
+
+
+@compiled
+def _by_corner(
+    xx: float, xy: float, xz: float, ax: float, ay: float, az: float,
+    sx: float, sy: float, sz: float, along: float, across: float, at_a: float, across_a: float,
+) -> tuple[bool, float, float, float, float]:  # fmt: skip
+    """The nearest point where it is corner X (B or C) of a triangle or lies on side AX
+    (``s``: X - A), from the point's dot products with AX and the other side taken from X
+    (``along``, ``across``) and from A (``at_a``, ``across_a``): whether found, the point,
+    and the barycentric numerator of the third corner (what the inside needs)."""
+    if along > -ZERO and across <= along:
+        return True, xx, xy, xz, 0.0
+    third = at_a * across - along * across_a
+    if third < ZERO and at_a > -ZERO and along < ZERO:
+        qx, qy, qz = _step(ax, ay, az, at_a / (at_a - along), sx, sy, sz)
+        return True, qx, qy, qz, third
+    return False, 0.0, 0.0, 0.0, third
+
+
+@compiled
+def _dots(
+    ux: float, uy: float, uz: float, vx: float, vy: float, vz: float,
+    dx: float, dy: float, dz: float,
+) -> tuple[float, float]:  # fmt: skip
+    """``u`` · ``d`` and ``v`` · ``d``."""
+    return ux * dx + uy * dy + uz * dz, vx * dx + vy * dy + vz * dz
+
+
+@compiled
+def _step(
+    ox: float, oy: float, oz: float, t: float, dx: float, dy: float, dz: float
+) -> tuple[float, float, float]:
+    """``o`` + ``t`` ``d``."""
+    return ox + t * dx, oy + t * dy, oz + t * dz
