@@ -3,8 +3,8 @@ kept compact, and the report written as JSON.
 
 A city of tens of thousands of objects gives as many records; as Python dictionaries each
 would hold a few kilobytes for the whole run. :class:`Records` keeps each as its compact JSON
-text and decodes it when read, and :func:`report_text` writes a report holding one without
-building all its records at once.
+text and decodes it when read, and :func:`report_text` writes a report holding one with each
+record on a line of its own, as that text (never decoded and encoded again).
 """
 
 from __future__ import annotations
@@ -68,18 +68,23 @@ class Records(Sequence[dict[str, Any]]):
         for text in self._texts:
             yield json.loads(text)
 
+    def texts(self) -> Iterator[str]:
+        """Each record's compact JSON text (ASCII), in the order added."""
+        for text in self._texts:
+            yield text.decode("ascii")
+
 
 def report_text(report: dict[str, Any]) -> Iterator[str]:
     """``report`` as JSON text indented by two spaces (as ``json.dumps(report, indent=2)``
-    writes it, and a newline at the end), in pieces: a :class:`Records` value one record at a
-    time."""
+    writes it, and a newline at the end), in pieces, except that each record of a
+    :class:`Records` value is one line of compact JSON."""
     yield "{"
     for n, (key, value) in enumerate(report.items()):
         yield ("," if n else "") + f"\n  {json.dumps(key)}: "
         if isinstance(value, Records):
             yield "[" if value else "[]"
-            for i, record in enumerate(value):
-                yield ("," if i else "") + "\n    " + _indented(record, 4)
+            for i, record in enumerate(value.texts()):
+                yield ("," if i else "") + "\n    " + record
             yield "\n  ]" if value else ""
         else:
             yield _indented(value, 2)
