@@ -22,7 +22,14 @@ import trimesh
 from lodconvert.io import OutputInfo
 from lodconvert.io.findings import Findings
 from lodconvert.io.gltf import check, elements, extrema, write_glb
-from lodconvert.io.gltf.stream import NotStreamed, Source, read_object, too_deep, utf8_error
+from lodconvert.io.gltf.stream import (
+    NotStreamed,
+    Source,
+    TooDeep,
+    read_object,
+    too_deep,
+    utf8_error,
+)
 from lodconvert.model import Level, LodChain, Surface
 
 INFO = OutputInfo(generator="lodconvert tests", source="check", crs="EPSG:25832")
@@ -120,6 +127,30 @@ def test_document_reads_as_json_loads_reads_it() -> None:
         except NotStreamed:
             got = None
         assert got == (expected if isinstance(expected, dict) else None), bytes(broken)
+
+
+def test_a_document_nested_too_deep_is_found_as_it_is_read() -> None:
+    """A JSON object read with a depth limit raises TooDeep exactly where too_deep says the
+    text nests deeper than it: elements read in batches (ASCII text), one at a time (text
+    that is not ASCII) and members read whole."""
+    rng = random.Random(5)
+    keys = ["nodes", "accessors", "asset", "buffers", "x"]
+    raised = 0
+    for _ in range(400):
+        doc = {key: _random_value(rng, 1) for key in rng.sample(keys, rng.randrange(1, 5))}
+        text = json.dumps(doc, indent=rng.choice([None, 1]), ensure_ascii=rng.random() < 0.5)
+        raw = text.encode()
+        for limit in range(7):
+            expected = too_deep(_source(raw), limit)
+            for window in (3, 1000):
+                try:
+                    read_object(_source(raw), {}, window, limit)
+                    got = False
+                except TooDeep:
+                    got = True
+                assert got == expected, (text, limit, window)
+                raised += got
+    assert raised > 100
 
 
 # --- a large-ish file ---------------------------------------------------------------------------

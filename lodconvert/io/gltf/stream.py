@@ -6,9 +6,10 @@ UTF-8, :func:`too_deep` whether arrays and objects nest deeper than a limit (as 
 expression scanning the whole text would say, strings skipped), and :func:`read_object` reads
 the top-level JSON object member by member, each array member element by element
 (:class:`LazyArray`: each element handed to a sink as it is read, then only its offset kept,
-so that it can be read again on demand). Where the text is not exactly what ``json.loads``
-accepts, :func:`read_object` raises :class:`NotStreamed` and the caller reads it whole, for the
-message ``json.loads`` gives.
+so that it can be read again on demand), and raises :class:`TooDeep` where it nests deeper
+than a limit (as :func:`too_deep` would say of the text). Where the text is not exactly what
+``json.loads`` accepts, :func:`read_object` raises :class:`NotStreamed` and the caller reads it
+whole, for the message ``json.loads`` gives.
 """
 
 from __future__ import annotations
@@ -43,10 +44,17 @@ character that ``.`` would not match)."""
 _STEP = np.zeros(256, np.int32)
 _STEP[[ord("["), ord("{")]] = 1
 _STEP[[ord("]"), ord("}")]] = -1
+_MARK = _STEP != 0
+_MARK[_COMMA] = True
+"""Brackets, braces and commas: the bytes :meth:`_Text._batch` looks at."""
 
 
 class NotStreamed(Exception):
     """The text is not a JSON object that reads as ``json.loads`` reads it: read it whole."""
+
+
+class TooDeep(Exception):
+    """Arrays and objects nest deeper than the limit :func:`read_object` was given."""
 
 
 class Source:
@@ -216,9 +224,10 @@ class _Text:
     before the text's end loads a window starting at the value it was reading (twice as
     long when that is where the window started) and reads again."""
 
-    def __init__(self, source: Source, window: int) -> None:
+    def __init__(self, source: Source, window: int, limit: int) -> None:
         self.source = source
         self.window = max(window, 8)  # a window holds at least one character
+        self.limit = limit
         self.decoder = json.JSONDecoder(parse_constant=reject_constant)
         self.scan = self.decoder.scan_once
         self._load(0, window)
@@ -270,8 +279,9 @@ class _Text:
     def char(self, i: int) -> str:
         return self.s[i : i + 1]
 
-    def value(self, i: int) -> tuple[Any, int, int]:
-        """The JSON value at ``i``: (value, its start, its end) in the window then loaded."""
+    def value(self, i: int, depth: int) -> tuple[Any, int, int]:
+        """The JSON value at ``i``, ``depth`` arrays and objects in: (value, its start, its
+        end) in the window then loaded."""
         while True:
             try:
                 value, end = self.scan(self.s, i)
@@ -281,6 +291,8 @@ class _Text:
             except (ValueError, RecursionError):  # NaN, Infinity; too long an integer
                 raise NotStreamed from None
             if end + _LOOKAHEAD <= len(self.s) or self.complete:
+                if _deeper_than(value, self.limit - depth):
+                    raise TooDeep
                 return value, i, end
             i = self._reload(i)
 
@@ -308,7 +320,7 @@ class _Text:
             if batch is not None:
                 values, starts, stop = batch
                 lazy.starts.extend([self.base + start for start in starts])
-                if lazy.all_objects and not all(type(v) is dict for v in values):
+                if lazy.all_objects and set(map(type, values)) != {dict}:
                     lazy.all_objects = False
                 if sink is not None:
                     sink(index, values)
@@ -318,7 +330,7 @@ class _Text:
                     return stop + 1
                 i = self.ws(stop + 1)
                 continue
-            value, i, end = self.value(i)
+            value, i, end = self.value(i, 2)
             lazy.starts.append(self.byte(i))
             if not isinstance(value, dict):
                 lazy.all_objects = False
@@ -339,19 +351,21 @@ class _Text:
         the array's end), read at once: (values, their starts, where the comma or closing
         bracket after them is); ``None`` where there is no such comma or the text between
         does not read as JSON values (then elements are read one at a time until the next
-        window). Commas between elements are found with numpy; reading the text between
-        decides: what reads as values followed by a comma is what reading one at a time
-        would have read."""
+        window). Commas between elements are found with numpy, among the brackets, braces
+        and commas outside strings; reading the text between decides: what reads as values
+        followed by a comma is what reading one at a time would have read. Raises
+        :class:`TooDeep` where the elements nest deeper than the limit (before reading them)."""
         w = np.frombuffer(self.raw, np.uint8)[i : i + _BATCH]
-        inside = _in_strings(w)
-        steps = _STEP[w]
-        steps[inside] = 0
-        depth = np.cumsum(steps, dtype=np.int32)
+        marks = np.flatnonzero(_MARK[w])
+        marks = marks[_outside_strings(w, marks)]
+        depth = np.cumsum(_STEP[w[marks]], dtype=np.int32)
         closing = np.flatnonzero(depth < 0)
-        limit = int(closing[0]) if len(closing) else len(w)
-        commas = np.flatnonzero((w[:limit] == _COMMA) & ~inside[:limit] & (depth[:limit] == 0))
-        if len(closing) and w[limit] == _CLOSE:
-            stop = limit
+        ahead = int(closing[0]) if len(closing) else len(marks)  # marks of these elements
+        if ahead and 2 + int(depth[:ahead].max()) > self.limit:
+            raise TooDeep
+        commas = marks[:ahead][(w[marks[:ahead]] == _COMMA) & (depth[:ahead] == 0)]
+        if len(closing) and w[marks[ahead]] == _CLOSE:
+            stop = int(marks[ahead])
         elif len(commas) and not len(closing):
             stop, commas = int(commas[-1]), commas[:-1]
         else:
@@ -367,12 +381,25 @@ class _Text:
         return values, [i, *(i + commas + 1).tolist()], i + stop
 
 
-def _in_strings(w: np.ndarray) -> np.ndarray:
-    """Which bytes of JSON text ``w`` (starting outside a string) are inside strings or open
-    them (a quote after an odd run of backslashes does not count)."""
+def _outside_strings(w: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """Which of the positions ``at`` (sorted, none a quote) of JSON text ``w`` (starting
+    outside a string) lie outside strings: after an even number of quotes (a quote after an
+    odd run of backslashes does not count)."""
     quote = w == _QUOTE
     quote[_escaped(w)] = False
-    return np.cumsum(quote, dtype=np.uint8) & 1 == 1
+    return np.searchsorted(np.flatnonzero(quote), at) % 2 == 0
+
+
+def _deeper_than(value: Any, levels: int) -> bool:
+    """Whether arrays and objects nest more than ``levels`` deep in the decoded JSON
+    ``value`` (looked into no further than that)."""
+    if type(value) is list:
+        children: Any = value
+    elif type(value) is dict:
+        children = value.values()
+    else:
+        return False
+    return levels <= 0 or any(_deeper_than(child, levels - 1) for child in children)
 
 
 def _escaped(w: np.ndarray) -> np.ndarray:
@@ -390,15 +417,21 @@ def _escaped(w: np.ndarray) -> np.ndarray:
 
 
 def read_object(
-    source: Source, sinks: dict[str, Callable[[], tuple[Any, Sink | None]]], window: int = WINDOW
+    source: Source,
+    sinks: dict[str, Callable[[], tuple[Any, Sink | None]]],
+    window: int = WINDOW,
+    limit: int = 1 << 30,
 ) -> dict[str, Any]:
     """The JSON object in ``source``, each array member a :class:`LazyArray`: for a key in
     ``sinks``, ``sinks[key]()`` gives its ``facts`` and the sink its elements go to. Raises
-    :class:`NotStreamed` where the text is not one JSON object (``json.loads`` says why)."""
-    text = _Text(source, window)
+    :class:`NotStreamed` where the text is not one JSON object (``json.loads`` says why), and
+    :class:`TooDeep` where arrays and objects nest deeper than ``limit`` in it."""
+    text = _Text(source, window, limit)
     i = text.ws(0)
     if text.char(i) != "{":
         raise NotStreamed
+    if limit < 1:
+        raise TooDeep
     doc: dict[str, Any] = {}
     i = text.ws(i + 1)
     if text.char(i) == "}":
@@ -411,12 +444,14 @@ def read_object(
                 raise NotStreamed
             i = text.ws(i + 1)
             if text.char(i) == "[" and key not in _WHOLE:
+                if limit < 2:
+                    raise TooDeep
                 facts, sink = sinks[key]() if key in sinks else (None, None)
                 lazy = LazyArray(text, facts)
                 i = text.elements(i, lazy, sink)
                 doc[key] = lazy
             else:
-                doc[key], _, i = text.value(i)
+                doc[key], _, i = text.value(i, 1)
             i = text.ws(i)
             mark = text.char(i)
             if mark == "}":

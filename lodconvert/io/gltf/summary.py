@@ -39,18 +39,23 @@ def _uint(value: Any) -> bool:
 
 def _all_uint(values: list[Any]) -> bool:
     """Whether every value is a JSON integer in [0, :data:`_BIG`)."""
-    if not all(type(v) is int for v in values):
+    if not values:
+        return True
+    return set(map(type, values)) == {int} and min(values) >= 0 and max(values) < _BIG
+
+
+def _all_numbers(values: list[Any]) -> bool:
+    """Whether every value is a JSON number that is exactly a float64."""
+    kinds = set(map(type, values))
+    if not kinds <= {float, int}:
         return False
-    return not values or (min(values) >= 0 and max(values) < _BIG)
+    whole = [v for v in values if type(v) is int] if int in kinds else []
+    return not whole or (min(whole) >= -(2**53) and max(whole) <= 2**53)
 
 
 def _numbers(value: Any, width: int) -> bool:
     """A list of ``width`` JSON numbers, each exactly a float64."""
-    return (
-        type(value) is list
-        and len(value) == width
-        and all(type(v) is float or (type(v) is int and -(2**53) <= v <= 2**53) for v in value)
-    )
+    return type(value) is list and len(value) == width and _all_numbers(value)
 
 
 class _Facts:
@@ -69,7 +74,7 @@ class _Facts:
     def add(self, first: int, items: list[Any]) -> None:
         """The sink of :func:`~.stream.read_object`: take the facts of elements ``first`` on."""
         self.size += len(items)
-        if self.regular and not all(type(item) is dict for item in items):
+        if self.regular and items and set(map(type, items)) != {dict}:
             self.regular = False
         if self.regular:
             self.regular = self.take_all(first, items)
@@ -102,17 +107,22 @@ class _Accessors(_Facts):
             return False
         if min(count, default=1) <= 0:
             return False
-        if not all(type(c) is int and c in COMPONENT_SIZES for c in ctype):
+        if set(map(type, ctype)) != {int} or not set(ctype) <= COMPONENT_SIZES.keys():
             return False
         bounds = [-1] * len(items)
+        declared: list[Any] = []
+        at = len(self.declared)
         for k, item in enumerate(items):
             if "min" in item or "max" in item:
                 low, high = item.get("min"), item.get("max")
-                if not (_numbers(low, width[k]) and _numbers(high, width[k])):
+                if not (type(low) is type(high) is list and len(low) == len(high) == width[k]):
                     return False
-                bounds[k] = len(self.declared)
-                self.declared.extend(low)
-                self.declared.extend(high)
+                bounds[k] = at + len(declared)
+                declared += low
+                declared += high
+        if not _all_numbers(declared):
+            return False
+        self.declared.extend(declared)
         self.view.extend(view)
         self.offset.extend(offset)
         self.ctype.extend(ctype)
