@@ -8,18 +8,20 @@ process's own CPU sampled every 50 ms, the tree's from ``wait4``), against the t
     python benchmarks/central.py                       # 100×, 2 workers: results/central.md
     python benchmarks/central.py --factor 10 --formats x3d
     python benchmarks/central.py --formats glb --baseline /tmp/base   # interleaved with a checkout
+    python benchmarks/central.py --formats glb --baseline /tmp/base --runs 3   # medians of 3
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import tempfile
 import time
 from pathlib import Path
 
 from city import Template, tum_document, write_district
-from scale import ROOT, convert_once
+from scale import ROOT, Run, convert_once
 from tables import commit_of, machine_line, markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
@@ -36,6 +38,9 @@ def main() -> None:
     parser.add_argument(
         "--baseline", type=Path, help="a checkout to run before this one, format by format"
     )
+    parser.add_argument(
+        "--runs", type=int, default=1, help="runs of each, interleaved; medians reported (1)"
+    )
     args = parser.parse_args()
     load, began = os.getloadavg()[0], time.perf_counter()
     rows = []
@@ -47,12 +52,17 @@ def main() -> None:
             roots.insert(0, (commit_of(args.baseline), args.baseline.resolve()))
         for fmt in args.formats.split(","):
             out = folder / ("out/tileset.json" if fmt == "tiles" else f"out.{fmt}")
-            for name, root in roots:
-                run = convert_once(
-                    district.path, out, str(args.workers), root=root, report=folder / "r.json"
-                )
+            runs: dict[str, list[Run]] = {name: [] for name, _ in roots}
+            for _ in range(args.runs):
+                for name, root in roots:
+                    run = convert_once(
+                        district.path, out, str(args.workers), root=root, report=folder / "r.json"
+                    )
+                    print(fmt, name, run, flush=True)
+                    runs[name].append(run)
+            for name, _ in roots:
+                run = _median(runs[name])
                 per = 1000 * run.main_cpu / district.buildings
-                print(fmt, name, run, flush=True)
                 rows.append(
                     [
                         fmt if args.baseline is None else f"{fmt} ({name})",
@@ -78,7 +88,8 @@ def main() -> None:
             + (f" --baseline {args.baseline}" if args.baseline is not None else "")
             + f"`; input: {district.buildings:,} LoD2 "
             f"buildings, {district.bytes / 1e9:.2f} GB of CityGML 2.0 (generated, removed "
-            "after); one run each.",
+            "after); "
+            + ("one run each." if args.runs == 1 else f"medians of {args.runs} interleaved runs."),
             "",
             markdown_table(header, rows, 1),
             "",
@@ -91,6 +102,20 @@ def main() -> None:
         ]
     )
     write_results(args.out, text)
+
+
+def _median(runs: list[Run]) -> Run:
+    """The median of each figure of ``runs`` (the first run's output digest and stage timings, but
+    the median check time)."""
+    check = statistics.median(run.timings.get("validate", 0.0) for run in runs)
+    return Run(
+        statistics.median(run.wall for run in runs),
+        statistics.median(run.cpu for run in runs),
+        statistics.median(run.peak_mib for run in runs),
+        runs[0].output,
+        {**runs[0].timings, "validate": check},
+        statistics.median(run.main_cpu for run in runs),
+    )
 
 
 if __name__ == "__main__":
