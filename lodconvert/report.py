@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import platform
+from collections import Counter
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -156,21 +157,40 @@ def chain_record(chain: LodChain) -> dict[str, Any]:
     }
 
 
+@dataclass
+class ObjectCounts:
+    """The objects' records counted as they are recorded (so that the totals need not read
+    them again): objects that dropped levels, by the levels they keep; objects with source
+    LoDs that no level is made from, and those LoDs; the points of all levels."""
+
+    fewer: Counter[int] = field(default_factory=Counter)
+    unused: Counter[str] = field(default_factory=Counter)
+    with_unused: int = 0
+    points: int = 0
+
+    def add(self, record: dict[str, Any]) -> None:
+        """Count an object's ``record`` (:func:`chain_record`)."""
+        if record["dropped"]:
+            self.fewer[len(record["levels"])] += 1
+        if record["unused"]:
+            self.with_unused += 1
+            self.unused.update(record["unused"].keys())
+        self.points += sum(lv["count"] for lv in record["levels"] if lv["kind"] == "pcd")
+
+
 def run_report(
     input_path: str | Path,
     output_path: str | Path,
     baker: Backend,
     options: ChainOptions,
     records: Records,
+    counts: ObjectCounts,
     skipped: list[dict[str, str]],
     timings: dict[str, float],
     tally: InputTally | None = None,
 ) -> dict[str, Any]:
-    """What ``--report`` records of a run; ``tally``: what the reader's checks dropped."""
-    reduced = points = 0
-    for record in records:
-        reduced += bool(record["dropped"])
-        points += sum(lv["count"] for lv in record["levels"] if lv["kind"] == "pcd")
+    """What ``--report`` records of a run (``counts``: of ``records``); ``tally``: what the
+    reader's checks dropped."""
     return {
         "lodconvert": __version__,
         "input": str(input_path),
@@ -184,9 +204,12 @@ def run_report(
         "totals": {
             "objects": len(records),
             "skipped": len(skipped) + (tally.unlisted if tally is not None else 0),
-            "fewer_levels": reduced,
+            "fewer_levels": sum(counts.fewer.values()),
+            "levels_kept": {str(n): counts.fewer[n] for n in sorted(counts.fewer)},
+            "with_unused_lods": counts.with_unused,
+            "unused_lods": {label: counts.unused[label] for label in sorted(counts.unused)},
             "dropped_faces": tally.dropped_faces if tally is not None else 0,
-            "points": int(points),
+            "points": int(counts.points),
         },
         "timings": {k: round(v, 4) for k, v in timings.items()},
     }
@@ -206,6 +229,7 @@ class Assembly:
     info: OutputInfo
     hlod: HlodOptions | None
     records: Records = field(default_factory=Records)
+    counts: ObjectCounts = field(default_factory=ObjectCounts)
     cells: list[dict[str, Any]] = field(default_factory=list)
     draw: dict[str, dict[str, int]] = field(default_factory=lambda: {"without": {}, "with": {}})
     frame: SceneFrame | None = None
@@ -226,9 +250,9 @@ class Assembly:
                 self.frame, self.started = frame, True
             objects = item.objects()
             for chain in objects:
-                self.records.append(
-                    {**chain_record(chain), "dropped_faces": dropped.get(chain.object_id, 0)}
-                )
+                record = {**chain_record(chain), "dropped_faces": dropped.get(chain.object_id, 0)}
+                self.counts.add(record)
+                self.records.append(record)
             if isinstance(item, CellChain):
                 self.cells.extend(cell_record(cell) for cell in item.cells())
             if self.hlod is not None:
@@ -250,8 +274,9 @@ class Assembly:
     ) -> dict[str, Any]:
         """The ``--report`` of the run (``up``: the up axis its meshes were read with)."""
         report = run_report(
-            named, output_path, baker, options, self.records, skipped, clock.timings, tally
-        )
+            named, output_path, baker, options, self.records, self.counts, skipped,
+            clock.timings, tally,
+        )  # fmt: skip
         report["crs"] = crs_record
         report["up"] = "z" if self.info.city else up or "y"
         if self.info.city:

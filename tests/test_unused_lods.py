@@ -61,11 +61,27 @@ def test_the_report_names_lod_1_2_beside_the_lod_1_3_that_fills_lod1(tmp_path: P
 
 
 def test_the_summary_counts_the_unused_lods(tmp_path: Path) -> None:
-    result = run(shared_data(MULTI_LOD), "-o", tmp_path / "out.glb", "--backend", "numpy")
+    report = tmp_path / "report.json"
+    result = run(
+        shared_data(MULTI_LOD), "-o", tmp_path / "out.glb", "--backend", "numpy",
+        "--levels", "3", "--report", report,
+    )  # fmt: skip
     assert result.returncode == 0, result.stderr
-    assert "10 object(s) have source LoDs that no level is made from: LoD 1.2 (10)" in (
-        result.stderr
+    assert (
+        "10 object(s) have source LoDs that no level is made from: LoD 1.2 (10), LoD 1.3 (10)"
+        in result.stderr
     )
+    # the totals, counted as the objects were recorded, are those of the objects' records
+    data = json.loads(report.read_text())
+    objects, totals = data["objects"], data["totals"]
+    fewer = [len(obj["levels"]) for obj in objects if obj["dropped"]]
+    assert totals["fewer_levels"] == len(fewer)
+    assert totals["levels_kept"] == {str(n): fewer.count(n) for n in sorted(set(fewer))}
+    assert totals["with_unused_lods"] == 10 and totals["unused_lods"] == {"1.2": 10, "1.3": 10}
+    points = sum(lv["count"] for obj in objects for lv in obj["levels"] if lv["kind"] == "pcd")
+    assert totals["points"] == points
+    assert totals["levels_kept"] == {"1": 10}  # each keeps its LOD2 alone here
+    assert "10 object(s) keep fewer levels (10 with 1 level(s))" in result.stderr
 
 
 def test_with_three_levels_every_lod_but_the_finest_is_unused(tmp_path: Path) -> None:

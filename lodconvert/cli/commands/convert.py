@@ -294,20 +294,20 @@ def run(args: argparse.Namespace, console: Console) -> int:
             counts = " → ".join(f"{lv['name']} {lv['count']:,}" for lv in obj["levels"])
             cuts = ", ".join(f"{c:.4g}" for c in obj["cutoffs"])
             console.info(f"{obj['id']}: {counts}" + (f"; cutoffs {cuts}" if cuts else ""))
-    fewer = Counter(len(obj["levels"]) for obj in objects if obj["dropped"])
-    if fewer:
-        kept = ", ".join(f"{n:,} with {k}" for k, n in sorted(fewer.items()))
+    totals = report["totals"]
+    if totals["fewer_levels"]:
+        kept = ", ".join(f"{n:,} with {k}" for k, n in totals["levels_kept"].items())
         console.info(
-            f"{sum(fewer.values()):,} object(s) keep fewer levels ({kept} level(s)): no coarser "
+            f"{totals['fewer_levels']:,} object(s) keep fewer levels ({kept} level(s)): no coarser "
             "level was both cheaper and faithful there, so the finer one stays on "
             "(see docs/levels.md)"
         )
-    unused = Counter(label for obj in objects for label in obj["unused"])
-    if unused:
-        labels = ", ".join(f"{lod_name(label)} ({n:,})" for label, n in sorted(unused.items()))
+    if totals["unused_lods"]:
+        unused = totals["unused_lods"].items()
+        labels = ", ".join(f"{lod_name(label)} ({n:,})" for label, n in unused)
         console.info(
-            f"{sum(1 for obj in objects if obj['unused']):,} object(s) have source LoDs that no "
-            f"level is made from: {labels}; --report says why for each"
+            f"{totals['with_unused_lods']:,} object(s) have source LoDs that no level is made "
+            f"from: {labels}; --report says why for each"
         )
     if "hlod" in report:
         console.info(_hlod_line(report["hlod"]))
