@@ -6,7 +6,7 @@ This module reads the file (GLB chunks, the JSON, buffer 0) and runs the checks:
 summary checks (:mod:`.summary`), which decide from compact facts whether the file is clean,
 and only where they find something the checks element by element (:mod:`.elements`), which say
 what is wrong; :mod:`.rules` holds what both hold a file to. Work is bounded by the bytes
-present: declared sizes are compared, never allocated; JSON nesting is limited before parsing.
+present: declared sizes are compared, never allocated; JSON nesting is limited as it is read.
 Every rule: ``docs/gltf.md``.
 """
 
