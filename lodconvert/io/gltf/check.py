@@ -66,16 +66,16 @@ def _load_json(source: Source, what: str, findings: Findings) -> dict[str, Any] 
             f"{what} is not UTF-8 text: byte 0x{bad[1]:02x} at offset {bad[0]}",
         )
         return None
-    too_deep_finding = f"{what} nests arrays and objects over {MAX_JSON_DEPTH} deep"
     try:
         return read_object(source, SINKS, limit=MAX_JSON_DEPTH)
     except TooDeep:
-        findings.error("GLTF_JSON_DEPTH", too_deep_finding)
-        return None
-    except NotStreamed:  # not one JSON object: json.loads says why
-        pass
-    if too_deep(source, MAX_JSON_DEPTH):
-        findings.error("GLTF_JSON_DEPTH", too_deep_finding)
+        deep = True
+    except NotStreamed:  # not one JSON object: json.loads says why, unless it nests too deep
+        deep = too_deep(source, MAX_JSON_DEPTH)
+    if deep:
+        findings.error(
+            "GLTF_JSON_DEPTH", f"{what} nests arrays and objects over {MAX_JSON_DEPTH} deep"
+        )
         return None
     text = bytes(source.read(0, len(source))).decode("utf-8")
     try:
