@@ -19,6 +19,8 @@ DIRECTORY = os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW | os.O_CLOEXEC
 """Flags opening a real folder (a link to one fails with ``ELOOP``)."""
 CREATE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
 READ = os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC
+APPEND = os.O_WRONLY | os.O_APPEND | os.O_NOFOLLOW | os.O_NONBLOCK | os.O_CLOEXEC
+"""Flags appending to a file (``O_NONBLOCK``: a FIFO planted there is not waited on)."""
 
 
 class Foreign(Exception):
@@ -78,6 +80,25 @@ def create(root: int, relative: str, replace: bool) -> int:
                 raise Foreign(relative, kind) from None
         os.unlink(names[-1], dir_fd=fd)
         return os.open(names[-1], CREATE, 0o644, dir_fd=fd)
+
+
+def append(root: int, relative: str) -> int:
+    """The existing file ``relative`` below ``root``, open for appending; :class:`Foreign`
+    where it is anything but a regular file of this user with one name (:func:`what`)."""
+    names = parts(relative)
+    with parent(root, names) as fd:
+        try:
+            handle = os.open(names[-1], APPEND, dir_fd=fd)
+        except OSError as exc:
+            if exc.errno in (errno.ELOOP, errno.ENXIO):
+                raise Foreign(relative, _kind(fd, names[-1])) from None
+            raise
+    found = os.fstat(handle)
+    problem = "a folder" if stat.S_ISDIR(found.st_mode) else what(found)
+    if problem is not None:
+        os.close(handle)
+        raise Foreign(relative, problem)
+    return handle
 
 
 def read(root: int, relative: str, limit: int) -> bytes | None:

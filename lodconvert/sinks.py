@@ -271,6 +271,22 @@ class DirectorySink:
             with os.fdopen(nofollow.create(_root(self.staged), name, replace), "wb") as handle:
                 yield handle
 
+    @contextlib.contextmanager
+    def appended(self, relative: str | Path) -> Iterator[BinaryIO]:
+        """The file at ``relative`` inside the staged directory, open for appending where a run
+        of this output wrote it, made as :meth:`file` makes it otherwise."""
+        name = "/".join(nofollow.parts(relative))
+        if name not in self.staged.written:
+            with self.file(name) as handle:
+                yield handle
+            return
+        with (
+            writing(self.path / name),
+            self._inside(name),
+            os.fdopen(nofollow.append(_root(self.staged), name), "ab") as handle,
+        ):
+            yield handle
+
     def with_staged(self, use: Callable[[Path], T], relative: str = "") -> T:
         """``use`` called with the path of the staged folder (or of ``relative`` inside it), to
         check or read it before the commit."""

@@ -7,6 +7,7 @@ byte-identical across runs and worker counts."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import itertools
 import json
@@ -29,6 +30,7 @@ from lodconvert.io.crs import pyproj_crs
 from lodconvert.io.gltf.binary import accessor_values as accessor
 from lodconvert.io.tiles import writer as tiles_writer
 from lodconvert.io.tiles.check import frame_points, read_glb
+from lodconvert.io.tiles.records import TileRecords
 from lodconvert.ranges import REFERENCE_VIEW
 from lodconvert.validate import validate_file
 from tests.conftest import SHARED, require, shared_data
@@ -690,11 +692,54 @@ def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_p
     assert list(tmp_path.iterdir()) == []
     with Outputs() as outputs:
         sink = outputs.directory(tmp_path / "out", resume="k" * 64)
-        written = task.written(sink, result)
+        written = TileRecords(sink).written(task, result)
         staged = next(tmp_path.glob(".out.*.tmp"))
         assert (staged / "tiles" / "t.glb").read_bytes() == result.data and written.data is None
-        kept = task.kept(sink)
+        kept = TileRecords(sink).kept(task)
     assert kept is not None and kept.reused and np.array_equal(kept.box, result.box)
+
+
+def test_tile_records_are_lines_of_one_file_and_a_torn_line_is_no_record(
+    tmp_path: Path,
+) -> None:
+    """A tileset records its tiles in one file, a line each, appended once each file is whole:
+    the last line of a tile is its record, and a line a killed run left half-written is none
+    (the tile is kept by its whole line, and the next record starts a line of its own)."""
+    import pyproj
+
+    from lodconvert.io.tiles.task import Where
+    from lodconvert.reproject import Georef
+    from lodconvert.sinks import Outputs
+
+    georef = Georef("EPSG:25832", pyproj.CRS("EPSG:25832"))
+    where = Where(georef, "EPSG:25832", "test", "EPSG:25832")
+    corners = np.array(
+        [[690000.0, 5335000.0, 520.0], [690010, 5335000, 520], [690000, 5335010, 530]]
+    )
+    task = _corner_task(where, corners, packed=False)
+    other = _corner_task(where, corners + np.array([5.0, 0.0, 0.0]), packed=False)
+    other = dataclasses.replace(other, name="u.glb")
+    with Outputs() as outputs:
+        sink = outputs.directory(tmp_path / "out", resume="k" * 64)
+        records = TileRecords(sink)
+        records.written(task, task.run())
+        records.written(other, other.run())
+        staged = next(tmp_path.glob(".out.*.tmp"))
+        assert sorted(p.name for p in (staged / ".resume").iterdir()) == [
+            "run", "tiles.jsonl", "written"
+        ]  # fmt: skip
+        with (staged / ".resume" / "tiles.jsonl").open("ab") as file:
+            file.write(b'{"name": "u.glb", "key": "')  # a killed run's last, torn line
+        again = TileRecords(sink)
+        assert again.torn and sorted(again.found) == ["t.glb", "u.glb"]
+        assert again.kept(task) is not None and again.kept(other) is not None
+        (staged / "tiles" / "u.glb").write_bytes(b"glTF half")
+        assert again.kept(other) is None  # the file no longer has its recorded hash
+        again.written(other, other.run())
+        lines = (staged / ".resume" / "tiles.jsonl").read_bytes().splitlines()
+        assert len(lines) == 4 and json.loads(lines[-1])["name"] == "u.glb"
+        last = TileRecords(sink)
+        assert not last.torn and last.kept(other) is not None
 
 
 def test_a_tile_whose_content_leaves_its_box_fails_where_it_is_made(

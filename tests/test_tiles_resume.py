@@ -17,7 +17,7 @@ from typing import Any
 
 import pytest
 
-from lodconvert.io.tiles import task
+from lodconvert.io.tiles import records, task
 from tests.test_cli import run
 from tests.test_tiles import FAST, convert, inputs
 
@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SAID = tuple(flag for flag in FAST if flag != "-q")
 HOLD = """
 import sys
-from lodconvert.io.tiles import task
+from lodconvert.io.tiles import records, task
 from lodconvert.cli import main
 real, made = task.TileTask.run, []
 def run(self, *args):
@@ -155,12 +155,12 @@ def test_a_resumed_run_holds_no_kept_tiles_geometry(
     killed(source, out, 10, "--hlod", "20")  # ten of its 20 tiles, two per cell
     kept_tasks: list[weakref.ref[task.TileTask]] = []
     alive: list[int] = []
-    real_kept, real_run = task.TileTask.kept, task.TileTask.run
+    real_kept, real_run = records.TileRecords.kept, task.TileTask.run
 
-    def kept(self: task.TileTask, sink: Any) -> task.TileResult | None:
-        found = real_kept(self, sink)
+    def kept(self: records.TileRecords, tile: task.TileTask) -> task.TileResult | None:
+        found = real_kept(self, tile)
         if found is not None:
-            kept_tasks.append(weakref.ref(self))
+            kept_tasks.append(weakref.ref(tile))
         return found
 
     def made(self: task.TileTask, *args: Any) -> task.TileResult:
@@ -169,7 +169,7 @@ def test_a_resumed_run_holds_no_kept_tiles_geometry(
             alive.append(sum(ref() is not None for ref in kept_tasks))
         return real_run(self, *args)
 
-    monkeypatch.setattr(task.TileTask, "kept", kept)
+    monkeypatch.setattr(records.TileRecords, "kept", kept)
     monkeypatch.setattr(task.TileTask, "run", made)
     said = resumed(source, out, "--hlod", "20")
     assert "10 of 20 tiles kept from an interrupted run" in said

@@ -60,10 +60,10 @@ def _link_tile(folder: Path, outside: Path) -> str:
 
 
 def _link_record(folder: Path, outside: Path) -> str:
-    [record] = (folder / ".resume" / "tiles").glob("*.json")
+    record = folder / ".resume" / "tiles.jsonl"
     record.unlink()
     record.symlink_to(outside / "canary.txt")
-    return f".resume/tiles/{record.name}"
+    return ".resume/tiles.jsonl"
 
 
 def _link_tiles_folder(folder: Path, outside: Path) -> str:

@@ -2,16 +2,12 @@
 levels' geometry (:class:`Placed`, opened here where it comes packed) placed in the scene, in
 ECEF and in the tile's ENU frame and encoded as a GLB; the result is the GLB, the tile's frame
 and content box, which the main process writes into
-the staged tileset folder through its sink (:meth:`TileTask.written`), so that a worker needs no
+the staged tileset folder (:meth:`.records.TileRecords.written`), so that a worker needs no
 access to it.
 
 Resuming: a task is keyed by a hash of everything that makes its file (:meth:`TileTask.key`:
-the placement, the geometry, colours and features, the generator). Beside the file the main
-process records the key, the file's SHA-256, frame and box (``.resume/tiles/NAME.json`` in the
-staged folder). A resumed run whose task finds its record of the same key, and the file with
-the recorded hash, both written by a run of that folder (its journal), takes the record instead
-of running the task (:meth:`TileTask.kept`). A file a killed run left half-written has no
-record yet, or another hash, and is made again.
+the placement, the geometry, colours and features, the generator), which the main process
+records beside the file (:mod:`.records`).
 """
 
 from __future__ import annotations
@@ -19,7 +15,7 @@ from __future__ import annotations
 import hashlib
 import json
 import pickle
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -35,7 +31,6 @@ from ...model import (
     from_numbers,
     in_scene,
 )
-from ...sinks import RESUME, DirectorySink
 from ...textures import ATLAS_SIZE
 from ..findings import failure_of
 from ..gltf.compression import MESHOPT, POSITION_TOLERANCE
@@ -51,10 +46,6 @@ TILES = "tiles"
 """The folder of the tiles' files in the tileset folder."""
 MARGIN = 0.001
 """Metres a bounding box is grown by on every side (float32 content rounding, flat content)."""
-RECORDS = f"{RESUME}/tiles"
-"""Where tasks record what they wrote, inside the staged folder."""
-RECORD_BYTES = 1 << 16
-"""Largest record read back."""
 
 
 @dataclass(frozen=True)
@@ -235,36 +226,15 @@ class TileTask:
             return self.failed(str(exc))
         box = np.stack([local.min(axis=0), local.max(axis=0)])
         grown = box + np.array([[-MARGIN], [MARGIN]])  # as the tileset's box of it grows
-        failure = failure_of(check_content(data, grown, f"{TILES}/{self.name}"))
+        failure = failure_of(check_content(data, grown, self.path))
         if failure is not None:
             return self.failed(failure)
         return TileResult(frame, box, data=data, key=self.key(drawn))
 
-    def _paths(self) -> tuple[str, str]:
-        """The tile's file in the tileset folder and its record."""
-        return f"{TILES}/{self.name}", f"{RECORDS}/{self.name}.json"
-
-    def kept(self, sink: DirectorySink) -> TileResult | None:
-        """What an interrupted run recorded of this tile in ``sink``'s staged folder, where its
-        file is whole and was made of the same (its key); ``None`` otherwise."""
-        path, record = self._paths()
-        found = sink.read(record, RECORD_BYTES)
-        data = None if found is None else sink.read(path, 1 << 40)
-        return None if data is None else _kept(found, data, self.key())
-
-    def written(self, sink: DirectorySink, result: TileResult) -> TileResult:
-        """Write the file and record of ``result`` (this task's) through ``sink``; a failed
-        write is one line naming the file."""
-        assert result.data is not None and result.key is not None
-        path, record = self._paths()
-        with sink.file(path) as handle:
-            handle.write(result.data)
-        frame, box = _placed(result)
-        sha256 = hashlib.sha256(result.data).hexdigest()
-        text = {"key": result.key, "sha256": sha256, "frame": frame.tolist(), "box": box.tolist()}
-        with sink.file(record) as handle:
-            handle.write(json.dumps(text).encode())
-        return replace(result, data=None, key=None)
+    @property
+    def path(self) -> str:
+        """The tile's file in the tileset folder."""
+        return f"{TILES}/{self.name}"
 
     def _glb(self, drawn: Drawn, gltf: np.ndarray) -> bytes:
         """The GLB of ``drawn`` at glTF coordinates ``gltf``."""
@@ -278,26 +248,6 @@ class TileTask:
     def failed(self, reason: str) -> TileResult:
         """The result of this task when it could not run, for ``reason``."""
         return TileResult(None, None, error=reason)
-
-
-def _placed(result: TileResult) -> tuple[np.ndarray, np.ndarray]:
-    assert result.frame is not None and result.box is not None
-    return result.frame, result.box
-
-
-def _kept(record: bytes, data: bytes, key: str) -> TileResult | None:
-    """The result ``record`` holds for the tile file of bytes ``data`` when its key is ``key``
-    and the file is whole (its recorded hash); ``None`` otherwise."""
-    try:
-        found = json.loads(record)
-        if found["key"] != key or hashlib.sha256(data).hexdigest() != found["sha256"]:
-            return None
-        frame, box = np.array(found["frame"], dtype=np.float64), np.array(found["box"])
-    except (ValueError, KeyError, TypeError):
-        return None
-    if frame.shape != (4, 4) or box.shape != (2, 3):
-        return None
-    return TileResult(frame, box.astype(np.float64), reused=True)
 
 
 def _colors(part: Surface) -> np.ndarray:

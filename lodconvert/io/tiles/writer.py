@@ -37,6 +37,7 @@ from .placement import Placement, world_to_frame
 if TYPE_CHECKING:
     from ...context import RunContext
 
+from .records import TileRecords
 from .task import MARGIN, TILES, Placed, TileResult, TileTask, Where
 
 DEFAULT_SSE = 16.0
@@ -116,6 +117,7 @@ class TilesetWriter:
         self.where = Where(georef, info.crs, info.source, named)
         self.point_scale: float | None = None
         self._queued: list[tuple[Tile, TileTask]] = []
+        self.records = TileRecords(sink)
 
     def error(self, distance: float) -> float:
         """The geometric error of content that switches at ``distance``."""
@@ -221,7 +223,7 @@ class TilesetWriter:
             for top in self.tops(items):
                 children.append(top)
                 for tile, task in self._queued:
-                    kept = task.kept(self.sink) if self.sink.resumed else None
+                    kept = self.records.kept(task) if self.sink.resumed else None
                     if kept is None:
                         waiting.append((tile, task))
                         yield task
@@ -239,7 +241,7 @@ class TilesetWriter:
             tile, task = waiting.popleft()
             if result.error is not None:
                 raise LodConvertError(result.error)
-            placed = task.written(self.sink, result)
+            placed = self.records.written(task, result)
             tile.frame, tile.box = placed.frame, placed.box
             made += 1
         if self.sink.resumed and self.progress is not None:
