@@ -59,6 +59,7 @@ class Tile:
     content: str | None = None
     children: list[Tile] = field(default_factory=list)
     extras: dict[str, Any] = field(default_factory=dict)
+    _volume: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     def corners(self) -> np.ndarray:
         """The 8 corners (ECEF) of this tile's bounding volume."""
@@ -69,15 +70,18 @@ class Tile:
         return local @ self.frame[:3, :3].T + self.frame[:3, 3]
 
     def volume(self) -> np.ndarray:
-        """Min and max corners (in this frame) enclosing the content and every child."""
-        boxes = [] if self.box is None else [self.box]
-        assert self.frame is not None
-        for child in self.children:
-            inside = world_to_frame(self.frame, child.corners())
-            boxes.append(np.stack([inside.min(axis=0), inside.max(axis=0)]))
-        low = np.min([b[0] for b in boxes], axis=0)
-        high = np.max([b[1] for b in boxes], axis=0)
-        return np.stack([low - MARGIN, high + MARGIN])
+        """Min and max corners (in this frame) enclosing the content and every child; found
+        once, when the tree is whole (every frame and box known)."""
+        if self._volume is None:
+            boxes = [] if self.box is None else [self.box]
+            assert self.frame is not None
+            for child in self.children:
+                inside = world_to_frame(self.frame, child.corners())
+                boxes.append(np.stack([inside.min(axis=0), inside.max(axis=0)]))
+            low = np.min([b[0] for b in boxes], axis=0)
+            high = np.max([b[1] for b in boxes], axis=0)
+            self._volume = np.stack([low - MARGIN, high + MARGIN])
+        return self._volume
 
 
 def _mesh_levels(chain: LodChain) -> list[tuple[int, Level]]:
@@ -329,7 +333,8 @@ class TilesetWriter:
         }
         if tile.content is not None:
             out["content"] = {"uri": folder + tile.content}
-        if tile.children:
+        out = _plain(out)
+        if tile.children:  # each child's JSON plain already
             out["children"] = [
                 self._reference(child, tile.frame)
                 if external
@@ -337,8 +342,8 @@ class TilesetWriter:
                 for child in tile.children
             ]
         if tile.extras:
-            out["extras"] = tile.extras
-        return {k: _plain(v) for k, v in out.items()}
+            out["extras"] = _plain(tile.extras)
+        return out
 
     def _reference(self, tile: Tile, parent: np.ndarray) -> dict[str, Any]:
         """A tile whose content is ``tile``'s subtree as an external tileset."""
