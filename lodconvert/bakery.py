@@ -39,7 +39,8 @@ def iter_chains(
     reported through its ``warn`` (unless ``strict``: the caller fails), recorded in its
     ``skipped`` and left out; its ``step`` hears how many are done, its ``clock`` how long
     planning and baking took. ``pieces`` keeps what its formatter made of each chain where it
-    was baked (those chains come without their geometry, but for LOD parents, which merge it);
+    was baked (those chains come without their geometry, but for LOD parents, which merge it)
+    and what its ``cells`` formatter made of each coarsest cell;
     ``first_at`` hears where the scene's first object lies (its bounding-box centre) before any
     chain comes; with ``packed``, chains baked elsewhere come with their geometry packed
     (:meth:`~.model.LodChain.packed`: the writer only passes it on to its own tasks). With
@@ -205,6 +206,7 @@ def _cell_chains(
         order = (i for plan in plans for i in plan.object_indices())
         found = bakery.chains((spool.get(i), radii[i]) for i in order)
         context = bakery.context
+        pieces = bakery.pieces
         baker = CellBaker(
             context.executor.results,
             options,
@@ -212,6 +214,8 @@ def _cell_chains(
             context.limits,
             context.warn,
             bakery.source,
+            pieces.cells if pieces is not None else None,
+            pieces.add if pieces is not None else None,
         )
         yield from baker.cells(plans, found)
 

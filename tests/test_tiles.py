@@ -15,6 +15,7 @@ import os
 import pickle
 import shutil
 import subprocess
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -305,6 +306,49 @@ def test_a_two_worker_run_makes_its_tiles_in_its_two_workers(tmp_path: Path) -> 
         watcher.join()
     assert len(list((tileset.parent / "tiles").glob("*.glb"))) > 2
     assert max(alive) == 2
+
+
+SENT = """
+import sys
+from collections import Counter
+from lodconvert import tasks
+from lodconvert.cli import main
+real, sent = tasks.pickled, Counter()
+def pickled(message):
+    sent[type(message).__name__] += 1
+    return real(message)
+tasks.pickled = pickled
+if __name__ == "__main__":
+    code = main(sys.argv[1:])
+    print(dict(sent), flush=True)
+    sys.exit(code)
+"""
+"""The command line, printing how many of each kind of message its main process sent."""
+
+
+@pytest.mark.slow
+def test_with_workers_a_coarsest_cells_tiles_are_made_where_it_is_baked(tmp_path: Path) -> None:
+    """With workers, the task that bakes a coarsest cell makes its tiles and gives them back
+    with it: the main process sends no tile task (the objects' geometry goes out once, to
+    their cell), and the tileset is the one a single process writes."""
+    tileset = tmp_path / "two" / "tileset.json"
+    [source] = inputs("multi_lod")
+    flags = ("--crs", "EPSG:7415", "--hlod", "20,80", *FAST)
+    command = [sys.executable, "-c", SENT, str(source), "-o", str(tileset), *flags]
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    result = subprocess.run(
+        [*command, "--workers", "2"], capture_output=True, text=True, env=env, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    sent = json.loads(result.stdout.strip().splitlines()[-1].replace("'", '"'))
+    assert sent.get("CellTask", 0) > 0 and "TileTask" not in sent
+    one = convert("multi_lod", tmp_path / "one", "--hlod", "20,80")
+
+    def files(out: Path) -> dict[str, bytes]:
+        return {str(p.relative_to(out)): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    written = files(tileset.parent)
+    assert written == files(one.parent) and sum(n.endswith(".glb") for n in written) > 2
 
 
 @pytest.mark.slow
@@ -692,10 +736,10 @@ def test_a_tile_is_made_in_a_worker_without_its_folder_and_written_by_the_main_p
     assert list(tmp_path.iterdir()) == []
     with Outputs() as outputs:
         sink = outputs.directory(tmp_path / "out", resume="k" * 64)
-        written = TileRecords(sink).written(task, result)
+        written = TileRecords(sink).written(task.name, result)
         staged = next(tmp_path.glob(".out.*.tmp"))
         assert (staged / "tiles" / "t.glb").read_bytes() == result.data and written.data is None
-        kept = TileRecords(sink).kept(task)
+        kept = TileRecords(sink).kept(task.name, task.key)
     assert kept is not None and kept.reused and np.array_equal(kept.box, result.box)
 
 
@@ -722,8 +766,8 @@ def test_tile_records_are_lines_of_one_file_and_a_torn_line_is_no_record(
     with Outputs() as outputs:
         sink = outputs.directory(tmp_path / "out", resume="k" * 64)
         records = TileRecords(sink)
-        records.written(task, task.run())
-        records.written(other, other.run())
+        records.written(task.name, task.run())
+        records.written(other.name, other.run())
         staged = next(tmp_path.glob(".out.*.tmp"))
         assert sorted(p.name for p in (staged / ".resume").iterdir()) == [
             "run", "tiles.jsonl", "written"
@@ -732,14 +776,14 @@ def test_tile_records_are_lines_of_one_file_and_a_torn_line_is_no_record(
             file.write(b'{"name": "u.glb", "key": "')  # a killed run's last, torn line
         again = TileRecords(sink)
         assert again.torn and sorted(again.found) == ["t.glb", "u.glb"]
-        assert again.kept(task) is not None and again.kept(other) is not None
+        assert again.kept(task.name, task.key) and again.kept(other.name, other.key)
         (staged / "tiles" / "u.glb").write_bytes(b"glTF half")
-        assert again.kept(other) is None  # the file no longer has its recorded hash
-        again.written(other, other.run())
+        assert again.kept(other.name, other.key) is None  # the file no longer has its recorded hash
+        again.written(other.name, other.run())
         lines = (staged / ".resume" / "tiles.jsonl").read_bytes().splitlines()
         assert len(lines) == 4 and json.loads(lines[-1])["name"] == "u.glb"
         last = TileRecords(sink)
-        assert not last.torn and last.kept(other) is not None
+        assert not last.torn and last.kept(other.name, other.key) is not None
 
 
 def test_a_tile_whose_content_leaves_its_box_fails_where_it_is_made(

@@ -25,19 +25,21 @@ ROOT = Path(__file__).resolve().parents[1]
 SAID = tuple(flag for flag in FAST if flag != "-q")
 HOLD = """
 import sys
-from lodconvert.io.tiles import records, task
+from lodconvert.io.tiles import records
 from lodconvert.cli import main
-real, made = task.TileTask.run, []
-def run(self, *args):
-    if len(made) == int(sys.argv[1]):
+real, written = records.TileRecords.written, []
+def write(self, name, result):
+    if len(written) == int(sys.argv[1]):
         print("held", flush=True)
         sys.stdin.read()  # the test kills this process here
-    made.append(self.name)
-    return real(self, *args)
-task.TileTask.run = run
-sys.exit(main(sys.argv[2:]))
+    written.append(name)
+    return real(self, name, result)
+records.TileRecords.written = write
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[2:]))
 """
-"""The command line, holding before its tile number ``argv[1]`` until it is killed."""
+"""The command line, holding before it writes its tile number ``argv[1]`` (wherever that
+tile was made) until it is killed."""
 
 
 def glbs(tileset: dict[str, bytes]) -> int:
@@ -102,6 +104,19 @@ def test_a_killed_run_resumes_and_ends_byte_identical(
     assert files(out) == clean
 
 
+def test_a_run_whose_cells_made_their_tiles_in_workers_resumes_byte_identical(
+    tmp_path: Path, clean: dict[str, bytes]
+) -> None:
+    """With workers, a coarsest cell's tiles are made where it is baked and come back with
+    it: a run killed after writing the first keeps it, found by the key that came back."""
+    [source] = inputs("multi_lod")
+    out = tmp_path / "out"
+    killed(source, out, 1, "--workers", "2")
+    said = resumed(source, out)
+    assert f"1 of {glbs(clean)} tiles kept from an interrupted run" in said
+    assert files(out) == clean
+
+
 @pytest.mark.parametrize("change", ["option", "input"])
 def test_changed_options_or_input_start_over(tmp_path: Path, change: str) -> None:
     source = tmp_path / "city.json"
@@ -157,10 +172,10 @@ def test_a_resumed_run_holds_no_kept_tiles_geometry(
     alive: list[int] = []
     real_kept, real_run = records.TileRecords.kept, task.TileTask.run
 
-    def kept(self: records.TileRecords, tile: task.TileTask) -> task.TileResult | None:
-        found = real_kept(self, tile)
+    def kept(self: records.TileRecords, name: str, key: Any) -> task.TileResult | None:
+        found = real_kept(self, name, key)
         if found is not None:
-            kept_tasks.append(weakref.ref(tile))
+            kept_tasks.append(weakref.ref(key.__self__))  # the task whose key it is
         return found
 
     def made(self: task.TileTask, *args: Any) -> task.TileResult:

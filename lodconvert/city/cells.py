@@ -32,6 +32,8 @@ from .hlod import CellPlan, Member
 Warn = Callable[[str], None]
 Results = Callable[[Iterable["CellTask"]], Iterator["CellResult"]]
 """An executor's ``results``: each task's result, in order."""
+Formatter = Callable[[CellChain], Any]
+"""An output format's ``cell_formatter``: the output's piece of a coarsest cell."""
 
 
 @dataclass(frozen=True)
@@ -50,6 +52,9 @@ class CellResult:
     """What the members' objects' finest levels derived that
     :data:`~lodconvert.model.TRAVELLING` names, each object's in order (for a coarser tier's
     task; none for a coarsest cell)."""
+    made: tuple[Any, ...] = ()
+    """What the task's ``formatter`` made of the cell and of the ``beside`` cell, in that
+    order (none without one)."""
 
     def items(self, members: list[Member]) -> list[Member]:
         """The cell of ``members`` (the task's, as the main process holds them, their geometry
@@ -71,7 +76,10 @@ class CellResult:
 class CellTask:
     """The LOD parent of ``plan`` over its baked ``members`` (:func:`~.cell_bake.bake_cell`;
     ``top``: a coarsest cell, which gathers what it leaves out into a cell of its own); the
-    members' geometry may come packed (:meth:`~lodconvert.model.LodChain.packed`)."""
+    members' geometry may come packed (:meth:`~lodconvert.model.LodChain.packed`). A
+    ``formatter`` (a coarsest cell's, an output format's ``cell_formatter``) makes the output's
+    piece of the cell and of the cell gathering the others here, their members' geometry at
+    hand."""
 
     plan: CellPlan
     members: tuple[Member, ...]
@@ -79,6 +87,7 @@ class CellTask:
     kind: str
     limits: Limits
     top: bool
+    formatter: Formatter | None = None
 
     def run(self, backend: Backend, progress: object = None) -> CellResult:
         """Bake the cell with ``backend``; its warnings are data."""
@@ -97,16 +106,20 @@ class CellTask:
         if self.top and len(admitted) < len(members):
             gathered = beside[0]
             assert isinstance(gathered, CellChain) and len(beside) == 1
+        made = () if self.formatter is None else (self.formatter(cell),)
+        if gathered is not None:
+            made += () if self.formatter is None else (self.formatter(gathered),)
             gathered = replace(gathered, members=[])
         return CellResult(
-            replace(cell, members=[]), admitted, gathered, tuple(warnings), derived=found
+            replace(cell, members=[]), admitted, gathered, tuple(warnings), derived=found, made=made
         )
 
     def __reduce__(self) -> tuple[type[CellTask], tuple[Any, ...]]:
         """Pickled with its members' meshes keeping only the derived tables that travel
         (:meth:`~lodconvert.model.Mesh.shipped`); packed geometry as it is."""
         members = tuple(_shipped(m) for m in self.members)
-        return CellTask, (self.plan, members, self.options, self.kind, self.limits, self.top)
+        values = (self.options, self.kind, self.limits, self.top, self.formatter)
+        return CellTask, (self.plan, members, *values)
 
     def failed(self, reason: str) -> CellResult:
         """The result of this task when it could not run, for ``reason``: no cell."""
@@ -117,7 +130,8 @@ class CellTask:
 class CellBaker:
     """How a run bakes its cells: by ``results`` (its executor's), with the run's options,
     far level kind and limits; ``warn`` hears the cells' warnings (``source`` names the
-    input)."""
+    input). With a ``formatter``, each coarsest cell's task makes the output's piece of it
+    (and of the cell gathering what it leaves out), which ``keep`` is given with that cell."""
 
     results: Results
     options: ChainOptions
@@ -125,6 +139,8 @@ class CellBaker:
     limits: Limits
     warn: Warn
     source: str
+    formatter: Formatter | None = None
+    keep: Callable[[CellChain, Any], None] | None = None
 
     def cells(self, plans: list[CellPlan], chains: Iterator[LodChain | None]) -> Iterator[Member]:
         """The coarsest cells of ``plans`` (in order) over the objects' ``chains`` (in the
@@ -151,7 +167,10 @@ class CellBaker:
             for plan, members in planned:
                 order.append((plan, members))
                 if members:
-                    yield CellTask(plan, tuple(members), self.options, self.kind, self.limits, top)
+                    formatter = self.formatter if top else None
+                    yield CellTask(
+                        plan, tuple(members), self.options, self.kind, self.limits, top, formatter
+                    )
 
         for result in self.results(tasks()):
             while not order[0][1]:
@@ -161,7 +180,12 @@ class CellBaker:
                 self.warn(text)
             if result.error is not None:
                 self.warn(f"{self.source}: {result.error} — its members are drawn on their own")
-            yield plan, result.items(members)
+            items = result.items(members)
+            if self.keep is not None:
+                for cell, piece in zip(items, result.made, strict=False):
+                    assert isinstance(cell, CellChain)
+                    self.keep(cell, piece)
+            yield plan, items
         while order:
             yield order.popleft()[0], []
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..errors import InputError, UsageError
 from ..limits import DEFAULT_LIMITS, Limits
-from ..model import LodChain, Scene
+from ..model import CellChain, LodChain, Scene
 from ..ranges import REFERENCE_VIEW, ReferenceView
 from .archive import member_name
 
@@ -96,6 +96,7 @@ class Format:
     takes_packed: bool = False
     viewer: str | None = None
     formatter: Callable[..., Callable[[LodChain], Any]] | None = None
+    cell_formatter: Callable[..., Callable[[CellChain], Any]] | None = None
     read_options: tuple[str, ...] = ()
     write_options: tuple[str, ...] = ()
 
@@ -135,28 +136,37 @@ class Format:
         self, info: OutputInfo, options: dict[str, Any], suffix: str | None = None
     ) -> Pieces | None:
         """Where the pieces its ``formatter`` (for an output with ``suffix``, by default its
-        first, and the write options this format takes) makes are kept for ``write``; ``None``
-        for a format without one."""
-        if self.formatter is None:
+        first, and the write options this format takes) and its ``cell_formatter`` make are
+        kept for ``write``; ``None`` for a format without either."""
+        if self.formatter is None and self.cell_formatter is None:
             return None
         taken = _taken(options, self.write_options)
-        return Pieces(self.formatter(info, suffix or self.suffixes[0], **taken))
+        chains = cells = None
+        if self.formatter is not None:
+            chains = self.formatter(info, suffix or self.suffixes[0], **taken)
+        if self.cell_formatter is not None:
+            cells = self.cell_formatter(info, **taken)
+        return Pieces(chains, cells)
 
 
 class Pieces:
-    """Chains' pieces of the output made by workers with ``formatter`` (a format's), each kept
-    with its chain until the writer takes it: a piece is only ever given for the very chain it
-    was made of."""
+    """Chains' pieces of the output made by workers with ``formatter`` (a format's), and
+    coarsest cells' made with ``cells`` where they are baked, each kept with its chain until
+    the writer takes it: a piece is only ever given for the very chain it was made of."""
 
-    def __init__(self, formatter: Callable[[LodChain], Any] | None = None) -> None:
-        self.formatter = formatter
-        self._held: dict[int, tuple[LodChain, Any]] = {}
+    def __init__(
+        self,
+        formatter: Callable[[LodChain], Any] | None = None,
+        cells: Callable[[CellChain], Any] | None = None,
+    ) -> None:
+        self.formatter, self.cells = formatter, cells
+        self._held: dict[int, tuple[LodChain | CellChain, Any]] = {}
 
-    def add(self, chain: LodChain, piece: Any) -> None:
+    def add(self, chain: LodChain | CellChain, piece: Any) -> None:
         """Keep ``piece`` (made of ``chain``) until :meth:`take`."""
         self._held[id(chain)] = (chain, piece)
 
-    def take(self, chain: LodChain) -> Any:
+    def take(self, chain: LodChain | CellChain) -> Any:
         """The piece made of ``chain`` (forgotten here), or ``None``."""
         held = self._held.get(id(chain))
         if held is None or held[0] is not chain:

@@ -19,7 +19,7 @@ from ... import manifest, nofollow
 from ...errors import InputError, UsageError
 from .. import Format
 from .check import check_tileset
-from .writer import DEFAULT_SSE, write_tileset
+from .writer import DEFAULT_SSE, cell_tiles, write_tileset
 
 NAME = "tileset.json"
 GENERATOR = "lodconvert"
@@ -99,6 +99,7 @@ FORMAT = Format(
     name="3d-tiles",
     suffixes=(".json",),
     write=write_tileset,
+    cell_formatter=cell_tiles,
     check=check_tileset,
     write_options=("sse", "atlas_size", "compress", "texture_format"),
     output_folder=output_folder,

@@ -11,11 +11,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 
 import numpy as np
 
 from ...sinks import RESUME, DirectorySink
-from .task import TileResult, TileTask
+from .task import TILES, TileResult
 
 RECORDS = f"{RESUME}/tiles.jsonl"
 """Where the records are appended, inside the staged folder."""
@@ -38,22 +39,27 @@ class TileRecords:
         self.torn = bool(data) and not data.endswith(b"\n")
         """Whether the records end in a line a killed run left half-written."""
 
-    def kept(self, task: TileTask) -> TileResult | None:
-        """What an interrupted run recorded of ``task``'s tile, where its file is whole and was
-        made of the same (its key); ``None`` otherwise."""
-        record = self.found.get(task.name)
-        data = None if record is None else self.sink.read(task.path, FILE_BYTES)
-        return None if data is None else _kept(record, data, task.key())
+    def kept(self, name: str, key: str | Callable[[], str]) -> TileResult | None:
+        """What an interrupted run recorded of the tile ``name``, where its file is whole and
+        was made of the same (its task's ``key``, or what finds it, called only where a record
+        is); ``None`` otherwise."""
+        record = self.found.get(name)
+        if record is None:
+            return None
+        data = self.sink.read(f"{TILES}/{name}", FILE_BYTES)
+        if data is None:
+            return None
+        return _kept(record, data, key() if callable(key) else key)
 
-    def written(self, task: TileTask, result: TileResult) -> TileResult:
-        """Write the file of ``result`` (``task``'s), then its record; a failed write is one
-        line naming the file."""
+    def written(self, name: str, result: TileResult) -> TileResult:
+        """Write the tile ``name``'s file (``result``'s GLB), then its record; a failed write
+        is one line naming the file."""
         assert result.data is not None and result.key is not None
-        with self.sink.file(task.path) as handle:
+        with self.sink.file(f"{TILES}/{name}") as handle:
             handle.write(result.data)
         frame, box = _placed(result)
         sha256 = hashlib.sha256(result.data).hexdigest()
-        text = {"name": task.name, "key": result.key, "sha256": sha256}
+        text = {"name": name, "key": result.key, "sha256": sha256}
         text |= {"frame": frame.tolist(), "box": box.tolist()}
         line = b"\n" if self.torn else b""
         with self.sink.appended(RECORDS) as handle:
