@@ -1,11 +1,13 @@
-"""The C heap of a conversion's processes: how glibc's allocator is tuned for a run
-(:func:`tune_heap`), and handing freed memory back after work that made and freed many small C
-objects (a large city object's XML elements, the shapely geometries of its footprint)."""
+"""The heaps of a conversion's processes: how glibc's allocator is tuned for a run
+(:func:`tune_heap`), handing freed memory back after work that made and freed many small C
+objects (a large city object's XML elements, the shapely geometries of its footprint), and
+how often the main process's cyclic garbage collector runs (:func:`tune_collector`)."""
 
 from __future__ import annotations
 
 import ctypes
 import functools
+import gc
 import sys
 from typing import Any
 
@@ -17,6 +19,9 @@ TRIM_BYTES = 64 << 20
 """The heap is trimmed when this much is free at its top."""
 TOP_PAD_BYTES = 16 << 20
 """The heap grows by this much more than a request needs."""
+COLLECTOR_THRESHOLDS = (50_000, 20, 100)
+"""The cyclic garbage collector's thresholds in a conversion's main process (Python's: 700,
+10, 10): a young pass once 50,000 more containers were made than freed."""
 
 
 def tune_heap() -> None:
@@ -34,6 +39,16 @@ def tune_heap() -> None:
         mallopt(M_MMAP_THRESHOLD, MAPPED_BYTES)
         mallopt(M_TRIM_THRESHOLD, TRIM_BYTES)
         mallopt(M_TOP_PAD, TOP_PAD_BYTES)
+
+
+def tune_collector() -> None:
+    """Run the cyclic garbage collector of a conversion's main process less often: what it
+    holds for long (chains until they are written, cells, records) grows with the city, and
+    each pass that reaches it scans it all again, while the run makes almost no cycles. On
+    100× TUM Munich to a tileset with 2 workers, 1,394 passes took 0.47 of the main process's
+    7.1 CPU s, against 2 passes and 0.01 s with these thresholds; 10× TUM on one core peaks at
+    the same memory either way."""
+    gc.set_threshold(*COLLECTOR_THRESHOLDS)
 
 
 def return_freed_heap() -> None:

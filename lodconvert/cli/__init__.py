@@ -25,7 +25,7 @@ from multiprocessing import resource_tracker
 from types import FrameType
 
 from ..errors import LodConvertError, UsageError
-from ..heap import tune_heap
+from ..heap import tune_collector, tune_heap
 from .commands import COMMANDS, MAIN_COMMAND
 from .console import Console
 from .options import (
@@ -125,6 +125,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``lodconvert`` console script."""
     argv = list(sys.argv[1:] if argv is None else argv)
     tune_heap()
+    tune_collector()
     # multiprocessing starts its resource tracker again where it died, and warns that
     # resources might leak: lodconvert gives it none to look after
     warnings.filterwarnings("ignore", "resource_tracker: process died", UserWarning)
