@@ -106,9 +106,10 @@ class CellTask:
         if self.top and len(admitted) < len(members):
             gathered = beside[0]
             assert isinstance(gathered, CellChain) and len(beside) == 1
-        made = () if self.formatter is None else (self.formatter(cell),)
+        made = ()
+        if self.formatter is not None:
+            made = tuple(self.formatter(c) for c in (cell, gathered) if c is not None)
         if gathered is not None:
-            made += () if self.formatter is None else (self.formatter(gathered),)
             gathered = replace(gathered, members=[])
         return CellResult(
             replace(cell, members=[]), admitted, gathered, tuple(warnings), derived=found, made=made
