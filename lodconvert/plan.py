@@ -186,13 +186,16 @@ def view_estimate(
     view: ReferenceView = REFERENCE_VIEW,
     point_px: float = 1.0,
     keep: bool = False,
+    stop_below: float = 0.0,
 ) -> SilhouetteEstimate:
     """Silhouette precision and recall of ``other`` (a mesh, or points ``point_px`` wide)
     against ``source`` seen from ``distance`` in ``view`` (both in the same frame, z up), over
     the guard's views of the upper hemisphere (:mod:`.views`): those of the view where F is
     least. Both are drawn on one pixel grid per view (:mod:`.bake.spans`; numba loaded here,
     where a run first judges a derived level); with ``keep``, ``source``'s silhouettes are kept
-    with it for the next estimate at that distance (a cell's candidates)."""
+    with it for the next estimate at that distance (a cell's candidates), and the views stop
+    at the first whose F is below ``stop_below``: then the F is that view's (the least is no
+    higher), for a caller that only needs to know it is below."""
     from .bake import spans
 
     if isinstance(other, PointCloud):
@@ -208,9 +211,10 @@ def view_estimate(
         frames, bits = source.derived(
             f"guard-{seen!r}", lambda: spans.silhouettes(*mesh, GUARD_BASES, *seen, GUARD_MARGIN)
         )
-        counts = spans.counts_against(frames, bits, *args, GUARD_BASES, *seen)
-        apart = np.flatnonzero(counts[:, 0] < 0)
-        if len(apart):  # ``other`` reaches beyond the source's images there
+        counts = spans.counts_against(frames, bits, *args, GUARD_BASES, *seen, stop_below)
+        if (counts[:, 0] == -2).any():  # stopped at a view below ``stop_below``
+            counts = counts[counts[:, 0] >= 0]
+        elif len(apart := np.flatnonzero(counts[:, 0] < 0)):  # beyond the source's images
             counts[apart] = spans.overlap_counts(*mesh, *args, GUARD_BASES[apart], *seen)
     worst = SilhouetteEstimate(precision=1.0, recall=1.0)
     for wanted, drawn, tp in counts.tolist():

@@ -14,10 +14,10 @@ from lodconvert.chain import ChainOptions
 from lodconvert.city.prisms import LOW_F, prism
 from lodconvert.errors import LodConvertError
 from lodconvert.model import Mesh, Node
-from lodconvert.plan import view_estimate
+from lodconvert.plan import GUARD_MARGIN, view_estimate
 from lodconvert.plans import bake_chain
 from lodconvert.ranges import REFERENCE_VIEW
-from lodconvert.views import guard_views, towards_camera, view_basis
+from lodconvert.views import GUARD_BASES, guard_views, towards_camera, view_basis
 
 from .conftest import require
 from .test_plan import gabled_house
@@ -112,3 +112,28 @@ def test_the_stated_f_is_the_f_a_render_of_the_views_gives() -> None:
                 assert abs(stated - rendered) <= 0.005, (distance, stated, rendered)
     finally:
         renderer.release()
+
+
+def test_a_candidate_below_what_it_must_beat_stops_at_its_first_view_below_it() -> None:
+    """A cell's candidate that neither reaches the F asked for nor beats the best so far is
+    drawn only up to its first view below that F: its F is then some F below it (never above
+    the F of every view), and one at or above it is the F of all 24 views."""
+    house = house_of(gabled_house(10, 8, 6, 10))
+    eaves_box = house_of(gabled_house(10, 8, 6, 6.001))
+    exact = view_estimate(house, eaves_box, 300.0, keep=True).f
+    assert view_estimate(house, eaves_box, 300.0, keep=True, stop_below=exact - 0.01).f == exact
+    stopped = view_estimate(house, eaves_box, 300.0, keep=True, stop_below=exact + 0.01).f
+    assert exact <= stopped < exact + 0.01
+
+    frames, bits = spans.silhouettes(
+        house.vertices, house.faces.astype(np.int64), GUARD_BASES, 300.0,
+        REFERENCE_VIEW.focal_px, GUARD_MARGIN,
+    )  # fmt: skip
+    args = (eaves_box.vertices, eaves_box.faces.astype(np.int64), 0.0, GUARD_BASES, 300.0)
+    every = spans.counts_against(frames, bits, *args, REFERENCE_VIEW.focal_px, 0.0)
+    assert (every >= 0).all()
+    each = 2 * every[:, 2] / (every[:, 0] + every[:, 1])
+    first_below = int(np.argmax(each < exact + 0.01))
+    cut = spans.counts_against(frames, bits, *args, REFERENCE_VIEW.focal_px, exact + 0.01)
+    assert (cut[: first_below + 1] == every[: first_below + 1]).all()
+    assert (cut[first_below + 1 :, 0] == -2).all() and first_below + 1 < len(GUARD_BASES)

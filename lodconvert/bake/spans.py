@@ -42,6 +42,9 @@ def _project(
     return u, v
 
 
+STOP_MARGIN = 1e-9
+"""How far below the F asked for a view's F must be for :func:`counts_against` to stop: F
+computed another way (precision and recall first) cannot round back above it."""
 ALL = np.uint64(0xFFFFFFFFFFFFFFFF)
 """A word of 64 pixels, all set."""
 
@@ -162,11 +165,14 @@ def counts_against(
     bases: np.ndarray,
     distance: float,
     focal: float,
+    stop_below: float,
 ) -> np.ndarray:
     """Per view, the pixels of the silhouette (``frames``, ``bits``: :func:`silhouettes`), of
     ``other`` and of both (:data:`Counts`): ``other`` is a mesh with ``other_faces``, or, with
     ``point_px`` above 0, points that many pixels wide. -1 in a view whose image ``other`` does
-    not fit in (to be drawn apart, :func:`overlap_counts`)."""
+    not fit in (to be drawn apart, :func:`overlap_counts`). Once a view's F (``2·both /
+    (first + second)``) is below ``stop_below`` (by more than :data:`STOP_MARGIN`), the views
+    after it are not drawn: -2 in each."""
     views = bases.shape[0]
     counts = np.zeros((views, 3), dtype=np.int64)
     half = max(point_px, 1.0) / 2.0 + 1.0 if point_px > 0.0 else 0.0
@@ -185,6 +191,10 @@ def counts_against(
         ov -= r0
         second = _other_drawn(rows, words, ou, ov, other_faces, point_px)
         _count(bits[view, :rows, :words], second, counts[view])
+        seen = counts[view, 0] + counts[view, 1]
+        if seen and 2.0 * counts[view, 2] / seen < stop_below - STOP_MARGIN:
+            counts[view + 1 :, 0] = -2
+            break
     return counts
 
 

@@ -60,7 +60,9 @@ def blocks_level(
     best: tuple[float, Level, float, float] | None = None
     for _, px, band, mesh in sorted(tried, key=lambda t: t[:3]):
         level = Level(name="FAR", kind="merged", mesh=mesh)
-        f = silhouette_f(source, level, distance, options)
+        # one that neither reaches MIN_CELL_F nor beats the best so far counts for nothing
+        floor = 0.0 if best is None else min(MIN_CELL_F, best[0])
+        f = silhouette_f(source, level, distance, options, floor)
         if best is None or f > best[0]:
             best = (f, level, px, band)
         if f >= MIN_CELL_F:

@@ -19,15 +19,20 @@ Made = tuple[Level, float, dict[str, Any]]
 """A far level, its silhouette F and its facts."""
 
 
-def silhouette_f(source: Mesh, level: Level, distance: float, options: ChainOptions) -> float:
+def silhouette_f(
+    source: Mesh, level: Level, distance: float, options: ChainOptions, stop_below: float = 0.0
+) -> float:
     """Silhouette F of ``level`` against ``source`` seen from ``distance`` over the guard's
     views (:func:`~lodconvert.plan.view_estimate`; ``source``'s silhouettes kept with it: a
-    cell compares every candidate with the same)."""
+    cell compares every candidate with the same); below ``stop_below``, only some F below it
+    (the views stop at the first below: for a candidate whose F counts only if it is not)."""
     if level.points is not None:
         size = level.params.point_size if level.params is not None else 1.0
-        return view_estimate(source, level.points, distance, options.view, size, True).f
+        return view_estimate(source, level.points, distance, options.view, size, True, stop_below).f
     assert level.mesh is not None
-    return view_estimate(source, level.mesh, distance, options.view, keep=True).f
+    return view_estimate(
+        source, level.mesh, distance, options.view, keep=True, stop_below=stop_below
+    ).f
 
 
 def lighter(one: Made | None, other: Made | None) -> Made | None:

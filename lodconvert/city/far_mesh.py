@@ -103,7 +103,8 @@ def merged_level(
             ]
         )
         level = Level(name="FAR", kind="merged", mesh=one_part(merged.translated(-origin)))
-        f = silhouette_f(source, level, distance, options)
+        last = finer == depth - 1  # whose F is given back, whatever it is
+        f = silhouette_f(source, level, distance, options, 0.0 if last else MIN_CELL_F)
         if f >= MIN_CELL_F:
             break
     return level, f, finer
@@ -133,7 +134,8 @@ def _simplified(
         tolerance = px * distance / options.view.focal_px
         mesh = Mesh([simplify_within(merged.mesh, tolerance, source)])
         level = Level(name="FAR", kind="merged", mesh=mesh)
-        after = silhouette_f(source, level, distance, options) if level.count else 0.0
+        stop = 0.0 if px == SIMPLIFY_PX[-1] else floor  # the last one's F is stated
+        after = silhouette_f(source, level, distance, options, stop) if level.count else 0.0
         if after >= floor:
             break
     kept = after >= floor
