@@ -142,10 +142,15 @@ def _foreign(fd: int, written: set[str]) -> tuple[str, str] | None:
     """The first entry of the staged directory ``fd`` that its runs did not write (a link,
     another user's file, a file its journal does not list): its relative path and what it is;
     ``None`` where there is none."""
-    own = {JOURNAL, RUN}
+    own = (JOURNAL, RUN)
     for relative, found in nofollow.walk(fd):
         why = nofollow.what(found)
-        if why is None and stat.S_ISREG(found.st_mode) and relative not in written | own:
+        if (
+            why is None
+            and stat.S_ISREG(found.st_mode)
+            and relative not in written
+            and relative not in own
+        ):
             why = "a file no run wrote there"
         if why is not None:
             return relative, why
