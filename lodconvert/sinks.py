@@ -43,21 +43,39 @@ large for its file system, a file system turned read-only. (Not EIO: input read 
 an output is written could raise it too.)"""
 
 
-@contextlib.contextmanager
-def writing(where: str | Path) -> Iterator[None]:
-    """A failed write in the block (:data:`WRITE_ERRNOS`) as one line naming ``where``
-    (:class:`LodConvertError`: ``out.glb: cannot write: No space left on device``)."""
-    try:
-        yield
-    except OSError as exc:
-        if exc.errno not in WRITE_ERRNOS:
-            raise
-        raise LodConvertError(f"cannot write: {os.strerror(exc.errno)}", str(where)) from exc
+class _Writing:
+    """The ``with`` block of :func:`writing`: no state of its own, so one serves any number of
+    blocks, and where it writes is named only when a write fails (a city writes a file or a
+    record per tile and parks many of its objects in a temporary file: their names are not
+    made for each)."""
+
+    __slots__ = ("_where",)
+
+    def __init__(self, where: str | Path | Callable[[], str | Path]) -> None:
+        self._where = where
+
+    def __enter__(self) -> None:
+        return None
+
+    def __exit__(self, kind: object, exc: BaseException | None, traceback: object) -> None:
+        if isinstance(exc, OSError) and exc.errno in WRITE_ERRNOS:
+            where = self._where() if callable(self._where) else self._where
+            raise LodConvertError(f"cannot write: {os.strerror(exc.errno)}", str(where)) from exc
 
 
-def writing_temporary() -> contextlib.AbstractContextManager[None]:
+def writing(where: str | Path | Callable[[], str | Path]) -> _Writing:
+    """A failed write in the ``with`` block (:data:`WRITE_ERRNOS`) as one line naming ``where``
+    (or what it gives, called then) (:class:`LodConvertError`: ``out.glb: cannot write: No space
+    left on device``); any other error as it is."""
+    return _Writing(where)
+
+
+_TEMPORARY = _Writing(lambda: f"temporary folder {tempfile.gettempdir()}")
+
+
+def writing_temporary() -> _Writing:
     """:func:`writing` for work files in the temporary folder (``TMPDIR``), naming it."""
-    return writing(f"temporary folder {tempfile.gettempdir()}")
+    return _TEMPORARY
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -271,7 +289,7 @@ class DirectorySink:
         written through a link: one found on the way is :class:`LodConvertError`, and so is
         any entry there that no run of this output wrote."""
         name = "/".join(nofollow.parts(relative))
-        with writing(self.path / name), self._inside(name):
+        with writing(lambda: self.path / name), self._inside(name):
             replace = self.staged.note(name)
             with os.fdopen(nofollow.create(_root(self.staged), name, replace), "wb") as handle:
                 yield handle
@@ -286,7 +304,7 @@ class DirectorySink:
                 yield handle
             return
         with (
-            writing(self.path / name),
+            writing(lambda: self.path / name),
             self._inside(name),
             os.fdopen(nofollow.append(_root(self.staged), name), "ab") as handle,
         ):
