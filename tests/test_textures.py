@@ -1114,6 +1114,113 @@ def test_webp_copies_of_textures_pass_the_validators_and_hold_the_same_texels(
             assert np.array_equal(*texels)
 
 
+KTX2_WARNINGS = {"VALUE_NOT_IN_LIST", "IMAGE_UNRECOGNIZED_FORMAT"}
+"""What glTF-Validator (2.0.0-dev.3.10, also inside the 3D Tiles validator) says of each KTX2
+image: it does not know ``KHR_texture_basisu`` (KhronosGroup/glTF-Validator#177), so it
+lists ``image/ktx2`` as a MIME type not in the core list and the bytes as no format it reads."""
+
+
+def _ktx2_header(data: bytes) -> dict[str, int]:
+    """The fields of a KTX2 file's header and of its data format descriptor that
+    ``KHR_texture_basisu`` constrains."""
+    assert data[:12] == b"\xabKTX 20\xbb\r\n\x1a\n"
+    names = ("vk_format", "type_size", "width", "height", "depth", "layers", "faces", "levels")
+    fields = dict(zip(names, np.frombuffer(data, "<u4", 8, 12).tolist(), strict=True))
+    fields["scheme"] = int(np.frombuffer(data, "<u4", 1, 44)[0])
+    dfd = int(np.frombuffer(data, "<u4", 1, 48)[0])
+    model, primaries, transfer, flags = data[dfd + 12 : dfd + 16]
+    return {**fields, "model": model, "primaries": primaries, "transfer": transfer, "flags": flags}
+
+
+def _assert_ktx2_copies(path: Path) -> int:
+    """Every texture of the GLB at ``path`` has a ``KHR_texture_basisu`` copy (used, not
+    required: its PNG or JPEG stays) as the extension asks for a base colour: ETC1S with
+    BasisLZ, sRGB and BT.709, not premultiplied, 2D, sides of multiples of 4 within a block of
+    its fallback's, every mipmap level; how many."""
+    document, blob = glb_parts(path.read_bytes())
+    assert "KHR_texture_basisu" in document["extensionsUsed"]
+    assert "KHR_texture_basisu" not in document.get("extensionsRequired", [])
+    views = document["bufferViews"]
+
+    def data(index: int) -> bytes:
+        view = views[document["images"][index]["bufferView"]]
+        return blob[view.get("byteOffset", 0) :][: view["byteLength"]]
+
+    for texture in document["textures"]:
+        fallback = Image.open(io.BytesIO(data(texture["source"])))
+        assert fallback.format in ("PNG", "JPEG")
+        copy = texture["extensions"]["KHR_texture_basisu"]["source"]
+        assert document["images"][copy]["mimeType"] == "image/ktx2"
+        header = _ktx2_header(data(copy))
+        assert (header["vk_format"], header["scheme"], header["model"]) == (0, 1, 163), header
+        assert (header["primaries"], header["transfer"], header["flags"] & 1) == (1, 2, 0)
+        assert (header["depth"], header["layers"], header["faces"]) == (0, 0, 1), header
+        width, height = header["width"], header["height"]
+        assert width % 4 == 0 and height % 4 == 0, header
+        assert abs(width - fallback.width) <= 2 and abs(height - fallback.height) <= 2, header
+        assert header["levels"] == max(width, height).bit_length(), header
+    return len(document["textures"])
+
+
+def _ktx2_only_warnings(report: dict, path: Path) -> None:
+    """glTF-Validator's ``report`` on the GLB at ``path``: no error, and no warning but the
+    two of :data:`KTX2_WARNINGS` on each of its KTX2 images."""
+    messages = report["issues"]["messages"]
+    assert report["issues"]["numErrors"] == 0, messages
+    images = glb_parts(path.read_bytes())[0]["images"]
+    ktx2 = [f"/images/{i}" for i, image in enumerate(images) if image["mimeType"] == "image/ktx2"]
+    warned = [m for m in messages if m["severity"] <= 1]
+    found = sorted((m["pointer"].removesuffix("/mimeType"), m["code"]) for m in warned)
+    assert found == sorted((i, code) for i in ktx2 for code in KTX2_WARNINGS), warned
+    unsupported = {m["message"] for m in messages if m["code"] == "UNSUPPORTED_EXTENSION"}
+    assert all("MSFT_lod" in m or "KHR_texture_basisu" in m for m in unsupported), unsupported
+
+
+def _leaves(issues: list[dict]) -> Iterator[dict]:
+    """The innermost issues of a 3D Tiles validator report (the content's own messages)."""
+    for issue in issues:
+        causes = issue.get("causes", [])
+        yield from _leaves(causes) if causes else [issue]
+
+
+def test_ktx2_copies_of_textures_are_basis_universal_as_the_extension_asks(
+    tmp_path: Path, gltf_validator, basisu: str
+) -> None:
+    """``--texture-format ktx2``: every texture of a ``.glb`` and of a tileset's atlas pages
+    also comes as KTX2 with Basis Universal (``KHR_texture_basisu``) as the extension asks
+    (:func:`_assert_ktx2_copies`); both validators find no error, and no warning but the two
+    each KTX2 image takes from a validator that does not know the extension; the same run twice
+    writes the same bytes, on one worker or two."""
+    source = city(tmp_path, texture("tex/roof.png"))
+    glb, again = tmp_path / "roof.glb", tmp_path / "again.glb"
+    tileset = tmp_path / "tiles" / "tileset.json"
+    for out, workers in ((glb, "1"), (again, "2"), (tileset, "1")):
+        flags = ("--texture-format", "ktx2", "--workers", workers, "-q")
+        result = run(source, "-o", out, *flags)
+        assert result.returncode == 0, result.stderr
+    assert glb.read_bytes() == again.read_bytes()
+    assert _assert_ktx2_copies(glb) >= 1
+    _ktx2_only_warnings(gltf_validator(glb), glb)
+    pages = sorted((tileset.parent / "tiles").glob("*.glb"))
+    assert sum(_assert_ktx2_copies(p) for p in pages if b"image/ktx2" in p.read_bytes()) >= 1
+    report = official(tileset, tmp_path / "report.json")
+    assert report["numErrors"] == 0, report["issues"]
+    warned = [i for i in _leaves(report["issues"]) if i["severity"] == "WARNING"]
+    ktx2 = ("Invalid value 'image/ktx2'", "Image format not recognized")
+    assert all(i["message"].startswith(ktx2) for i in warned), warned
+
+
+def test_ktx2_without_its_encoder_is_a_one_line_usage_error_that_writes_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    source = city(tmp_path, texture("tex/roof.png"))
+    monkeypatch.setenv("LODCONVERT_BASISU", str(tmp_path / "no-basisu"))
+    for out in (tmp_path / "out.glb", tmp_path / "tiles" / "tileset.json"):
+        result = run(source, "-o", out, "--texture-format", "ktx2")
+        assert_one_line_error(result, 2, "--texture-format ktx2", "basisu", "LODCONVERT_BASISU")
+    assert not (tmp_path / "out.glb").exists() and not (tmp_path / "tiles").exists()
+
+
 def test_a_wrong_texture_format_is_a_one_line_usage_error(tmp_path: Path) -> None:
     source = city(tmp_path, texture("tex/roof.png"))
     result = run(source, "-o", tmp_path / "out.glb", "--texture-format", "ktx9")

@@ -204,13 +204,15 @@ function scaleLods(scale) {
 
 const backend = {
   async load(host) {
-    let GLTFLoader, OrbitControls, MeshoptDecoder;
-    [THREE, { GLTFLoader }, { OrbitControls }, { MeshoptDecoder }] = await Promise.all([
-      import("three"),
-      import("three/addons/loaders/GLTFLoader.js"),
-      import("three/addons/controls/OrbitControls.js"),
-      import("three/addons/libs/meshopt_decoder.module.js"), // --compress meshopt
-    ]);
+    let GLTFLoader, KTX2Loader, OrbitControls, MeshoptDecoder;
+    [THREE, { GLTFLoader }, { KTX2Loader }, { OrbitControls }, { MeshoptDecoder }] =
+      await Promise.all([
+        import("three"),
+        import("three/addons/loaders/GLTFLoader.js"),
+        import("three/addons/loaders/KTX2Loader.js"), // --texture-format ktx2
+        import("three/addons/controls/OrbitControls.js"),
+        import("three/addons/libs/meshopt_decoder.module.js"), // --compress meshopt
+      ]);
     origin = new THREE.Vector3(...focus); // the page's origin, so float32 keeps precision
     renderer = new THREE.WebGLRenderer({ antialias: true });
     renderer.setPixelRatio(window.devicePixelRatio);
@@ -220,7 +222,10 @@ const backend = {
     camera = new THREE.PerspectiveCamera(config.view.fov_y_deg, 1, nearest / 50, 10 * farthest);
     camera.add(new THREE.DirectionalLight(0xffffff, 1.5));
     scene.add(camera, new THREE.HemisphereLight(0xffffff, 0x444444, 2));
-    const loader = new GLTFLoader().setMeshoptDecoder(MeshoptDecoder);
+    const ktx2 = new KTX2Loader() // Basis Universal's transcoder, beside three's addons
+      .setTranscoderPath(import.meta.resolve("three/addons/libs/basis/"))
+      .detectSupport(renderer);
+    const loader = new GLTFLoader().setMeshoptDecoder(MeshoptDecoder).setKTX2Loader(ktx2);
     await buildScene(await loader.loadAsync(config.asset));
     raycaster = new THREE.Raycaster();
     controls = new OrbitControls(camera, renderer.domElement);

@@ -13,11 +13,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from lodconvert.io.gltf.texture_copies import BASISU, COPIES, WEBP
 from lodconvert.io.tiles.check import glb_parts
 from lodconvert.semantics import DEFAULT_CLASS_COLORS
 from lodconvert.viewer import write_page
 
-from ..conftest import ROOT, SHARED, require
+from ..conftest import ROOT, SHARED, basisu_encoder, require
 from ..test_cli import run
 from .conftest import REQUIRE, Drive, Driver, console_text
 from .test_tiles_cesium import CESIUM, _page
@@ -42,27 +43,33 @@ def plateau(site: Path) -> dict[str, Path]:
         "plain": site / "plateau_plain.x3d",
         "webp_glb": site / "plateau_webp.glb",
         "webp_tiles": site / "plateau_webp_tiles" / "tileset.json",
+        "ktx2_glb": site / "plateau_ktx2.glb",
+        "ktx2_tiles": site / "plateau_ktx2_tiles" / "tileset.json",
     }
-    for name, out in made.items():
-        theme = ("--appearance-theme", "none") if name == "plain" else ()
-        webp = ("--texture-format", "webp") if name.startswith("webp") else ()
-        result = run(PLATEAU, "-o", out, "-q", *theme, *webp)
-        assert result.returncode == 0, result.stderr
-    for glb in (made["webp_glb"], *(made["webp_tiles"].parent / "tiles").glob("*.glb")):
-        _break_fallbacks(glb)
-    for name in ("tiles", "webp_tiles"):
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("LODCONVERT_BASISU", basisu_encoder())
+        for name, out in made.items():
+            theme = ("--appearance-theme", "none") if name == "plain" else ()
+            kind = name.partition("_")[0]
+            copy = ("--texture-format", kind) if kind in COPIES else ()
+            result = run(PLATEAU, "-o", out, "-q", *theme, *copy)
+            assert result.returncode == 0, result.stderr
+    for kind in COPIES:
+        for glb in (made[f"{kind}_glb"], *(made[f"{kind}_tiles"].parent / "tiles").glob("*.glb")):
+            _break_fallbacks(glb)
+    for name in ("tiles", "webp_tiles", "ktx2_tiles"):
         write_page(made[name], library=CESIUM)
     return made
 
 
 def _break_fallbacks(glb: Path) -> None:
-    """Zero the bytes of every image that a texture's WebP copy stands in for, so that only
-    a viewer taking the WebP copy shows the texture."""
+    """Zero the bytes of every image that a texture's copy (WebP or KTX2) stands in for, so
+    that only a viewer taking the copy shows the texture."""
     document, _ = glb_parts(glb.read_bytes())
     data = bytearray(glb.read_bytes())
     start = 20 + struct.unpack_from("<I", data, 12)[0] + 8  # the BIN chunk's data
     for texture in document.get("textures", []):
-        if "EXT_texture_webp" in texture.get("extensions", {}):
+        if texture.get("extensions", {}).keys() & {WEBP, BASISU}:
             view = document["bufferViews"][document["images"][texture["source"]]["bufferView"]]
             at = start + view["byteOffset"]
             data[at : at + view["byteLength"]] = bytes(view["byteLength"])
@@ -120,7 +127,36 @@ def test_three_and_babylon_take_a_textures_webp_copy(
     assert any(m["texture"] and m["texture"]["width"] > 0 for m in out["result"]["meshes"]), message
 
 
-@pytest.mark.parametrize("name", ["tiles", "webp_tiles"])
+def test_three_takes_a_textures_ktx2_copy(plateau: dict[str, Path], drive: Drive) -> None:
+    """With ``--texture-format ktx2`` and the JPEG each KTX2 copy stands in for zeroed,
+    three.js (its KTX2Loader, Basis Universal's transcoder) draws the LoD2 level with a
+    compressed texture of the copy's size."""
+    out = drive("three", file=plateau["ktx2_glb"].name, node=1)
+    message = f"{out['result']}\n{console_text(out)}"
+    textures = out["result"]["textures"]
+    assert textures and all(t["compressed"] and t["uv"] for t in textures), message
+    assert all(t["width"] % 4 == 0 and t["height"] % 4 == 0 for t in textures), message
+
+
+def test_the_viewer_page_draws_the_ktx2_copy(
+    plateau: dict[str, Path], site: Path, drive: Drive
+) -> None:
+    """lodconvert's own page for the ``--texture-format ktx2`` ``.glb`` (each JPEG zeroed)
+    draws the building in its photograph's colours, through three.js's KTX2Loader, and says
+    nothing failed; in the class colours it would stand far from them."""
+    page = write_page(plateau["ktx2_glb"], library=str(site / "node_modules" / "three"))
+    out = drive("viewer", page=page.name, stops=[{"distance": 60.0}])
+    [seen] = out["result"]["stops"]
+    message = f"{seen}\n{console_text(out)}"
+    assert not [line for line in out["console"] if line.startswith(("error", "pageerror"))], message
+    assert seen["foreground"] > 0, message
+    photograph = np.asarray(Image.open(ATLAS).convert("RGB")).reshape(-1, 3).mean(axis=0)
+    drawn = float(np.linalg.norm(np.asarray(seen["mean"]) - photograph))
+    plain = float(np.linalg.norm(np.asarray(DEFAULT_CLASS_COLORS["wall"][:3]) - photograph))
+    assert drawn <= plain - 8, (drawn, plain, seen)
+
+
+@pytest.mark.parametrize("name", ["tiles", "webp_tiles", "ktx2_tiles"])
 def test_cesium_shows_the_texture_from_the_atlas(
     plateau: dict[str, Path],
     driver: Driver,
@@ -132,7 +168,7 @@ def test_cesium_shows_the_texture_from_the_atlas(
     """From 300 m at 50° above, the building shows the atlas's colours: its pixels' median
     is near the texture's and far from the roof and wall class colours, and they vary as a
     photograph does (a flat class colour, even lit, varies far less). With
-    ``--texture-format webp`` (each page's JPEG zeroed) CesiumJS takes the WebP copy."""
+    ``--texture-format webp`` or ``ktx2`` (each page's JPEG zeroed) CesiumJS takes the copy."""
     package = ROOT / "node_modules" / "cesium" / "package.json"
     require(package.exists(), f"{package} is absent (scripts/test.sh installs it)", REQUIRE)
     look = driver("tiles.mjs")
@@ -150,7 +186,8 @@ def test_cesium_shows_the_texture_from_the_atlas(
     assert len(building) >= MIN_VISIBLE * len(pixels), message
     texture = np.asarray(Image.open(ATLAS).convert("RGB")).reshape(-1, 3).astype(float)
     seen_median, texture_median = np.median(building, axis=0), np.median(texture, axis=0)
-    what = "CesiumJS PLATEAU textured" + (", WebP" if name == "webp_tiles" else "")
+    copy = {"webp_tiles": ", WebP", "ktx2_tiles": ", KTX2"}.get(name, "")
+    what = "CesiumJS PLATEAU textured" + copy
     measure(f"{what}, median colour", f"{seen_median.astype(int).tolist()}")
     assert np.abs(seen_median - texture_median).max() <= 60, (seen_median, texture_median)
     for kind in ("roof", "wall"):

@@ -16,7 +16,8 @@ from ...city.hlod import KINDS, HlodOptions, parse_sizes
 from ...errors import UsageError
 from ...io import output_format
 from ...io.frame import UP_AXES
-from ...io.gltf.compression import check_compression, check_texture_format
+from ...io.gltf.compression import check_compression
+from ...io.gltf.texture_copies import check_texture_format
 from ...io.x3d import SWITCHING_MODES
 from ...limits import DEFAULT_LIMITS
 from ...model.lods import lod_name
@@ -151,8 +152,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     out.add_argument(
         "--texture-format",
         metavar="FORMAT",
-        help="glTF and 3D Tiles textures: default (PNG, or JPEG for photographs) or webp "
-        "(each also as WebP, EXT_texture_webp, which a viewer that reads it prefers); "
+        help="glTF and 3D Tiles textures: default (PNG, or JPEG for photographs), webp "
+        "(each also as WebP, EXT_texture_webp, which a viewer that reads it prefers) or ktx2 "
+        "(also as KTX2, KHR_texture_basisu: Basis Universal's basisu encoder on PATH); "
         "docs/textures.md",
     )
     out.add_argument(

@@ -12,7 +12,7 @@ import numpy as np
 from ...colors import linear_rgba, linear_rgba16
 from ...errors import LodConvertError
 from ...model import Level, PointCloud, Surface
-from ..images import encoded, webp_encoded
+from ..images import encoded
 from .binary import (
     ARRAY_BUFFER,
     COMPONENT_TYPES,
@@ -33,6 +33,7 @@ from .compression import (
     stored_view,
 )
 from .json_text import COMPACT, json_object
+from .texture_copies import TextureCopy, texture_copy
 
 
 def float32_positions(positions: np.ndarray) -> np.ndarray:
@@ -154,8 +155,8 @@ class PrimitiveData:
     image: tuple[bytes, str] | None = None
     indices: AccessorData | None = None
     stored: Stored | None = None
-    webp: bytes | None = None
-    """The image's WebP copy (``--texture-format webp``), which the texture prefers."""
+    copy: TextureCopy | None = None
+    """The image's copy (``--texture-format``), which the texture prefers."""
 
 
 @dataclass(frozen=True)
@@ -207,7 +208,7 @@ class _Storing:
 
 
 def _mesh_data(
-    surface: Surface, storing: _Storing, normals: bool = True, webp: bool = False
+    surface: Surface, storing: _Storing, normals: bool = True, copy_kind: str = ""
 ) -> PrimitiveData:
     attributes = {"POSITION": storing.positions(surface.vertices)}
     if normals:
@@ -221,9 +222,8 @@ def _mesh_data(
         flipped = np.column_stack([surface.uv[:, 0], 1.0 - surface.uv[:, 1]])
         attributes["TEXCOORD_0"] = storing.attribute("TEXCOORD_0", flipped.astype(np.float32))
         image = surface_image(surface)
-        if webp:
-            assert surface.texture is not None
-            copy = webp_encoded(surface.texture, surface.photographic)
+        assert surface.texture is not None
+        copy = texture_copy(surface.texture, surface.photographic, copy_kind)
     index_type = np.uint16 if len(surface.vertices) < 65536 else np.uint32
     indices = storing.data(surface.faces.ravel().astype(index_type), ELEMENT_ARRAY_BUFFER)
     alpha_mode = alpha_mode_of(
@@ -232,7 +232,7 @@ def _mesh_data(
         surface.texture[..., 3] if textured else None,
     )
     base = [float(v) for v in linear_rgba(surface.material_color)]
-    return PrimitiveData(attributes, TRIANGLES, alpha_mode, base, image, indices, webp=copy)
+    return PrimitiveData(attributes, TRIANGLES, alpha_mode, base, image, indices, copy=copy)
 
 
 def _points_data(points: PointCloud, storing: _Storing) -> PrimitiveData:
@@ -244,10 +244,10 @@ def _points_data(points: PointCloud, storing: _Storing) -> PrimitiveData:
     return PrimitiveData(attributes, POINTS, alpha_mode_of(points.colors[:, 3]))
 
 
-def level_data(level: Level, compress: str = NONE, webp: bool = False) -> list[PrimitiveData]:
+def level_data(level: Level, compress: str = NONE, copy: str = "") -> list[PrimitiveData]:
     """The primitives of one (non-empty) level, compressed as ``compress`` says (quantized
     positions: in steps of the whole level, whose node turns them back), their textures with a
-    ``webp`` copy where asked. A LOD parent's
+    ``copy`` where asked (:func:`~.texture_copies.texture_copy`). A LOD parent's
     merged far mesh has no normals: its corners are welded
     (:func:`~lodconvert.bake.qem.simplify_within`), where normals per vertex would round every
     building's edges, and glTF clients shade a primitive without normals flat (three.js from
@@ -262,6 +262,6 @@ def level_data(level: Level, compress: str = NONE, webp: bool = False) -> list[P
         made = [_points_data(level.points, storing)]
     else:
         flat = level.kind == "merged"
-        made = [_mesh_data(part, storing, not flat, webp) for part in level.mesh.parts]
+        made = [_mesh_data(part, storing, not flat, copy) for part in level.mesh.parts]
     stored = storing.stored()
     return [replace(data, stored=stored) for data in made]

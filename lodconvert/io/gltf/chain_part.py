@@ -17,9 +17,10 @@ import numpy as np
 from ...model import CellChain, Level, LodChain
 from ...ranges import ReferenceView, screen_coverage
 from .. import OutputInfo
-from .compression import NONE, check_compression, check_texture_format
+from .compression import NONE, check_compression
 from .document import TRANSLATION, Document, DocumentPart, PartDocument
 from .json_text import COMPACT, INDENTED, Layout
+from .texture_copies import check_texture_format
 
 MSFT_LOD = "MSFT_lod"
 MEMBER_DEPTH = 3
@@ -224,19 +225,19 @@ class ChainParts:
     """Makes the :class:`ChainPart` of a chain that is not an instance of shared geometry
     (whose levels are written once, by the first), as the writer of a document laid out with
     ``indent`` adds it, for the reference ``view``, compressed as ``compress`` says, textures
-    with a ``webp`` copy where asked; its root's translation is left to the writer, which
-    knows the scene frame."""
+    with a ``copy`` where asked (:func:`~.texture_copies.check_texture_format`); its root's
+    translation is left to the writer, which knows the scene frame."""
 
     view: ReferenceView
     indent: int | None
     compress: str
-    webp: bool
+    copy: str
 
     def __call__(self, chain: LodChain) -> ChainPart | None:
         if chain.transform is not None:
             return None
         layout = COMPACT if self.indent is None else INDENTED
-        doc = PartDocument(layout, self.compress, self.webp)
+        doc = PartDocument(layout, self.compress, self.copy)
         add_chain(doc, chain, chain_text(chain, self.view, layout), TRANSLATION)
         return ChainPart(self.indent, doc.part())
 
@@ -247,5 +248,5 @@ def chain_parts(
     """The glTF formats' ``formatter`` (:mod:`lodconvert.io`) for a ``.glb`` (compact JSON)
     or ``.gltf`` (indented) ``suffix``."""
     indent = COMPACT.indent if suffix == ".glb" else INDENTED.indent
-    webp = check_texture_format(texture_format)
-    return ChainParts(info.view, indent, check_compression(compress), webp)
+    copy = check_texture_format(texture_format)
+    return ChainParts(info.view, indent, check_compression(compress), copy)

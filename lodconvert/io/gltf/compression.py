@@ -43,21 +43,6 @@ POSITION_STEPS = 65535
 """Steps of a quantized position across the content's largest extent."""
 
 
-TEXTURE_FORMATS = ("default", "webp")
-"""The ``--texture-format`` choices: PNG or JPEG (:func:`~..images.encoded`), or those with a
-WebP copy each texture prefers (``EXT_texture_webp``)."""
-WEBP = "EXT_texture_webp"
-
-
-def check_texture_format(name: str) -> bool:
-    """Whether textures get a WebP copy (``name`` ``webp``); :class:`UsageError` for a name
-    not in :data:`TEXTURE_FORMATS`."""
-    if name not in TEXTURE_FORMATS:
-        choices = ", ".join(TEXTURE_FORMATS)
-        raise UsageError(f"--texture-format must be one of {choices}, got {name!r}")
-    return name == "webp"
-
-
 def check_compression(name: str) -> str:
     """``name`` when it is one of :data:`COMPRESSIONS`, else :class:`UsageError`."""
     if name not in COMPRESSIONS:

@@ -17,8 +17,9 @@ from typing import IO, Any
 from ...model import Level
 from .binary import LINEAR, LINEAR_MIPMAP_LINEAR, REPEAT
 from .buffers import VIEW_HEAD, AccessorData, PrimitiveData, level_data
-from .compression import NONE, WEBP, StoredView, fallback_buffer, required
+from .compression import NONE, StoredView, fallback_buffer, required
 from .json_text import COMPACT, DataUri, JsonArray, Layout, json_object
+from .texture_copies import TextureCopy
 
 UNLIT = "KHR_materials_unlit"
 SPOOL_BYTES = 1 << 20
@@ -121,11 +122,12 @@ class Document:
     """A glTF document being written: its JSON arrays and binary buffer go to temporary files
     as they are made (:mod:`.json_text`), so memory holds the chain being added, not what was
     added before; :meth:`close` deletes them. Levels made here are compressed as ``compress``
-    says (docs/compression.md), their textures with a ``webp`` copy where asked."""
+    says (docs/compression.md), their textures with a ``copy`` where asked
+    (:func:`~.texture_copies.check_texture_format`)."""
 
-    def __init__(self, layout: Layout, compress: str = NONE, webp: bool = False) -> None:
+    def __init__(self, layout: Layout, compress: str = NONE, copy: str = "") -> None:
         self.layout = layout
-        self.compress, self.webp = compress, webp
+        self.compress, self.copy = compress, copy
         self._files = contextlib.ExitStack()
         self.blob = self._spool()
         self.blob_length = 0
@@ -260,9 +262,9 @@ class Document:
             return self.accessors.append_text(text)
         return self.accessors.append({"bufferView": self.value("v", view), **accessor.fields})
 
-    def _texture(self, data: tuple[bytes, str], webp: bytes | None = None) -> int:
-        """A texture of the image ``data`` (bytes, MIME type), preferring its ``webp`` copy
-        where there is one (``EXT_texture_webp``: the image stays for clients without it)."""
+    def _texture(self, data: tuple[bytes, str], copy: TextureCopy | None = None) -> int:
+        """A texture of the image ``data`` (bytes, MIME type), preferring its ``copy``
+        where there is one (named by its extension: the image stays for clients without it)."""
         image = {"mimeType": data[1], "bufferView": self.value("v", self._buffer_view(data[0]))}
         sampler = {
             "magFilter": LINEAR,
@@ -274,18 +276,18 @@ class Document:
             "sampler": self.value("s", self.samplers.append(sampler)),
             "source": self.value("i", self.images.append(image)),
         }
-        if webp is not None:
-            self.use(WEBP)
-            view = self.value("v", self._buffer_view(webp))
-            copy = self.images.append({"mimeType": "image/webp", "bufferView": view})
-            texture["extensions"] = {WEBP: {"source": self.value("i", copy)}}
+        if copy is not None:
+            self.use(copy.extension)
+            view = self.value("v", self._buffer_view(copy.data))
+            index = self.images.append({"mimeType": copy.mime, "bufferView": view})
+            texture["extensions"] = {copy.extension: {"source": self.value("i", index)}}
         return self.textures.append(texture)
 
     def _primitive(self, data: PrimitiveData) -> str:
         """A primitive's JSON text, its accessors (and texture) added."""
         ref = self.ref
         added = {name: self._accessor(accessor) for name, accessor in data.attributes.items()}
-        texture = self._texture(data.image, data.webp) if data.image is not None else None
+        texture = self._texture(data.image, data.copy) if data.image is not None else None
         attributes = [(name, ref("a", added[name])) for name in _ATTRIBUTES if name in added]
         members = [("attributes", self.layout.object_text(attributes, _PRIMITIVE_DEPTH + 1))]
         if data.indices is not None:
@@ -328,7 +330,7 @@ class Document:
             return None
         if id(level) in self._shared:
             return self._shared[id(level)][1]
-        made = level_data(level, self.compress, self.webp)
+        made = level_data(level, self.compress, self.copy)
         primitives = self.layout.array_text([self._primitive(data) for data in made], 3)
         mesh = self.meshes.append_text(
             self.layout.object_text([("primitives", primitives), ("name", name)], 2)
@@ -392,9 +394,9 @@ class PartDocument(Document):
     materials are all its own, and its buffer stays in memory; :meth:`part` is what
     :meth:`Document.merge` takes."""
 
-    def __init__(self, layout: Layout, compress: str = NONE, webp: bool = False) -> None:
+    def __init__(self, layout: Layout, compress: str = NONE, copy: str = "") -> None:
         self._made_materials: list[tuple[MaterialKey, str]] = []
-        super().__init__(layout, compress, webp)
+        super().__init__(layout, compress, copy)
 
     def _spool(self) -> IO[bytes]:
         return io.BytesIO()

@@ -90,7 +90,7 @@ class LodScene:
         self.info = info
         self.reference_view = info.view
         self.pieces = pieces
-        self.parts = ChainParts(info.view, doc.layout.indent, doc.compress, doc.webp)
+        self.parts = ChainParts(info.view, doc.layout.indent, doc.compress, doc.copy)
         """Makes the part of a chain no worker made."""
         self.frame: SceneFrame | None = None  # set by the first item, for a framed scene
         self.scene_nodes = doc.array(depth=3)  # at scenes[0].nodes

@@ -16,10 +16,11 @@ from ...model import LodChain
 from ...sinks import writing_temporary
 from .. import OutputInfo, Pieces
 from .binary import pack_glb
-from .compression import NONE, check_compression, check_texture_format
+from .compression import NONE, check_compression
 from .document import SPOOL_BYTES, Document
 from .json_text import COMPACT, INDENTED, Layout, write_json
 from .lod import LodScene
+from .texture_copies import check_texture_format
 
 
 @contextlib.contextmanager
@@ -55,9 +56,9 @@ def write_glb(
     texture_format: str = "default",
 ) -> None:
     """Write ``chains`` as binary glTF (one JSON chunk, one BIN chunk) to ``handle``, its
-    geometry compressed as ``compress`` says (docs/compression.md), its textures with a WebP
-    copy where ``texture_format`` is ``webp``; the part of a chain in ``pieces`` (made by a
-    worker, :class:`.chain_part.ChainParts`) is taken as it is."""
+    geometry compressed as ``compress`` says (docs/compression.md), its textures with a copy
+    where ``texture_format`` asks for one (``webp``, ``ktx2``); the part of a chain in
+    ``pieces`` (made by a worker, :class:`.chain_part.ChainParts`) is taken as it is."""
     with (
         _scene(chains, info, COMPACT, pieces, compress, texture_format) as scene,
         tempfile.SpooledTemporaryFile(SPOOL_BYTES) as text,

@@ -33,7 +33,6 @@ from ..gltf.buffers import alpha_mode_of, float32_positions, vertex_normals
 from ..gltf.compression import (
     NONE,
     POSITION_TOLERANCE,
-    WEBP,
     Filtered,
     Quantizer,
     StoredView,
@@ -44,7 +43,8 @@ from ..gltf.compression import (
     stored_view,
 )
 from ..gltf.document import UNLIT
-from ..images import encoded, webp_encoded
+from ..gltf.texture_copies import COPIES, texture_copy
+from ..images import encoded
 from .metadata import Feature, property_table
 
 MESH_FEATURES = "EXT_mesh_features"
@@ -55,10 +55,11 @@ class _Builder:
     """A GLB's binary buffer, buffer views and accessors; with ``compress`` (a
     :data:`~..gltf.compression.COMPRESSIONS`) other than ``none``, its vertex attributes and
     indices compressed so (meshopt positions within ``tolerance`` metres, or float32's step
-    where that is finer); its textures with a WebP copy where ``webp``."""
+    where that is finer); its textures with a ``copy`` where asked
+    (:func:`~..gltf.texture_copies.check_texture_format`)."""
 
-    def __init__(self, compress: str = NONE, webp: bool = False, tolerance: float = 0.0) -> None:
-        self.compress, self.webp, self.tolerance = compress, webp, tolerance
+    def __init__(self, compress: str = NONE, copy: str = "", tolerance: float = 0.0) -> None:
+        self.compress, self.copy, self.tolerance = compress, copy, tolerance
         self.blob = bytearray()
         self.views: list[dict[str, Any]] = []
         self.accessors: list[dict[str, Any]] = []
@@ -72,16 +73,16 @@ class _Builder:
         """How far (metres) a stored position lies from its float32 position, at most."""
 
     def texture(self, rgba: np.ndarray, photographic: bool) -> int:
-        """A texture of the image ``rgba`` (:func:`~..images.encoded`; preferring a WebP copy
-        where the builder makes one), sampled with mipmaps and clamped at its edges (an atlas
+        """A texture of the image ``rgba`` (:func:`~..images.encoded`; preferring its copy where
+        the builder makes one), sampled with mipmaps and clamped at its edges (an atlas
         page: nothing repeats)."""
         data, mime = encoded(rgba, photographic)
         self.images.append({"bufferView": self.view(data), "mimeType": mime})
         texture: dict[str, Any] = {"sampler": 0, "source": len(self.images) - 1}
-        if self.webp:
-            copy = self.view(webp_encoded(rgba, photographic))
-            self.images.append({"bufferView": copy, "mimeType": "image/webp"})
-            texture["extensions"] = {WEBP: {"source": len(self.images) - 1}}
+        copy = texture_copy(rgba, photographic, self.copy)
+        if copy is not None:
+            self.images.append({"bufferView": self.view(copy.data), "mimeType": copy.mime})
+            texture["extensions"] = {copy.extension: {"source": len(self.images) - 1}}
         self.textures_made.append(texture)
         return len(self.textures_made) - 1
 
@@ -158,13 +159,14 @@ class _Builder:
 
     def glb(self, document: dict[str, Any]) -> bytes:
         """The GLB of ``document`` with this buffer (and the fallback buffer of compressed
-        views, the extensions they take named used and required, and WebP's used)."""
+        views, the extensions they take named used and required, and a texture copy's used)."""
         self.blob.extend(b"\0" * (-len(self.blob) % 4))
         buffers: list[dict[str, Any]] = [{"byteLength": len(self.blob)}]
         if self.fallback:
             buffers.append(fallback_buffer(self.fallback))
         needed = required(self.quantized, self.fallback > 0)
-        used = document.get("extensionsUsed", []) + [WEBP] * (self.webp and bool(self.images))
+        copies = [COPIES[self.copy][0]] if self.copy and self.images else []
+        used = document.get("extensionsUsed", []) + copies
         document = {
             **document,
             "accessors": self.accessors,
@@ -244,7 +246,7 @@ def mesh_glb(
     textures: TileTextures | None = None,
     atlas_size: int = ATLAS_SIZE,
     compress: str = NONE,
-    webp: bool = False,
+    copy: str = "",
     tolerance: float = POSITION_TOLERANCE[0],
 ) -> bytes:
     """A GLB of a triangle primitive: ``vertices`` (n, 3) glTF coordinates (y-up, about the
@@ -253,12 +255,12 @@ def mesh_glb(
     textured vertices (``textures``) are drawn by a primitive per atlas page (at most
     ``atlas_size`` texels a side) instead, on the same vertices (their colours multiply the
     texture: white shows it as it is); its geometry compressed as ``compress`` says (meshopt
-    positions within ``tolerance`` metres), its pages with a WebP copy where ``webp``."""
+    positions within ``tolerance`` metres), its pages with a ``copy`` where asked."""
     if compress != NONE:
         vertices, faces, colors, feature_ids, textures = _in_fetch_order(
             vertices, faces, colors, feature_ids, textures
         )
-    builder = _Builder(compress, webp, tolerance)
+    builder = _Builder(compress, copy, tolerance)
     positions = float32_positions(vertices)
     normals = vertex_normals(Surface(positions.astype(np.float64), faces))
     index_type = np.uint16 if len(vertices) < 65536 else np.uint32

@@ -75,8 +75,8 @@ class TilePlan:
     """How a run's tiles are planned: placed by ``where``, written by ``generator``, their
     geometric errors from ``sse`` and the reference view's ``focal_px``, their textures packed
     into atlas pages of ``atlas_size`` texels, their geometry compressed as ``compress`` says,
-    pages with a WebP copy where ``webp``. The tiles planned wait in ``queued`` (each with its
-    task), and ``point_scale`` is the largest its far points ask for."""
+    pages with a ``copy`` where asked (``webp``, ``ktx2``). The tiles planned wait in
+    ``queued`` (each with its task), and ``point_scale`` is the largest its far points ask for."""
 
     where: Where
     generator: str
@@ -84,7 +84,7 @@ class TilePlan:
     focal_px: float
     atlas_size: int
     compress: str
-    webp: bool
+    copy: str
     queued: list[tuple[Tile, TileTask]] = field(default_factory=list)
     point_scale: float | None = None
 
@@ -99,7 +99,7 @@ class TilePlan:
         and box are filled in from the task's result); see :class:`TileTask`."""
         task = TileTask(
             f"{name}.glb", self.where, sources, features, self.generator, self.atlas_size,
-            self.compress, self.webp, position_tolerance(error),
+            self.compress, self.copy, position_tolerance(error),
         )  # fmt: skip
         tile = Tile(None, None, error, task.name)
         self.queued.append((tile, task))
@@ -169,7 +169,7 @@ class TilePlan:
     def __reduce__(self) -> tuple[Any, ...]:
         """Pickled without what it has queued (a plan travels to a cell's task empty)."""
         values = (self.where, self.generator, self.sse, self.focal_px, self.atlas_size)
-        return TilePlan, (*values, self.compress, self.webp)
+        return TilePlan, (*values, self.compress, self.copy)
 
 
 def _mesh_levels(chain: LodChain) -> list[tuple[int, Level]]:

@@ -155,7 +155,7 @@ class TileTask:
     its colours and textures, or points); textures packed into atlas pages of
     ``atlas_size``; its geometry compressed as ``compress``
     (:data:`~..gltf.compression.COMPRESSIONS`) says (meshopt positions within ``tolerance``
-    metres), its atlas pages with a WebP copy where ``webp``. The sources' geometry is placed
+    metres), its atlas pages with a ``copy`` where asked. The sources' geometry is placed
     where the task runs: packed geometry is opened only there."""
 
     name: str
@@ -165,7 +165,7 @@ class TileTask:
     generator: str
     atlas_size: int = ATLAS_SIZE
     compress: str = MESHOPT
-    webp: bool = False
+    copy: str = ""
     tolerance: float = POSITION_TOLERANCE[0]
 
     def drawn(self) -> Drawn:
@@ -196,7 +196,7 @@ class TileTask:
         drawn = drawn or self.drawn()
         digest = hashlib.sha256()
         head = [self.name, self.where.key, self.generator, self.features, self.compress]
-        head += [self.webp, self.tolerance]
+        head += [self.copy, self.tolerance]
         textures = drawn.textures
         if textures is not None:
             head += [self.atlas_size, textures.photographic]
@@ -242,7 +242,7 @@ class TileTask:
             return points_glb(gltf, drawn.colors, self.generator, self.compress, self.tolerance)
         return mesh_glb(
             gltf, drawn.faces, drawn.colors, drawn.feature_ids, self.features, self.generator,
-            drawn.textures, self.atlas_size, self.compress, self.webp, self.tolerance,
+            drawn.textures, self.atlas_size, self.compress, self.copy, self.tolerance,
         )  # fmt: skip
 
     def failed(self, reason: str) -> TileResult:

@@ -22,7 +22,8 @@ from ...errors import LodConvertError, UsageError
 from ...model import CellChain, LodChain
 from ...textures import ATLAS_SIZE, check_atlas_size
 from .. import OutputInfo, Pieces
-from ..gltf.compression import MESHOPT, check_compression, check_texture_format
+from ..gltf.compression import MESHOPT, check_compression
+from ..gltf.texture_copies import check_texture_format
 from .placement import Placement, world_to_frame
 from .plan import MadeTiles, Tile, TilePlan
 from .records import TileRecords
@@ -280,8 +281,8 @@ def tile_plan(
 ) -> TilePlan:
     """How the tiles of a run writing ``info``'s scene are planned: geometric errors for
     ``sse``, textures packed into atlas pages of at most ``atlas_size`` texels a side, geometry
-    compressed as ``compress`` says (``None``: ``meshopt``), pages with a WebP copy where
-    ``texture_format`` is ``webp``."""
+    compressed as ``compress`` says (``None``: ``meshopt``), pages with a copy where
+    ``texture_format`` asks for one (``webp``, ``ktx2``)."""
     if not (math.isfinite(sse) and sse > 0):
         raise UsageError(f"must be a positive number of pixels, got {sse:g}", "sse")
     check_atlas_size(atlas_size)
