@@ -1221,6 +1221,22 @@ def test_ktx2_without_its_encoder_is_a_one_line_usage_error_that_writes_nothing(
     assert not (tmp_path / "out.glb").exists() and not (tmp_path / "tiles").exists()
 
 
+def test_an_encoder_that_fails_is_a_one_line_error_that_writes_nothing(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An encoder that fails (here a script that says why and exits 3) stops the run with its
+    name and last word, on one worker or in a worker of two; nothing is left."""
+    source = city(tmp_path, texture("tex/roof.png"))
+    failing = tmp_path / "basisu"
+    failing.write_text("#!/bin/sh\necho 'ERROR: out of texels' >&2\nexit 3\n")
+    failing.chmod(0o755)
+    monkeypatch.setenv("LODCONVERT_BASISU", str(failing))
+    for out, workers in ((tmp_path / "out.glb", "1"), (tmp_path / "tiles" / "tileset.json", "2")):
+        result = run(source, "-o", out, "--texture-format", "ktx2", "--workers", workers)
+        assert_one_line_error(result, 1, str(failing), "failed on a texture", "out of texels")
+    assert not (tmp_path / "out.glb").exists() and not (tmp_path / "tiles").exists()
+
+
 def test_a_wrong_texture_format_is_a_one_line_usage_error(tmp_path: Path) -> None:
     source = city(tmp_path, texture("tex/roof.png"))
     result = run(source, "-o", tmp_path / "out.glb", "--texture-format", "ktx9")

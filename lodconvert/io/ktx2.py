@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import UsageError
+from ..errors import LodConvertError, UsageError
 
 ENCODER_VARIABLE = "LODCONVERT_BASISU"
 """The environment variable that names the ``basisu`` executable (else ``PATH`` is searched)."""
@@ -41,8 +41,8 @@ def encoder() -> str:
 def ktx2_encoded(rgba: np.ndarray) -> bytes:
     """Deterministic KTX2 bytes (ETC1S, mipmapped, sRGB) of an RGBA uint8 image (top row
     first), its alpha kept only where a texel is not opaque; an image whose sides are not
-    multiples of :data:`BLOCK` is resampled to the nearest that are. :class:`RuntimeError`
-    with the encoder's message when it fails."""
+    multiples of :data:`BLOCK` is resampled to the nearest that are.
+    :class:`~lodconvert.errors.LodConvertError` with the encoder's last message when it fails."""
     from PIL import Image
 
     opaque = int(rgba[..., 3].min(initial=255)) == 255
@@ -55,11 +55,13 @@ def ktx2_encoded(rgba: np.ndarray) -> bytes:
     with tempfile.TemporaryDirectory(prefix="lodconvert-ktx2-") as folder:
         source, target = Path(folder, "image.png"), Path(folder, "image.ktx2")
         image.save(source, format="PNG")
-        command = [encoder(), "-ktx2", "-mipmap", "-no_multithreading", "-q", str(QUALITY)]
+        basisu = encoder()
+        command = [basisu, "-ktx2", "-mipmap", "-no_multithreading", "-q", str(QUALITY)]
         command += ["-no_alpha"] if opaque else ["-force_alpha"]
         command += ["-file", source.name, "-output_file", target.name]
         done = subprocess.run(command, cwd=folder, capture_output=True, text=True, check=False)
         if done.returncode != 0 or not target.is_file():
             said = (done.stderr or done.stdout).strip().splitlines()
-            raise RuntimeError(f"basisu failed: {said[-1] if said else done.returncode}")
+            why = said[-1] if said else f"exit status {done.returncode}"
+            raise LodConvertError(f"Basis Universal's encoder {basisu} failed on a texture: {why}")
         return target.read_bytes()
