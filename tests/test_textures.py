@@ -1210,6 +1210,24 @@ def test_ktx2_copies_of_textures_are_basis_universal_as_the_extension_asks(
     assert all(i["message"].startswith(ktx2) for i in warned), warned
 
 
+@pytest.mark.parametrize("shape", [(1, 1), (3, 7), (1, 4096), (6, 10)])
+def test_ktx2_takes_any_image_and_an_encoder_named_relative_to_the_working_folder(
+    basisu: str, monkeypatch: pytest.MonkeyPatch, shape: tuple[int, int]
+) -> None:
+    """A texture of any size (a texel, a sliver) becomes KTX2 with sides of multiples of 4
+    and every mipmap level, by an encoder named by a path relative to where the run started
+    (the encoder runs in a folder of its own)."""
+    from lodconvert.io.ktx2 import ktx2_encoded
+
+    monkeypatch.chdir(Path(basisu).parent)
+    monkeypatch.setenv("LODCONVERT_BASISU", "./basisu")
+    rgba = np.full((*shape, 4), 200, dtype=np.uint8)
+    header = _ktx2_header(ktx2_encoded(rgba))
+    width, height = header["width"], header["height"]
+    assert width % 4 == 0 and height % 4 == 0 and abs(width - shape[1]) < 4, header
+    assert abs(height - shape[0]) < 4 and header["levels"] == max(width, height).bit_length()
+
+
 def test_ktx2_without_its_encoder_is_a_one_line_usage_error_that_writes_nothing(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

