@@ -7,12 +7,15 @@ focal length (1080 px, 45°), with mipmaps alone and supersampled (each pixel th
 those drawn under it). Per tier, the mean CIEDE2000 ΔE of the pixels both show, roofs and walls
 apart by the source's face there ("pixels"), of those where the far level shows a face of the
 same kind ("same kind": its colours where the geometries agree), and the ΔE of the mean
-colours of those pixels ("means"), each a mean over a tier's levels with its largest:
+colours of those pixels ("means"), each a mean over a tier's levels with its largest; and how
+far the source's own pixels of each kind lie from their mean colour ("spread": the least error
+of a level in one colour for roofs and one for walls, were its geometry the source's):
 
     python benchmarks/texture_colours.py               # 20 copies: results/texture_colours.md
     python benchmarks/texture_colours.py --supersample 1   # mipmaps alone (13 s, not 3 min)
 
-Tiers: ``LOD1`` (each building's LoD1 against its textured LoD2), ``blocks`` and ``mesh``
+Tiers: ``LOD1`` (each building's LoD1 against its textured LoD2), its floor (:data:`FLOOR`),
+``blocks`` and ``mesh``
 (each cell's far level against its buildings' finest levels), and ``mesh, baked texture`` (the
 simplified far meshes with a texture baked from their buildings' as LOD1 and blocks take one,
 in place of their vertex colours), with each level's bytes as a ``.glb`` holds it
@@ -33,6 +36,10 @@ from tables import markdown_table, one_core_facts, write_results
 from textured_district import district
 
 HERE = Path(__file__).resolve().parent
+FLOOR = "LOD2 in its class means"
+"""The tier of each building's textured LoD2 with each face in its roof's or walls' mean colour
+(:func:`in_class_means`): the least pixel ΔE of a level coloured as LOD1 and block proxies are
+(one colour for roofs, one for walls), where its geometry is the source's own."""
 SUPERSAMPLE = "1,64"
 """Pixels drawn per pixel compared, a side, each a table's rows (each compared pixel their
 mean in linear light; at most 2,048 drawn a side): 1 compares what mipmaps alone give, which
@@ -71,6 +78,11 @@ def tiers(
                                             directions, supersample)  # fmt: skip
             row = {"distance": distance, "bytes": level_bytes(level.mesh), **errors}
             found.setdefault("LOD1", []).append(row)
+            flat = in_class_means(meshes[0][1].mesh)
+            errors = class_delta_e_rendered(renderer, meshes[0][1].mesh, flat, distance,
+                                            directions, supersample)  # fmt: skip
+            row = {"distance": distance, "bytes": level_bytes(flat), **errors}
+            found.setdefault(FLOOR, []).append(row)
     for cell in cells:
         assert cell.far.mesh is not None
         source = merge([finest_mesh(chain) for chain in cell.objects()]).translated(-cell.origin)
@@ -85,6 +97,25 @@ def tiers(
             row = {"distance": distance, "bytes": level_bytes(mesh), **errors}
             found.setdefault(tier, []).append(row)
     return found
+
+
+def in_class_means(mesh: Any) -> Any:
+    """``mesh`` with each face in one flat colour: its roof's mean colour over the roof's area
+    where the face is a roof, else its walls' (:func:`~lodconvert.city.prisms.prism_colors`,
+    the colours a prism and a block proxy take), a face's own corners apart from its
+    neighbours'. Drawn against ``mesh``, the least colour error of a level coloured so."""
+    from lodconvert.analysis.albedo import STEEP
+    from lodconvert.city.prisms import prism_colors
+    from lodconvert.model import Mesh, Surface
+
+    roof, wall = prism_colors(mesh)
+    tri = mesh.triangles
+    across = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    roofs = across[:, 2] > STEEP * np.linalg.norm(across, axis=1)
+    colours = np.where(roofs[:, None], roof, wall).astype(np.uint8)
+    faces = np.arange(3 * len(tri), dtype=np.int64).reshape(-1, 3)
+    surface = Surface(tri.reshape(-1, 3), faces, vertex_colors=np.repeat(colours, 3, axis=0))
+    return Mesh([surface])
 
 
 def level_bytes(mesh: Any) -> int:
@@ -139,10 +170,13 @@ def main() -> None:
         for key in ("roof", "wall", "roof_same", "wall_same", "roof_mean", "wall_mean"):
             values = [r[key] for r in levels if not math.isnan(r[key])]
             row += [f"{np.mean(values):.1f}", f"{max(values):.1f}"]
+        for key in ("roof_spread", "wall_spread"):
+            row.append(f"{np.nanmean([r[key] for r in levels]):.1f}")
         rows.append(row)
     header = ["tier", "drawn", "levels", "switch-in m", "bytes a level", "roof pixels ΔE", "max",
               "wall pixels ΔE", "max", "roof, same kind", "max", "wall, same kind", "max",
-              "roof means ΔE", "max", "wall means ΔE", "max"]  # fmt: skip
+              "roof means ΔE", "max", "wall means ΔE", "max", "source roof spread",
+              "source wall spread"]  # fmt: skip
     text = "\n".join(
         [
             f"# Far levels of {args.copies} textured PLATEAU copies against their textures, drawn",

@@ -876,7 +876,8 @@ def test_the_colour_renderer_draws_a_roof_in_its_texture_and_a_flat_one_apart(
     tmp_path: Path, albedo: object
 ) -> None:
     """The roof drawn from above shows the quadrants where they lie (from near) and their
-    mean (from afar, mipmapped); a roof in one flat colour is that colour's ΔE away."""
+    mean (from afar, mipmapped); a roof in one flat colour is that colour's ΔE away, and the
+    quadrants lie their spread from their mean."""
     from lodconvert.analysis.albedo import ROOF as ROOF_KIND
     from lodconvert.analysis.albedo import class_delta_e_rendered
     from lodconvert.views import towards_camera
@@ -907,6 +908,10 @@ def test_the_colour_renderer_draws_a_roof_in_its_texture_and_a_flat_one_apart(
         assert errors["roof"] > 20 and errors["wall"] == pytest.approx(0.0, abs=0.5)
         # one geometry: every pixel shows the same kind in both
         assert errors["roof_same"] == errors["roof"] and errors["wall_same"] == errors["wall"]
+        # four quadrants lie far from their mean, though nearer than from the class colour;
+        # walls in one colour lie at it
+        assert 10 < errors["roof_spread"] < errors["roof"]
+        assert errors["wall_spread"] == pytest.approx(0.0, abs=0.5)
 
 
 def test_a_supersampled_pixel_is_the_mean_of_the_pixels_drawn_under_it() -> None:

@@ -183,7 +183,9 @@ def class_delta_e_rendered(
     mean CIEDE2000 ΔE of the pixels (``roof``, ``wall``), of those where ``far`` shows a face
     of the same kind (``roof_same``, ``wall_same``: the colours, where the geometries agree),
     and the CIEDE2000 ΔE of their mean colours, in CIE L*a*b* (``roof_mean``,
-    ``wall_mean``); NaN where no pixel is of a kind.
+    ``wall_mean``); and the mean CIEDE2000 ΔE of ``source``'s pixels of each kind from their
+    mean colour (``roof_spread``, ``wall_spread``: the error of a level in one colour a kind
+    with the source's geometry); NaN where no pixel is of a kind.
     With ``supersample``, each pixel is the mean of ``supersample`` × ``supersample`` drawn
     ones (at most 2,048 a side in all): what the surfaces under it show, where mipmaps alone
     blend a texture atlas's unrelated parts into a pixel that covers a building."""
@@ -210,6 +212,9 @@ def class_delta_e_rendered(
         b = np.concatenate([g for _, g in found])
         out[name] = float(delta_e_2000(a, b).mean()) if len(a) else float("nan")
         if name in ("roof", "wall"):
-            mean = ciede2000(lab(a).mean(axis=0), lab(b).mean(axis=0)) if len(a) else np.nan
+            wanted_lab = lab(a)
+            mean = ciede2000(wanted_lab.mean(axis=0), lab(b).mean(axis=0)) if len(a) else np.nan
             out[f"{name}_mean"] = float(mean)
+            spread = ciede2000(wanted_lab, wanted_lab.mean(axis=0)).mean() if len(a) else np.nan
+            out[f"{name}_spread"] = float(spread)
     return out
