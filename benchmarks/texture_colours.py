@@ -8,8 +8,9 @@ those drawn under it). Per tier, the mean CIEDE2000 ΔE of the pixels both show,
 apart by the source's face there ("pixels"), of those where the far level shows a face of the
 same kind ("same kind": its colours where the geometries agree), and the ΔE of the mean
 colours of those pixels ("means"), each a mean over a tier's levels with its largest; and how
-far the source's own pixels of each kind lie from their mean colour ("spread": the least error
-of a level in one colour for roofs and one for walls, were its geometry the source's):
+far the source's own pixels of each kind lie from their mean colour ("spread": about what a
+level in one colour for roofs and one for walls lies from them, were its geometry the
+source's, as the tier :data:`FLOOR` draws):
 
     python benchmarks/texture_colours.py               # 20 copies: results/texture_colours.md
     python benchmarks/texture_colours.py --supersample 1   # mipmaps alone (13 s, not 3 min)
@@ -38,8 +39,8 @@ from textured_district import district
 HERE = Path(__file__).resolve().parent
 FLOOR = "LOD2 in its class means"
 """The tier of each building's textured LoD2 with each face in its roof's or walls' mean colour
-(:func:`in_class_means`): the least pixel ΔE of a level coloured as LOD1 and block proxies are
-(one colour for roofs, one for walls), where its geometry is the source's own."""
+over their areas (:func:`in_class_means`): what those two colours give per pixel with no
+geometric error, where the LOD1 and block tiers carry textures baked from the source's."""
 SUPERSAMPLE = "1,64"
 """Pixels drawn per pixel compared, a side, each a table's rows (each compared pixel their
 mean in linear light; at most 2,048 drawn a side): 1 compares what mipmaps alone give, which
@@ -102,8 +103,8 @@ def tiers(
 def in_class_means(mesh: Any) -> Any:
     """``mesh`` with each face in one flat colour: its roof's mean colour over the roof's area
     where the face is a roof, else its walls' (:func:`~lodconvert.city.prisms.prism_colors`,
-    the colours a prism and a block proxy take), a face's own corners apart from its
-    neighbours'. Drawn against ``mesh``, the least colour error of a level coloured so."""
+    a prism's colours where its source has no texture), a face's own corners apart from its
+    neighbours'."""
     from lodconvert.analysis.albedo import STEEP
     from lodconvert.city.prisms import prism_colors
     from lodconvert.model import Mesh, Surface

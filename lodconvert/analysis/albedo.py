@@ -184,8 +184,8 @@ def class_delta_e_rendered(
     of the same kind (``roof_same``, ``wall_same``: the colours, where the geometries agree),
     and the CIEDE2000 ΔE of their mean colours, in CIE L*a*b* (``roof_mean``,
     ``wall_mean``); and the mean CIEDE2000 ΔE of ``source``'s pixels of each kind from their
-    mean colour (``roof_spread``, ``wall_spread``: the error of a level in one colour a kind
-    with the source's geometry); NaN where no pixel is of a kind.
+    mean colour (``roof_spread``, ``wall_spread``: how much its colours vary within a kind);
+    NaN where no pixel is of a kind.
     With ``supersample``, each pixel is the mean of ``supersample`` × ``supersample`` drawn
     ones (at most 2,048 a side in all): what the surfaces under it show, where mipmaps alone
     blend a texture atlas's unrelated parts into a pixel that covers a building."""
