@@ -76,6 +76,21 @@ def floors(source: Path) -> tuple[float, float]:
     return walk(False), walk(True)
 
 
+def results_head(
+    title: str, command: str, baseline: Path, runs: int, load: float, began: float
+) -> list[str]:
+    """The title, machine and command lines of a results file that sets this checkout beside
+    ``baseline``, medians of ``runs`` interleaved runs on core 0 (``load``: the load average
+    at the start; ``began``: its ``perf_counter``)."""
+    return [
+        f"# {title}",
+        "",
+        machine_line(load, time.perf_counter() - began),
+        f"Command: `{command}` (baseline: {commit_of(baseline)}, this: {commit_of(ROOT)}); "
+        f"medians of {runs} interleaved runs, each pinned to core 0 with `--workers 1`.",
+    ]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--baseline", type=Path, required=True, help="checkout to compare with")
@@ -136,15 +151,20 @@ def main() -> None:
     header = ["input", "output", "base CPU s", "CPU s", "base wall s", "wall s"]
     header += ["base bldg/CPU s", "bldg/CPU s", "base RSS MiB", "RSS MiB", "ratio", "target"]
     header += ["met", "floor share"]
+    command = (
+        f"python benchmarks/per_core.py --baseline {args.baseline} --runs {args.runs} "
+        f"--formats {args.formats} --factor {args.factor}"
+    )
     text = "\n".join(
         [
-            "# CPU per building on one core, against an earlier commit",
-            "",
-            machine_line(load, time.perf_counter() - began),
-            f"Command: `python benchmarks/per_core.py --baseline {args.baseline} --runs "
-            f"{args.runs} --formats {args.formats} --factor {args.factor}` (baseline: "
-            f"{commit_of(trees['baseline'])}, this: {commit_of(ROOT)}); medians of {args.runs} "
-            "interleaved runs, each pinned to core 0 with `--workers 1`.",
+            *results_head(
+                "CPU per building on one core, against an earlier commit",
+                command,
+                trees["baseline"],
+                args.runs,
+                load,
+                began,
+            ),
             "",
             markdown_table(header, rows, 2),
             "",

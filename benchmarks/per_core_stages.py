@@ -35,8 +35,8 @@ from pathlib import Path
 from typing import Any
 
 from city import Template, tum_document, write_district
-from per_core import PINNED, convert, floors
-from tables import commit_of, machine_line, markdown_table, write_results
+from per_core import PINNED, convert, floors, results_head
+from tables import markdown_table, write_results
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -189,14 +189,17 @@ def main() -> None:
     target = TARGET * median["base"]
     text = "\n".join(
         [
-            "# Where one core's CPU goes in a city run, and the least this design can take",
-            "",
-            machine_line(load, time.perf_counter() - began),
-            f"Command: `python benchmarks/per_core_stages.py --baseline {args.baseline} --runs "
-            f"{args.runs}` (baseline: {commit_of(base)}, this: {commit_of(ROOT)}); medians of "
-            f"{args.runs} interleaved runs, each pinned to core 0 with `--workers 1`: 10× TUM "
-            f"({n:,} buildings) to `.x3d`; the start fitted from 1× ({m:,} buildings, "
-            f"{median['one']:.2f} CPU s) and 10× ({median['ten']:.2f} CPU s).",
+            *results_head(
+                "Where one core's CPU goes in a city run, and the least this design can take",
+                f"python benchmarks/per_core_stages.py --baseline {args.baseline} "
+                f"--runs {args.runs}",
+                base,
+                args.runs,
+                load,
+                began,
+            ),
+            f"Input: 10× TUM ({n:,} buildings) to `.x3d`; the start fitted from 1× ({m:,} "
+            f"buildings, {median['one']:.2f} CPU s) and 10× ({median['ten']:.2f} CPU s).",
             "",
             __doc__.split("\n\n")[2].replace("\n", " "),
             "",
